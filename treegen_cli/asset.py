@@ -1,0 +1,77 @@
+"""What writers receive: a finished, format-neutral asset. Writers only serialise it.
+
+Everything is in generator space (metres, Z up, right-handed); each writer converts to its
+format's axes (glTF: Y up). Quaternions are (x, y, z, w), scipy's order.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Material:
+    name: str                              # "bark" / "leaf"
+    base_color: tuple[float, float, float, float]
+    roughness: float = 0.9
+    metallic: float = 0.0
+    double_sided: bool = False
+    alpha_cutoff: float | None = None      # set when a leaf texture with alpha is expected
+
+
+@dataclass(frozen=True, eq=False)
+class Primitive:
+    """One triangle list with one material, skinned to the LOD's skeleton."""
+
+    name: str                              # "bark" / "leaves"
+    material: str                          # Material.name
+    positions: np.ndarray                  # float32 (V, 3), rest pose, generator space
+    normals: np.ndarray                    # float32 (V, 3), unit
+    uvs: np.ndarray                        # float32 (V, 2)
+    indices: np.ndarray                    # uint32 (T*3,), counter-clockwise front faces
+    joints: np.ndarray                     # uint16 (V, 4), indices into Skeleton joints
+    weights: np.ndarray                    # float32 (V, 4), rows sum to 1, unused slots 0
+
+
+@dataclass(frozen=True, eq=False)
+class Skeleton:
+    """Joints ordered parent-before-child; joint 0 is the root at the trunk base."""
+
+    names: list[str]                       # unique, path-safe ("j0", "j1", ...)
+    parent: np.ndarray                     # int32 (J,), -1 for the root
+    rest_translation: np.ndarray           # float64 (J, 3), local (in the parent's frame)
+    rest_rotation: np.ndarray              # float64 (J, 4), local quaternion xyzw
+    bind_world: np.ndarray                 # float64 (J, 4, 4), world matrix of each joint at
+                                           # rest; inverse bind matrix = inv(bind_world)
+
+
+@dataclass(frozen=True, eq=False)
+class Clip:
+    """Baked joint rotations. `keys[j]` selects which of `times` joint j keeps (LOD schedule);
+    None keeps every key. Translations and scales stay at rest."""
+
+    name: str                              # "wind", "wind_lod1", ...
+    times: np.ndarray                      # float64 (K,), seconds, starts at 0
+    rotations: np.ndarray                  # float64 (K, J, 4), local quaternions xyzw
+    interpolation: str = "LINEAR"          # "LINEAR" or "STEP"
+    keys: list[np.ndarray] | None = None   # per joint: sorted int indices into times
+    animated: np.ndarray | None = None     # bool (J,): joints that get a channel (None: all
+                                           # joints whose rotation ever leaves rest)
+
+
+@dataclass(frozen=True, eq=False)
+class Lod:
+    primitives: list[Primitive]
+    skeleton: Skeleton
+    clips: list[Clip] = field(default_factory=list)
+    distance: float = 0.0                  # metres from which this LOD is used
+    screen_coverage: float = 1.0           # MSFT_screencoverage hint (fraction of screen height)
+
+
+@dataclass(frozen=True, eq=False)
+class Asset:
+    name: str
+    materials: list[Material]
+    lods: list[Lod]                        # lods[0] is the full-detail tree
+    extras: dict = field(default_factory=dict)  # provenance (species, seed, treegen version)

@@ -1,0 +1,14 @@
+"""The one exception type for mistakes a user can make.
+
+The CLI catches it, prints its message on one line without a traceback and exits 2.
+Anything else escaping is a bug in treegen.
+"""
+
+
+class TreegenError(Exception):
+    """A user-caused error: bad species file, bad option, oversized tree, bad layout.
+
+    The message names the file, the line or JSON path, the key and the allowed range.
+    """
+
+    exit_code = 2
