@@ -1,0 +1,443 @@
+"""Asset → UsdSkel (.usda text, .usdc crate, .usdz package), and a validator runner.
+
+Writers only serialise: everything here is a re-encoding of the Asset. Stage layout:
+
+    /<Asset>                       Xform, kind=component, defaultPrim
+        Looks/bark, Looks/leaf     UsdPreviewSurface materials (+ an st primvar reader)
+        LODHeuristic               LODDistanceHeuristic (only with >1 LOD)
+        LODs                       Xform with LODRootAPI and variant set "LOD" (only with >1 LOD)
+            LOD0, LOD1, ...        SkelRoot: Skeleton, SkelAnimation(s), meshes
+        (LOD0)                     with a single LOD the SkelRoot sits directly under /<Asset>
+
+Generator space is Z up, metres, right-handed: upAxis "Z", metersPerUnit 1, no conversion.
+USD matrices are row-vector (p' = p·M): every matrix here is the transpose of the Asset's.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ..asset import Asset, Clip, Lod, Material, Primitive, Skeleton
+from ..errors import TreegenError
+
+SUFFIXES = (".usda", ".usdc", ".usdz")
+USDZ_MTIME = 946684800  # 2000-01-01: fixed zip entry time for reproducible .usdz bytes
+IDENTITY_EPS = 1e-7     # |dot(q, rest)| above 1 - eps: the joint counts as not moving
+
+
+# --------------------------------------------------------------------------- public API
+
+def write_usd(asset: Asset, path) -> None:
+    """Write `asset` to exactly `path`; the suffix picks text, crate or a usdz package.
+
+    The caller (exchange registry) does temp-file + rename; a temp name with the right suffix
+    works for all three formats.
+    """
+    from pxr import Sdf
+
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in SUFFIXES:
+        raise TreegenError(f"{path}: unknown USD extension {suffix!r}; allowed {', '.join(SUFFIXES)}")
+    stage = build_stage(asset)
+    layer = stage.GetRootLayer()
+    if suffix in (".usda", ".usdc"):
+        if not layer.Export(str(path), args={"format": suffix[1:]}):
+            raise TreegenError(f"{path}: could not write the USD layer")
+        return
+    # .usdz: a zip whose first entry is the root layer (crate). Built with Sdf's own zip
+    # writer (no dependency discovery needed: the asset references no external files).
+    tmpdir = tempfile.mkdtemp(prefix="treegen-usdz-", dir=path.parent if path.parent.exists() else None)
+    try:
+        inner = os.path.join(tmpdir, _identifier(asset.name) + ".usdc")
+        if not layer.Export(inner, args={"format": "usdc"}):
+            raise TreegenError(f"{path}: could not write the USD layer")
+        # the zip entry carries the file's mtime: pin it so the same Asset gives the same bytes
+        os.utime(inner, (USDZ_MTIME, USDZ_MTIME))
+        writer = Sdf.ZipFileWriter.CreateNew(str(path))
+        writer.AddFile(inner, os.path.basename(inner))
+        if not writer.Save():
+            raise TreegenError(f"{path}: could not write the usdz package")
+    finally:
+        shutil.rmtree(tmpdir, ignore_errors=True)
+
+
+def validate_usd(path) -> list[str]:
+    """Run every validator registered with pxr.UsdValidation (core, geom, shade, skel, usdz
+    utils, ...) over the stage at `path`; return their messages ("" list = clean)."""
+    from pxr import Usd, UsdValidation
+
+    stage = Usd.Stage.Open(str(path))
+    if stage is None:
+        return [f"{path}: cannot be opened as a USD stage"]
+    registry = UsdValidation.ValidationRegistry()
+    context = UsdValidation.ValidationContext(registry.GetOrLoadAllValidators())
+    errors = context.Validate(stage)
+    return [e.GetErrorAsString() for e in errors if not e.HasNoError()]
+
+
+# --------------------------------------------------------------------------- stage building
+
+def build_stage(asset: Asset):
+    """The whole asset as an in-memory stage (one anonymous layer)."""
+    from pxr import Kind, Sdf, Usd, UsdGeom
+
+    if not asset.lods:
+        raise TreegenError(f"asset {asset.name!r}: no LODs to write")
+    stage = Usd.Stage.CreateInMemory()
+    layer = stage.GetRootLayer()
+    layer.documentation = "treegen: skinned Weber-Penn tree (UsdSkel)"
+    if asset.extras:
+        layer.customLayerData = {"treegen": {str(k): str(v) for k, v in sorted(asset.extras.items())}}
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+
+    root_path = Sdf.Path("/" + _identifier(asset.name))
+    root = UsdGeom.Xform.Define(stage, root_path).GetPrim()
+    Usd.ModelAPI(root).SetKind(Kind.Tokens.component)
+    stage.SetDefaultPrim(root)
+
+    materials = {m.name: _define_material(stage, root_path.AppendChild("Looks"), m)
+                 for m in asset.materials}
+
+    tcps = _stage_timing(stage, asset)
+
+    if len(asset.lods) == 1:
+        _define_lod(stage, root_path.AppendChild("LOD0"), asset.lods[0], asset, materials, tcps)
+    else:
+        _define_lod_root(stage, root_path, asset, materials, tcps)
+    return stage
+
+
+def _stage_timing(stage, asset: Asset) -> float | None:
+    """timeCodesPerSecond = framesPerSecond = the clips' sample rate; start/end cover them."""
+    clips = [c for lod in asset.lods for c in lod.clips if len(c.times)]
+    if not clips:
+        return None
+    tcps = _sample_rate(clips[0].times)
+    end = max(float(c.times[-1]) for c in clips) * tcps
+    stage.SetTimeCodesPerSecond(tcps)
+    stage.SetFramesPerSecond(tcps)
+    stage.SetStartTimeCode(0.0)
+    stage.SetEndTimeCode(_snap(np.array([end]))[0])
+    return tcps
+
+
+def _define_lod_root(stage, root_path, asset: Asset, materials, tcps) -> None:
+    """LODs as children of an LODRootAPI prim, plus a "LOD" variant set on that same prim.
+
+    Both views share one copy of the data: the LOD items are authored once, locally; each
+    variant only toggles `visibility` (LODk: every other item invisible). The default selection
+    LOD0 therefore gives legacy renderers exactly what the UsdLod docs recommend (default item
+    visible, others invisible), while an LOD-aware renderer still sees every item active under
+    the root and picks by the distance heuristic. Importers that read variant sets (Unreal)
+    switch LODk to show only that item. `active` is not used for the toggle, because inactive
+    items would vanish from the LOD root's children.
+    """
+    from pxr import Sdf, UsdGeom, UsdLod, Vt
+
+    lods_path = root_path.AppendChild("LODs")
+    heur_path = root_path.AppendChild("LODHeuristic")
+    lods_prim = UsdGeom.Xform.Define(stage, lods_path).GetPrim()
+    names = [f"LOD{k}" for k in range(len(asset.lods))]
+    bounds = []
+    for name, lod in zip(names, asset.lods):
+        _define_lod(stage, lods_path.AppendChild(name), lod, asset, materials, tcps)
+        bounds.append(_bounds(lod))
+
+    lod_root = UsdLod.RootAPI.Apply(lods_prim)
+    lod_root.CreateLodDefaultIndexAttr(0)
+    lod_root.CreateLodHeuristicsRel().SetTargets([heur_path])
+    heur = UsdLod.DistanceHeuristic.Define(stage, heur_path)
+    heur.CreateLodDomainAttr(UsdLod.Tokens.imaging)
+    lo, hi = bounds[0]
+    heur.CreateCenterAttr(_gf_vec3f(0.5 * (lo + hi)))   # LOD root space = tree space
+    # thresholds: LOD k (k ≥ 1) is used from Lod.distance on
+    heur.CreateThresholdsAttr(Vt.FloatArray([float(lod.distance) for lod in asset.lods[1:]]))
+
+    vset = lods_prim.GetVariantSets().AddVariantSet("LOD")
+    for k, name in enumerate(names):
+        vset.AddVariant(name)
+    for k, name in enumerate(names):
+        vset.SetVariantSelection(name)
+        with vset.GetVariantEditContext():
+            for other in names:
+                if other != name:
+                    over = stage.OverridePrim(lods_path.AppendChild(other))
+                    UsdGeom.Imageable(over).CreateVisibilityAttr(UsdGeom.Tokens.invisible)
+    vset.SetVariantSelection(names[0])
+
+
+def _define_lod(stage, path, lod: Lod, asset: Asset, materials, tcps) -> None:
+    """One SkelRoot: Skeleton, its SkelAnimation(s), and the skinned meshes."""
+    from pxr import UsdSkel
+
+    skel_root = UsdSkel.Root.Define(stage, path)
+    lo, hi = _bounds(lod)
+    skel_root.CreateExtentAttr([_gf_vec3f(lo), _gf_vec3f(hi)])
+    skel_path = path.AppendChild("Skeleton")
+    joint_paths = _define_skeleton(stage, skel_path, lod.skeleton)
+
+    anim_paths = []
+    used = {"Skeleton"}
+    for clip in lod.clips:
+        name = _unique(_identifier(clip.name), used)
+        anim_paths.append(path.AppendChild(name))
+        _define_animation(stage, anim_paths[-1], clip, lod.skeleton, joint_paths, tcps)
+    if anim_paths:
+        binding = UsdSkel.BindingAPI.Apply(stage.GetPrimAtPath(skel_path))
+        binding.CreateAnimationSourceRel().SetTargets([anim_paths[0]])
+
+    for prim in lod.primitives:
+        name = _unique(_identifier(prim.name), used)
+        mat = next((m for m in asset.materials if m.name == prim.material), None)
+        _define_mesh(stage, path.AppendChild(name), prim, skel_path,
+                     materials.get(prim.material), mat, len(lod.skeleton.names))
+
+
+def _define_skeleton(stage, path, skel: Skeleton) -> list[str]:
+    """Joints as path tokens "j0", "j0/j1", ...; bind = world, rest = local (row-vector)."""
+    from pxr import UsdSkel, Vt
+
+    joint_paths = _joint_paths(skel)
+    s = UsdSkel.Skeleton.Define(stage, path)
+    s.CreateJointsAttr(Vt.TokenArray(joint_paths))
+    s.CreateJointNamesAttr(Vt.TokenArray(list(skel.names)))
+    bind = np.ascontiguousarray(np.transpose(np.asarray(skel.bind_world, np.float64), (0, 2, 1)))
+    s.CreateBindTransformsAttr(Vt.Matrix4dArray.FromNumpy(bind))
+    rest = _trs_matrices(skel.rest_translation, skel.rest_rotation)
+    s.CreateRestTransformsAttr(Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(np.transpose(rest, (0, 2, 1)))))
+    return joint_paths
+
+
+def _define_animation(stage, path, clip: Clip, skel: Skeleton, joint_paths, tcps) -> None:
+    """SkelAnimation for the joints that move: rotations time-sampled, translations and scales
+    at rest (default value only).
+
+    USD samples every joint of an animation at the same time codes, while Clip.keys keeps keys
+    per joint. We write the union of the kept keys (of the moving joints) and give each joint,
+    at a time code it did not keep, the value its own track plays there: slerp between its
+    neighbouring kept keys (LINEAR) or its previous kept key (STEP). USD interpolates quatf
+    samples by slerp, so LINEAR playback is reproduced exactly.
+
+    STEP: USD's held interpolation is a per-stage runtime setting, not stored in files. We keep
+    linear files and encode the hold by also writing, one frame before each change, the held
+    value; playback is then exact at every frame time code (only the last sub-frame ramps).
+    customData["treegen:interpolation"] records "STEP" so a player can switch the stage to
+    Usd.InterpolationTypeHeld.
+    """
+    from pxr import UsdSkel, Vt
+
+    moving = _moving_joints(clip, skel)
+    frames, rot = resample_clip(clip, moving)
+    anim = UsdSkel.Animation.Define(stage, path)
+    anim.CreateJointsAttr(Vt.TokenArray([joint_paths[j] for j in moving]))
+    anim.CreateTranslationsAttr(Vt.Vec3fArray.FromNumpy(
+        np.ascontiguousarray(skel.rest_translation[moving], np.float32)))
+    anim.CreateScalesAttr(Vt.Vec3hArray.FromNumpy(np.ones((len(moving), 3), np.float16)))
+    rot_attr = anim.CreateRotationsAttr()
+    codes = _snap(np.asarray(clip.times, np.float64)[frames] * (tcps or 1.0))
+    # Vt.QuatfArray.FromNumpy takes rows in GfQuatf memory order (x, y, z, w): the Asset's order
+    for code, q in zip(codes, rot):
+        rot_attr.Set(Vt.QuatfArray.FromNumpy(np.ascontiguousarray(q, np.float32)), float(code))
+    anim.GetPrim().SetCustomDataByKey("treegen:interpolation", clip.interpolation)
+
+
+def _define_mesh(stage, path, prim: Primitive, skel_path, material, mat: Material | None,
+                 n_joints: int) -> None:
+    """Triangle mesh with vertex normals, st, skinning primvars and a material binding."""
+    from pxr import Gf, Sdf, UsdGeom, UsdShade, UsdSkel, Vt
+
+    pos = np.ascontiguousarray(prim.positions, np.float32)
+    idx = np.asarray(prim.indices, np.int64)
+    if idx.size % 3 or (idx.size and (idx.min() < 0 or idx.max() >= len(pos))):
+        raise TreegenError(f"primitive {prim.name!r}: indices are not a valid triangle list")
+    joints = np.asarray(prim.joints, np.int64)
+    if joints.size and joints.max() >= n_joints:
+        raise TreegenError(f"primitive {prim.name!r}: joint index beyond the skeleton")
+
+    mesh = UsdGeom.Mesh.Define(stage, path)
+    mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)   # Asset winding: CCW = front
+    mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(pos))
+    mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(idx.size // 3, 3, np.int32)))
+    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(idx.astype(np.int32)))
+    mesh.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(prim.normals, np.float32)))
+    mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
+    if len(pos):
+        mesh.CreateExtentAttr([Gf.Vec3f(*map(float, pos.min(0))), Gf.Vec3f(*map(float, pos.max(0)))])
+    st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray,
+                                                 UsdGeom.Tokens.vertex)
+    st.Set(Vt.Vec2fArray.FromNumpy(np.ascontiguousarray(prim.uvs, np.float32)))
+    mesh.CreateDoubleSidedAttr(bool(mat.double_sided) if mat else False)
+
+    binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
+    binding.CreateSkeletonRel().SetTargets([skel_path])
+    binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1.0))
+    influences = joints.shape[1] if joints.ndim == 2 else 4
+    ji = binding.CreateJointIndicesPrimvar(False, influences)
+    ji.Set(Vt.IntArray.FromNumpy(joints.astype(np.int32).reshape(-1)))
+    jw = binding.CreateJointWeightsPrimvar(False, influences)
+    jw.Set(Vt.FloatArray.FromNumpy(np.ascontiguousarray(prim.weights, np.float32).reshape(-1)))
+
+    if material is not None:
+        UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(material)
+
+
+def _define_material(stage, looks_path, m: Material):
+    """UsdPreviewSurface with constant inputs; an st primvar reader, wired to the material's
+    frame:stPrimvarName interface input, is the slot a UsdUVTexture can plug into later."""
+    from pxr import Gf, Sdf, UsdGeom, UsdShade
+
+    if not stage.GetPrimAtPath(looks_path):
+        UsdGeom.Scope.Define(stage, looks_path)
+    mpath = looks_path.AppendChild(_identifier(m.name))
+    material = UsdShade.Material.Define(stage, mpath)
+    st_name = material.CreateInput("frame:stPrimvarName", Sdf.ValueTypeNames.String)
+    st_name.Set("st")
+
+    surf = UsdShade.Shader.Define(stage, mpath.AppendChild("PreviewSurface"))
+    surf.CreateIdAttr("UsdPreviewSurface")
+    r, g, b, a = (float(c) for c in m.base_color)
+    surf.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(r, g, b))
+    surf.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(float(m.roughness))
+    surf.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(float(m.metallic))
+    surf.CreateInput("opacity", Sdf.ValueTypeNames.Float).Set(a)
+    if m.alpha_cutoff is not None:
+        surf.CreateInput("opacityThreshold", Sdf.ValueTypeNames.Float).Set(float(m.alpha_cutoff))
+    material.CreateSurfaceOutput().ConnectToSource(surf.ConnectableAPI(), "surface")
+
+    reader = UsdShade.Shader.Define(stage, mpath.AppendChild("stReader"))
+    reader.CreateIdAttr("UsdPrimvarReader_float2")
+    reader.CreateInput("varname", Sdf.ValueTypeNames.String).ConnectToSource(st_name)
+    reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
+    return material
+
+
+# --------------------------------------------------------------------------- numeric helpers
+
+def resample_clip(clip: Clip, joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(frames (U,), rotations (U, len(joints), 4) xyzw) as USD will store them.
+
+    frames: the union of the kept key indices of `joints` (every key when clip.keys is None;
+    for STEP also the frame before each kept key); rotations: each joint's own playback value
+    at those frames (see _define_animation).
+    """
+    rot = np.asarray(clip.rotations, np.float64)
+    times = np.asarray(clip.times, np.float64)
+    K = len(times)
+    if clip.keys is None:
+        return np.arange(K), rot[:, joints]
+    keys = [np.unique(np.r_[np.asarray(clip.keys[j], np.int64), 0, K - 1]) for j in joints]
+    frames = np.unique(np.concatenate(keys + [np.zeros(1, np.int64), [K - 1]]))
+    step = clip.interpolation.upper() == "STEP"
+    if step:
+        frames = np.unique(np.r_[frames, np.maximum(frames - 1, 0)])
+    out = np.empty((len(frames), len(joints), 4))
+    for c, (j, kj) in enumerate(zip(joints, keys)):   # loop over joints only; frames vectorised
+        p = np.clip(np.searchsorted(kj, frames, side="right") - 1, 0, len(kj) - 1)
+        a = kj[p]
+        if step:
+            out[:, c] = rot[a, j]
+            continue
+        b = kj[np.minimum(p + 1, len(kj) - 1)]
+        span = times[b] - times[a]
+        u = np.where(span > 0, (times[frames] - times[a]) / np.where(span > 0, span, 1.0), 0.0)
+        out[:, c] = slerp(rot[a, j], rot[b, j], u)
+    return frames, out
+
+
+def slerp(q0: np.ndarray, q1: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Row-wise shortest-arc slerp of xyzw quaternions (N, 4) at fractions u (N,)."""
+    d = np.sum(q0 * q1, axis=-1)
+    q1 = np.where(d[:, None] < 0, -q1, q1)
+    d = np.abs(d)
+    theta = np.arccos(np.clip(d, -1.0, 1.0))
+    s = np.sin(theta)
+    small = s < 1e-9
+    w0 = np.where(small, 1.0 - u, np.sin((1.0 - u) * theta) / np.where(small, 1.0, s))
+    w1 = np.where(small, u, np.sin(u * theta) / np.where(small, 1.0, s))
+    q = w0[:, None] * q0 + w1[:, None] * q1
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def _moving_joints(clip: Clip, skel: Skeleton) -> np.ndarray:
+    """Joints that get animation tracks: clip.animated, else those leaving rest; never empty."""
+    if clip.animated is not None:
+        moving = np.flatnonzero(np.asarray(clip.animated, bool))
+    else:
+        rest = np.asarray(skel.rest_rotation, np.float64)
+        dots = np.abs(np.einsum("kjc,jc->kj", np.asarray(clip.rotations, np.float64), rest))
+        moving = np.flatnonzero((dots < 1.0 - IDENTITY_EPS).any(axis=0))
+    return moving if moving.size else np.zeros(1, np.int64)
+
+
+def _joint_paths(skel: Skeleton) -> list[str]:
+    """Path tokens from Skeleton.parent (parents come before children)."""
+    from pxr import Sdf
+
+    paths: list[str] = []
+    for j, (name, parent) in enumerate(zip(skel.names, np.asarray(skel.parent))):
+        if not Sdf.Path.IsValidIdentifier(name):
+            raise TreegenError(f"skeleton joint {j}: name {name!r} is not a valid USD identifier")
+        if parent >= j:
+            raise TreegenError(f"skeleton joint {j}: parent {parent} does not come before it")
+        paths.append(name if parent < 0 else f"{paths[parent]}/{name}")
+    return paths
+
+
+def _trs_matrices(t: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """(J, 4, 4) column-vector matrices from translations and xyzw quaternions."""
+    t = np.asarray(t, np.float64)
+    m = np.zeros((len(t), 4, 4))
+    if len(t):
+        m[:, :3, :3] = Rotation.from_quat(np.asarray(q, np.float64)).as_matrix()
+    m[:, :3, 3] = t
+    m[:, 3, 3] = 1.0
+    return m
+
+
+def _bounds(lod: Lod) -> tuple[np.ndarray, np.ndarray]:
+    pts = [np.asarray(p.positions, np.float64) for p in lod.primitives if len(p.positions)]
+    if not pts:
+        return np.zeros(3), np.zeros(3)
+    allp = np.concatenate(pts)
+    return allp.min(0), allp.max(0)
+
+
+def _sample_rate(times: np.ndarray) -> float:
+    """Keys per second of a uniformly sampled clip (snapped to an integer when it is one)."""
+    times = np.asarray(times, np.float64)
+    if len(times) < 2 or times[-1] <= times[0]:
+        return 24.0
+    rate = (len(times) - 1) / (times[-1] - times[0])
+    return float(round(rate)) if abs(rate - round(rate)) < 1e-6 else float(rate)
+
+
+def _snap(codes: np.ndarray) -> np.ndarray:
+    """Round time codes that are integers up to float noise, so files carry clean frames."""
+    r = np.round(codes)
+    return np.where(np.abs(codes - r) < 1e-6, r, codes)
+
+
+def _gf_vec3f(v):
+    from pxr import Gf
+    return Gf.Vec3f(*(float(x) for x in v))
+
+
+def _identifier(name: str) -> str:
+    from pxr import Tf
+    return Tf.MakeValidIdentifier(name or "tree")
+
+
+def _unique(name: str, used: set[str]) -> str:
+    out, k = name, 1
+    while out in used:
+        out, k = f"{name}_{k}", k + 1
+    used.add(out)
+    return out
