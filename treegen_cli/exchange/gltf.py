@@ -1,0 +1,325 @@
+"""glTF 2.0 writer: Asset → .glb (binary, default) or .gltf + sibling .bin.
+
+A lean writer of our own: every array goes to the binary buffer by numpy concatenation (no
+per-vertex Python), the JSON is built from plain dicts and dumped with sorted keys, so the same
+Asset always gives the same bytes.
+
+Axes: the generator is Z up, glTF is Y up (right-handed), so every vector goes through
+C: (x, y, z) → (x, z, −y); quaternion vector parts likewise; matrices become C·M·Cᵀ.
+
+Node layout, per LOD k (LOD0 first):
+
+    mesh node "<name>_lod<k>"  (mesh + skin, no transform, a root node)
+      └── joint nodes of LOD k's skeleton (local TRS), rooted at the trunk-base joint
+
+The skeleton hangs under its own mesh node so one node is the whole LOD: MSFT_lod swaps whole
+nodes, and a lower LOD's node (not in the scene, reached only through LOD0's MSFT_lod ids) thus
+brings its skeleton with it. The skinned mesh node itself stays a root with an identity
+transform, which is what the validator asks (NODE_SKINNED_MESH_NON_ROOT / _LOCAL_TRANSFORMS).
+Only LOD0's node is in the scene: clients without MSFT_lod see just the full-detail tree; the
+validator merely notes the lower LODs as UNUSED_OBJECT infos.
+"""
+from __future__ import annotations
+
+import json
+import os
+import struct
+from pathlib import Path
+
+import numpy as np
+
+from .. import __version__
+from ..asset import Asset, Clip, Lod, Primitive, Skeleton
+
+# glTF enums
+FLOAT, UNSIGNED_BYTE, UNSIGNED_SHORT, UNSIGNED_INT = 5126, 5121, 5123, 5125
+ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
+_COMPONENT = {np.dtype(np.float32): FLOAT, np.dtype(np.uint8): UNSIGNED_BYTE,
+              np.dtype(np.uint16): UNSIGNED_SHORT, np.dtype(np.uint32): UNSIGNED_INT}
+_TYPE = {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4", 16: "MAT4"}
+
+# generator (Z up) → glTF (Y up)
+Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+
+
+def to_y_up(v: np.ndarray) -> np.ndarray:
+    """Vectors (..., 3): (x, y, z) → (x, z, −y)."""
+    v = np.asarray(v)
+    return np.stack([v[..., 0], v[..., 2], -v[..., 1]], axis=-1)
+
+
+def quat_to_y_up(q: np.ndarray) -> np.ndarray:
+    """Quaternions (..., 4) xyzw: C is a proper rotation, so the vector part maps like a vector."""
+    q = np.asarray(q, dtype=np.float64)
+    return np.concatenate([to_y_up(q[..., :3]), q[..., 3:]], axis=-1)
+
+
+def matrix_to_y_up(m: np.ndarray) -> np.ndarray:
+    """4×4 matrices (..., 4, 4): C·M·Cᵀ."""
+    c = np.eye(4)
+    c[:3, :3] = Z_UP_TO_Y_UP
+    return c @ np.asarray(m, dtype=np.float64) @ c.T
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.where(n > 0, n, 1.0)
+
+
+def _continuous(q: np.ndarray) -> np.ndarray:
+    """Flip signs along axis 0 so consecutive keys have a non-negative dot (no long-way slerp)."""
+    if len(q) < 2:
+        return q
+    dot = np.einsum("k...i,k...i->k...", q[1:], q[:-1])
+    flips = np.concatenate([np.ones((1,) + dot.shape[1:]), np.where(dot < 0, -1.0, 1.0)])
+    return q * np.cumprod(flips, axis=0)[..., None]
+
+
+class _Buffer:
+    """Accumulates bufferViews (each 4-byte aligned) and accessors into one binary blob."""
+
+    def __init__(self) -> None:
+        self.parts: list[bytes] = []
+        self.size = 0
+        self.views: list[dict] = []
+        self.accessors: list[dict] = []
+
+    def view(self, data: bytes, target: int | None) -> int:
+        pad = -self.size % 4
+        if pad:
+            self.parts.append(b"\0" * pad)
+            self.size += pad
+        v = {"buffer": 0, "byteOffset": self.size, "byteLength": len(data)}
+        if target is not None:
+            v["target"] = target
+        self.parts.append(data)
+        self.size += len(data)
+        self.views.append(v)
+        return len(self.views) - 1
+
+    def accessor(self, a: np.ndarray, target: int | None = None, bounds: bool = False,
+                 normalized: bool = False) -> int:
+        a = np.ascontiguousarray(a)
+        comps = 1 if a.ndim == 1 else int(np.prod(a.shape[1:]))
+        acc = {"bufferView": self.view(a.astype(a.dtype.newbyteorder("<"), copy=False).tobytes(),
+                                       target),
+               "componentType": _COMPONENT[a.dtype], "count": int(a.shape[0]),
+               "type": _TYPE[comps]}
+        if normalized:
+            acc["normalized"] = True
+        if bounds:
+            flat = a.reshape(len(a), comps)
+            acc["min"] = [_num(x) for x in flat.min(axis=0)]
+            acc["max"] = [_num(x) for x in flat.max(axis=0)]
+        self.accessors.append(acc)
+        return len(self.accessors) - 1
+
+    def blob(self) -> bytes:
+        pad = -self.size % 4
+        return b"".join(self.parts) + b"\0" * pad
+
+
+def _num(x) -> int | float:
+    return int(x) if np.issubdtype(type(x), np.integer) else float(x)
+
+
+def _weights(joints: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Float32 weights summing to 1 as exactly as float32 allows; zero-weight slots index 0."""
+    w = np.asarray(weights, dtype=np.float64)
+    w = w / np.where(w.sum(axis=1, keepdims=True) > 0, w.sum(axis=1, keepdims=True), 1.0)
+    w32 = w.astype(np.float32)
+    # put the float32 rounding residual on each row's largest weight
+    top = np.argmax(w32, axis=1)
+    rows = np.arange(len(w32))
+    resid = 1.0 - w32.astype(np.float64).sum(axis=1)
+    w32[rows, top] = (w32[rows, top].astype(np.float64) + resid).astype(np.float32)
+    j = np.where(w32 > 0, joints, 0)
+    return j, w32
+
+
+def _primitive(buf: _Buffer, p: Primitive, n_joints: int, material: int) -> dict:
+    V = len(p.positions)
+    pos = to_y_up(np.asarray(p.positions, dtype=np.float64)).astype(np.float32)
+    nrm = _unit(to_y_up(np.asarray(p.normals, dtype=np.float64))).astype(np.float32)
+    # Asset UVs have their origin bottom-left (OpenGL/USD); glTF's is top-left
+    uv = np.asarray(p.uvs, dtype=np.float32).copy()
+    uv[:, 1] = 1.0 - uv[:, 1]
+    joints, weights = _weights(p.joints, p.weights)
+    joints = joints.astype(np.uint8 if n_joints <= 256 else np.uint16)
+    indices = np.asarray(p.indices).astype(np.uint16 if V < 65535 else np.uint32)
+    attrs = {
+        "POSITION": buf.accessor(pos, ARRAY_BUFFER, bounds=True),
+        "NORMAL": buf.accessor(nrm, ARRAY_BUFFER),
+        "TEXCOORD_0": buf.accessor(uv, ARRAY_BUFFER),
+        "JOINTS_0": buf.accessor(joints, ARRAY_BUFFER),
+        "WEIGHTS_0": buf.accessor(weights, ARRAY_BUFFER),
+    }
+    return {"attributes": attrs, "indices": buf.accessor(indices, ELEMENT_ARRAY_BUFFER),
+            "material": material, "mode": 4}
+
+
+def animated_joints(clip: Clip, skeleton: Skeleton) -> np.ndarray:
+    """Joints that get a channel: Clip.animated, else those whose rotation ever leaves rest."""
+    if clip.animated is not None:
+        return np.flatnonzero(np.asarray(clip.animated, dtype=bool))
+    rest = _unit(np.asarray(skeleton.rest_rotation, dtype=np.float64))
+    rot = _unit(np.asarray(clip.rotations, dtype=np.float64))
+    dot = np.abs(np.einsum("kji,ji->kj", rot, rest))
+    return np.flatnonzero((dot < 1.0 - 1e-12).any(axis=0))
+
+
+def _animation(buf: _Buffer, clip: Clip, skeleton: Skeleton, joint_nodes: np.ndarray) -> dict | None:
+    joints = animated_joints(clip, skeleton)
+    if len(joints) == 0:
+        return None
+    K = len(clip.times)
+    rot = _unit(quat_to_y_up(clip.rotations))
+    times = np.asarray(clip.times, dtype=np.float32)
+    inputs: dict[bytes, int] = {}      # key set → shared input accessor
+    samplers, channels = [], []
+    for j in joints:                    # loop over joints (a few hundred), not keys or vertices
+        keys = np.arange(K) if clip.keys is None else np.asarray(clip.keys[j], dtype=np.int64)
+        ident = keys.tobytes()
+        if ident not in inputs:
+            inputs[ident] = buf.accessor(times[keys], bounds=True)
+        out = buf.accessor(_continuous(rot[keys, j]).astype(np.float32))
+        samplers.append({"input": inputs[ident], "output": out,
+                         "interpolation": clip.interpolation})
+        channels.append({"sampler": len(samplers) - 1,
+                         "target": {"node": int(joint_nodes[j]), "path": "rotation"}})
+    return {"name": clip.name, "samplers": samplers, "channels": channels}
+
+
+def _is_default(v: np.ndarray, default) -> bool:
+    return bool(np.array_equal(v, default))
+
+
+def build(asset: Asset) -> tuple[dict, bytes]:
+    """Asset → (glTF JSON dict without buffer uri, binary buffer)."""
+    buf = _Buffer()
+    mat_index = {m.name: i for i, m in enumerate(asset.materials)}
+    materials = []
+    for m in asset.materials:
+        d = {"name": m.name,
+             "pbrMetallicRoughness": {"baseColorFactor": [float(c) for c in m.base_color],
+                                      "metallicFactor": float(m.metallic),
+                                      "roughnessFactor": float(m.roughness)}}
+        if m.double_sided:
+            d["doubleSided"] = True
+        if m.alpha_cutoff is not None:
+            d["alphaMode"] = "MASK"
+            d["alphaCutoff"] = float(m.alpha_cutoff)
+        materials.append(d)
+
+    nodes: list[dict] = []
+    meshes, skins, animations, lod_nodes = [], [], [], []
+    for k, lod in enumerate(asset.lods):
+        sk = lod.skeleton
+        J = len(sk.names)
+        mesh_node = len(nodes)
+        joint_nodes = mesh_node + 1 + np.arange(J)
+        lod_nodes.append(mesh_node)
+        nodes.append({})    # filled below, once children are known
+        t = to_y_up(np.asarray(sk.rest_translation, dtype=np.float64))
+        q = _unit(quat_to_y_up(sk.rest_rotation))
+        parent = np.asarray(sk.parent)
+        for j in range(J):  # one JSON node per joint
+            n = {"name": sk.names[j]}
+            if not _is_default(t[j], [0, 0, 0]):
+                n["translation"] = [float(x) for x in t[j]]
+            if not _is_default(q[j], [0, 0, 0, 1]):
+                n["rotation"] = [float(x) for x in q[j]]
+            kids = np.flatnonzero(parent == j)
+            if len(kids):
+                n["children"] = [int(x) for x in joint_nodes[kids]]
+            nodes.append(n)
+        roots = np.flatnonzero(parent < 0)
+        ibm = matrix_to_y_up(np.linalg.inv(np.asarray(sk.bind_world, dtype=np.float64)))
+        ibm[:, 3, :] = (0.0, 0.0, 0.0, 1.0)
+        skin = {"name": f"{asset.name}_lod{k}_skin",
+                "joints": [int(x) for x in joint_nodes],
+                "inverseBindMatrices": buf.accessor(
+                    ibm.transpose(0, 2, 1).reshape(J, 16).astype(np.float32))}  # column-major
+        if len(roots) == 1:
+            skin["skeleton"] = int(joint_nodes[roots[0]])
+        skins.append(skin)
+        prims = [_primitive(buf, p, J, mat_index[p.material]) for p in lod.primitives]
+        meshes.append({"name": f"{asset.name}_lod{k}", "primitives": prims})
+        nodes[mesh_node] = {"name": f"{asset.name}_lod{k}", "mesh": len(meshes) - 1,
+                            "skin": len(skins) - 1,
+                            "children": [int(x) for x in joint_nodes[roots]]}
+        for clip in lod.clips:
+            anim = _animation(buf, clip, sk, joint_nodes)
+            if anim is not None:
+                animations.append(anim)
+
+    gltf: dict = {
+        "asset": {"version": "2.0", "generator": f"treegen {__version__}"},
+        "scene": 0,
+        "scenes": [{"name": asset.name, "nodes": [lod_nodes[0]]}],
+        "nodes": nodes, "meshes": meshes, "skins": skins, "materials": materials,
+    }
+    if asset.extras:
+        gltf["asset"]["extras"] = asset.extras
+    if animations:
+        gltf["animations"] = animations
+    if len(asset.lods) > 1:
+        nodes[lod_nodes[0]]["extensions"] = {"MSFT_lod": {"ids": lod_nodes[1:]}}
+        nodes[lod_nodes[0]]["extras"] = {
+            "MSFT_screencoverage": [float(lod.screen_coverage) for lod in asset.lods]}
+        gltf["extensionsUsed"] = ["MSFT_lod"]
+    blob = buf.blob()
+    gltf["accessors"] = buf.accessors
+    gltf["bufferViews"] = buf.views
+    gltf["buffers"] = [{"byteLength": len(blob)}]
+    return gltf, blob
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"cannot write {type(o).__name__} into glTF JSON")
+
+
+def dumps(gltf: dict) -> bytes:
+    return json.dumps(gltf, sort_keys=True, separators=(",", ":"), allow_nan=False,
+                      default=_json_default).encode("utf-8")
+
+
+def glb_bytes(gltf: dict, blob: bytes) -> bytes:
+    """GLB container: 12-byte header, JSON chunk (space-padded), BIN chunk (zero-padded)."""
+    js = dumps(gltf)
+    js += b" " * (-len(js) % 4)
+    total = 12 + 8 + len(js) + 8 + len(blob)
+    return b"".join([struct.pack("<4sII", b"glTF", 2, total),
+                     struct.pack("<I4s", len(js), b"JSON"), js,
+                     struct.pack("<I4s", len(blob), b"BIN\0"), blob])
+
+
+def write_gltf_files(asset: Asset, path: str | os.PathLike, binary: bool | None = None) -> None:
+    """Write straight to `path` (and `<stem>.bin` beside a .gltf); not atomic on its own —
+    `write_gltf` and `exchange.export` stage it."""
+    path = Path(path)
+    if binary is None:
+        binary = path.suffix.lower() != ".gltf"
+    gltf, blob = build(asset)
+    if binary:
+        path.write_bytes(glb_bytes(gltf, blob))
+        return
+    bin_path = path.with_suffix(".bin")
+    gltf["buffers"][0]["uri"] = bin_path.name
+    bin_path.write_bytes(blob)
+    path.write_bytes(dumps(gltf))
+
+
+def write_gltf(asset: Asset, path: str | os.PathLike, binary: bool | None = None) -> None:
+    """Asset → .glb (binary=None picks by suffix: binary unless .gltf), written atomically;
+    .gltf also writes `<stem>.bin` beside it."""
+    from . import staged
+
+    with staged(path) as tmp:
+        write_gltf_files(asset, tmp, binary)
