@@ -1,0 +1,371 @@
+"""Physical plausibility of the baked wind (issue 4): directions, scaling, loops, bounds."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from treegen_cli.asset import Skeleton
+from treegen_cli.errors import TreegenError
+from treegen_cli.params import Params
+from treegen_cli.rig import Rig
+from treegen_cli.tree import Tree
+from treegen_cli.wind import (
+    AIR_DENSITY,
+    WindOptions,
+    bake_wind,
+    joint_loads,
+    pose_world,
+    wind_angles,
+    wind_velocity,
+)
+
+# ---------------------------------------------------------------------------------------------
+# a small hand-built tree and rig, following the tree.py / rig.py contracts
+
+THIN_R, THICK_R = 0.02, 0.04
+
+
+def _frame(direction: np.ndarray) -> np.ndarray:
+    """Rotation whose column 2 is `direction`."""
+    z = direction / np.linalg.norm(direction)
+    helper = np.array([0.0, 0.0, 1.0]) if abs(z[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x)
+    return np.stack([x, np.cross(z, x), z], axis=1)
+
+
+def make_tree_and_rig(jointed_twig: bool = False) -> tuple[Tree, Rig]:
+    """Trunk (5 nodes, 6 m) with two mirrored level-1 branches at z = 3 m: +Y thin, −Y thick,
+    same length and same leaves; and a twig on the thin branch carried rigidly (no joints)."""
+    # (parent stem, parent node local index, direction, length, nodes, r_base, r_tip, jointed)
+    up = np.array([0.0, 0.0, 1.0])
+    tilt = np.deg2rad(20.0)
+    plus_y = np.array([0.0, np.cos(tilt), np.sin(tilt)])
+    minus_y = np.array([0.0, -np.cos(tilt), np.sin(tilt)])
+    specs = [
+        (-1, 0, up, 6.0, 5, 0.15, 0.03, True),
+        (0, 2, plus_y, 2.0, 4, THIN_R, THIN_R, True),
+        (0, 2, minus_y, 2.0, 4, THICK_R, THICK_R, True),
+        (1, 1, np.array([0.7, 0.5, 0.5]), 0.6, 3, 0.008, 0.004, jointed_twig),
+    ]
+    pos, frame, radius, z, node_stem = [], [], [], [], []
+    starts, counts = [], []
+    for s, (ps, pn, d, length, n, r0, r1, _) in enumerate(specs):
+        base = np.zeros(3) if ps < 0 else pos[starts[ps] + pn]
+        t = np.linspace(0.0, 1.0, n)
+        starts.append(len(pos))
+        counts.append(n)
+        for ti in t:
+            pos.append(base + ti * length * d / np.linalg.norm(d))
+            frame.append(_frame(d))
+            radius.append(r0 + (r1 - r0) * ti)
+            z.append(ti * length)
+            node_stem.append(s)
+    pos = np.array(pos)
+    starts = np.array(starts, dtype=np.int32)
+    counts = np.array(counts, dtype=np.int32)
+
+    # leaves: 12 per branch (mirror images), 6 on the twig, fixed to segment-start nodes
+    leaf_stem, leaf_node, leaf_pos, leaf_frame = [], [], [], []
+    for s, n_leaves in ((1, 12), (2, 12), (3, 6)):
+        nodes = starts[s] + (np.arange(n_leaves) % (counts[s] - 1))
+        for i, nd in enumerate(nodes):
+            frac = (i + 0.5) / n_leaves * 0.3
+            p = pos[nd] + frac * (pos[nd + 1] - pos[nd])
+            leaf_stem.append(s)
+            leaf_node.append(nd)
+            leaf_pos.append(p)
+            leaf_frame.append(_frame(np.array([0.3, 0.2, 1.0])))
+    n_leaf = len(leaf_stem)
+    tree = Tree(
+        params=Params(),
+        seed=0,
+        scale=6.0,
+        stem_level=np.array([0, 1, 1, 2], dtype=np.int8),
+        stem_parent=np.array([sp[0] for sp in specs], dtype=np.int32),
+        stem_parent_node=np.array([-1] + [starts[sp[0]] + sp[1] for sp in specs[1:]], dtype=np.int32),
+        stem_offset=np.array([0.0, 3.0, 3.0, 0.66]),
+        stem_length=np.array([sp[3] for sp in specs]),
+        stem_radius=np.array([sp[5] for sp in specs]),
+        stem_clone=np.zeros(4, dtype=bool),
+        stem_node_start=starts,
+        stem_node_count=counts,
+        node_stem=np.array(node_stem, dtype=np.int32),
+        node_pos=pos,
+        node_frame=np.array(frame),
+        node_radius=np.array(radius),
+        node_z=np.array(z),
+        leaf_stem=np.array(leaf_stem, dtype=np.int32),
+        leaf_node=np.array(leaf_node, dtype=np.int32),
+        leaf_pos=np.array(leaf_pos),
+        leaf_frame=np.array(leaf_frame),
+        leaf_size=np.tile([0.12, 0.06], (n_leaf, 1)),
+    )
+
+    # joints: every non-tip node of jointed stems, parented along the chain / to the attach joint
+    joint_node, joint_parent = [], []
+    node_joint = {}
+    for s, spec in enumerate(specs):
+        if not spec[7]:
+            continue
+        for k in range(counts[s] - 1):
+            nd = starts[s] + k
+            if k == 0:
+                par = -1 if spec[0] < 0 else node_joint[starts[spec[0]] + spec[1]]
+            else:
+                par = node_joint[nd - 1]
+            node_joint[nd] = len(joint_node)
+            joint_node.append(nd)
+            joint_parent.append(par)
+    joint_node = np.array(joint_node, dtype=np.int32)
+    parent = np.array(joint_parent, dtype=np.int32)
+    n_j = joint_node.shape[0]
+    world = np.tile(np.eye(4), (n_j, 1, 1))
+    world[:, :3, :3] = tree.node_frame[joint_node]
+    world[:, :3, 3] = pos[joint_node]
+    local = world.copy()
+    has_p = parent >= 0
+    local[has_p] = np.linalg.inv(world[parent[has_p]]) @ world[has_p]
+    skeleton = Skeleton(
+        names=[f"j{i}" for i in range(n_j)],
+        parent=parent,
+        rest_translation=local[:, :3, 3],
+        rest_rotation=Rotation.from_matrix(local[:, :3, :3]).as_quat(),
+        bind_world=world,
+    )
+
+    def carrier(nd: int) -> int:
+        s = node_stem[nd]
+        while True:
+            for k in range(nd, starts[s] - 1, -1):
+                if k in node_joint:
+                    return node_joint[k]
+            nd, s = int(tree.stem_parent_node[s]), int(tree.stem_parent[s])
+
+    node_carrier = np.array([carrier(i) for i in range(len(pos))])
+    rig = Rig(
+        skeleton=skeleton,
+        joint_node=joint_node,
+        joint_stem=tree.node_stem[joint_node],
+        node_joints=np.stack([node_carrier, node_carrier], axis=1).astype(np.uint16),
+        node_weights=np.tile(np.array([1.0, 0.0], dtype=np.float32), (len(pos), 1)),
+        leaf_joint=node_carrier[tree.leaf_node].astype(np.uint16),
+        stem_joint=np.array([0] + [carrier(int(tree.stem_parent_node[s])) for s in range(1, 4)],
+                            dtype=np.int32),
+    )
+    return tree, rig
+
+
+@pytest.fixture(scope="module")
+def tree_rig() -> tuple[Tree, Rig]:
+    return make_tree_and_rig()
+
+
+FAST = dict(duration=2.0, fps=30.0)
+
+
+def _deviation(clip, skeleton) -> np.ndarray:
+    """Angle (K, J) of each key's local rotation away from the rest rotation."""
+    k, j = clip.rotations.shape[:2]
+    rest = Rotation.from_quat(np.tile(skeleton.rest_rotation, (k, 1)))
+    rel = rest.inv() * Rotation.from_quat(clip.rotations.reshape(-1, 4))
+    return rel.magnitude().reshape(k, j)
+
+
+def _tip_displacement(clip, rig: Rig) -> np.ndarray:
+    """World displacement (K, T, 3) of the leaf-carrying joints furthest out on their chains."""
+    skel = rig.skeleton
+    world = pose_world(skel, clip.rotations)
+    carriers = np.unique(rig.leaf_joint.astype(np.int64))
+    is_parent = np.zeros(skel.parent.shape[0], dtype=bool)
+    is_parent[skel.parent[skel.parent >= 0]] = True
+    tips = carriers[~is_parent[carriers]]
+    assert tips.size > 0
+    return world[:, tips][:, :, :3, 3] - skel.bind_world[tips][None, :, :3, 3]
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+def test_clip_shape_times_and_loop(tree_rig):
+    tree, rig = tree_rig
+    clip = bake_wind(tree, rig, WindOptions(duration=3.0, fps=24.0), seed=1)
+    n_j = rig.skeleton.parent.shape[0]
+    assert clip.name == "wind"
+    assert clip.rotations.shape == (3 * 24 + 1, n_j, 4)
+    assert clip.times[0] == 0.0 and clip.times[-1] == 3.0
+    assert np.allclose(np.diff(clip.times), 1.0 / 24.0)
+    assert np.array_equal(clip.rotations[0], clip.rotations[-1])
+    assert np.allclose(np.linalg.norm(clip.rotations, axis=2), 1.0)
+
+
+def test_pose_world_at_rest_equals_bind(tree_rig):
+    _, rig = tree_rig
+    skel = rig.skeleton
+    world = pose_world(skel, np.stack([skel.rest_rotation] * 3))
+    assert world.shape == (3, skel.parent.shape[0], 4, 4)
+    assert np.allclose(world, skel.bind_world[None], atol=1e-12)
+
+
+def test_zero_wind_is_rest_at_every_frame(tree_rig):
+    tree, rig = tree_rig
+    clip = bake_wind(tree, rig, WindOptions(speed=0.0, **FAST), seed=3)
+    rest = np.broadcast_to(rig.skeleton.rest_rotation, clip.rotations.shape)
+    assert np.array_equal(clip.rotations, rest)
+
+
+def test_root_never_moves(tree_rig):
+    tree, rig = tree_rig
+    clip = bake_wind(tree, rig, WindOptions(speed=20.0, **FAST), seed=4)
+    assert np.array_equal(clip.rotations[:, 0], np.broadcast_to(rig.skeleton.rest_rotation[0], (clip.times.shape[0], 4)))
+    world = pose_world(rig.skeleton, clip.rotations)
+    assert np.allclose(world[:, 0], rig.skeleton.bind_world[0], atol=1e-12)
+    assert _deviation(clip, rig.skeleton)[:, 1:].max() > 0.0
+
+
+@pytest.mark.parametrize("direction_deg", [0.0, 90.0, 215.0])
+def test_mean_tip_displacement_points_downwind(tree_rig, direction_deg):
+    tree, rig = tree_rig
+    clip = bake_wind(tree, rig, WindOptions(speed=8.0, direction_deg=direction_deg, **FAST), seed=5)
+    disp = _tip_displacement(clip, rig)[:-1].mean(axis=0)            # (T, 3), one period
+    phi = np.deg2rad(direction_deg)
+    wind_dir = np.array([np.cos(phi), np.sin(phi), 0.0])
+    assert np.all(disp @ wind_dir > 0.0)
+    assert (disp.mean(axis=0) @ wind_dir) > 0.5 * np.linalg.norm(disp.mean(axis=0))
+
+
+def test_amplitude_grows_monotonically_with_speed(tree_rig):
+    tree, rig = tree_rig
+    amps = []
+    for speed in (1.0, 2.0, 4.0, 8.0, 16.0, 32.0):
+        clip = bake_wind(tree, rig, WindOptions(speed=speed, **FAST), seed=6)
+        disp = _tip_displacement(clip, rig)
+        amps.append(np.sqrt(np.mean(np.sum(disp**2, axis=2))))
+    assert np.all(np.diff(amps) > 0.0), amps
+
+
+def test_static_wind_matches_hand_computed_beam_rotation(tree_rig):
+    """Steady wind, no gusts: the last joint of the thin branch turns by τ⊥/k exactly."""
+    tree, rig = tree_rig
+    opts = WindOptions(speed=5.0, gust=0.0, turbulence=0.0, stem_drag_coefficient=0.0, **FAST)
+    theta = wind_angles(tree, rig, opts, seed=0)
+    j = int(np.flatnonzero(rig.joint_node == tree.stem_node_start[1] + 2)[0])   # last joint, stem 1
+    on = rig.leaf_joint == j
+    assert on.any()
+    centre = tree.leaf_pos[on] + 0.5 * tree.leaf_size[on, :1] * tree.leaf_frame[on][:, :, 1]
+    force = 0.5 * AIR_DENSITY * opts.drag_coefficient * tree.leaf_area[on, None] * 25.0 * np.array([1.0, 0, 0])
+    torque = np.cross(centre - rig.skeleton.bind_world[j, :3, 3], force).sum(axis=0)
+    d = tree.node_frame[rig.joint_node[j], :, 2]
+    torque -= (torque @ d) * d
+    r = tree.node_radius[rig.joint_node[j]]
+    span = np.linalg.norm(tree.node_pos[rig.joint_node[j] + 1] - tree.node_pos[rig.joint_node[j]])
+    k = opts.elastic_modulus * np.pi * r**4 / 4.0 / span
+    expected = torque / k
+    max_angle = np.deg2rad(opts.max_angle_deg)
+    expected *= max_angle * np.tanh(np.linalg.norm(expected) / max_angle) / np.linalg.norm(expected)
+    assert np.allclose(theta[j], expected[None], rtol=1e-9, atol=1e-15)
+
+
+def test_thin_branch_deflects_more_per_length_than_thick(tree_rig):
+    tree, rig = tree_rig
+    theta = wind_angles(tree, rig, WindOptions(speed=6.0, **FAST), seed=7)
+    loads = joint_loads(tree, rig)
+    base_thin = int(np.flatnonzero(rig.joint_node == tree.stem_node_start[1])[0])
+    base_thick = int(np.flatnonzero(rig.joint_node == tree.stem_node_start[2])[0])
+    per_len = np.linalg.norm(theta, axis=2).mean(axis=1) / loads.span
+    assert per_len[base_thin] > 4.0 * per_len[base_thick]
+    # across levels too: every joint of the thin level-1 branch bends more per metre than the trunk
+    trunk = rig.joint_stem == 0
+    assert per_len[rig.joint_stem == 1].min() > 5.0 * per_len[trunk][1:].max()
+
+
+def test_gale_stays_bounded_and_finite(tree_rig):
+    tree, rig = tree_rig
+    opts = WindOptions(speed=40.0, **FAST)
+    clip = bake_wind(tree, rig, opts, seed=8)
+    assert np.all(np.isfinite(clip.rotations))
+    dev = _deviation(clip, rig.skeleton)
+    assert dev.max() <= np.deg2rad(opts.max_angle_deg) + 1e-9
+    assert dev.max() > 0.3 * np.deg2rad(opts.max_angle_deg)          # the bound is doing work
+
+
+def test_seam_is_smooth(tree_rig):
+    """First key == last key, and the step across the seam looks like any interior step."""
+    tree, rig = tree_rig
+    clip = bake_wind(tree, rig, WindOptions(speed=10.0, **FAST), seed=9)
+    q = clip.rotations[:-1]                                          # one period, (n, J, 4)
+    step = np.diff(np.concatenate([q, q[:1]]), axis=0)               # includes the seam step
+    second = step - np.roll(step, 1, axis=0)                         # second difference, periodic
+    seam = np.linalg.norm(second[0], axis=1)                         # across keys n−1, 0, 1
+    interior = np.linalg.norm(second[1:], axis=2).max(axis=0)
+    moving = interior > 0
+    assert np.all(seam[moving] <= interior[moving] * 1.0001)
+    first_step = np.linalg.norm(clip.rotations[1] - clip.rotations[0], axis=1)
+    last_step = np.linalg.norm(clip.rotations[-1] - clip.rotations[-2], axis=1)
+    typical = np.linalg.norm(np.diff(q, axis=0), axis=2).max(axis=0)
+    assert np.all(np.abs(first_step - last_step)[moving] <= typical[moving])
+
+
+def test_seeds(tree_rig):
+    tree, rig = tree_rig
+    a = bake_wind(tree, rig, WindOptions(**FAST), seed=11)
+    b = bake_wind(tree, rig, WindOptions(**FAST), seed=11)
+    c = bake_wind(tree, rig, WindOptions(**FAST), seed=12)
+    assert np.array_equal(a.rotations, b.rotations)
+    assert not np.allclose(a.rotations, c.rotations)
+
+
+def test_wind_field_statistics_and_periodicity():
+    pts = np.array([[0.0, 0, 2], [0.0, 0, 3], [5.0, 0, 3], [0.0, 6, 3]])
+    opts = WindOptions(speed=5.0, gust=0.4, turbulence=0.0, duration=8.0, fps=30.0)
+    v = wind_velocity(pts, np.arange(4), opts, seed=1, n_samples=240)
+    assert v.shape == (4, 240, 3)
+    # mean exactly U along +X (all fluctuations are zero-mean harmonics); σ_u from the gust knob
+    assert np.allclose(v.mean(axis=1), [5.0, 0.0, 0.0], atol=1e-9)
+    assert np.allclose(v[:, :, 0].std(axis=1), 0.4 * 5.0, rtol=1e-9)
+    assert np.all(v[:, :, 1].std(axis=1) < v[:, :, 0].std(axis=1))   # lateral smaller
+    # frozen turbulence: the downwind point sees the upwind point's series 1 s later
+    shift = int(round(5.0 / 5.0 * 30))
+    assert np.allclose(np.roll(v[1, :, 0], shift), v[2, :, 0])
+    # with turbulence, points at the same downwind distance still differ (per-branch part)
+    v2 = wind_velocity(pts, np.arange(4), dataclasses.replace(opts, turbulence=0.3), 1, 240)
+    assert not np.allclose(v2[1], v2[3])
+    # shared field seed: two trees at different places see the same advected field
+    o1 = dataclasses.replace(opts, field_seed=99, origin=(0.0, 0.0, 0.0))
+    o2 = dataclasses.replace(opts, field_seed=99, origin=(5.0, 0.0, 0.0))
+    a = wind_velocity(pts[:1], [0], o1, seed=1, n_samples=240)
+    b = wind_velocity(pts[:1], [0], o2, seed=2, n_samples=240)
+    assert np.allclose(np.roll(a[0, :, 0], 30), b[0, :, 0])
+
+
+def test_loads_sum_over_subtree(tree_rig):
+    """Root mass is the whole tree's; its inertia is Σ m·|x − p|² (parallel axis is right)."""
+    tree, rig = tree_rig
+    opts = WindOptions()
+    loads = joint_loads(tree, rig, opts)
+    seg = np.flatnonzero(tree.node_stem[:-1] == tree.node_stem[1:])
+    a, b = tree.node_pos[seg], tree.node_pos[seg + 1]
+    r0, r1 = tree.node_radius[seg], tree.node_radius[seg + 1]
+    length = np.linalg.norm(b - a, axis=1)
+    wood = opts.wood_density * np.pi * length * (r0**2 + r0 * r1 + r1**2) / 3.0
+    leaf = opts.leaf_areal_density * tree.leaf_area
+    assert np.isclose(loads.mass[0], wood.sum() + leaf.sum())
+    centre = np.concatenate([0.5 * (a + b), tree.leaf_pos + 0.5 * tree.leaf_size[:, :1] * tree.leaf_frame[:, :, 1]])
+    m = np.concatenate([wood, leaf])
+    expected = np.sum(m * np.sum((centre - loads.pivot[0]) ** 2, axis=1)) + np.sum(wood * length**2 / 12)
+    assert np.isclose(loads.inertia[0], expected)
+    # the rigid twig's leaves load the thin branch's joint it hangs from
+    attach = int(rig.stem_joint[3])
+    assert loads.area[attach] >= opts.drag_coefficient * tree.leaf_area[tree.leaf_stem == 3].sum()
+
+
+def test_bad_options_raise_treegen_error():
+    with pytest.raises(TreegenError, match="speed"):
+        WindOptions(speed=-1.0)
+    with pytest.raises(TreegenError, match="duration"):
+        WindOptions(duration=0.0)
+    with pytest.raises(TreegenError, match="fps"):
+        WindOptions(fps=float("nan"))
