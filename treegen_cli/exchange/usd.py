@@ -171,6 +171,8 @@ def _define_lod_root(stage, root_path, asset: Asset, materials, tcps) -> None:
                     over = stage.OverridePrim(lods_path.AppendChild(other))
                     UsdGeom.Imageable(over).CreateVisibilityAttr(UsdGeom.Tokens.invisible)
     vset.SetVariantSelection(names[0])
+    # child order is the LOD index; variant overs would otherwise be composed first
+    lods_prim.SetChildrenReorder(names)
 
 
 def _define_lod(stage, path, lod: Lod, asset: Asset, materials, tcps) -> None:
