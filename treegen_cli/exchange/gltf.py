@@ -323,3 +323,42 @@ def write_gltf(asset: Asset, path: str | os.PathLike, binary: bool | None = None
 
     with staged(path) as tmp:
         write_gltf_files(asset, tmp, binary)
+
+
+# ---- reading back (tests, `treegen preview`, cross-format checks) ----
+
+_DTYPE = {FLOAT: np.float32, UNSIGNED_BYTE: np.uint8, UNSIGNED_SHORT: np.uint16,
+          UNSIGNED_INT: np.uint32}
+_NCOMP = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
+
+
+def read_gltf(path: str | os.PathLike) -> tuple[dict, bytes]:
+    """(JSON dict, buffer 0 bytes) of a .glb, or of a .gltf with its external .bin."""
+    path = Path(path)
+    data = path.read_bytes()
+    if data[:4] == b"glTF":
+        _, _, total = struct.unpack_from("<4sII", data, 0)
+        jlen, _ = struct.unpack_from("<I4s", data, 12)
+        gltf = json.loads(data[20:20 + jlen])
+        blob = b""
+        if 20 + jlen < total:
+            blen, _ = struct.unpack_from("<I4s", data, 20 + jlen)
+            blob = data[28 + jlen:28 + jlen + blen]
+        return gltf, blob
+    gltf = json.loads(data)
+    uri = gltf["buffers"][0].get("uri") if gltf.get("buffers") else None
+    return gltf, (path.parent / uri).read_bytes() if uri else b""
+
+
+def read_accessor(gltf: dict, blob: bytes, index: int) -> np.ndarray:
+    """An accessor as a numpy array (count, components), or (count,) for scalars, (count, 4, 4)
+    row-major for MAT4. Tightly packed views only (what this writer produces)."""
+    acc = gltf["accessors"][index]
+    view = gltf["bufferViews"][acc["bufferView"]]
+    n = _NCOMP[acc["type"]]
+    start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+    a = np.frombuffer(blob, dtype=np.dtype(_DTYPE[acc["componentType"]]).newbyteorder("<"),
+                      count=acc["count"] * n, offset=start)
+    if acc["type"] == "MAT4":
+        return a.reshape(-1, 4, 4).transpose(0, 2, 1)
+    return a if n == 1 else a.reshape(-1, n)

@@ -1,0 +1,371 @@
+"""glTF writer and export registry: validator-clean output, real readers, exact re-reads."""
+from __future__ import annotations
+
+import os
+import dataclasses
+
+import numpy as np
+import pytest
+import trimesh
+from scipy.spatial.transform import Rotation
+
+from synthetic import bark, chain_skeleton, leaves, synthetic_asset, MATERIALS
+from treegen_cli import __version__
+from treegen_cli.asset import Asset, Lod
+from treegen_cli.errors import TreegenError
+from treegen_cli.exchange import WRITERS, export, supported_suffixes
+from treegen_cli.exchange.gltf import (FLOAT, UNSIGNED_BYTE, UNSIGNED_INT, UNSIGNED_SHORT,
+                                       quat_to_y_up, read_accessor, read_gltf, to_y_up,
+                                       write_gltf)
+from treegen_cli.exchange.validate import summary, validate_gltf
+
+
+def _clean(path) -> dict:
+    report = validate_gltf(path)
+    issues = report["issues"]
+    print(f"{path.name}: {issues['numInfos']} infos, {issues['numHints']} hints\n{summary(report)}")
+    assert issues["numErrors"] == 0, summary(report)
+    assert issues["numWarnings"] == 0, summary(report)
+    return report
+
+
+def _trs_world(gltf: dict, root: int) -> dict[int, np.ndarray]:
+    """World matrices of `root` and its descendants from node TRS (glTF space)."""
+    out = {}
+
+    def walk(i, parent):
+        n = gltf["nodes"][i]
+        m = np.eye(4)
+        m[:3, :3] = Rotation.from_quat(n.get("rotation", [0, 0, 0, 1])).as_matrix()
+        m[:3, 3] = n.get("translation", [0, 0, 0])
+        out[i] = parent @ m
+        for c in n.get("children", []):
+            walk(c, out[i])
+
+    walk(root, np.eye(4))
+    return out
+
+
+@pytest.fixture(scope="module")
+def written(tmp_path_factory):
+    """The synthetic asset (1, 2 and 3 LODs) written once as GLB and as .gltf + .bin."""
+    d = tmp_path_factory.mktemp("gltf")
+    out = {}
+    for lods in (1, 2, 3):
+        asset = synthetic_asset(lods)
+        for suffix in (".glb", ".gltf"):
+            p = d / f"tree{lods}{suffix}"
+            export(asset, p)
+            out[lods, suffix] = (asset, p)
+    return out
+
+
+@pytest.mark.parametrize("key", [(1, ".glb"), (2, ".glb"), (2, ".gltf"), (3, ".glb")])
+def test_validator_clean(written, key):
+    _clean(written[key][1])
+
+
+def test_validator_clean_without_clip(tmp_path):
+    p = tmp_path / "still.glb"
+    export(synthetic_asset(2, with_clip=False), p)
+    _clean(p)
+    assert "animations" not in read_gltf(p)[0]
+
+
+def test_trimesh_counts(written):
+    asset, p = written[2, ".glb"]
+    scene = trimesh.load(p, force="scene")
+    shown = [scene.geometry[scene.graph[n][1]] for n in scene.graph.nodes_geometry]
+    lod0 = asset.lods[0].primitives
+    # only LOD0 is in the scene; the lower LOD reaches engines through MSFT_lod
+    assert sum(len(g.vertices) for g in shown) == sum(len(p.positions) for p in lod0) == 32
+    assert sum(len(g.faces) for g in shown) == sum(len(p.indices) // 3 for p in lod0) == 40
+
+
+def test_gltf_and_glb_carry_the_same_data(written):
+    g1, b1 = read_gltf(written[2, ".glb"][1])
+    g2, b2 = read_gltf(written[2, ".gltf"][1])
+    assert b1 == b2
+    assert g2["buffers"][0]["uri"] == "tree2.bin"
+    g2["buffers"][0].pop("uri")
+    assert g1 == g2
+
+
+def test_skin_joints_and_inverse_bind(written):
+    asset, p = written[2, ".glb"]
+    gltf, blob = read_gltf(p)
+    assert len(gltf["skins"]) == len(asset.lods)
+    for k, (lod, skin) in enumerate(zip(asset.lods, gltf["skins"])):
+        J = len(lod.skeleton.names)
+        assert len(skin["joints"]) == J
+        assert [gltf["nodes"][j]["name"] for j in skin["joints"]] == lod.skeleton.names
+        mesh_node = gltf["nodes"][gltf["nodes"].index(
+            next(n for n in gltf["nodes"] if n.get("skin") == k))]
+        assert "translation" not in mesh_node and "rotation" not in mesh_node
+        world = _trs_world(gltf, skin["skeleton"])
+        ibm = read_accessor(gltf, blob, skin["inverseBindMatrices"])
+        for j, node in enumerate(skin["joints"]):
+            np.testing.assert_allclose(ibm[j] @ world[node], np.eye(4), atol=1e-5)
+
+
+def test_y_up_conversion(written):
+    asset, p = written[1, ".glb"]
+    gltf, blob = read_gltf(p)
+    for prim, src in zip(gltf["meshes"][0]["primitives"], asset.lods[0].primitives):
+        pos = read_accessor(gltf, blob, prim["attributes"]["POSITION"])
+        gen = src.positions
+        np.testing.assert_array_equal(pos[:, 0], gen[:, 0])
+        np.testing.assert_array_equal(pos[:, 1], gen[:, 2])   # generator z=5 → glTF y=5
+        np.testing.assert_array_equal(pos[:, 2], -gen[:, 1])
+        acc = gltf["accessors"][prim["attributes"]["POSITION"]]
+        assert acc["min"] == pos.min(axis=0).tolist() and acc["max"] == pos.max(axis=0).tolist()
+        nrm = read_accessor(gltf, blob, prim["attributes"]["NORMAL"])
+        np.testing.assert_allclose(nrm, to_y_up(src.normals), atol=1e-6)
+    tip = gltf["nodes"][gltf["skins"][0]["joints"][-1]]
+    assert np.allclose(to_y_up([0, 0, 1]), [0, 1, 0])
+    # joints climb in +y in glTF as they climb in +z in the generator
+    world = _trs_world(gltf, gltf["skins"][0]["skeleton"])
+    top = world[gltf["skins"][0]["joints"][-1]][:3, 3]
+    np.testing.assert_allclose(top, to_y_up(asset.lods[0].skeleton.bind_world[-1][:3, 3]),
+                               atol=1e-6)
+    assert tip["name"] == "j2"
+
+
+def test_vertex_attributes(written):
+    asset, p = written[1, ".glb"]
+    gltf, blob = read_gltf(p)
+    J = len(asset.lods[0].skeleton.names)
+    for prim, src in zip(gltf["meshes"][0]["primitives"], asset.lods[0].primitives):
+        a = prim["attributes"]
+        w = read_accessor(gltf, blob, a["WEIGHTS_0"])
+        j = read_accessor(gltf, blob, a["JOINTS_0"])
+        np.testing.assert_allclose(w.sum(axis=1), 1.0, atol=1e-7)
+        assert j.max() < J and np.all(j[w == 0] == 0)
+        assert gltf["accessors"][a["JOINTS_0"]]["componentType"] == UNSIGNED_BYTE
+        assert gltf["accessors"][prim["indices"]]["componentType"] == UNSIGNED_SHORT
+        np.testing.assert_array_equal(read_accessor(gltf, blob, prim["indices"]), src.indices)
+        uv = read_accessor(gltf, blob, a["TEXCOORD_0"])
+        np.testing.assert_allclose(uv[:, 1], 1.0 - src.uvs[:, 1])   # glTF's v runs down
+    views = gltf["bufferViews"]
+    assert all(v["byteOffset"] % 4 == 0 for v in views)
+    targets = {gltf["accessors"][i]["bufferView"]: t
+               for prim in gltf["meshes"][0]["primitives"]
+               for i, t in [*((x, 34962) for x in prim["attributes"].values()),
+                            (prim["indices"], 34963)]}
+    for i, v in enumerate(views):
+        assert v.get("target") == targets.get(i)   # no target on IBM / animation views
+
+
+def test_materials(written):
+    gltf, _ = read_gltf(written[1, ".glb"][1])
+    mats = {m["name"]: m for m in gltf["materials"]}
+    assert mats["leaf"]["doubleSided"] is True
+    assert mats["leaf"]["alphaMode"] == "MASK" and mats["leaf"]["alphaCutoff"] == 0.5
+    assert "alphaMode" not in mats["bark"] and "doubleSided" not in mats["bark"]
+    pbr = mats["bark"]["pbrMetallicRoughness"]
+    assert pbr["baseColorFactor"] == list(MATERIALS[0].base_color)
+    assert pbr["roughnessFactor"] == 0.9 and pbr["metallicFactor"] == 0.0
+
+
+def test_asset_header(written):
+    asset, p = written[1, ".glb"]
+    gltf, _ = read_gltf(p)
+    assert gltf["asset"]["generator"] == f"treegen {__version__}"
+    assert gltf["asset"]["extras"] == asset.extras
+    assert len(gltf["scenes"]) == 1 and gltf["scene"] == 0
+
+
+def test_animation_channels_and_sparse_keys(written):
+    asset, p = written[2, ".glb"]
+    gltf, blob = read_gltf(p)
+    anims = {a["name"]: a for a in gltf["animations"]}
+    assert sorted(anims) == ["wind_lod0", "wind_lod1"]
+    for k, lod in enumerate(asset.lods):
+        clip = lod.clips[0]
+        anim = anims[clip.name]
+        joints = gltf["skins"][k]["joints"]
+        J = len(joints)
+        # the root never leaves rest, so it gets no channel
+        assert len(anim["channels"]) == J - 1
+        inputs = set()
+        for ch in anim["channels"]:
+            j = joints.index(ch["target"]["node"])
+            assert ch["target"]["path"] == "rotation" and j > 0
+            s = anim["samplers"][ch["sampler"]]
+            assert s["interpolation"] == clip.interpolation
+            keys = np.arange(len(clip.times)) if clip.keys is None else clip.keys[j]
+            t = read_accessor(gltf, blob, s["input"])
+            np.testing.assert_array_equal(t, clip.times[keys].astype(np.float32))
+            acc = gltf["accessors"][s["input"]]
+            assert acc["min"] == [float(t[0])] and acc["max"] == [float(t[-1])]
+            q = read_accessor(gltf, blob, s["output"])
+            want = quat_to_y_up(clip.rotations[keys, j])
+            np.testing.assert_allclose(np.abs(np.einsum("ki,ki->k", q, want)), 1.0, atol=1e-6)
+            assert np.all(np.einsum("ki,ki->k", q[1:], q[:-1]) >= 0)   # no long-way slerp
+            inputs.add(s["input"])
+        # LOD0's non-root joints share one key set, LOD1 is dense: one input accessor each
+        assert len(inputs) == 1
+    sparse = asset.lods[0].clips[0].keys[1]
+    assert len(sparse) < len(asset.lods[0].clips[0].times)
+
+
+def _skin(gltf, blob, mesh_index, skin_index, rotations: dict[int, np.ndarray]):
+    """Skinned positions of a mesh in glTF space with some joint rotations overridden."""
+    skin = gltf["skins"][skin_index]
+    nodes = gltf["nodes"]
+    saved = {n: nodes[n].get("rotation") for n in rotations}
+    for n, q in rotations.items():
+        nodes[n]["rotation"] = list(q)
+    world = _trs_world(gltf, skin["skeleton"])
+    for n, q in saved.items():
+        nodes[n]["rotation"] = q if q is not None else [0, 0, 0, 1]
+    ibm = read_accessor(gltf, blob, skin["inverseBindMatrices"])
+    mats = np.stack([world[n] @ ibm[j] for j, n in enumerate(skin["joints"])])
+    out = []
+    for prim in gltf["meshes"][mesh_index]["primitives"]:
+        a = prim["attributes"]
+        pos = read_accessor(gltf, blob, a["POSITION"]).astype(np.float64)
+        jj = read_accessor(gltf, blob, a["JOINTS_0"]).astype(np.int64)
+        ww = read_accessor(gltf, blob, a["WEIGHTS_0"]).astype(np.float64)
+        m = np.einsum("vk,vkij->vij", ww, mats[jj])
+        out.append(np.einsum("vij,vj->vi", m[:, :3, :3], pos) + m[:, :3, 3])
+    return np.concatenate(out)
+
+
+def test_posed_mesh_matches_generator_space(written):
+    """Pose key 2 in glTF (node TRS + IBM + weights) equals the generator-space pose rotated
+    to Y up: checks translations, rotations, IBMs and animation quaternions together."""
+    asset, p = written[1, ".glb"]
+    gltf, blob = read_gltf(p)
+    lod = asset.lods[0]
+    sk, clip, key = lod.skeleton, lod.clips[0], 2
+    anim = gltf["animations"][0]
+    pose = {}
+    for ch in anim["channels"]:
+        s = anim["samplers"][ch["sampler"]]
+        t = read_accessor(gltf, blob, s["input"])
+        q = read_accessor(gltf, blob, s["output"])
+        pose[ch["target"]["node"]] = q[np.flatnonzero(t == np.float32(clip.times[key]))[0]]
+    got = _skin(gltf, blob, 0, 0, pose)
+    # generator space: compose the keyed local rotations, skin with inv(bind_world)
+    J = len(sk.names)
+    world = np.empty((J, 4, 4))
+    for j in range(J):
+        m = np.eye(4)
+        m[:3, :3] = Rotation.from_quat(clip.rotations[key, j]).as_matrix()
+        m[:3, 3] = sk.rest_translation[j]
+        world[j] = m if sk.parent[j] < 0 else world[sk.parent[j]] @ m
+    mats = world @ np.linalg.inv(sk.bind_world)
+    want = []
+    for prim in lod.primitives:
+        m = np.einsum("vk,vkij->vij", prim.weights.astype(np.float64), mats[prim.joints])
+        want.append(np.einsum("vij,vj->vi", m[:, :3, :3], prim.positions) + m[:, :3, 3])
+    want = to_y_up(np.concatenate(want))
+    np.testing.assert_allclose(got, want, atol=1e-5)
+    rest = _skin(gltf, blob, 0, 0, {})
+    assert np.abs(got - rest).max() > 0.05   # the key really moves the tree
+
+
+def test_msft_lod(written):
+    asset, p = written[3, ".glb"]
+    gltf, _ = read_gltf(p)
+    roots = gltf["scenes"][0]["nodes"]
+    assert len(roots) == 1
+    top = gltf["nodes"][roots[0]]
+    ids = top["extensions"]["MSFT_lod"]["ids"]
+    assert len(ids) == 2 and not set(ids) & set(roots)
+    assert [gltf["nodes"][i]["mesh"] for i in ids] == [1, 2]
+    assert [gltf["nodes"][i]["skin"] for i in ids] == [1, 2]
+    cover = top["extras"]["MSFT_screencoverage"]
+    assert cover == [lod.screen_coverage for lod in asset.lods]
+    assert all(a > b for a, b in zip(cover, cover[1:]))
+    assert gltf["extensionsUsed"] == ["MSFT_lod"] and "extensionsRequired" not in gltf
+    # each LOD node carries its own skeleton as children
+    for k, i in enumerate([roots[0], *ids]):
+        assert gltf["nodes"][i]["children"] == [gltf["skins"][k]["skeleton"]]
+    single, _ = read_gltf(written[1, ".glb"][1])
+    assert "extensionsUsed" not in single and "extensions" not in single["nodes"][0]
+
+
+def test_deterministic_bytes(tmp_path):
+    for suffix in (".glb", ".gltf"):
+        a, b = tmp_path / f"a{suffix}", tmp_path / f"b{suffix}"
+        export(synthetic_asset(2), a)
+        export(synthetic_asset(2), b)
+        assert a.read_bytes().replace(b"a.bin", b"b.bin") == b.read_bytes()
+    assert (tmp_path / "a.bin").read_bytes() == (tmp_path / "b.bin").read_bytes()
+
+
+def test_large_indices_and_joints(tmp_path):
+    """300 joints → UNSIGNED_SHORT joints; ≥ 65535 vertices → UNSIGNED_INT indices."""
+    sk = chain_skeleton(300)
+    asset = Asset("big", list(MATERIALS),
+                  [Lod([bark(sk, 220), leaves(sk, 4)], sk)])
+    assert len(asset.lods[0].primitives[0].positions) >= 65535
+    p = tmp_path / "big.glb"
+    export(asset, p)
+    _clean(p)
+    gltf, _ = read_gltf(p)
+    bark_prim, leaf_prim = gltf["meshes"][0]["primitives"]
+    acc = gltf["accessors"]
+    assert acc[bark_prim["attributes"]["JOINTS_0"]]["componentType"] == UNSIGNED_SHORT
+    assert acc[bark_prim["indices"]]["componentType"] == UNSIGNED_INT
+    assert acc[leaf_prim["indices"]]["componentType"] == UNSIGNED_SHORT
+    assert acc[bark_prim["attributes"]["WEIGHTS_0"]]["componentType"] == FLOAT
+
+
+def test_step_and_explicit_animated(tmp_path):
+    asset = synthetic_asset(1)
+    clip = dataclasses.replace(asset.lods[0].clips[0], interpolation="STEP",
+                               animated=np.array([False, False, True]), keys=None)
+    asset = dataclasses.replace(asset, lods=[dataclasses.replace(asset.lods[0], clips=[clip])])
+    p = tmp_path / "step.glb"
+    write_gltf(asset, p)
+    _clean(p)
+    gltf, _ = read_gltf(p)
+    anim = gltf["animations"][0]
+    assert len(anim["channels"]) == 1 and anim["samplers"][0]["interpolation"] == "STEP"
+    assert gltf["nodes"][anim["channels"][0]["target"]["node"]]["name"] == "j2"
+
+
+def test_unknown_suffix(tmp_path):
+    with pytest.raises(TreegenError) as e:
+        export(synthetic_asset(), tmp_path / "tree.fbx")
+    assert ".glb" in str(e.value) and ".usdc" in str(e.value) and ".fbx" in str(e.value)
+    assert os.listdir(tmp_path) == []
+    assert {".glb", ".gltf", ".usda", ".usdc", ".usdz", ".obj", ".ply"} <= set(supported_suffixes())
+
+
+def test_missing_folder(tmp_path):
+    with pytest.raises(TreegenError, match="does not exist"):
+        export(synthetic_asset(), tmp_path / "nope" / "tree.glb")
+
+
+def test_atomic_write_leaves_no_temp_files(tmp_path, monkeypatch):
+    export(synthetic_asset(), tmp_path / "t.gltf")
+    export(synthetic_asset(), tmp_path / "t.glb")
+    assert sorted(os.listdir(tmp_path)) == ["t.bin", "t.glb", "t.gltf"]
+    old = (tmp_path / "t.glb").read_bytes()
+
+    def broken(asset, path, **opts):
+        path.write_bytes(b"half a file")
+        raise RuntimeError("interrupted")
+
+    monkeypatch.setitem(WRITERS, ".glb", broken)
+    with pytest.raises(RuntimeError):
+        export(synthetic_asset(), tmp_path / "t.glb")
+    assert sorted(os.listdir(tmp_path)) == ["t.bin", "t.glb", "t.gltf"]
+    assert (tmp_path / "t.glb").read_bytes() == old     # the previous file is untouched
+
+
+@pytest.mark.parametrize("suffix", [".obj", ".ply"])
+def test_static_exports(tmp_path, suffix):
+    asset = synthetic_asset(2)
+    p = tmp_path / f"tree{suffix}"
+    assert export(asset, p) == [p]
+    mesh = trimesh.load(p, force="mesh", process=False)
+    lod0 = asset.lods[0].primitives
+    assert len(mesh.faces) == sum(len(q.indices) // 3 for q in lod0)
+    assert len(mesh.vertices) == sum(len(q.positions) for q in lod0)
+    gen = np.concatenate([q.positions for q in lod0])
+    np.testing.assert_allclose(mesh.vertices[:, 1], gen[:, 2], atol=1e-5)   # Y up
