@@ -293,3 +293,47 @@ def test_unknown_suffix_is_a_user_error(tmp_path):
     with pytest.raises(TreegenError, match="usdz"):
         write_usd(synthetic_asset(), tmp_path / "tree.usdx")
     assert not list(tmp_path.iterdir())
+
+
+def test_extra_clips_are_sibling_animations_and_empty_primitives_are_valid(tmp_path):
+    """Only the first clip drives the skeleton; a primitive without vertices stays valid."""
+    asset = synthetic_asset(lods=1)
+    lod = asset.lods[0]
+    calm = dataclasses.replace(lod.clips[0], name="calm", keys=None,
+                               rotations=np.repeat(lod.skeleton.rest_rotation[None], 9, 0))
+    empty = dataclasses.replace(lod.primitives[1], name="twigs",
+                                positions=np.zeros((0, 3), np.float32),
+                                normals=np.zeros((0, 3), np.float32), uvs=np.zeros((0, 2), np.float32),
+                                indices=np.zeros(0, np.uint32), joints=np.zeros((0, 4), np.uint16),
+                                weights=np.zeros((0, 4), np.float32))
+    lod = dataclasses.replace(lod, clips=[lod.clips[0], calm], primitives=[*lod.primitives, empty])
+    path = tmp_path / "two clips.usda"
+    write_usd(dataclasses.replace(asset, name="two clips", lods=[lod]), path)
+    assert validate_usd(path) == []
+    stage = Usd.Stage.Open(str(path))
+    skel_root = stage.GetDefaultPrim().GetChild("LOD0")
+    anims = [p.GetName() for p in skel_root.GetChildren() if p.IsA(UsdSkel.Animation)]
+    assert anims == ["wind_lod0", "calm"]
+    source = skel_root.GetChild("Skeleton").GetRelationship("skel:animationSource").GetTargets()
+    assert source == [skel_root.GetPath().AppendChild("wind_lod0")]
+    assert len(UsdGeom.Mesh(skel_root.GetChild("twigs")).GetPointsAttr().Get()) == 0
+
+
+def test_validator_looks_inside_non_default_variants(tmp_path):
+    path = tmp_path / "variants.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    root = UsdGeom.Xform.Define(stage, "/a").GetPrim()
+    stage.SetDefaultPrim(root)
+    vset = root.GetVariantSets().AddVariantSet("LOD")
+    vset.AddVariant("LOD0")
+    vset.AddVariant("LOD1")
+    vset.SetVariantSelection("LOD1")
+    with vset.GetVariantEditContext():   # a binding without MaterialBindingAPI, only in LOD1
+        UsdGeom.Mesh.Define(stage, "/a/m").GetPrim().CreateRelationship("material:binding").SetTargets(["/a"])
+    vset.SetVariantSelection("LOD0")
+    stage.Save()
+    assert validate_usd(path, all_variants=False) == []
+    (msg,) = validate_usd(path)
+    assert "MaterialBindingAPI" in msg and "LOD=LOD1" in msg

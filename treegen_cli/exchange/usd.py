@@ -67,9 +67,13 @@ def write_usd(asset: Asset, path) -> None:
         shutil.rmtree(tmpdir, ignore_errors=True)
 
 
-def validate_usd(path) -> list[str]:
+def validate_usd(path, all_variants: bool = True) -> list[str]:
     """Run every validator registered with pxr.UsdValidation (core, geom, shade, skel, usdz
-    utils, ...) over the stage at `path`; return their messages ("" list = clean)."""
+    utils, ...) over the stage at `path`; return their messages (empty list = clean).
+
+    all_variants: also validate the stage under every selection of every variant set (our
+    "LOD" set), set in the session layer, so non-default LODs are checked too.
+    """
     from pxr import Usd, UsdValidation
 
     stage = Usd.Stage.Open(str(path))
@@ -77,8 +81,27 @@ def validate_usd(path) -> list[str]:
         return [f"{path}: cannot be opened as a USD stage"]
     registry = UsdValidation.ValidationRegistry()
     context = UsdValidation.ValidationContext(registry.GetOrLoadAllValidators())
-    errors = context.Validate(stage)
-    return [e.GetErrorAsString() for e in errors if not e.HasNoError()]
+    messages: list[str] = []
+
+    def run(label: str) -> None:
+        for e in context.Validate(stage):
+            if not e.HasNoError():
+                msg = e.GetErrorAsString() + label
+                if msg not in messages:
+                    messages.append(msg)
+
+    run("")
+    if all_variants:
+        sets = [(prim.GetPath(), name, prim.GetVariantSets().GetVariantSet(name).GetVariantNames())
+                for prim in stage.Traverse() for name in prim.GetVariantSets().GetNames()]
+        with Usd.EditContext(stage, stage.GetSessionLayer()):
+            for prim_path, name, variants in sets:
+                vset = stage.GetPrimAtPath(prim_path).GetVariantSets().GetVariantSet(name)
+                for variant in variants:
+                    vset.SetVariantSelection(variant)
+                    run(f" [variant {prim_path}{{{name}={variant}}}]")
+                vset.ClearVariantSelection()
+    return messages
 
 
 # --------------------------------------------------------------------------- stage building
