@@ -369,3 +369,10 @@ def test_static_exports(tmp_path, suffix):
     assert len(mesh.vertices) == sum(len(q.positions) for q in lod0)
     gen = np.concatenate([q.positions for q in lod0])
     np.testing.assert_allclose(mesh.vertices[:, 1], gen[:, 2], atol=1e-5)   # Y up
+
+
+@pytest.mark.parametrize("suffix", [".usda", ".usdz"])
+def test_registry_dispatches_usd_lazily(tmp_path, suffix):
+    p = tmp_path / f"tree{suffix}"
+    assert export(synthetic_asset(2), p) == [p]
+    assert os.listdir(tmp_path) == [p.name] and p.stat().st_size > 0

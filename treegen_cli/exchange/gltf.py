@@ -97,16 +97,13 @@ class _Buffer:
         self.views.append(v)
         return len(self.views) - 1
 
-    def accessor(self, a: np.ndarray, target: int | None = None, bounds: bool = False,
-                 normalized: bool = False) -> int:
+    def accessor(self, a: np.ndarray, target: int | None = None, bounds: bool = False) -> int:
         a = np.ascontiguousarray(a)
         comps = 1 if a.ndim == 1 else int(np.prod(a.shape[1:]))
         acc = {"bufferView": self.view(a.astype(a.dtype.newbyteorder("<"), copy=False).tobytes(),
                                        target),
                "componentType": _COMPONENT[a.dtype], "count": int(a.shape[0]),
                "type": _TYPE[comps]}
-        if normalized:
-            acc["normalized"] = True
         if bounds:
             flat = a.reshape(len(a), comps)
             acc["min"] = [_num(x) for x in flat.min(axis=0)]
@@ -243,6 +240,9 @@ def build(asset: Asset) -> tuple[dict, bytes]:
         if len(roots) == 1:
             skin["skeleton"] = int(joint_nodes[roots[0]])
         skins.append(skin)
+        missing = {p.material for p in lod.primitives} - set(mat_index)
+        if missing:
+            raise ValueError(f"primitives use materials {sorted(missing)} not in asset.materials")
         prims = [_primitive(buf, p, J, mat_index[p.material]) for p in lod.primitives]
         meshes.append({"name": f"{asset.name}_lod{k}", "primitives": prims})
         nodes[mesh_node] = {"name": f"{asset.name}_lod{k}", "mesh": len(meshes) - 1,
@@ -294,10 +294,10 @@ def glb_bytes(gltf: dict, blob: bytes) -> bytes:
     """GLB container: 12-byte header, JSON chunk (space-padded), BIN chunk (zero-padded)."""
     js = dumps(gltf)
     js += b" " * (-len(js) % 4)
-    total = 12 + 8 + len(js) + 8 + len(blob)
+    bin_chunk = [struct.pack("<I4s", len(blob), b"BIN\0"), blob] if blob else []
+    total = 12 + 8 + len(js) + sum(len(b) for b in bin_chunk)
     return b"".join([struct.pack("<4sII", b"glTF", 2, total),
-                     struct.pack("<I4s", len(js), b"JSON"), js,
-                     struct.pack("<I4s", len(blob), b"BIN\0"), blob])
+                     struct.pack("<I4s", len(js), b"JSON"), js, *bin_chunk])
 
 
 def write_gltf_files(asset: Asset, path: str | os.PathLike, binary: bool | None = None) -> None:
