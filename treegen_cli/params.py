@@ -267,6 +267,8 @@ _ALL_KEYS_LOWER = {k.lower(): k for k in _ALL_KEYS}
 
 def _suggest(key: str) -> str:
     """' (did you mean X?)' for the closest real key name, or ''."""
+    if len(key) > 40:
+        return ""
     low = key.lower()
     m = _LEVEL_RE.match(key)
     if m is None and low in _LEVEL_BY_LOWER:
@@ -302,6 +304,16 @@ class _Entry:
     line: int | None    # 1-based, None if unknown
 
 
+def _printable(text: str) -> str:
+    """Escape control characters so an error stays one readable terminal line."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
+def _clip(text: str, limit: int = 40) -> str:
+    """Shorten file text quoted in an error message."""
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
 class _Builder:
     """Collects entries from either reader, then validates all of them at once."""
 
@@ -315,7 +327,7 @@ class _Builder:
         return f"{self.source}:{line}" if line is not None else self.source
 
     def fail(self, line: int | None, msg: str) -> TreegenError:
-        return TreegenError(f"{self.where(line)}: {msg}")
+        return TreegenError(f"{self.where(line)}: {_printable(msg)}")
 
     def set_name(self, value: str, line: int | None, key: str = "Name") -> None:
         value = value.strip()
@@ -333,6 +345,7 @@ class _Builder:
 
     def _number(self, spec: KeySpec, canon: str, e: _Entry) -> int | float:
         raw = e.value.strip()
+        shown = _clip(raw)
         if spec.field == "leaf_shape" and raw.lower() in LEAF_SHAPES:
             return LEAF_SHAPES[raw.lower()]
         rng = spec.range_text()
@@ -341,18 +354,17 @@ class _Builder:
         except ValueError:
             if spec.field == "leaf_shape":
                 allowed = ", ".join(sorted(set(LEAF_SHAPES) - {f"disc{i}" for i in range(4, 10)}))
-                raise self.fail(e.line, f"{canon} = {raw!r} is not a leaf shape "
+                raise self.fail(e.line, f"{canon} = {shown!r} is not a leaf shape "
                                         f"(a code in {rng} or one of: {allowed})") from None
-            shown = raw if raw else "(nothing)"
             raise self.fail(e.line, f"{canon} = {shown!r} is not a number "
                                     f"(allowed range {rng})") from None
         if not math.isfinite(v):
-            raise self.fail(e.line, f"{canon} = {raw} is not a finite number (allowed range {rng})")
+            raise self.fail(e.line, f"{canon} = {shown} is not a finite number (allowed range {rng})")
         if not spec.contains(v):
-            raise self.fail(e.line, f"{canon} = {raw} is out of range {rng}")
+            raise self.fail(e.line, f"{canon} = {shown} is out of range {rng}")
         if spec.kind is int:
             if not v.is_integer():
-                raise self.fail(e.line, f"{canon} = {raw} must be a whole number in {rng}")
+                raise self.fail(e.line, f"{canon} = {shown} must be a whole number in {rng}")
             return int(v)
         return v
 
@@ -366,7 +378,7 @@ class _Builder:
         for e in self.entries:
             found = _lookup(e.key)
             if found is None:
-                raise self.fail(e.line, f"unknown key {e.key}{_suggest(e.key)}")
+                raise self.fail(e.line, f"unknown key {_clip(e.key)}{_suggest(e.key)}")
             spec, n, canon = found
             ident = (spec.key, n)
             if ident in seen:
@@ -412,7 +424,8 @@ def parse_params_text(text: str, source: str = "<string>") -> Params:
     if "\x00" in text:
         line = text.count("\n", 0, text.index("\x00")) + 1
         raise b.fail(line, "binary data (NUL byte): not a species text file")
-    for lineno, raw in enumerate(text.splitlines(), start=1):
+    # Lines are counted by "\n" only, as editors do (str.splitlines also splits on \f, \v, ...).
+    for lineno, raw in enumerate(text.split("\n"), start=1):
         line = raw.split("#", 1)[0].strip()
         if not line:
             continue
@@ -422,17 +435,18 @@ def parse_params_text(text: str, source: str = "<string>") -> Params:
             key, value = (line.split(None, 1) + [""])[:2]
         key, value = key.strip(), value.strip()
         if not key or any(c.isspace() for c in key):
-            raise b.fail(lineno, f"expected 'Key value' or 'Key = value', got {raw.strip()!r}")
+            raise b.fail(lineno, f"expected 'Key value' or 'Key = value', got {_clip(raw.strip())!r}")
         if key.lower() in ("name", "species"):
             b.set_name(value, lineno, key)
             continue
         found = _lookup(key)
         if found is None:
-            raise b.fail(lineno, f"unknown key {key}{_suggest(key)}")
+            raise b.fail(lineno, f"unknown key {_clip(key)}{_suggest(key)}")
         if not value:
             raise b.fail(lineno, f"{key} has no value (allowed range {found[0].range_text()})")
         if len(value.split()) > 1:
-            raise b.fail(lineno, f"{key} = {value!r}: expected one value, got {len(value.split())}")
+            raise b.fail(lineno, f"{key} = {_clip(value)!r}: expected one value, "
+                                 f"got {len(value.split())}")
         b.add(key, value, lineno)
     return b.build(_default_name(source))
 
@@ -456,7 +470,7 @@ def parse_params_xml(data: str | bytes, source: str = "<string>") -> Params:
     species_count = 0
 
     def refuse(msg: str):
-        raise _Refused(f"{b.where(p.CurrentLineNumber)}: {msg}")
+        raise _Refused(f"{b.where(p.CurrentLineNumber)}: {_printable(_clip(msg, 200))}")
 
     def start(tag: str, attrs: dict[str, str]):
         nonlocal species_count
