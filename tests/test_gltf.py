@@ -376,3 +376,16 @@ def test_registry_dispatches_usd_lazily(tmp_path, suffix):
     p = tmp_path / f"tree{suffix}"
     assert export(synthetic_asset(2), p) == [p]
     assert os.listdir(tmp_path) == [p.name] and p.stat().st_size > 0
+
+
+def test_validator_missing_is_a_clear_error(tmp_path, monkeypatch):
+    from treegen_cli.exchange import validate
+
+    monkeypatch.setattr(validate, "TOOLS_DIR", tmp_path)
+    with pytest.raises(validate.ValidatorUnavailable, match="npm ci"):
+        validate.validate_gltf(tmp_path / "x.glb")
+    monkeypatch.undo()
+    monkeypatch.setenv("PATH", str(tmp_path))
+    monkeypatch.delenv("TREEGEN_NODE", raising=False)
+    with pytest.raises(validate.ValidatorUnavailable, match="Node.js"):
+        validate.validate_gltf(tmp_path / "x.glb")
