@@ -1,11 +1,26 @@
-"""Tree → skeleton whose joints are stem nodes, under a joint budget.  (contract; to implement)"""
+"""Tree → skeleton whose joints are stem nodes, under a joint budget.
+
+Result: every stem node that starts a segment may become a joint (a joint at a stem's tip would
+rotate nothing), chained along its stem and hung from the parent stem's joint at the attach
+point; stems without joints ride rigidly on the nearest ancestor joint.
+
+    rig = build_rig(tree, RigOptions(max_joints=128))
+    rig.skeleton.parent[:5]   # → [-1, 0, 1, 0, 3]
+
+Budget (never exceeded): levels are filled from the trunk down. A level whose full chains fit
+gets them; the first level that does not fit has its chains coarsened (every k-th segment node,
+the smallest k that fits, the stem's base always kept) and deeper levels get no joints; if even
+one joint per stem does not fit, only that level's longest stems get one (at their base).
+"""
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from .asset import Skeleton
+from .errors import TreegenError
 
 
 @dataclass(frozen=True, eq=False)
@@ -18,3 +33,138 @@ class Rig:
                                # (rigidly carried nodes: (carrier, 0) with weights (1, 0))
     leaf_joint: np.ndarray     # uint16 (L,): joint carrying each leaf rigidly
     stem_joint: np.ndarray     # int32 (S,): joint carrying the stem's base (its attach joint)
+
+
+@dataclass(frozen=True)
+class RigOptions:
+    """max_joints: hard budget (≥ 1). joint_levels: stem levels allowed to own joints
+    (None = all); the trunk base is always the root joint."""
+
+    max_joints: int = 256
+    joint_levels: tuple[int, ...] | None = None
+
+
+RIG_DEFAULTS = RigOptions()
+
+_MAX_JOINTS = 65535                      # skin joint indices are uint16
+_BASE_ONLY = np.iinfo(np.int32).max      # chain stride that keeps only a stem's base node
+
+
+def _chain_joints(chain: np.ndarray, clone: np.ndarray, stride: int) -> int:
+    """Joints on chains of `chain` candidate positions kept every `stride`-th (a clone's
+    position 0 sits on its parent's split node and is not its own joint)."""
+    return int(np.sum(-(-chain // stride)) - np.count_nonzero(clone))
+
+
+def _select(tree, options: RigOptions) -> np.ndarray:
+    """Bool (N,): which nodes become joints, following the budget rules in the module doc."""
+    level = tree.stem_level.astype(np.int64)
+    clone = tree.stem_clone.astype(bool)
+    chain = tree.stem_node_count.astype(np.int64) - 1       # segment-start nodes per stem
+    include = np.zeros(tree.n_stems, dtype=bool)
+    stride = np.ones(tree.n_stems, dtype=np.int64)
+    budget = options.max_joints
+    roots = np.flatnonzero(tree.stem_parent < 0)
+
+    present = np.unique(level)
+    allowed = present if options.joint_levels is None else \
+        np.intersect1d(present, np.asarray(options.joint_levels, dtype=np.int64))
+    if 0 not in allowed:                   # the root joint exists regardless
+        include[roots[:budget]] = True
+        stride[roots] = _BASE_ONLY
+        budget -= int(min(len(roots), budget))
+    for lev in allowed:
+        idx = np.flatnonzero(level == lev)
+        for k in range(1, int(chain[idx].max()) + 1):
+            used = _chain_joints(chain[idx], clone[idx], k)
+            if used <= budget:
+                include[idx] = True
+                stride[idx] = k
+                budget -= used
+                break
+        else:
+            # Not even one joint per stem: the longest (non-clone) stems keep a base joint.
+            own = idx[~clone[idx]]
+            is_root = tree.stem_parent[own] < 0
+            order = np.lexsort((-tree.stem_length[own], ~is_root))
+            keep = own[order[:budget]]
+            include[keep] = True
+            stride[keep] = _BASE_ONLY
+            k = _BASE_ONLY
+        if k > 1:                          # this level was coarsened: deeper levels get none
+            break
+
+    s = tree.node_stem
+    p = np.arange(tree.n_nodes) - tree.stem_node_start[s]
+    return include[s] & (p < chain[s]) & (p % stride[s] == 0) & ~(clone[s] & (p == 0))
+
+
+def build_rig(tree, options: RigOptions = RIG_DEFAULTS) -> Rig:
+    """Joints on stem nodes under `options.max_joints`, with node and leaf skin bindings."""
+    if not 1 <= options.max_joints <= _MAX_JOINTS:
+        raise TreegenError(f"--max-joints {options.max_joints}: the joint budget must be in "
+                           f"1..{_MAX_JOINTS}")
+    N = tree.n_nodes
+    nid = np.arange(N)
+    s = tree.node_stem
+    jointed = _select(tree, options)
+    joint_node = np.flatnonzero(jointed).astype(np.int32)
+    J = len(joint_node)
+    joint_of = np.cumsum(jointed) - 1                       # joint index at jointed nodes
+
+    # Carrier: the last joint at or below the node on its own chain, else the attach joint.
+    last_own = np.maximum.accumulate(np.where(jointed, nid, -1))
+    has_prev = (last_own >= 0) & (s[np.maximum(last_own, 0)] == s)
+    carrier = np.where(has_prev, joint_of[np.maximum(last_own, 0)], -1)
+    attach = tree.stem_parent_node[s]
+    carrier[(carrier < 0) & (attach < 0)] = 0               # extra trunks hang from the root
+    while (todo := carrier < 0).any():                      # one pass per stem generation
+        carrier[todo] = carrier[attach[todo]]
+
+    # Blend toward the next joint of the own chain, linearly in node_z.
+    nxt = np.minimum.accumulate(np.where(jointed, nid, N)[::-1])[::-1]
+    nxt = np.append(nxt[1:], N)                             # strictly after the node
+    has_next = (nxt < N) & (s[np.minimum(nxt, N - 1)] == s)
+    z = tree.node_z
+    z_prev = np.where(has_prev, z[np.maximum(last_own, 0)], z[tree.stem_node_start[s]])
+    z_next = z[np.minimum(nxt, N - 1)]
+    span = np.where(has_next, z_next - z_prev, 1.0)
+    w = np.where(has_next, np.clip((z - z_prev) / np.where(span > 0, span, 1.0), 0.0, 1.0), 0.0)
+    node_joints = np.zeros((N, 2), dtype=np.uint16)
+    node_joints[:, 0] = carrier
+    node_joints[:, 1] = np.where(w > 0, joint_of[np.minimum(nxt, N - 1)], 0)
+    node_weights = np.column_stack([1.0 - w, w]).astype(np.float32)
+
+    stem_joint = np.where(tree.stem_parent_node >= 0,
+                          carrier[np.maximum(tree.stem_parent_node, 0)], 0).astype(np.int32)
+    lj = node_joints[tree.leaf_node, np.argmax(node_weights[tree.leaf_node], axis=1)] \
+        if tree.n_leaves else np.zeros(0, dtype=np.uint16)
+
+    # Hierarchy: previous joint on the chain, else the stem's attach joint; root = trunk base.
+    js = s[joint_node]
+    prev_node = joint_node - 1
+    on_chain = (joint_node > tree.stem_node_start[js]) & has_prev[np.maximum(prev_node, 0)]
+    parent = np.where(on_chain, joint_of[last_own[np.maximum(prev_node, 0)]], stem_joint[js])
+    parent = parent.astype(np.int32)
+    parent[0] = -1
+    if J > 1 and not np.all(parent[1:] < np.arange(1, J)):
+        raise ValueError("tree stems are not ordered parent before child")
+
+    rot = Rotation.from_matrix(tree.node_frame[joint_node])      # orthonormalised frames
+    R = rot.as_matrix()
+    t = tree.node_pos[joint_node]
+    pr = np.maximum(parent, 0)
+    local_R = np.einsum("jki,jkl->jil", R[pr], R)                # R_parent^T R
+    local_t = np.einsum("jki,jk->ji", R[pr], t - t[pr])
+    local_R[0], local_t[0] = R[0], t[0]
+    world = np.zeros((J, 4, 4))
+    world[:, :3, :3] = R
+    world[:, :3, 3] = t
+    world[:, 3, 3] = 1.0
+    skeleton = Skeleton(names=[f"j{j}" for j in range(J)], parent=parent,
+                        rest_translation=local_t,
+                        rest_rotation=Rotation.from_matrix(local_R).as_quat(),
+                        bind_world=world)
+    return Rig(skeleton=skeleton, joint_node=joint_node, joint_stem=js.astype(np.int32),
+               node_joints=node_joints, node_weights=node_weights,
+               leaf_joint=lj.astype(np.uint16), stem_joint=stem_joint)

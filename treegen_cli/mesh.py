@@ -1,0 +1,253 @@
+"""Tree + Rig → skinned triangle lists: bark tubes along every stem and a card per leaf.
+
+Result: one "bark" primitive (a ring of `sides + 1` vertices per ring, seam column duplicated for
+UVs, each stem closed by a cone to an apex vertex) and one "leaves" primitive (the LeafShape
+outline stamped on every leaf frame), both bound to the rig's joints.
+
+    prims = build_mesh(tree, rig, MeshOptions(sides=(24, 10, 6, 4)))
+
+Everything is ragged-array arithmetic over all stems at once (np.repeat / cumsum): no Python loop
+over stems, rings, leaves or vertices (only over the few trunk stems for their flare rings).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .asset import Primitive
+from .errors import TreegenError
+from .leafshapes import outline
+
+
+@dataclass(frozen=True)
+class MeshOptions:
+    """Per-level tuples index by stem level; their last entry repeats for deeper levels."""
+
+    sides: tuple[int, ...] = (16, 8, 6, 4, 3)   # cross-section sides per level (>= 3)
+    rings_per_segment: tuple[int, ...] = (2, 1)  # rings per segment per level (>= 1): more rings
+                                                 # bend more smoothly under skinning
+    flare_rings: int = 4          # extra trunk rings in the flare zone (lowest 1/8 of the trunk)
+    thin_radius: float = 0.002    # metres: stems with a thinner base radius get thin_sides
+    thin_sides: int = 3
+    cap_height: float = 0.5       # tip cap cone height / tip radius
+    point_radius: float = 1e-4    # metres: tips thinner than this end in a point, not a cap
+    leaves: bool = True           # emit the "leaves" primitive
+
+
+MESH_DEFAULTS = MeshOptions()
+
+
+def _per_level(values: tuple, level: np.ndarray) -> np.ndarray:
+    v = np.asarray(values)
+    return v[np.minimum(level, len(v) - 1)]
+
+
+def _flare_factor(flare: float, Z: np.ndarray) -> np.ndarray:
+    """Weber–Penn trunk flare: 1 + Flare·(100^y − 1)/100, y = max(0, 1 − 8Z)."""
+    y = np.maximum(0.0, 1.0 - 8.0 * Z)
+    return 1.0 + flare * (np.power(100.0, y) - 1.0) / 100.0
+
+
+def merge_influences(joints: np.ndarray, weights: np.ndarray):
+    """(K, n ≤ 4) joint/weight slots → (K, 4): duplicates merged, sorted by weight, normalised,
+    unused slots (0, 0.0).   Result: ([3, 5, 3, 0], [.2, .3, .5, 0]) → ([3, 5, 0, 0], [.7, .3, 0, 0])"""
+    K, n = joints.shape
+    J = np.zeros((K, 4), dtype=np.int64)
+    W = np.zeros((K, 4), dtype=np.float64)
+    J[:, :n] = joints
+    W[:, :n] = weights
+    for j in range(1, 4):
+        for i in range(j):
+            dup = (J[:, j] == J[:, i]) & (W[:, i] > 0)
+            W[dup, i] += W[dup, j]
+            W[dup, j] = 0.0
+    order = np.argsort(-W, axis=1, kind="stable")
+    W = np.take_along_axis(W, order, axis=1)
+    J = np.take_along_axis(J, order, axis=1)
+    J[W <= 0] = 0
+    W[W < 0] = 0.0
+    W /= W.sum(axis=1, keepdims=True)
+    return J.astype(np.uint16), W.astype(np.float32)
+
+
+def _check(options: MeshOptions) -> None:
+    if min(options.sides) < 3 or options.thin_sides < 3:
+        raise TreegenError(f"--sides {options.sides}: every level needs at least 3 sides")
+    if min(options.rings_per_segment) < 1:
+        raise TreegenError(f"rings per segment {options.rings_per_segment}: must be >= 1")
+
+
+def _ring_params(tree, options: MeshOptions):
+    """Rings of every stem as (stem, u), u = segment index + fraction, sorted base to tip."""
+    cnt = tree.stem_node_count.astype(np.int64)
+    seg = cnt - 1
+    m = _per_level(options.rings_per_segment, tree.stem_level.astype(np.int64)).astype(np.int64)
+    n_rings = seg * m + 1
+    stem = np.repeat(np.arange(tree.n_stems), n_rings)
+    k = np.arange(stem.size) - np.repeat(np.cumsum(n_rings) - n_rings, n_rings)
+    u = k / m[stem]
+    flare = tree.params.flare
+    trunks = np.flatnonzero((tree.stem_level == 0) & ~tree.stem_clone)
+    if flare > 0 and options.flare_rings > 0 and trunks.size:
+        # Flare grows as 100^(1 − 8Z): rings packed toward the base (quadratic spacing).
+        Zs = (np.arange(1, options.flare_rings + 1) / (options.flare_rings + 1)) ** 2 / 8.0
+        extra_s, extra_u = [], []
+        for s in trunks:                           # a handful of trunks at most
+            nz = tree.node_z[tree.stem_node_start[s]:tree.stem_node_start[s] + cnt[s]]
+            z = nz[0] + Zs * tree.stem_length[s]
+            a = np.clip(np.searchsorted(nz, z, side="right") - 1, 0, seg[s] - 1)
+            extra_u.append(a + (z - nz[a]) / np.maximum(nz[a + 1] - nz[a], 1e-12))
+            extra_s.append(np.full(len(z), s))
+        stem = np.concatenate([stem, *extra_s])
+        u = np.concatenate([u, *extra_u])
+        order = np.lexsort((u, stem))
+        stem, u = stem[order], u[order]
+        keep = np.ones(stem.size, dtype=bool)
+        keep[1:] = (stem[1:] != stem[:-1]) | (u[1:] - u[:-1] > 1e-4)
+        stem, u = stem[keep], u[keep]
+    return stem, u
+
+
+def _bark(tree, rig, options: MeshOptions) -> Primitive:
+    S = tree.n_stems
+    level = tree.stem_level.astype(np.int64)
+    cnt = tree.stem_node_count.astype(np.int64)
+    start = tree.stem_node_start.astype(np.int64)
+    F = tree.node_frame
+    p = tree.params
+
+    # --- rings: centre, frame, radius, z, binding (all rings, tip rings included) ---
+    rs, u = _ring_params(tree, options)
+    a_loc = np.minimum(np.floor(u).astype(np.int64), cnt[rs] - 2)
+    t = u - a_loc
+    a = start[rs] + a_loc
+    b = a + 1
+    centre = tree.node_pos[a] + t[:, None] * (tree.node_pos[b] - tree.node_pos[a])
+    frame = np.where((t >= 1.0 - 1e-9)[:, None, None], F[b], F[a])
+    z = tree.node_z[a] + t * (tree.node_z[b] - tree.node_z[a])
+    trunk = level[rs] == 0
+    length = np.maximum(tree.stem_length[rs], 1e-12)
+    f_a, f_b, f_r = (np.where(trunk, _flare_factor(p.flare, zz / length), 1.0)
+                     for zz in (tree.node_z[a], tree.node_z[b], z))
+    radius = (tree.node_radius[a] / f_a * (1 - t) + tree.node_radius[b] / f_b * t) * f_r
+
+    n_all = np.bincount(rs, minlength=S)
+    first = np.cumsum(n_all) - n_all
+    last = first + n_all - 1
+    i = np.arange(rs.size)
+    ip, inx = np.maximum(i - 1, first[rs]), np.minimum(i + 1, last[rs])
+    slope = (radius[inx] - radius[ip]) / np.maximum(z[inx] - z[ip], 1e-12)   # dr/ds
+
+    # Pointed tips drop their zero-radius ring and close on the apex; others get a cone cap.
+    tip = start + cnt - 1
+    pointed = tree.node_radius[tip] < options.point_radius
+    emit = ~(pointed[rs] & (i == last[rs]))
+    rs, centre, frame, z, radius, slope, a, b, t = (
+        x[emit] for x in (rs, centre, frame, z, radius, slope, a, b, t))
+    trunk = level[rs] == 0
+    R = rs.size
+
+    sides = _per_level(options.sides, level).astype(np.int64)
+    lobed = p.lobes > 0 and p.lobe_depth != 0
+    if lobed:
+        sides = np.where(level == 0, np.maximum(sides, 4 * p.lobes), sides)
+    sides = np.where(tree.stem_radius < options.thin_radius,
+                     np.minimum(sides, options.thin_sides), sides)
+    sd = sides[rs]
+    nv = sd + 1                                         # seam column duplicated for UVs
+    v0 = np.cumsum(nv) - nv
+    Vr = int(nv.sum())
+
+    # --- ring vertices ---
+    rv = np.repeat(np.arange(R), nv)
+    j = np.arange(Vr) - v0[rv]
+    theta = 2.0 * np.pi * j / sd[rv]
+    c, s_ = np.cos(theta), np.sin(theta)
+    fr = frame[rv]
+    radial = c[:, None] * fr[:, :, 0] + s_[:, None] * fr[:, :, 1]
+    tangent = -s_[:, None] * fr[:, :, 0] + c[:, None] * fr[:, :, 1]
+    if lobed:
+        on = trunk[rv]
+        lf = np.where(on, 1.0 + p.lobe_depth * np.sin(p.lobes * theta), 1.0)
+        dlf = np.where(on, p.lobe_depth * p.lobes * np.cos(p.lobes * theta), 0.0)
+    else:
+        lf, dlf = np.ones(Vr), np.zeros(Vr)
+    pos_r = centre[rv] + (radius[rv] * lf)[:, None] * radial
+    # Surface normal of c(s) + r(s)·f(θ)·radial(θ): f·radial − f'·tangent − f²·r'(s)·axis.
+    nrm_r = lf[:, None] * radial - dlf[:, None] * tangent \
+        - (lf * lf * slope[rv])[:, None] * fr[:, :, 2]
+    nrm_r /= np.linalg.norm(nrm_r, axis=1, keepdims=True)
+    vscale = 1.0 / (2.0 * np.pi * np.maximum(tree.stem_radius, 1e-6))   # square-ish texels
+    uv_r = np.column_stack([j / sd[rv], z[rv] * vscale[rs[rv]]])
+
+    ring_J = np.concatenate([rig.node_joints[a], rig.node_joints[b]], axis=1)
+    ring_W = np.concatenate([rig.node_weights[a] * (1 - t)[:, None],
+                             rig.node_weights[b] * t[:, None]], axis=1)
+    ring_J, ring_W = merge_influences(ring_J, ring_W)
+
+    # --- apex per stem (tip point, or a low cone over a blunt tip) ---
+    axis = F[tip][:, :, 2]
+    cap = np.where(pointed, 0.0, options.cap_height * tree.node_radius[tip])
+    pos_a = tree.node_pos[tip] + cap[:, None] * axis
+    uv_a = np.column_stack([np.full(S, 0.5), (tree.node_z[tip] + cap) * vscale])
+    apex_J, apex_W = merge_influences(rig.node_joints[tip], rig.node_weights[tip])
+
+    # --- triangles: quads between consecutive rings of a stem, then a fan to the apex ---
+    pair = np.flatnonzero(rs[1:] == rs[:-1])
+    qn = sd[pair]
+    qp = np.repeat(pair, qn)
+    qj = np.arange(qp.size) - np.repeat(np.cumsum(qn) - qn, qn)
+    q0 = v0[qp] + qj
+    q3 = v0[qp + 1] + qj
+    quads = np.stack([q0, q0 + 1, q3 + 1, q0, q3 + 1, q3], axis=1).reshape(-1, 3)
+    n_emit = np.bincount(rs, minlength=S)
+    last_ring = np.cumsum(n_emit) - 1
+    fn = sides
+    fs = np.repeat(np.arange(S), fn)
+    fj = np.arange(fs.size) - np.repeat(np.cumsum(fn) - fn, fn)
+    l0 = v0[last_ring[fs]] + fj
+    fans = np.stack([l0, l0 + 1, Vr + fs], axis=1)
+
+    return Primitive(
+        name="bark", material="bark",
+        positions=np.concatenate([pos_r, pos_a]).astype(np.float32),
+        normals=np.concatenate([nrm_r, axis]).astype(np.float32),
+        uvs=np.concatenate([uv_r, uv_a]).astype(np.float32),
+        indices=np.concatenate([quads, fans]).astype(np.uint32).ravel(),
+        joints=np.concatenate([ring_J[rv], apex_J]),
+        weights=np.concatenate([ring_W[rv], apex_W]),
+    )
+
+
+def _leaves(tree, rig) -> Primitive:
+    o = outline(tree.params.leaf_shape)
+    L, P = tree.n_leaves, len(o.points)
+    length, width = tree.leaf_size[:, 0], tree.leaf_size[:, 1]
+    scale = np.stack([width, length, width], axis=1)              # card x, y, z in metres
+    local = o.points[None, :, :] * scale[:, None, :]              # (L, P, 3)
+    pos = tree.leaf_pos[:, None, :] + np.einsum("lij,lpj->lpi", tree.leaf_frame, local)
+    nrm = np.einsum("lij,pj->lpi", tree.leaf_frame, o.normals)
+    nrm /= np.linalg.norm(nrm, axis=2, keepdims=True)
+    idx = o.triangles[None, :, :] + (P * np.arange(L))[:, None, None]
+    joints = np.zeros((L * P, 4), dtype=np.uint16)
+    joints[:, 0] = np.repeat(rig.leaf_joint, P)
+    weights = np.zeros((L * P, 4), dtype=np.float32)
+    weights[:, 0] = 1.0
+    return Primitive(
+        name="leaves", material="leaf",
+        positions=pos.reshape(-1, 3).astype(np.float32),
+        normals=nrm.reshape(-1, 3).astype(np.float32),
+        uvs=np.tile(o.uvs, (L, 1)).astype(np.float32),
+        indices=idx.astype(np.uint32).ravel(),
+        joints=joints, weights=weights,
+    )
+
+
+def build_mesh(tree, rig, options: MeshOptions = MESH_DEFAULTS) -> list[Primitive]:
+    """Bark (always) and leaves (when the tree has any and options.leaves), skinned to `rig`."""
+    _check(options)
+    prims = [_bark(tree, rig, options)]
+    if options.leaves and tree.n_leaves:
+        prims.append(_leaves(tree, rig))
+    return prims
