@@ -337,3 +337,48 @@ def test_validator_looks_inside_non_default_variants(tmp_path):
     assert validate_usd(path, all_variants=False) == []
     (msg,) = validate_usd(path)
     assert "MaterialBindingAPI" in msg and "LOD=LOD1" in msg
+
+
+def test_usd_and_gltf_agree(tmp_path):
+    """Same Asset through both writers: the USD skinned rest pose equals the glTF rest geometry
+    (brought back to Z up) and both animate the same joints with the same rotations."""
+    from treegen_cli.exchange import export
+    from treegen_cli.exchange.gltf import quat_to_y_up, read_accessor, read_gltf
+
+    asset = synthetic_asset(lods=1)
+    export(asset, tmp_path / "t.glb")
+    export(asset, tmp_path / "t.usdc")
+    gltf, blob = read_gltf(tmp_path / "t.glb")
+    stage = Usd.Stage.Open(str(tmp_path / "t.usdc"))
+    sq, binding = skel_query(stage, lod_paths(stage, 1)[0])
+
+    rest = sq.ComputeJointSkelTransforms(Usd.TimeCode.Default(), True)
+    bind = sq.GetJointWorldBindTransforms()
+    xforms = Vt.Matrix4dArray([bind[j].GetInverse() * rest[j] for j in range(len(rest))])
+    targets = {t.GetPrim().GetName(): t for t in binding.GetSkinningTargets()}
+    for mesh in gltf["meshes"]:
+        for gprim in mesh["primitives"]:
+            y_up = read_accessor(gltf, blob, gprim["attributes"]["POSITION"])
+            z_up = np.stack([y_up[:, 0], -y_up[:, 2], y_up[:, 1]], -1)
+            name = asset.materials[gprim["material"]].name
+            prim = next(p for p in asset.lods[0].primitives if p.material == name)
+            pts = Vt.Vec3fArray(UsdGeom.Mesh(targets[prim.name].GetPrim()).GetPointsAttr().Get())
+            targets[prim.name].ComputeSkinnedPoints(xforms, pts, Usd.TimeCode.Default())
+            np.testing.assert_allclose(np.array(pts), z_up, atol=1e-5)
+
+    joint_nodes = gltf["skins"][0]["joints"]
+    (anim,) = gltf["animations"]
+    usd_anim = UsdSkel.Animation(stage.GetPrimAtPath(
+        lod_paths(stage, 1)[0].AppendChild(asset.lods[0].clips[0].name)))
+    gltf_joints = sorted(joint_nodes.index(c["target"]["node"]) for c in anim["channels"])
+    usd_joints = [list(sq.GetJointOrder()).index(p) for p in usd_anim.GetJointsAttr().Get()]
+    assert gltf_joints == sorted(usd_joints)
+    rate = stage.GetTimeCodesPerSecond()
+    for channel in anim["channels"]:
+        sampler = anim["samplers"][channel["sampler"]]
+        j = joint_nodes.index(channel["target"]["node"])
+        times = read_accessor(gltf, blob, sampler["input"])
+        values = read_accessor(gltf, blob, sampler["output"])
+        for t, q in zip(times, values):
+            usd_q = quat_to_y_up(local_rotations(sq, float(np.round(t * rate, 4)))[j])
+            assert same_rotation(usd_q, q), (j, t)

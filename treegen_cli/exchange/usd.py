@@ -27,7 +27,6 @@ from ..errors import TreegenError
 
 SUFFIXES = (".usda", ".usdc", ".usdz")
 USDZ_MTIME = 946684800  # 2000-01-01: fixed zip entry time for reproducible .usdz bytes
-IDENTITY_EPS = 1e-7     # |dot(q, rest)| above 1 - eps: the joint counts as not moving
 
 
 # --------------------------------------------------------------------------- public API
@@ -392,13 +391,11 @@ def slerp(q0: np.ndarray, q1: np.ndarray, u: np.ndarray) -> np.ndarray:
 
 
 def _moving_joints(clip: Clip, skel: Skeleton) -> np.ndarray:
-    """Joints that get animation tracks: clip.animated, else those leaving rest; never empty."""
-    if clip.animated is not None:
-        moving = np.flatnonzero(np.asarray(clip.animated, bool))
-    else:
-        rest = np.asarray(skel.rest_rotation, np.float64)
-        dots = np.abs(np.einsum("kjc,jc->kj", np.asarray(clip.rotations, np.float64), rest))
-        moving = np.flatnonzero((dots < 1.0 - IDENTITY_EPS).any(axis=0))
+    """Joints that get animation tracks: the same rule as the glTF writer's channels (so both
+    formats animate the same joints); never empty (a still clip keeps the root)."""
+    from .gltf import animated_joints
+
+    moving = animated_joints(clip, skel)
     return moving if moving.size else np.zeros(1, np.int64)
 
 
