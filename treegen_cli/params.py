@@ -6,7 +6,14 @@ Defaults for absent keys follow Arbaro; the file's own values always win.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import difflib
+import math
+import re
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from xml.parsers import expat
+
+from .errors import TreegenError
 
 MAX_LEVELS = 9          # Levels may be 0..MAX_LEVELS
 LEVEL_SLOTS = MAX_LEVELS + 1  # per-level values exist for levels 0..MAX_LEVELS
@@ -80,15 +87,6 @@ class Params:
 # nothing below changes their meaning.
 # ---------------------------------------------------------------------------------------------
 
-import difflib
-import math
-import re
-from dataclasses import fields, replace
-from pathlib import Path
-from xml.parsers import expat
-
-from .errors import TreegenError
-
 INF = math.inf
 
 # LeafShape codes. Arbaro's files name shapes ("disc1", "sphere", "palm"); treegen stores an
@@ -98,8 +96,8 @@ INF = math.inf
 # |------|---------------------------|--------------------------------------------------------|
 # | 0    | 0, disc, oval, ellipse,   | elliptic blade, the Weber–Penn / Arbaro default        |
 # |      | disc4 … disc9             | (Arbaro's disc4+ are finer ovals: same outline here)   |
-# | 1    | disc1                     | 1 triangle (Arbaro: lowest-quality needle / leaf)      |
-# | 2    | disc2                     | 2 triangles (a diamond; needles of the larch, tamarack) |
+# | 1    | disc1                     | 1 triangle: cheapest needle (Arbaro's european_larch)  |
+# | 2    | disc2                     | 2 triangles, a thin diamond (Arbaro's weeping_willow)  |
 # | 3    | disc3                     | 3 triangles (coarse oval)                              |
 # | 4    | square, rectangle         | full rectangle (the leaf card itself)                  |
 # | 5    | sphere                    | a small closed blob: seeds, knots, needles seen all-round |
