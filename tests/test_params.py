@@ -251,6 +251,11 @@ def test_error_duplicate_key_names_both_lines():
     expect_error("Name a\nSpecies b\n", ":2:", "Species", "line 1")
 
 
+def test_error_bad_names():
+    expect_error("Name\nLevels 2", ":1:", "Name")
+    expect_error("<arbaro><species name='oak #2'/></arbaro>", ":1:", "species name", "'#'")
+
+
 def test_error_empty_and_binary_files():
     expect_error("", "sp/x.txt:1:", "empty")
     expect_error("  \n# only comments\n\n", "sp/x.txt:1:", "empty")

@@ -331,8 +331,9 @@ class _Builder:
         value = value.strip()
         if self.name is not None:
             raise self.fail(line, f"duplicate key {key} (first set on line {self.name_line})")
-        if not value or any(ord(c) < 32 for c in value):
-            raise self.fail(line, f"{key} must be a non-empty name on one line")
+        if not value or not value.isprintable() or "#" in value:
+            raise self.fail(line, f"{key} = {_clip(value)!r} must be a non-empty one-line name "
+                                  f"without '#' (the text format's comment sign)")
         self.name, self.name_line = value, line
 
     def add(self, key: str, value: str, line: int | None) -> None:
