@@ -256,7 +256,8 @@ def test_static_wind_matches_hand_computed_beam_rotation(tree_rig):
     on = rig.leaf_joint == j
     assert on.any()
     centre = tree.leaf_pos[on] + 0.5 * tree.leaf_size[on, :1] * tree.leaf_frame[on][:, :, 1]
-    force = 0.5 * AIR_DENSITY * opts.drag_coefficient * tree.leaf_area[on, None] * 25.0 * np.array([1.0, 0, 0])
+    soften = (1.0 + (5.0 / opts.reconfig_speed) ** 2) ** (0.5 * opts.vogel_exponent)
+    force = 0.5 * AIR_DENSITY * opts.drag_coefficient * soften * tree.leaf_area[on, None] * 25.0 * np.array([1.0, 0, 0])
     torque = np.cross(centre - rig.skeleton.bind_world[j, :3, 3], force).sum(axis=0)
     d = tree.node_frame[rig.joint_node[j], :, 2]
     torque -= (torque @ d) * d
@@ -282,14 +283,17 @@ def test_thin_branch_deflects_more_per_length_than_thick(tree_rig):
     assert per_len[rig.joint_stem == 1].min() > 5.0 * per_len[trunk][1:].max()
 
 
-def test_gale_stays_bounded_and_finite(tree_rig):
+@pytest.mark.parametrize("elastic_modulus", [9.0e9, 5.0e7])
+def test_gale_stays_bounded_and_finite(tree_rig, elastic_modulus):
+    """40 m/s on real wood, and on wood so soft the linear response would spin twigs round."""
     tree, rig = tree_rig
-    opts = WindOptions(speed=40.0, **FAST)
+    opts = WindOptions(speed=40.0, elastic_modulus=elastic_modulus, max_sag_deg=90.0, **FAST)
     clip = bake_wind(tree, rig, opts, seed=8)
     assert np.all(np.isfinite(clip.rotations))
     dev = _deviation(clip, rig.skeleton)
     assert dev.max() <= np.deg2rad(opts.max_angle_deg) + 1e-9
-    assert dev.max() > 0.3 * np.deg2rad(opts.max_angle_deg)          # the bound is doing work
+    if elastic_modulus < 1e9:
+        assert dev.max() > 0.9 * np.deg2rad(opts.max_angle_deg)      # the bound is doing work
 
 
 def test_seam_is_smooth(tree_rig):

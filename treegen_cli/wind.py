@@ -10,14 +10,15 @@ The model (Kondo et al., after Weber–Penn; REFERENCE.md §1, §3):
 * Every joint carries the stem segments from its node up to the next joint on its chain, the
   leaves bound to it (``rig.leaf_joint``) and the stems it carries rigidly. The wind force on a
   joint's load is the leaves' drag F = ½·ρ_air·C_d·A·|v|·v (the paper's F_w = W·A with W the
-  dynamic pressure, so it scales physically with speed), plus optional cylinder drag on the wood
-  so leafless species still sway. Forces and their torques Σ (x_i − p_j) × F_i are summed over
+  dynamic pressure, so it scales physically with speed; softened at high speed by Vogel's
+  reconfiguration exponent), plus cylinder drag on the wood so leafless species still sway. Forces and their torques Σ (x_i − p_j) × F_i are summed over
   each joint's whole subtree with reverse (deepest-first) accumulation by depth.
 * Gravity is in the rest shape already: its moment is constant and drops out of the deviation,
   so weight (F_g = G·(l·r²·π·d + A·A_g)) only enters as inertia.
 * Each joint is a damped rotational spring: k = E·I/ℓ with I = π r⁴/4 (beam theory: curvature
-  M/EI integrated over the span ℓ the joint bends over), inertia = second moment of the subtree
-  mass about the joint, c = 2ζ√(k·I_m). It turns about the torque's component perpendicular to
+  M/EI integrated over the span ℓ the joint bends over), floored so that the subtree's weight
+  moment would sag it at most max_sag (Weber–Penn twigs are often thinner than wood could bear),
+  inertia = second moment of the subtree mass about the joint, c = 2ζ√(k·I_m). It turns about the torque's component perpendicular to
   the branch (no twist), in the joint's rest world frame, composed down the hierarchy.
 * Periodic steady state, exactly: the wind uses only harmonics of 1/duration, so the torque is
   periodic on the clip's grid; the system is linear, so each harmonic's response is the torque's
@@ -38,7 +39,7 @@ from .rig import Rig
 from .tree import Tree
 
 AIR_DENSITY = 1.2          # kg/m³ at sea level, 20 °C
-GRAVITY = 9.81             # m/s² (documentation: weight's moment is constant, see module doc)
+GRAVITY = 9.81             # m/s²
 LATERAL_RATIO = 0.75       # σ_v / σ_u (lateral vs longitudinal gust; ESDU / ASCE ~0.75–0.88)
 VERTICAL_RATIO = 0.5       # σ_w / σ_u
 
@@ -55,11 +56,15 @@ class WindOptions:
     fps: float = 30.0                # keys per second
     wood_density: float = 800.0      # kg/m³, green (living) wood is ~800; dry ~500–700
     leaf_areal_density: float = 0.2  # kg/m², fresh leaf mass per area (dry LMA ~0.05–0.1, ~60% water)
-    drag_coefficient: float = 0.3    # C_d per one-sided leaf area (leaves reconfigure; ~0.1–0.5)
+    drag_coefficient: float = 0.15   # C_d per one-sided leaf area at low speed; crown sheltering
+                                     # included (whole crowns: ~0.5 of frontal ≈ 0.1–0.2 of leaf area)
+    vogel_exponent: float = -0.5     # B: leaves streamline, drag ∝ |v|^(2+B) above reconfig_speed
+    reconfig_speed: float = 2.0      # m/s, where reconfiguration sets in
     stem_drag_coefficient: float = 1.2  # cylinder C_d on the wood's 2·r·l; 0 = the paper's leaves only
     elastic_modulus: float = 9.0e9   # Pa, green wood E ≈ 8–10 GPa
     damping_ratio: float = 0.1       # ζ, structural + aerodynamic damping of branches
     max_angle_deg: float = 25.0      # soft bound on any joint's deviation from rest
+    max_sag_deg: float = 5.0         # stiffness floor: its own weight bends no joint further
     gust_length: float = 30.0        # m, integral length scale of the gusts (von Kármán)
     turbulence_length: float = 3.0   # m, integral length scale of the canopy turbulence
     incoherent: float = 0.3          # share of the turbulence variance that is per-branch noise
@@ -73,7 +78,7 @@ class WindOptions:
                 raise TreegenError(
                     f"wind option '{name}' = {value!r}: allowed range {lo:g}..{hi:g} {unit}".rstrip()
                 )
-        for name in ("duration", "fps", "elastic_modulus", "max_angle_deg", "gust_length",
+        for name in ("duration", "fps", "elastic_modulus", "max_angle_deg", "max_sag_deg", "gust_length",
                      "turbulence_length"):
             if getattr(self, name) <= 0:
                 raise TreegenError(f"wind option '{name}' must be > 0, got {getattr(self, name)!r}")
@@ -91,10 +96,13 @@ _RANGES = {
     "wood_density": (1.0, 2000.0, "kg/m³"),
     "leaf_areal_density": (0.0, 5.0, "kg/m²"),
     "drag_coefficient": (0.0, 3.0, ""),
+    "vogel_exponent": (-1.5, 0.0, ""),
+    "reconfig_speed": (0.1, 100.0, "m/s"),
     "stem_drag_coefficient": (0.0, 3.0, ""),
     "elastic_modulus": (0.0, 1.0e12, "Pa"),
     "damping_ratio": (0.001, 10.0, ""),
     "max_angle_deg": (0.0, 90.0, "degrees"),
+    "max_sag_deg": (0.0, 90.0, "degrees"),
     "gust_length": (0.0, 1000.0, "m"),
     "turbulence_length": (0.0, 1000.0, "m"),
     "incoherent": (0.0, 1.0, ""),
@@ -164,7 +172,7 @@ class JointLoads:
     area_moment: np.ndarray  # (J, 3) Σ C_d·A_i (x_i − pivot) of its own load
     mass: np.ndarray         # (J,) subtree mass, kg
     inertia: np.ndarray      # (J,) subtree second moment of mass about the joint, kg·m²
-    stiffness: np.ndarray    # (J,) k = E·π r⁴/4 / ℓ, N·m/rad
+    stiffness: np.ndarray    # (J,) k = max(E·π r⁴/4 / ℓ, |weight moment⊥| / max_sag), N·m/rad
     span: np.ndarray         # (J,) ℓ, m
 
 
@@ -251,6 +259,12 @@ def joint_loads(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS) -> JointL
     span = _joint_span(tree, rig)
     r = tree.node_radius[rig.joint_node]
     stiffness = options.elastic_modulus * np.pi * r**4 / 4.0 / span
+    # Weber–Penn radii can be far thinner than wood could hold (a 1 mm, 1.5 m leafy branch):
+    # the rest shape carries its weight, so a joint is at least stiff enough that its subtree's
+    # weight, held out sideways, would bend it no more than max_sag (orientation-independent).
+    weight_moment = GRAVITY * np.linalg.norm(s_sub, axis=1)
+    stiffness = np.maximum(stiffness, weight_moment
+                           / np.deg2rad(options.max_sag_deg))
     return JointLoads(pivot, direction, own_area, own_moment, m_sub, i_sub, stiffness, span)
 
 
@@ -351,6 +365,14 @@ def _frames(options: WindOptions) -> tuple[int, np.ndarray]:
     return n, np.linspace(0.0, options.duration, n + 1)
 
 
+def drag_pressure(v: np.ndarray, options: WindOptions) -> np.ndarray:
+    """Drag per unit drag area (N/m²), vector along v: ½ρ|v|v, softened by Vogel's
+    reconfiguration (1 + (|v|/U_r)²)^(B/2) so leaves streamline in strong wind (∝ |v|^(2+B))."""
+    speed = np.linalg.norm(v, axis=-1, keepdims=True)
+    soften = (1.0 + (speed / options.reconfig_speed) ** 2) ** (0.5 * options.vogel_exponent)
+    return (0.5 * AIR_DENSITY) * soften * speed * v
+
+
 def wind_angles(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int = 0,
                 loads: JointLoads | None = None) -> np.ndarray:
     """World-frame rotation vectors (J, n, 3) of each joint's deviation from rest over one
@@ -361,7 +383,7 @@ def wind_angles(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int
         return np.zeros((n_j, n, 3))
     ld = loads if loads is not None else joint_loads(tree, rig, options)
     v = wind_velocity(ld.pivot, rig.joint_stem, options, seed, n)           # (J, n, 3)
-    pressure = (0.5 * AIR_DENSITY) * np.linalg.norm(v, axis=2, keepdims=True) * v
+    pressure = drag_pressure(v, options)
     force = ld.area[:, None, None] * pressure                               # (J, n, 3)
     torque = np.cross(ld.area_moment[:, None, :], pressure)                 # about own pivot
 
