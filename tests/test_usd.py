@@ -382,3 +382,20 @@ def test_usd_and_gltf_agree(tmp_path):
         for t, q in zip(times, values):
             usd_q = quat_to_y_up(local_rotations(sq, float(np.round(t * rate, 4)))[j])
             assert same_rotation(usd_q, q), (j, t)
+
+
+def test_rotation_samples_stay_on_one_hemisphere(tmp_path):
+    """A clip whose stored quaternions flip sign every key is written sign-continuous."""
+    asset = synthetic_asset(lods=1)
+    lod = asset.lods[0]
+    clip = lod.clips[0]
+    flipped = clip.rotations * np.where(np.arange(len(clip.times)) % 2, -1.0, 1.0)[:, None, None]
+    lod = dataclasses.replace(lod, clips=[dataclasses.replace(clip, rotations=flipped, keys=None)])
+    path = tmp_path / "flip.usda"
+    write_usd(dataclasses.replace(asset, lods=[lod]), path)
+    stage = Usd.Stage.Open(str(path))
+    attr = UsdSkel.Animation(stage.GetPrimAtPath(
+        lod_paths(stage, 1)[0].AppendChild(clip.name))).GetRotationsAttr()
+    samples = np.array([np.array(attr.Get(t)) for t in attr.GetTimeSamples()])
+    assert len(samples) == len(clip.times)
+    assert (np.einsum("kji,kji->kj", samples[1:], samples[:-1]) > 0).all()

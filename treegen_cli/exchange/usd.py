@@ -31,11 +31,11 @@ USDZ_MTIME = 946684800  # 2000-01-01: fixed zip entry time for reproducible .usd
 
 # --------------------------------------------------------------------------- public API
 
-def write_usd(asset: Asset, path) -> None:
+def write_usd(asset: Asset, path, **_opts) -> None:
     """Write `asset` to exactly `path`; the suffix picks text, crate or a usdz package.
 
     The caller (exchange registry) does temp-file + rename; a temp name with the right suffix
-    works for all three formats.
+    works for all three formats. Other writers' options (`_opts`) are accepted and ignored.
     """
     from pxr import Sdf
 
@@ -259,6 +259,11 @@ def _define_animation(stage, path, clip: Clip, skel: Skeleton, joint_paths, tcps
 
     moving = _moving_joints(clip, skel)
     frames, rot = resample_clip(clip, moving)
+    # same rotation, but consecutive samples on one hemisphere: importers that lerp are safe
+    if len(rot) > 1:
+        dots = np.einsum("kji,kji->kj", rot[1:], rot[:-1])
+        signs = np.cumprod(np.r_[np.ones((1, rot.shape[1])), np.where(dots < 0, -1.0, 1.0)], axis=0)
+        rot = rot * signs[..., None]
     anim = UsdSkel.Animation.Define(stage, path)
     anim.CreateJointsAttr(Vt.TokenArray([joint_paths[j] for j in moving]))
     anim.CreateTranslationsAttr(Vt.Vec3fArray.FromNumpy(
