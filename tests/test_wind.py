@@ -18,6 +18,7 @@ from treegen_cli.wind import (
     bake_wind,
     joint_loads,
     pose_world,
+    quat_mul,
     wind_angles,
     wind_velocity,
 )
@@ -373,3 +374,8 @@ def test_bad_options_raise_treegen_error():
         WindOptions(duration=0.0)
     with pytest.raises(TreegenError, match="fps"):
         WindOptions(fps=float("nan"))
+
+
+def test_quat_mul_matches_scipy():
+    a, b = Rotation.random(50, random_state=1), Rotation.random(50, random_state=2)
+    assert np.allclose(quat_mul(a.as_quat(), b.as_quat()), (a * b).as_quat(canonical=False), atol=1e-12)
