@@ -399,3 +399,19 @@ def test_rotation_samples_stay_on_one_hemisphere(tmp_path):
     samples = np.array([np.array(attr.Get(t)) for t in attr.GetTimeSamples()])
     assert len(samples) == len(clip.times)
     assert (np.einsum("kji,kji->kj", samples[1:], samples[:-1]) > 0).all()
+
+
+def test_skel_root_extent_holds_every_animated_frame(written):
+    asset = synthetic_asset(lods=3)
+    stage = Usd.Stage.Open(str(written[3, "usdc"]))
+    for path, lod in zip(lod_paths(stage, 3), asset.lods):
+        lo, hi = np.array(UsdSkel.Root(stage.GetPrimAtPath(path)).GetExtentAttr().Get())
+        sq, binding = skel_query(stage, path)
+        for frame in range(len(lod.clips[0].times) * 2 - 1):   # keys and half-way between
+            code = frame / 2
+            xforms = sq.ComputeSkinningTransforms(Usd.TimeCode(code))
+            for target in binding.GetSkinningTargets():
+                pts = Vt.Vec3fArray(UsdGeom.Mesh(target.GetPrim()).GetPointsAttr().Get())
+                target.ComputeSkinnedPoints(xforms, pts, Usd.TimeCode(code))
+                p = np.array(pts)
+                assert (p >= lo - 1e-5).all() and (p <= hi + 1e-5).all(), (path, code)

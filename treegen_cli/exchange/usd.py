@@ -202,7 +202,7 @@ def _define_lod(stage, path, lod: Lod, asset: Asset, materials, tcps) -> None:
     from pxr import UsdSkel
 
     skel_root = UsdSkel.Root.Define(stage, path)
-    lo, hi = _bounds(lod)
+    lo, hi = _animated_bounds(lod)
     skel_root.CreateExtentAttr([_gf_vec3f(lo), _gf_vec3f(hi)])
     skel_path = path.AppendChild("Skeleton")
     joint_paths = _define_skeleton(stage, skel_path, lod.skeleton)
@@ -435,6 +435,68 @@ def _bounds(lod: Lod) -> tuple[np.ndarray, np.ndarray]:
         return np.zeros(3), np.zeros(3)
     allp = np.concatenate(pts)
     return allp.min(0), allp.max(0)
+
+
+def _animated_bounds(lod: Lod) -> tuple[np.ndarray, np.ndarray]:
+    """A box holding the skinned geometry at rest and at every key of every clip.
+
+    Cheap (joints × keys, not vertices × keys): each joint's vertices, in its bind frame, fill
+    a local box that the joint carries rigidly; a linear blend of such points lies in the
+    union of the joints' posed boxes. Slerp between keys can bulge slightly past the keyed
+    poses: a 2% margin covers it.
+    """
+    lo, hi = _bounds(lod)
+    skel = lod.skeleton
+    J = len(skel.names)
+    clips = [c for c in lod.clips if len(c.times)]
+    if not clips or J == 0:
+        return lo, hi
+    bind = np.asarray(skel.bind_world, np.float64)
+    box_lo, box_hi = np.full((J, 3), np.inf), np.full((J, 3), -np.inf)
+    for prim in lod.primitives:   # per-joint local boxes: one pass per influence slot
+        pos = np.asarray(prim.positions, np.float64)
+        joints = np.asarray(prim.joints, np.int64)
+        weights = np.asarray(prim.weights)
+        for k in range(joints.shape[1] if joints.ndim == 2 else 0):
+            used = weights[:, k] > 0
+            if not used.any():
+                continue
+            jv = joints[used, k]
+            order = np.argsort(jv, kind="stable")
+            jv = jv[order]
+            local = np.einsum("nji,nj->ni", bind[jv, :3, :3], pos[used][order] - bind[jv, :3, 3])
+            starts = np.flatnonzero(np.r_[True, jv[1:] != jv[:-1]])   # Rᵀ(p − t) per joint run
+            js = jv[starts]
+            box_lo[js] = np.minimum(box_lo[js], np.minimum.reduceat(local, starts, axis=0))
+            box_hi[js] = np.maximum(box_hi[js], np.maximum.reduceat(local, starts, axis=0))
+    has = np.isfinite(box_lo[:, 0])
+    if not has.any():
+        return lo, hi
+    corner_sel = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)], bool)
+    corners = np.where(corner_sel[None], box_hi[has, None, :], box_lo[has, None, :])   # (Jh, 8, 3)
+    parent = np.asarray(skel.parent)
+    rest_q = np.asarray(skel.rest_rotation, np.float64)
+    t = np.asarray(skel.rest_translation, np.float64)
+    for clip in clips:
+        K = len(clip.times)
+        q = np.broadcast_to(rest_q, (K, J, 4)).copy()
+        moving = _moving_joints(clip, skel)
+        q[:, moving] = np.asarray(clip.rotations, np.float64)[:, moving]
+        rot = Rotation.from_quat(q.reshape(-1, 4)).as_matrix().reshape(K, J, 3, 3)
+        w_rot = np.empty_like(rot)
+        w_pos = np.empty((K, J, 3))
+        for j in range(J):   # forward kinematics: loop over joints, frames vectorised
+            if parent[j] < 0:
+                w_rot[:, j], w_pos[:, j] = rot[:, j], np.broadcast_to(t[j], (K, 3))
+            else:
+                pr = w_rot[:, parent[j]]
+                w_rot[:, j] = pr @ rot[:, j]
+                w_pos[:, j] = w_pos[:, parent[j]] + pr @ t[j]
+        posed = np.einsum("kjab,jcb->kjca", w_rot[:, has], corners) + w_pos[:, has, None, :]
+        lo = np.minimum(lo, posed.min(axis=(0, 1, 2)))
+        hi = np.maximum(hi, posed.max(axis=(0, 1, 2)))
+    margin = 0.02 * (hi - lo).max()
+    return lo - margin, hi + margin
 
 
 def _sample_rate(times: np.ndarray) -> float:
