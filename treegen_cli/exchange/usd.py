@@ -161,7 +161,7 @@ def _define_lod_root(stage, root_path, asset: Asset, materials, tcps) -> None:
     switch LODk to show only that item. `active` is not used for the toggle, because inactive
     items would vanish from the LOD root's children.
     """
-    from pxr import Sdf, UsdGeom, UsdLod, Vt
+    from pxr import UsdGeom, UsdLod, Vt
 
     lods_path = root_path.AppendChild("LODs")
     heur_path = root_path.AppendChild("LODHeuristic")
