@@ -89,3 +89,22 @@ def synthetic_tree(leaf_shape: int = 0, lobes: int = 0, lobe_depth: float = 0.0,
         leaf_stem=leaf_stem, leaf_node=leaf_node, leaf_pos=leaf_pos,
         leaf_frame=leaf_frame, leaf_size=leaf_size,
     )
+
+
+def trunk_only(lobes: int = 0, lobe_depth: float = 0.0, flare: float = 0.0) -> Tree:
+    """Just the straight trunk of `synthetic_tree` (stem 0, no leaves): its axis is the Z axis."""
+    t = synthetic_tree(lobes=lobes, lobe_depth=lobe_depth, flare=flare)
+    n = int(t.stem_node_count[0])
+    one = slice(0, 1)
+    return Tree(
+        params=t.params, seed=0, scale=t.scale,
+        stem_level=t.stem_level[one], stem_parent=t.stem_parent[one],
+        stem_parent_node=t.stem_parent_node[one], stem_offset=t.stem_offset[one],
+        stem_length=t.stem_length[one], stem_radius=t.stem_radius[one],
+        stem_clone=t.stem_clone[one], stem_node_start=t.stem_node_start[one],
+        stem_node_count=t.stem_node_count[one],
+        node_stem=t.node_stem[:n], node_pos=t.node_pos[:n], node_frame=t.node_frame[:n],
+        node_radius=t.node_radius[:n], node_z=t.node_z[:n],
+        leaf_stem=np.zeros(0, np.int32), leaf_node=np.zeros(0, np.int32),
+        leaf_pos=np.zeros((0, 3)), leaf_frame=np.zeros((0, 3, 3)), leaf_size=np.zeros((0, 2)),
+    )

@@ -159,27 +159,36 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
     v0 = np.cumsum(nv) - nv
     Vr = int(nv.sum())
 
-    # --- ring vertices ---
-    rv = np.repeat(np.arange(R), nv)
-    j = np.arange(Vr) - v0[rv]
-    theta = 2.0 * np.pi * j / sd[rv]
-    c, s_ = np.cos(theta), np.sin(theta)
-    fr = frame[rv]
-    radial = c[:, None] * fr[:, :, 0] + s_[:, None] * fr[:, :, 1]
-    tangent = -s_[:, None] * fr[:, :, 0] + c[:, None] * fr[:, :, 1]
-    if lobed:
-        on = trunk[rv]
-        lf = np.where(on, 1.0 + p.lobe_depth * np.sin(p.lobes * theta), 1.0)
-        dlf = np.where(on, p.lobe_depth * p.lobes * np.cos(p.lobes * theta), 0.0)
-    else:
-        lf, dlf = np.ones(Vr), np.zeros(Vr)
-    pos_r = centre[rv] + (radius[rv] * lf)[:, None] * radial
-    # Surface normal of c(s) + r(s)·f(θ)·radial(θ): f·radial − f'·tangent − f²·r'(s)·axis.
-    nrm_r = lf[:, None] * radial - dlf[:, None] * tangent \
-        - (lf * lf * slope[rv])[:, None] * fr[:, :, 2]
-    nrm_r /= np.linalg.norm(nrm_r, axis=1, keepdims=True)
+    # --- ring vertices, one broadcast per distinct side count (a handful of groups) ---
+    pos_r = np.empty((Vr, 3), dtype=np.float32)
+    nrm_r = np.empty((Vr, 3), dtype=np.float32)
+    uv_r = np.empty((Vr, 2), dtype=np.float32)
     vscale = 1.0 / (2.0 * np.pi * np.maximum(tree.stem_radius, 1e-6))   # square-ish texels
-    uv_r = np.column_stack([j / sd[rv], z[rv] * vscale[rs[rv]]])
+    for n in np.unique(sd):
+        g = np.flatnonzero(sd == n)
+        col = np.arange(n + 1)
+        theta = 2.0 * np.pi * col / n
+        c, s_ = np.cos(theta)[None, :, None], np.sin(theta)[None, :, None]
+        fr = frame[g]
+        radial = c * fr[:, None, :, 0] + s_ * fr[:, None, :, 1]        # (Rg, n+1, 3)
+        if lobed:
+            on = trunk[g][:, None]
+            lf = np.where(on, 1.0 + p.lobe_depth * np.sin(p.lobes * theta), 1.0)
+            dlf = np.where(on, p.lobe_depth * p.lobes * np.cos(p.lobes * theta), 0.0)
+        else:
+            lf, dlf = np.ones((1, n + 1)), np.zeros((1, n + 1))
+        dest = (v0[g][:, None] + col[None, :]).ravel()
+        pos_r[dest] = (centre[g][:, None, :]
+                       + (radius[g][:, None] * lf)[:, :, None] * radial).reshape(-1, 3)
+        # Normal of c(s) + r(s)·f(θ)·radial(θ): f·radial − f'·tangent − f²·r'(s)·axis.
+        tangent = -s_ * fr[:, None, :, 0] + c * fr[:, None, :, 1]
+        nr = lf[:, :, None] * radial - dlf[:, :, None] * tangent \
+            - (lf * lf * slope[g][:, None])[:, :, None] * fr[:, None, :, 2]
+        nr /= np.linalg.norm(nr, axis=2, keepdims=True)
+        nrm_r[dest] = nr.reshape(-1, 3)
+        uv_r[dest, 0] = np.tile(col / n, len(g))
+        uv_r[dest, 1] = np.repeat(z[g] * vscale[rs[g]], n + 1)
+    rv = np.repeat(np.arange(R), nv)
 
     ring_J = np.concatenate([rig.node_joints[a], rig.node_joints[b]], axis=1)
     ring_W = np.concatenate([rig.node_weights[a] * (1 - t)[:, None],

@@ -1,0 +1,240 @@
+"""Bark tubes and leaf cards: counts from formulas, skin bindings, normals, UVs, leaf area."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from synthetic_tree import synthetic_tree, trunk_only
+from test_rig import compose
+from treegen_cli.errors import TreegenError
+from treegen_cli.leafshapes import OUTLINES, fill_factor
+from treegen_cli.mesh import MeshOptions, build_mesh, merge_influences
+from treegen_cli.rig import RigOptions, build_rig
+
+SPECIES = Path(__file__).resolve().parent.parent / "species"
+
+
+def mesh(tree, budget=256, **opts):
+    rig = build_rig(tree, RigOptions(max_joints=budget))
+    prims = {p.name: p for p in build_mesh(tree, rig, MeshOptions(**opts))}
+    return rig, prims
+
+
+def expected_bark_counts(tree, sides, rings_per_segment, thin_radius=0.002, thin_sides=3,
+                         point_radius=1e-4, extra_trunk_rings=0):
+    """Per stem: rings = segments·m + 1 (minus the tip ring of a pointed stem), each with
+    sides + 1 vertices, plus one apex; triangles = 2·sides per ring gap + a fan of sides."""
+    lev = np.minimum(tree.stem_level, len(sides) - 1)
+    n_sides = np.where(tree.stem_radius < thin_radius, thin_sides, np.asarray(sides)[lev])
+    m = np.asarray(rings_per_segment)[np.minimum(tree.stem_level, len(rings_per_segment) - 1)]
+    rings = (tree.stem_node_count - 1) * m + 1
+    rings[0] += extra_trunk_rings
+    tips = tree.stem_node_start + tree.stem_node_count - 1
+    rings -= tree.node_radius[tips] < point_radius
+    verts = rings * (n_sides + 1) + 1
+    tris = (rings - 1) * n_sides * 2 + n_sides
+    return int(verts.sum()), int(tris.sum())
+
+
+def skin(prim, skel, world):
+    """Linear blend skinning with skinning matrices world_j · inv(bind_j)."""
+    M = world @ np.linalg.inv(skel.bind_world)
+    P = np.c_[prim.positions.astype(np.float64), np.ones(len(prim.positions))]
+    out = np.zeros((len(P), 4))
+    for k in range(4):
+        out += prim.weights[:, k, None] * np.einsum("vij,vj->vi", M[prim.joints[:, k]], P)
+    return out[:, :3]
+
+
+def descendants(parent, j):
+    mask = np.zeros(len(parent), dtype=bool)
+    mask[j] = True
+    for i in range(j + 1, len(parent)):           # parents come first
+        mask[i] = mask[parent[i]]
+    return mask
+
+
+def triangle_normals(prim):
+    tri = prim.positions[prim.indices.reshape(-1, 3)].astype(np.float64)
+    return np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+
+
+def check_prim(prim, n_joints):
+    V = len(prim.positions)
+    assert prim.positions.dtype == np.float32 and prim.normals.dtype == np.float32
+    assert prim.uvs.dtype == np.float32 and prim.indices.dtype == np.uint32
+    assert prim.joints.dtype == np.uint16 and prim.weights.dtype == np.float32
+    assert prim.normals.shape == (V, 3) and prim.uvs.shape == (V, 2)
+    assert prim.joints.shape == (V, 4) and prim.weights.shape == (V, 4)
+    assert len(prim.indices) % 3 == 0 and prim.indices.max() < V
+    assert np.isin(np.arange(V), prim.indices).all()           # no stray vertices
+    for a in (prim.positions, prim.normals, prim.uvs, prim.weights):
+        assert np.isfinite(a).all()
+    np.testing.assert_allclose(np.linalg.norm(prim.normals, axis=1), 1.0, atol=1e-5)
+    # Every vertex bound: weights sum to 1, sorted, valid joints, unused slots (0, 0.0).
+    w = prim.weights
+    np.testing.assert_allclose(w.sum(axis=1), 1.0, atol=1e-6)
+    assert np.all(w >= 0) and np.all(np.diff(w, axis=1) <= 0)
+    assert prim.joints.max() < n_joints
+    assert np.all(prim.joints[w == 0] == 0)
+    # Counter-clockwise fronts: every non-degenerate face agrees with its vertex normals.
+    fn = triangle_normals(prim)
+    vn = prim.normals[prim.indices.reshape(-1, 3)].sum(axis=1)
+    big = np.linalg.norm(fn, axis=1) > 1e-10
+    assert np.all(np.einsum("ij,ij->i", fn[big], vn[big]) > 0)
+
+
+def test_counts_follow_the_formulas():
+    tree = synthetic_tree()
+    rig, prims = mesh(tree)
+    bark = prims["bark"]
+    V, T = expected_bark_counts(tree, (16, 8, 6, 4, 3), (2, 1))
+    assert (len(bark.positions), len(bark.indices) // 3) == (V, T)
+    o = OUTLINES[0]
+    assert len(prims["leaves"].positions) == tree.n_leaves * len(o.points)
+    assert len(prims["leaves"].indices) // 3 == tree.n_leaves * len(o.triangles)
+    # Other options: coarser rings, more sides; the 1 mm twig stays, with thin_sides.
+    _, p2 = mesh(tree, sides=(7, 5), rings_per_segment=(1, 3), thin_sides=4)
+    V, T = expected_bark_counts(tree, (7, 5), (1, 3), thin_sides=4)
+    assert (len(p2["bark"].positions), len(p2["bark"].indices) // 3) == (V, T)
+
+
+def test_lobes_and_flare_add_trunk_detail():
+    tree = synthetic_tree(lobes=5, lobe_depth=0.1, flare=0.8)
+    _, prims = mesh(tree)
+    # Five lobes need 4 samples each: the trunk and its clone get 20 sides; flare adds 4 rings.
+    V, T = expected_bark_counts(tree, (20, 8, 6, 4, 3), (2, 1), extra_trunk_rings=4)
+    assert (len(prims["bark"].positions), len(prims["bark"].indices) // 3) == (V, T)
+    # Flare: the base ring is Flare·0.99 wider than the node radius trend, and it narrows fast.
+    trunk = trunk_only(flare=0.8)
+    bark = build_mesh(trunk, build_rig(trunk))[0]
+    p = bark.positions.astype(np.float64)
+    r = np.hypot(p[:, 0], p[:, 1])
+    base = r[np.abs(p[:, 2]) < 1e-6].max()
+    np.testing.assert_allclose(base, 0.4, rtol=1e-6)             # node radius at the base
+    ring1 = r[(p[:, 2] > 0.05) & (p[:, 2] < 0.2)]
+    assert ring1.size and np.all(ring1 < 0.4 * 0.99) and np.all(ring1 > 0.0)
+
+
+@pytest.mark.parametrize("lobes,depth", [(0, 0.0), (5, 0.1), (9, 0.03)])
+def test_trunk_normals_point_outward_and_v_runs_up(lobes, depth):
+    tree = trunk_only(lobes=lobes, lobe_depth=depth, flare=0.5)
+    rig = build_rig(tree)
+    bark = build_mesh(tree, rig)[0]
+    check_prim(bark, len(rig.joint_node))
+    p, n, uv = (a.astype(np.float64) for a in (bark.positions, bark.normals, bark.uvs))
+    ring = np.hypot(p[:, 0], p[:, 1]) > 1e-6                     # all but the tip apex
+    radial = p[ring] * [1, 1, 0]
+    assert np.all(np.einsum("ij,ij->i", n[ring], radial) > 0)
+    # Lobed radius r·(1 + LobeDepth·sin(Lobes·θ)) around the axis.
+    z0 = np.abs(p[:, 2] - 2.0) < 1e-6                            # the ring at trunk node 1
+    r = np.hypot(p[z0, 0], p[z0, 1]) / 0.3
+    theta = 2 * np.pi * uv[z0, 0]
+    np.testing.assert_allclose(r, 1 + depth * np.sin(lobes * theta), atol=1e-5)
+    # u wraps 0..1 with a seam column; v grows with height (metres / (2π·base radius)).
+    assert uv[:, 0].min() == 0.0 and uv[ring, 0].max() == 1.0
+    order = np.argsort(p[:, 2], kind="stable")
+    assert np.all(np.diff(uv[order, 1]) >= -1e-6)
+    np.testing.assert_allclose(uv[ring, 1], p[ring, 2] / (2 * np.pi * 0.4), atol=1e-5)
+
+
+@pytest.mark.parametrize("budget", [1, 2, 5, 9, 256])
+def test_every_vertex_bound_and_moving_a_joint_moves_only_its_descendants(budget):
+    tree = synthetic_tree()
+    rig, prims = mesh(tree, budget=budget)
+    skel = rig.skeleton
+    J = len(skel.names)
+    for prim in prims.values():
+        check_prim(prim, J)
+        # Rest pose: identity skinning matrices reproduce the positions.
+        np.testing.assert_allclose(skin(prim, skel, skel.bind_world), prim.positions, atol=1e-5)
+    if J < 2:
+        return
+    j = J // 2 if J > 2 else 1
+    q = skel.rest_rotation.copy()
+    q[j] = (Rotation.from_euler("xz", [25, 10], degrees=True) * Rotation.from_quat(q[j])).as_quat()
+    t = skel.rest_translation.copy()
+    t[j] += [0.05, -0.03, 0.02]
+    world = compose(skel, q, t)
+    desc = descendants(skel.parent, j)
+    for prim in prims.values():
+        moved = np.linalg.norm(skin(prim, skel, world) - prim.positions, axis=1) > 1e-5
+        touched = (desc[prim.joints] & (prim.weights > 0)).any(axis=1)
+        only = (desc[prim.joints] | (prim.weights == 0)).all(axis=1)
+        assert not np.any(moved & ~touched)       # nothing outside the subtree moves
+        assert np.all(moved[only])                # geometry wholly on the subtree moves
+
+
+def test_leaves_take_their_carrier_rigidly():
+    tree = synthetic_tree()
+    rig, prims = mesh(tree, budget=5)
+    leaves = prims["leaves"]
+    P = len(OUTLINES[0].points)
+    np.testing.assert_array_equal(leaves.joints[:, 0], np.repeat(rig.leaf_joint, P))
+    assert np.all(leaves.weights[:, 0] == 1)
+    # Normals are the leaf frames' column 2 (flat card, two-sided material).
+    np.testing.assert_allclose(leaves.normals, np.repeat(tree.leaf_frame[:, :, 2], P, axis=0),
+                               atol=1e-6)
+    # Card UVs span 0..1 and the blade base sits at leaf_pos.
+    assert leaves.uvs.min() >= 0 and leaves.uvs.max() <= 1
+    np.testing.assert_allclose(leaves.positions[::P], tree.leaf_pos, atol=1e-6)
+
+
+@pytest.mark.parametrize("shape", sorted(OUTLINES))
+def test_leaf_card_area_matches_tree_leaf_area(shape):
+    tree = synthetic_tree(leaf_shape=shape)
+    rig, prims = mesh(tree)
+    leaves = prims["leaves"]
+    check_prim(leaves, len(rig.joint_node))
+    area = 0.5 * np.linalg.norm(triangle_normals(leaves), axis=1).sum()
+    np.testing.assert_allclose(area, tree.leaf_area.sum(), rtol=1e-4)
+    assert 0.25 < fill_factor(shape) <= 1.0
+    assert leaves.uvs.min() >= 0 and leaves.uvs.max() <= 1
+
+
+def test_merge_influences_merges_sorts_and_normalises():
+    J, W = merge_influences(np.array([[3, 5, 3, 0], [2, 2, 2, 2]]),
+                            np.array([[0.2, 0.3, 0.5, 0.0], [0.25, 0.25, 0.25, 0.25]]))
+    np.testing.assert_array_equal(J, [[3, 5, 0, 0], [2, 0, 0, 0]])
+    np.testing.assert_allclose(W, [[0.7, 0.3, 0, 0], [1, 0, 0, 0]], atol=1e-7)
+
+
+def test_bad_options_are_user_errors():
+    tree = synthetic_tree()
+    rig = build_rig(tree)
+    with pytest.raises(TreegenError, match="sides"):
+        build_mesh(tree, rig, MeshOptions(sides=(8, 2)))
+    with pytest.raises(TreegenError, match="rings"):
+        build_mesh(tree, rig, MeshOptions(rings_per_segment=(0,)))
+    with pytest.raises(TreegenError, match="LeafShape"):
+        build_mesh(synthetic_tree(leaf_shape=42), rig)
+
+
+@pytest.mark.parametrize("species", ["quaking_aspen", "black_tupelo"])
+def test_species_mesh_is_bound_and_keeps_every_stem(species):
+    generate = pytest.importorskip("treegen_cli.generate").generate
+    from treegen_cli.params import load_params
+
+    path = SPECIES / f"{species}.txt"
+    if not path.exists():
+        pytest.skip(f"{path} not written yet")
+    tree = generate(load_params(path), seed=2)
+    rig, prims = mesh(tree, budget=64)
+    for prim in prims.values():
+        check_prim(prim, len(rig.joint_node))
+    # One apex per stem closes the bark (stems are never dropped), last in the vertex list.
+    bark = prims["bark"]
+    tips = tree.stem_node_start + tree.stem_node_count - 1
+    apex = bark.positions[-tree.n_stems:].astype(np.float64)
+    gap = np.linalg.norm(apex - tree.node_pos[tips], axis=1)
+    assert np.all(gap <= 0.5 * tree.node_radius[tips] + 1e-5)
+    lobed = tree.params.lobes > 0 and tree.params.lobe_depth != 0
+    trunk_sides = max(16, 4 * tree.params.lobes) if lobed else 16
+    V, T = expected_bark_counts(tree, (trunk_sides, 8, 6, 4, 3), (2, 1),
+                                extra_trunk_rings=4 if tree.params.flare > 0 else 0)
+    assert (len(bark.positions), len(bark.indices) // 3) == (V, T)
+    area = 0.5 * np.linalg.norm(triangle_normals(prims["leaves"]), axis=1).sum()
+    np.testing.assert_allclose(area, tree.leaf_area.sum(), rtol=1e-3)

@@ -1,0 +1,159 @@
+"""Skeleton under a joint budget: hierarchy, rest transforms, bindings (synthetic + species)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from synthetic_tree import synthetic_tree
+from treegen_cli.errors import TreegenError
+from treegen_cli.rig import RigOptions, build_rig
+
+SPECIES = Path(__file__).resolve().parent.parent / "species"
+
+
+def compose(skel, rotation=None, translation=None) -> np.ndarray:
+    """World matrices from the local rest transforms (optionally overridden), parent first."""
+    q = skel.rest_rotation if rotation is None else rotation
+    t = skel.rest_translation if translation is None else translation
+    J = len(skel.names)
+    local = np.zeros((J, 4, 4))
+    local[:, :3, :3] = Rotation.from_quat(q).as_matrix()
+    local[:, :3, 3] = t
+    local[:, 3, 3] = 1.0
+    world = np.empty_like(local)
+    for j in range(J):              # a few hundred joints in a test
+        world[j] = local[j] if skel.parent[j] < 0 else world[skel.parent[j]] @ local[j]
+    return world
+
+
+def full_joint_count(tree) -> int:
+    """Every segment-start node is a joint, except a clone's first (it is the split node)."""
+    return int(np.sum(tree.stem_node_count - 1) - np.count_nonzero(tree.stem_clone))
+
+
+def check_rig(tree, rig, budget):
+    skel = rig.skeleton
+    J = len(skel.names)
+    assert 1 <= J <= budget
+    assert len(set(skel.names)) == J
+    # A tree rooted at the trunk base, parents listed before children.
+    assert skel.parent[0] == -1 and rig.joint_node[0] == tree.stem_node_start[0]
+    assert np.all(skel.parent[1:] >= 0) and np.all(skel.parent[1:] < np.arange(1, J))
+    # Joints sit on their nodes, and the local rest transforms compose to bind_world.
+    np.testing.assert_allclose(skel.bind_world[:, :3, 3], tree.node_pos[rig.joint_node], atol=1e-9)
+    np.testing.assert_allclose(compose(skel), skel.bind_world, atol=1e-9)
+    np.testing.assert_allclose(np.linalg.det(skel.bind_world[:, :3, :3]), 1.0, atol=1e-9)
+    # Bindings: valid joints, weights in [0, 1] summing to 1, unused slot (0, 0).
+    assert rig.node_joints.dtype == np.uint16 and rig.node_weights.dtype == np.float32
+    assert rig.node_joints.max() < J and rig.leaf_joint.max(initial=0) < J
+    w = rig.node_weights
+    assert np.all((w >= 0) & (w <= 1))
+    np.testing.assert_allclose(w.sum(axis=1), 1.0, atol=1e-6)
+    assert np.all(rig.node_joints[w[:, 1] == 0, 1] == 0)
+    # A jointed node is bound to its own joint alone.
+    assert np.all(rig.node_joints[rig.joint_node, 0] == np.arange(J))
+    np.testing.assert_allclose(w[rig.joint_node, 0], 1.0)
+    # Each joint's parent sits on the same stem below it, or on an ancestor stem.
+    pn = rig.joint_node[skel.parent[1:]]
+    js = rig.joint_stem[1:]
+    same = rig.joint_stem[skel.parent[1:]] == js
+    assert np.all(pn[same] < rig.joint_node[1:][same])
+    assert np.all(np.isin(rig.joint_stem[skel.parent[1:]][~same],
+                          np.concatenate([tree.stem_parent, [0]])))
+
+
+def test_full_budget_puts_a_joint_on_every_segment_start():
+    tree = synthetic_tree()
+    rig = build_rig(tree)
+    check_rig(tree, rig, 256)
+    assert len(rig.joint_node) == full_joint_count(tree) == 14
+    # No tip node is a joint; every other node is (clone's base aliases the split node).
+    tips = tree.stem_node_start + tree.stem_node_count - 1
+    assert not np.isin(tips, rig.joint_node).any()
+    # The clone's first joint hangs from the joint on the trunk's split node (trunk node 2).
+    clone_first = np.flatnonzero(rig.joint_stem == 1)[0]
+    assert rig.joint_node[rig.skeleton.parent[clone_first]] == tree.stem_parent_node[1] == 2
+    # The clone's base node is bound to the split joint; children attach to their carrier.
+    assert rig.node_joints[tree.stem_node_start[1], 0] == 2
+    assert rig.joint_node[rig.stem_joint[2]] == tree.stem_parent_node[2]
+
+
+@pytest.mark.parametrize("budget", [1, 2, 3, 5, 8, 12, 13, 14, 256])
+def test_budget_never_exceeded_and_rig_valid(budget):
+    tree = synthetic_tree()
+    rig = build_rig(tree, RigOptions(max_joints=budget))
+    check_rig(tree, rig, budget)
+
+
+def test_budget_drops_finest_levels_first_then_coarsens():
+    tree = synthetic_tree()
+    lev = lambda rig: tree.stem_level[rig.joint_stem]   # noqa: E731
+    r12 = build_rig(tree, RigOptions(max_joints=12))
+    # Level 2 (3 joints in full) does not fit: only its longest stem keeps a base joint.
+    assert len(r12.joint_node) == 12
+    assert set(r12.joint_stem[lev(r12) == 2]) == {4}
+    r8 = build_rig(tree, RigOptions(max_joints=8))
+    assert not np.any(lev(r8) == 2)
+    # Level 1 coarsened, yet each level-1 stem keeps its base node.
+    assert np.isin(tree.stem_node_start[[2, 3]], r8.joint_node).all()
+    assert np.count_nonzero(lev(r8) == 1) < 6
+    r5 = build_rig(tree, RigOptions(max_joints=5))
+    assert np.all(lev(r5) == 0) and len(r5.joint_node) == 5
+    r1 = build_rig(tree, RigOptions(max_joints=1))
+    assert list(r1.joint_node) == [0]
+    assert np.all(r1.node_joints == 0) and np.all(r1.node_weights[:, 0] == 1)
+
+
+def test_coarse_chain_blends_by_node_z():
+    tree = synthetic_tree()
+    rig = build_rig(tree, RigOptions(max_joints=3))     # trunk joints on nodes 0 and 2
+    assert list(rig.joint_node) == [0, 2]
+    # Trunk node 1 (z = 2) lies halfway between joints at z = 0 and z = 4.
+    assert list(rig.node_joints[1]) == [0, 1]
+    np.testing.assert_allclose(rig.node_weights[1], [0.5, 0.5])
+    # Beyond the last joint of a chain: rigid to it.
+    assert list(rig.node_joints[3]) == [1, 0] and list(rig.node_weights[3]) == [1, 0]
+    # Leaves collapse to their node's dominant joint.
+    dom = rig.node_joints[tree.leaf_node, np.argmax(rig.node_weights[tree.leaf_node], axis=1)]
+    np.testing.assert_array_equal(rig.leaf_joint, dom)
+
+
+def test_joint_levels_restrict_and_rigid_stems_ride_on_their_carrier():
+    tree = synthetic_tree()
+    rig = build_rig(tree, RigOptions(joint_levels=(0,)))
+    check_rig(tree, rig, 256)
+    assert np.all(tree.stem_level[rig.joint_stem] == 0)
+    # Stem 2 grows from trunk node 1: all its nodes and its child's leaves ride on that joint.
+    j = np.flatnonzero(rig.joint_node == 1)[0]
+    nodes2 = np.flatnonzero(np.isin(tree.node_stem, [2, 4]))
+    assert np.all(rig.node_joints[nodes2, 0] == j) and np.all(rig.node_weights[nodes2, 0] == 1)
+    assert np.all(rig.leaf_joint[tree.leaf_stem == 4] == j)
+    # Levels that skip the trunk still get the trunk base as root.
+    r2 = build_rig(tree, RigOptions(joint_levels=(2,)))
+    check_rig(tree, r2, 256)
+    assert r2.joint_node[0] == 0 and set(tree.stem_level[r2.joint_stem[1:]]) == {2}
+
+
+@pytest.mark.parametrize("budget", [0, -3])
+def test_budget_below_one_is_a_user_error(budget):
+    with pytest.raises(TreegenError, match="max-joints"):
+        build_rig(synthetic_tree(), RigOptions(max_joints=budget))
+
+
+@pytest.mark.parametrize("species", ["quaking_aspen", "lombardy_poplar", "black_tupelo"])
+def test_species_rig_under_several_budgets(species):
+    generate = pytest.importorskip("treegen_cli.generate").generate
+    from treegen_cli.params import load_params
+
+    path = SPECIES / f"{species}.txt"
+    if not path.exists():
+        pytest.skip(f"{path} not written yet")
+    tree = generate(load_params(path), seed=1)
+    for budget in (1, 2, 5, 64, 256):
+        rig = build_rig(tree, RigOptions(max_joints=budget))
+        check_rig(tree, rig, budget)
+        if full_joint_count(tree) > budget:
+            assert len(rig.joint_node) > budget // 2   # the budget is used, not wasted
