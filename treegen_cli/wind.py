@@ -263,8 +263,8 @@ def joint_loads(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS) -> JointL
     # the rest shape carries its weight, so a joint is at least stiff enough that its subtree's
     # weight, held out sideways, would bend it no more than max_sag (orientation-independent).
     weight_moment = GRAVITY * np.linalg.norm(s_sub, axis=1)
-    stiffness = np.maximum(stiffness, weight_moment
-                           / np.deg2rad(options.max_sag_deg))
+    stiffness = np.maximum(np.maximum(stiffness, weight_moment / np.deg2rad(options.max_sag_deg)),
+                           1e-6)     # a massless zero-radius tip joint must not divide by zero
     return JointLoads(pivot, direction, own_area, own_moment, m_sub, i_sub, stiffness, span)
 
 
