@@ -3,6 +3,11 @@ the default joint budget and at 4×. Prints joints, frames, seconds (median of 5
 joint-frame. Target (issue 4): under 0.5 s at the default budget.
 
     python bench/wind_bench.py [species/weeping_willow.txt] [--seed N]
+
+Measured (2-core shared box, willow seed 1: 53,850 stems, 582,188 leaves):
+     budget  joints  frames  seconds  us/joint-frame
+        256     222     301    0.112            1.67
+       1024     858     301    0.233            0.90
 """
 from __future__ import annotations
 
