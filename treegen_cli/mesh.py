@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from .asset import Primitive
 from .errors import TreegenError
@@ -125,6 +126,13 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
     b = a + 1
     centre = tree.node_pos[a] + t[:, None] * (tree.node_pos[b] - tree.node_pos[a])
     frame = np.where((t >= 1.0 - 1e-9)[:, None, None], F[b], F[a])
+    # A ring on an interior node takes the frame halfway between its two segments, so a bend
+    # does not pinch the incoming tube against the outgoing one.
+    bend = np.flatnonzero((t <= 1e-9) & (a_loc > 0))
+    if bend.size:
+        r_in = Rotation.from_matrix(F[a[bend] - 1])
+        half = Rotation.from_rotvec(0.5 * (r_in.inv() * Rotation.from_matrix(F[a[bend]])).as_rotvec())
+        frame[bend] = (r_in * half).as_matrix()
     z = tree.node_z[a] + t * (tree.node_z[b] - tree.node_z[a])
     trunk = level[rs] == 0
     length = np.maximum(tree.stem_length[rs], 1e-12)
@@ -230,26 +238,39 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
 
 
 def _leaves(tree, rig) -> Primitive:
+    """Stamp the LeafShape outline on every leaf frame (float32 broadcasts: 250k+ leaves)."""
     o = outline(tree.params.leaf_shape)
     L, P = tree.n_leaves, len(o.points)
-    length, width = tree.leaf_size[:, 0], tree.leaf_size[:, 1]
-    scale = np.stack([width, length, width], axis=1)              # card x, y, z in metres
-    local = o.points[None, :, :] * scale[:, None, :]              # (L, P, 3)
-    pos = tree.leaf_pos[:, None, :] + np.einsum("lij,lpj->lpi", tree.leaf_frame, local)
-    nrm = np.einsum("lij,pj->lpi", tree.leaf_frame, o.normals)
-    nrm /= np.linalg.norm(nrm, axis=2, keepdims=True)
-    idx = o.triangles[None, :, :] + (P * np.arange(L))[:, None, None]
+    F = tree.leaf_frame.astype(np.float32)
+    size = tree.leaf_size.astype(np.float32)
+    length, width = size[:, 0:1], size[:, 1:2]                    # (L, 1)
+    pts = o.points.astype(np.float32)
+    pos = np.empty((L, P, 3), dtype=np.float32)
+    pos[:] = tree.leaf_pos.astype(np.float32)[:, None, :]
+    pos += (width * pts[:, 0])[:, :, None] * F[:, None, :, 0]
+    pos += (length * pts[:, 1])[:, :, None] * F[:, None, :, 1]
+    flat = not np.any(pts[:, 2])
+    if not flat:                                                  # folded blades (palm)
+        pos += (width * pts[:, 2])[:, :, None] * F[:, None, :, 2]
+    if flat and np.allclose(o.normals, [0.0, 0.0, 1.0]):
+        n = F[:, :, 2] / np.linalg.norm(F[:, :, 2], axis=1, keepdims=True)
+        nrm = np.repeat(n, P, axis=0)
+    else:
+        nl = o.normals.astype(np.float32)
+        nrm = (nl[None, :, 0, None] * F[:, None, :, 0] + nl[None, :, 1, None] * F[:, None, :, 1]
+               + nl[None, :, 2, None] * F[:, None, :, 2])
+        nrm = (nrm / np.linalg.norm(nrm, axis=2, keepdims=True)).reshape(-1, 3)
+    idx = o.triangles.astype(np.uint32)[None, :, :] \
+        + (np.uint32(P) * np.arange(L, dtype=np.uint32))[:, None, None]
     joints = np.zeros((L * P, 4), dtype=np.uint16)
     joints[:, 0] = np.repeat(rig.leaf_joint, P)
     weights = np.zeros((L * P, 4), dtype=np.float32)
     weights[:, 0] = 1.0
     return Primitive(
         name="leaves", material="leaf",
-        positions=pos.reshape(-1, 3).astype(np.float32),
-        normals=nrm.reshape(-1, 3).astype(np.float32),
-        uvs=np.tile(o.uvs, (L, 1)).astype(np.float32),
-        indices=idx.astype(np.uint32).ravel(),
-        joints=joints, weights=weights,
+        positions=pos.reshape(-1, 3), normals=nrm,
+        uvs=np.tile(o.uvs.astype(np.float32), (L, 1)),
+        indices=idx.ravel(), joints=joints, weights=weights,
     )
 
 
