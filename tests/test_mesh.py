@@ -24,7 +24,7 @@ def mesh(tree, budget=256, **opts):
 
 
 def expected_bark_counts(tree, sides, rings_per_segment, thin_radius=0.002, thin_sides=3,
-                         point_radius=1e-4, extra_trunk_rings=0):
+                         point_radius=1e-4, point_ratio=0.02, extra_trunk_rings=0):
     """Per stem: rings = segments·m + 1 (minus the tip ring of a pointed stem), each with
     sides + 1 vertices, plus one apex; triangles = 2·sides per ring gap + a fan of sides."""
     lev = np.minimum(tree.stem_level, len(sides) - 1)
@@ -33,7 +33,7 @@ def expected_bark_counts(tree, sides, rings_per_segment, thin_radius=0.002, thin
     rings = (tree.stem_node_count - 1) * m + 1
     rings[0] += extra_trunk_rings
     tips = tree.stem_node_start + tree.stem_node_count - 1
-    rings -= tree.node_radius[tips] < point_radius
+    rings -= tree.node_radius[tips] < np.maximum(point_radius, point_ratio * tree.stem_radius)
     verts = rings * (n_sides + 1) + 1
     tris = (rings - 1) * n_sides * 2 + n_sides
     return int(verts.sum()), int(tris.sum())

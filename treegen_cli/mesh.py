@@ -19,6 +19,7 @@ from scipy.spatial.transform import Rotation
 from .asset import Primitive
 from .errors import TreegenError
 from .leafshapes import outline
+from .shapes import flare_factor, taper_radius
 
 
 @dataclass(frozen=True)
@@ -32,7 +33,8 @@ class MeshOptions:
     thin_radius: float = 0.002    # metres: stems with a thinner base radius get thin_sides
     thin_sides: int = 3
     cap_height: float = 0.5       # tip cap cone height / tip radius
-    point_radius: float = 1e-4    # metres: tips thinner than this end in a point, not a cap
+    point_radius: float = 1e-4    # metres: tips thinner than this end in a point, not a cap,
+    point_ratio: float = 0.02     # ... and so do tips thinner than this × the stem's base radius
     leaves: bool = True           # emit the "leaves" primitive
 
 
@@ -42,12 +44,6 @@ MESH_DEFAULTS = MeshOptions()
 def _per_level(values: tuple, level: np.ndarray) -> np.ndarray:
     v = np.asarray(values)
     return v[np.minimum(level, len(v) - 1)]
-
-
-def _flare_factor(flare: float, Z: np.ndarray) -> np.ndarray:
-    """Weber–Penn trunk flare: 1 + Flare·(100^y − 1)/100, y = max(0, 1 − 8Z)."""
-    y = np.maximum(0.0, 1.0 - 8.0 * Z)
-    return 1.0 + flare * (np.power(100.0, y) - 1.0) / 100.0
 
 
 def merge_influences(joints: np.ndarray, weights: np.ndarray):
@@ -136,9 +132,20 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
     z = tree.node_z[a] + t * (tree.node_z[b] - tree.node_z[a])
     trunk = level[rs] == 0
     length = np.maximum(tree.stem_length[rs], 1e-12)
-    f_a, f_b, f_r = (np.where(trunk, _flare_factor(p.flare, zz / length), 1.0)
-                     for zz in (tree.node_z[a], tree.node_z[b], z))
-    radius = (tree.node_radius[a] / f_a * (1 - t) + tree.node_radius[b] / f_b * t) * f_r
+    # Between nodes the radius follows the species' taper × flare profile, rescaled so that it
+    # passes exactly through the generator's node radii.
+    taper = np.array([lp.taper for lp in p.level])[np.minimum(level[rs], len(p.level) - 1)]
+    r0 = tree.stem_radius[rs]
+
+    def profile(zz):
+        prof = taper_radius(r0, length, taper, zz)
+        return np.where(trunk, prof * flare_factor(p.flare, zz / length), prof)
+
+    def fit(r_node, prof):
+        return np.where(prof > 0, r_node / np.where(prof > 0, prof, 1.0), 1.0)
+
+    radius = (fit(tree.node_radius[a], profile(tree.node_z[a])) * (1 - t)
+              + fit(tree.node_radius[b], profile(tree.node_z[b])) * t) * profile(z)
 
     n_all = np.bincount(rs, minlength=S)
     first = np.cumsum(n_all) - n_all
@@ -149,7 +156,8 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
 
     # Pointed tips drop their zero-radius ring and close on the apex; others get a cone cap.
     tip = start + cnt - 1
-    pointed = tree.node_radius[tip] < options.point_radius
+    pointed = tree.node_radius[tip] < np.maximum(options.point_radius,
+                                                 options.point_ratio * tree.stem_radius)
     emit = ~(pointed[rs] & (i == last[rs]))
     rs, centre, frame, z, radius, slope, a, b, t = (
         x[emit] for x in (rs, centre, frame, z, radius, slope, a, b, t))
