@@ -375,7 +375,7 @@ def estimate_counts(p: Params, leaf_quality: float | None = None, levels: int | 
 
 def _refuse(kind: str, count: float, limit: int, flag: str, name: str):
     raise TreegenError(
-        f"{name}: the tree would have about {int(count):,} {kind}, over the limit of {limit:,}; "
+        f"species '{name}' would grow about {int(count):,} {kind}, over the limit of {limit:,}; "
         f"raise it with {flag} N (or lower the species' Branches/Leaves/LeafQuality)")
 
 

@@ -72,3 +72,25 @@ class Tree:
         from .leafshapes import fill_factor
 
         return self.leaf_size[:, 0] * self.leaf_size[:, 1] * fill_factor(self.params.leaf_shape)
+
+
+def tree_stats(tree: Tree) -> dict:
+    """The figures `treegen info` reports: counts per level, leaf area, height, crown width."""
+    levels = np.bincount(tree.stem_level.astype(np.int64), minlength=1) if tree.n_stems else []
+    pts = np.concatenate([tree.node_pos, tree.leaf_pos]) if tree.n_leaves else tree.node_pos
+    horizontal = pts[:, :2]
+    width = float(np.max(np.ptp(horizontal, axis=0))) if len(pts) else 0.0
+    return {
+        "species": tree.params.name,
+        "seed": tree.seed,
+        "scale_m": round(tree.scale, 4),
+        "stems": tree.n_stems,
+        "stems_per_level": [int(n) for n in levels],
+        "clones": int(np.count_nonzero(tree.stem_clone)),
+        "nodes": tree.n_nodes,
+        "leaves": tree.n_leaves,
+        "leaf_area_m2": round(float(tree.leaf_area.sum()), 4),
+        "height_m": round(float(pts[:, 2].max()) if len(pts) else 0.0, 4),
+        "crown_width_m": round(width, 4),
+        "trunk_radius_m": round(float(tree.node_radius[0]) if tree.n_nodes else 0.0, 4),
+    }

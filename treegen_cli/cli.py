@@ -1,0 +1,184 @@
+"""The `treegen` command line. Thin: parse options, call the pipeline, report.
+
+Every user mistake arrives here as a TreegenError and leaves as one line on stderr, exit 2.
+"""
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+import click
+
+from . import __version__
+from .errors import TreegenError
+from .generate import GenerateOptions
+
+SPECIES = click.Path(dir_okay=False, path_type=Path)
+
+
+def _generate_options(f):
+    f = click.option("--max-leaves", type=int, default=GenerateOptions.max_leaves, show_default=True,
+                     help="Refuse trees with more leaves than this (estimated before growing).")(f)
+    f = click.option("--max-stems", type=int, default=GenerateOptions.max_stems, show_default=True,
+                     help="Refuse trees with more stems than this (estimated before growing).")(f)
+    f = click.option("--seed", type=int, default=0, show_default=True,
+                     help="Random seed: the same seed grows the same tree, byte for byte.")(f)
+    return f
+
+
+def _load(species: Path):
+    from .params import load_params
+    return load_params(species)
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
+@click.version_option(__version__, prog_name="treegen")
+def cli():
+    """Grow Weber–Penn trees and write them skinned, wind-animated and LOD'd for game engines."""
+
+
+@cli.command()
+@click.argument("species", type=SPECIES)
+@_generate_options
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
+def info(species, seed, max_stems, max_leaves, as_json):
+    """Grow SPECIES (a Weber–Penn text or Arbaro XML file) and report on the tree:
+    stems per level, leaves, leaf area (m²), height and crown width (m), nodes, seconds."""
+    from .generate import generate
+    from .tree import tree_stats
+
+    params = _load(species)
+    t0 = time.perf_counter()
+    tree = _in_file(species, generate, params, seed,
+                    GenerateOptions(max_stems=max_stems, max_leaves=max_leaves))
+    seconds = time.perf_counter() - t0
+    stats = tree_stats(tree) | {"generate_s": round(seconds, 4), "file": str(species)}
+    if as_json:
+        click.echo(json.dumps(stats, indent=2))
+        return
+    click.echo(f"{stats['species']}  ({species}, seed {seed})")
+    rows = [
+        ("stems", f"{stats['stems']:,}  per level {stats['stems_per_level']}"
+                  f"  ({stats['clones']:,} split clones)"),
+        ("nodes", f"{stats['nodes']:,}"),
+        ("leaves", f"{stats['leaves']:,}"),
+        ("leaf area", f"{stats['leaf_area_m2']:.2f} m²"),
+        ("height", f"{stats['height_m']:.2f} m"),
+        ("crown width", f"{stats['crown_width_m']:.2f} m"),
+        ("trunk radius", f"{stats['trunk_radius_m'] * 100:.1f} cm"),
+        ("generation", f"{seconds:.3f} s"),
+    ]
+    for name, value in rows:
+        click.echo(f"  {name:<13}{value}")
+
+
+def _int_list(text: str | None, name: str) -> tuple[int, ...] | None:
+    if text is None:
+        return None
+    try:
+        values = tuple(int(v) for v in text.split(",") if v.strip() != "")
+    except ValueError:
+        raise TreegenError(f"{name} '{text}': expected comma-separated whole numbers, e.g. 0,1,2") from None
+    if not values:
+        raise TreegenError(f"{name} '{text}': give at least one value")
+    return values
+
+
+@cli.command()
+@click.argument("species", type=SPECIES)
+@click.option("-o", "--output", type=click.Path(path_type=Path), required=True,
+              help="Output file; the extension picks the format: .glb .gltf .usda .usdc .usdz "
+                   "(skinned, animated) or .obj .ply (static rest pose).")
+@_generate_options
+@click.option("--max-joints", type=int, default=256, show_default=True,
+              help="Joint budget of the skeleton (>= 1); chains coarsen and the finest levels "
+                   "lose their joints first.")
+@click.option("--joint-levels", default=None, metavar="0,1,2",
+              help="Stem levels allowed to own joints [default: all].")
+@click.option("--sides", default=None, metavar="16,8,6,4,3",
+              help="Cross-section sides per stem level, trunk first; the last value repeats "
+                   "[default: 16,8,6,4,3].")
+@click.option("--wind-speed", type=float, default=4.0, show_default=True, help="Mean wind speed, m/s.")
+@click.option("--wind-dir", type=float, default=0.0, show_default=True,
+              help="Direction the wind blows towards, degrees (0 = +X, 90 = +Y in Z-up terms).")
+@click.option("--gust", type=float, default=0.35, show_default=True,
+              help="Gust intensity: σ of the gust process / mean speed.")
+@click.option("--turbulence", type=float, default=0.3, show_default=True,
+              help="Spatially varying turbulence: σ / mean speed.")
+@click.option("--duration", type=float, default=4.0, show_default=True,
+              help="Clip length in seconds (the wind loops over it).")
+@click.option("--fps", type=float, default=30.0, show_default=True, help="Keys per second.")
+@click.option("--no-wind", is_flag=True, help="Write no animation (rest pose only).")
+def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels, sides,
+         wind_speed, wind_dir, gust, turbulence, duration, fps, no_wind):
+    """Grow SPECIES and write a skinned, wind-animated tree to OUTPUT."""
+    from dataclasses import replace
+
+    from .exchange import WRITERS, export, supported_suffixes
+    from .mesh import MESH_DEFAULTS
+    from .pipeline import MakeOptions, Timings, build_asset
+    from .rig import RigOptions
+    from .wind import WindOptions
+
+    t0 = time.perf_counter()
+    if output.suffix.lower() not in WRITERS:
+        raise TreegenError(f"{output}: unknown output extension '{output.suffix or '(none)'}'; "
+                           f"supported: {', '.join(supported_suffixes())}")
+    if max_joints < 1:
+        raise TreegenError(f"--max-joints {max_joints}: the joint budget must be at least 1")
+    mesh = MESH_DEFAULTS
+    side_list = _int_list(sides, "--sides")
+    if side_list is not None:
+        if min(side_list) < 3 or max(side_list) > 64:
+            raise TreegenError(f"--sides '{sides}': each value must be in [3, 64]")
+        mesh = replace(mesh, sides=side_list)
+    wind = None if no_wind else WindOptions(speed=wind_speed, direction_deg=wind_dir, gust=gust,
+                                            turbulence=turbulence, duration=duration, fps=fps)
+    options = MakeOptions(
+        generate=GenerateOptions(max_stems=max_stems, max_leaves=max_leaves),
+        rig=RigOptions(max_joints=max_joints, joint_levels=_int_list(joint_levels, "--joint-levels")),
+        mesh=mesh, wind=wind)
+    params = _load(species)
+    timings = Timings()
+    asset, tree = _in_file(species, build_asset, params, seed, options, timings)
+    written = timings.run("write", export, asset, output)
+    lod0 = asset.lods[0]
+    vertices = sum(len(p.positions) for p in lod0.primitives)
+    triangles = sum(len(p.indices) // 3 for p in lod0.primitives)
+    size = sum(p.stat().st_size for p in written)
+    click.echo(f"wrote {', '.join(str(p) for p in written)}  ({size / 1e6:.2f} MB)")
+    click.echo(f"  {tree.n_stems:,} stems, {tree.n_leaves:,} leaves; {vertices:,} vertices, "
+               f"{triangles:,} triangles; {len(lod0.skeleton.names)} joints; "
+               f"{len(lod0.clips[0].times) if lod0.clips else 0} keys")
+    stages = ", ".join(f"{k} {v:.2f}" for k, v in timings.stages.items())
+    click.echo(f"  {time.perf_counter() - t0:.2f} s  ({stages})")
+
+
+def _in_file(species: Path, fn, *args):
+    """Run a stage; a user error it raises about the tree is reported against the file."""
+    try:
+        return fn(*args)
+    except TreegenError as e:
+        if str(e).startswith(str(species)):
+            raise
+        raise TreegenError(f"{species}: {e}") from None
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point: run the CLI, turning user errors into one line and exit code 2."""
+    try:
+        cli.main(args=argv, prog_name="treegen", standalone_mode=False)
+    except TreegenError as e:
+        click.echo(f"treegen: error: {e}", err=True)
+        sys.exit(2)
+    except click.exceptions.Abort:
+        click.echo("treegen: aborted", err=True)
+        sys.exit(130)
+    except click.ClickException as e:
+        e.show()
+        sys.exit(e.exit_code)
+    except click.exceptions.Exit as e:
+        sys.exit(e.exit_code)
+    sys.exit(0)
