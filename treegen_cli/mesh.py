@@ -2,7 +2,9 @@
 
 Result: one "bark" primitive (a ring of `sides + 1` vertices per ring, seam column duplicated for
 UVs, each stem closed by a cone to an apex vertex) and one "leaves" primitive (the LeafShape
-outline stamped on every leaf frame), both bound to the rig's joints.
+outline stamped on every leaf frame), both bound to the rig's joints. Bark vertex layout: the
+ring vertices stem by stem (base to tip), then one apex vertex per stem in stem order, so no
+stem, however thin, is ever dropped.
 
     prims = build_mesh(tree, rig, MeshOptions(sides=(24, 10, 6, 4)))
 
@@ -228,9 +230,8 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
     quads = np.stack([q0, q0 + 1, q3 + 1, q0, q3 + 1, q3], axis=1).reshape(-1, 3)
     n_emit = np.bincount(rs, minlength=S)
     last_ring = np.cumsum(n_emit) - 1
-    fn = sides
-    fs = np.repeat(np.arange(S), fn)
-    fj = np.arange(fs.size) - np.repeat(np.cumsum(fn) - fn, fn)
+    fs = np.repeat(np.arange(S), sides)
+    fj = np.arange(fs.size) - np.repeat(np.cumsum(sides) - sides, sides)
     l0 = v0[last_ring[fs]] + fj
     fans = np.stack([l0, l0 + 1, Vr + fs], axis=1)
 

@@ -4,8 +4,8 @@ Result: every stem node that starts a segment may become a joint (a joint at a s
 rotate nothing), chained along its stem and hung from the parent stem's joint at the attach
 point; stems without joints ride rigidly on the nearest ancestor joint.
 
-    rig = build_rig(tree, RigOptions(max_joints=128))
-    rig.skeleton.parent[:5]   # → [-1, 0, 1, 0, 3]
+    rig = build_rig(tree, RigOptions(max_joints=128))   # → len(rig.skeleton.names) <= 128,
+    rig.skeleton.parent[0] == -1                         #   joint 0 on the trunk base node
 
 Budget (never exceeded): levels are filled from the trunk down. A level whose full chains fit
 gets them; the first level that does not fit has its chains coarsened (every k-th segment node,
