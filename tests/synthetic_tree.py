@@ -11,8 +11,10 @@
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
 from treegen_cli.params import Params
@@ -108,3 +110,14 @@ def trunk_only(lobes: int = 0, lobe_depth: float = 0.0, flare: float = 0.0) -> T
         leaf_stem=np.zeros(0, np.int32), leaf_node=np.zeros(0, np.int32),
         leaf_pos=np.zeros((0, 3)), leaf_frame=np.zeros((0, 3, 3)), leaf_size=np.zeros((0, 2)),
     )
+
+
+def species_tree(name: str, seed: int = 0) -> Tree:
+    """A bundled species grown by the generator (skips while either is not there yet)."""
+    generate = pytest.importorskip("treegen_cli.generate").generate
+    from treegen_cli.params import load_params
+
+    path = Path(__file__).resolve().parent.parent / "species" / f"{name}.txt"
+    if not path.exists():
+        pytest.skip(f"{path} not written yet")
+    return generate(load_params(path), seed=seed)

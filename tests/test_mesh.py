@@ -1,20 +1,16 @@
 """Bark tubes and leaf cards: counts from formulas, skin bindings, normals, UVs, leaf area."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from synthetic_tree import synthetic_tree, trunk_only
+from synthetic_tree import species_tree, synthetic_tree, trunk_only
 from test_rig import compose
 from treegen_cli.errors import TreegenError
 from treegen_cli.leafshapes import OUTLINES, fill_factor
 from treegen_cli.mesh import MeshOptions, build_mesh, merge_influences
 from treegen_cli.rig import RigOptions, build_rig
-
-SPECIES = Path(__file__).resolve().parent.parent / "species"
 
 
 def mesh(tree, budget=256, **opts):
@@ -215,13 +211,7 @@ def test_bad_options_are_user_errors():
 
 @pytest.mark.parametrize("species", ["quaking_aspen", "black_tupelo"])
 def test_species_mesh_is_bound_and_keeps_every_stem(species):
-    generate = pytest.importorskip("treegen_cli.generate").generate
-    from treegen_cli.params import load_params
-
-    path = SPECIES / f"{species}.txt"
-    if not path.exists():
-        pytest.skip(f"{path} not written yet")
-    tree = generate(load_params(path), seed=2)
+    tree = species_tree(species, seed=2)
     rig, prims = mesh(tree, budget=64)
     for prim in prims.values():
         check_prim(prim, len(rig.joint_node))

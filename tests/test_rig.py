@@ -1,17 +1,13 @@
 """Skeleton under a joint budget: hierarchy, rest transforms, bindings (synthetic + species)."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from synthetic_tree import synthetic_tree
+from synthetic_tree import species_tree, synthetic_tree
 from treegen_cli.errors import TreegenError
 from treegen_cli.rig import RigOptions, build_rig
-
-SPECIES = Path(__file__).resolve().parent.parent / "species"
 
 
 def compose(skel, rotation=None, translation=None) -> np.ndarray:
@@ -145,13 +141,7 @@ def test_budget_below_one_is_a_user_error(budget):
 
 @pytest.mark.parametrize("species", ["quaking_aspen", "lombardy_poplar", "black_tupelo"])
 def test_species_rig_under_several_budgets(species):
-    generate = pytest.importorskip("treegen_cli.generate").generate
-    from treegen_cli.params import load_params
-
-    path = SPECIES / f"{species}.txt"
-    if not path.exists():
-        pytest.skip(f"{path} not written yet")
-    tree = generate(load_params(path), seed=1)
+    tree = species_tree(species, seed=1)
     for budget in (1, 2, 5, 64, 256):
         rig = build_rig(tree, RigOptions(max_joints=budget))
         check_rig(tree, rig, budget)
