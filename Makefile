@@ -13,6 +13,8 @@ test:
 
 bench:
 	$(PYTHON) bench/generate_bench.py
+	@for b in bench/make_bench.py bench/wind_bench.py bench/lod_bench.py bench/forest_bench.py; do \
+		if [ -f $$b ]; then echo "== $$b"; $(PYTHON) $$b; fi; done
 
 clean:
 	rm -rf build *.egg-info .pytest_cache tools/node_modules
