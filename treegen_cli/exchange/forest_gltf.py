@@ -1,0 +1,207 @@
+"""Forest Scene → one glTF 2.0 file whose binary grows with prototypes, not with trees.
+
+Shared, written once per (prototype, LOD): the mesh (all vertex data), the skin's inverse bind
+matrices accessor, and per phase variant the animation sampler data (input times and output
+rotations). Per instance (JSON only): its own joint node hierarchy and its own skin object
+(a node has one parent, so joints cannot be shared), and one channel per animated joint
+pointing at the shared sampler of its variant.
+
+Per instance and LOD k:
+
+    "<tree>_lod<k>"        mesh + skin, no transform, a scene root (the validator wants
+      └── "<tree>_place"   skinned mesh nodes at the root); instance TRS (Y up)
+            └── joints     the prototype's skeleton (local TRS)
+
+One animation "wind" drives every instance; phase variety comes from `phase_variants`
+copies of each clip, key arrays rotated (forest.phase_rotate), the instance taking the variant
+nearest its time offset. With `all_lods` every LOD of every instance is written and LOD0's
+node lists the others with MSFT_lod (lower LODs are reached only through it).
+"""
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from .. import __version__
+from ..forest import Scene, phase_rotate
+from .gltf import (_Buffer, _continuous, _is_default, _primitive, _unit, animated_joints, dumps,
+                   glb_bytes, matrix_to_y_up, quat_to_y_up, to_y_up)
+
+
+def _material_dict(m) -> dict:
+    d = {"name": m.name,
+         "pbrMetallicRoughness": {"baseColorFactor": [float(c) for c in m.base_color],
+                                  "metallicFactor": float(m.metallic),
+                                  "roughnessFactor": float(m.roughness)}}
+    if m.double_sided:
+        d["doubleSided"] = True
+    if m.alpha_cutoff is not None:
+        d["alphaMode"] = "MASK"
+        d["alphaCutoff"] = float(m.alpha_cutoff)
+    return d
+
+
+class _Shared:
+    """Lazily written per-(prototype, LOD[, variant]) data, so unused LODs cost nothing."""
+
+    def __init__(self, scene: Scene, buf: _Buffer):
+        self.scene, self.buf = scene, buf
+        self.materials: list[dict] = []
+        self._mat: dict = {}
+        self.meshes: list[dict] = []
+        self._mesh: dict = {}
+        self._ibm: dict = {}
+        self._inputs: dict = {}
+        self._tracks: dict = {}
+        self.samplers: list[dict] = []
+
+    def material(self, m) -> int:
+        if m not in self._mat:
+            self._mat[m] = len(self.materials)
+            self.materials.append(_material_dict(m))
+        return self._mat[m]
+
+    def mesh(self, p: int, k: int) -> int:
+        if (p, k) not in self._mesh:
+            asset = self.scene.prototypes[p]
+            lod = asset.lods[k]
+            mats = {m.name: m for m in asset.materials}
+            J = len(lod.skeleton.names)
+            prims = [_primitive(self.buf, q, J, self.material(mats[q.material])) for q in lod.primitives]
+            self._mesh[(p, k)] = len(self.meshes)
+            self.meshes.append({"name": f"{asset.name}_s{asset.extras.get('seed', p)}_lod{k}",
+                                "primitives": prims})
+        return self._mesh[(p, k)]
+
+    def ibm(self, p: int, k: int) -> int:
+        if (p, k) not in self._ibm:
+            sk = self.scene.prototypes[p].lods[k].skeleton
+            m = matrix_to_y_up(np.linalg.inv(np.asarray(sk.bind_world, dtype=np.float64)))
+            m[:, 3, :] = (0.0, 0.0, 0.0, 1.0)
+            self._ibm[(p, k)] = self.buf.accessor(
+                m.transpose(0, 2, 1).reshape(len(m), 16).astype(np.float32))   # column-major
+        return self._ibm[(p, k)]
+
+    def tracks(self, p: int, k: int, v: int) -> list[tuple[int, int]]:
+        """[(joint, sampler index)] of variant v of LOD k's first clip (empty if static)."""
+        key = (p, k, v)
+        if key in self._tracks:
+            return self._tracks[key]
+        lod = self.scene.prototypes[p].lods[k]
+        out: list[tuple[int, int]] = []
+        if lod.clips and len(lod.clips[0].times) > 1:
+            base = lod.clips[0]
+            joints = animated_joints(base, lod.skeleton)
+            n = len(base.times) - 1
+            clip = phase_rotate(base, round(v * n / self.scene.phase_variants))
+            rot = _unit(quat_to_y_up(clip.rotations))
+            times = np.asarray(clip.times, np.float32)
+            for j in joints:        # per joint (tens), keys vectorised
+                keys = np.arange(len(times)) if clip.keys is None else np.asarray(clip.keys[j], np.int64)
+                ident = (times.tobytes(), keys.tobytes())
+                if ident not in self._inputs:
+                    self._inputs[ident] = self.buf.accessor(times[keys], bounds=True)
+                output = self.buf.accessor(_continuous(rot[keys, j]).astype(np.float32))
+                self.samplers.append({"input": self._inputs[ident], "output": output,
+                                      "interpolation": clip.interpolation})
+                out.append((int(j), len(self.samplers) - 1))
+        self._tracks[key] = out
+        return out
+
+
+def build_forest(scene: Scene) -> tuple[dict, bytes]:
+    """Scene → (glTF JSON dict without buffer uri, binary buffer)."""
+    buf = _Buffer()
+    sh = _Shared(scene, buf)
+    nodes: list[dict] = []
+    skins: list[dict] = []
+    channels: list[dict] = []
+    roots: list[int] = []
+    V = max(1, scene.phase_variants)
+    width = len(str(max(len(scene.instances) - 1, 0)))
+    for i, inst in enumerate(scene.instances):     # per tree: JSON records only, no vertex data
+        asset = scene.prototypes[inst.prototype]
+        name = f"tree{i:0{width}d}"
+        t = to_y_up(np.asarray(inst.position, np.float64))
+        half = math.radians(inst.rotation_deg) / 2
+        q = np.array([0.0, math.sin(half), 0.0, math.cos(half)])   # about glTF's up (+Y)
+        variant = int(round(inst.time_offset / scene.loop * V)) % V if scene.loop > 0 else 0
+        lods = range(len(asset.lods)) if scene.all_lods else [inst.lod]
+        lod_nodes = []
+        for k in lods:
+            sk = asset.lods[k].skeleton
+            J = len(sk.names)
+            mesh_node = len(nodes)
+            place = mesh_node + 1
+            joint_nodes = place + 1 + np.arange(J)
+            parent = np.asarray(sk.parent)
+            jroots = np.flatnonzero(parent < 0)
+            place_node = {"name": f"{name}_lod{k}_place", "children": [int(x) for x in joint_nodes[jroots]]}
+            if not _is_default(t, [0, 0, 0]):
+                place_node["translation"] = [float(x) for x in t]
+            if inst.rotation_deg % 360 != 0:
+                place_node["rotation"] = [float(x) for x in q]
+            if inst.scale != 1.0:
+                place_node["scale"] = [float(inst.scale)] * 3
+            nodes.append({"name": f"{name}_lod{k}", "mesh": sh.mesh(inst.prototype, k),
+                          "skin": len(skins), "children": [place]})
+            nodes.append(place_node)
+            jt = to_y_up(np.asarray(sk.rest_translation, np.float64))
+            jq = _unit(quat_to_y_up(sk.rest_rotation))
+            kids_of = [[] for _ in range(J)]
+            for j in np.flatnonzero(parent >= 0):
+                kids_of[parent[j]].append(int(joint_nodes[j]))
+            for j in range(J):      # one JSON node per joint
+                n = {"name": f"{name}_lod{k}_{sk.names[j]}"}
+                if not _is_default(jt[j], [0, 0, 0]):
+                    n["translation"] = [float(x) for x in jt[j]]
+                if not _is_default(jq[j], [0, 0, 0, 1]):
+                    n["rotation"] = [float(x) for x in jq[j]]
+                if kids_of[j]:
+                    n["children"] = kids_of[j]
+                nodes.append(n)
+            skins.append({"name": f"{name}_lod{k}_skin", "joints": [int(x) for x in joint_nodes],
+                          "inverseBindMatrices": sh.ibm(inst.prototype, k), "skeleton": place})
+            for j, sampler in sh.tracks(inst.prototype, k, variant):
+                channels.append({"sampler": sampler,
+                                 "target": {"node": int(joint_nodes[j]), "path": "rotation"}})
+            lod_nodes.append(mesh_node)
+        if len(lod_nodes) > 1:
+            nodes[lod_nodes[0]]["extensions"] = {"MSFT_lod": {"ids": lod_nodes[1:]}}
+            nodes[lod_nodes[0]]["extras"] = {
+                "MSFT_screencoverage": [float(l.screen_coverage) for l in asset.lods]}
+        roots.append(lod_nodes[0])
+
+    gltf: dict = {
+        "asset": {"version": "2.0", "generator": f"treegen {__version__}",
+                  "extras": {"forest": scene.name, "instances": len(scene.instances),
+                             "prototypes": [dict(a.extras) for a in scene.prototypes]}},
+        "scene": 0,
+        "scenes": [{"name": scene.name, "nodes": roots}],
+        "nodes": nodes, "meshes": sh.meshes, "skins": skins, "materials": sh.materials,
+    }
+    if channels:
+        gltf["animations"] = [{"name": "wind", "samplers": sh.samplers, "channels": channels}]
+    if any("extensions" in n for n in nodes):
+        gltf["extensionsUsed"] = ["MSFT_lod"]
+    blob = buf.blob()
+    gltf["accessors"] = buf.accessors
+    gltf["bufferViews"] = buf.views
+    gltf["buffers"] = [{"byteLength": len(blob)}]
+    return gltf, blob
+
+
+def write_forest_gltf_files(scene: Scene, path: str | os.PathLike) -> None:
+    """Write straight to `path` (.glb, or .gltf + `<stem>.bin`); forest.write_scene stages it."""
+    path = Path(path)
+    gltf, blob = build_forest(scene)
+    if path.suffix.lower() != ".gltf":
+        path.write_bytes(glb_bytes(gltf, blob))
+        return
+    bin_path = path.with_suffix(".bin")
+    gltf["buffers"][0]["uri"] = bin_path.name
+    bin_path.write_bytes(blob)
+    path.write_bytes(dumps(gltf))
