@@ -14,7 +14,7 @@ from treegen_cli import __version__
 from treegen_cli.asset import Asset, Lod
 from treegen_cli.errors import TreegenError
 from treegen_cli.exchange import WRITERS, export, supported_suffixes
-from treegen_cli.exchange.gltf import (FLOAT, UNSIGNED_BYTE, UNSIGNED_INT, UNSIGNED_SHORT,
+from treegen_cli.exchange.gltf import (UNSIGNED_BYTE, UNSIGNED_INT, UNSIGNED_SHORT,
                                        quat_to_y_up, read_accessor, read_gltf, to_y_up,
                                        write_gltf)
 from treegen_cli.exchange.validate import summary, validate_gltf
@@ -311,7 +311,10 @@ def test_large_indices_and_joints(tmp_path):
     assert acc[bark_prim["attributes"]["JOINTS_0"]]["componentType"] == UNSIGNED_SHORT
     assert acc[bark_prim["indices"]]["componentType"] == UNSIGNED_INT
     assert acc[leaf_prim["indices"]]["componentType"] == UNSIGNED_SHORT
-    assert acc[bark_prim["attributes"]["WEIGHTS_0"]]["componentType"] == FLOAT
+    # weights: blended bark as normalized UNSIGNED_SHORT, rigid leaves as UNSIGNED_BYTE
+    assert acc[bark_prim["attributes"]["WEIGHTS_0"]]["componentType"] == UNSIGNED_SHORT
+    assert acc[leaf_prim["attributes"]["WEIGHTS_0"]]["componentType"] == UNSIGNED_BYTE
+    assert acc[bark_prim["attributes"]["WEIGHTS_0"]]["normalized"] is True
 
 
 def test_step_and_explicit_animated(tmp_path):

@@ -9,7 +9,7 @@ from synthetic_tree import species_tree, synthetic_tree, trunk_only
 from test_rig import compose
 from treegen_cli.errors import TreegenError
 from treegen_cli.leafshapes import OUTLINES, fill_factor
-from treegen_cli.mesh import MeshOptions, build_mesh, merge_influences
+from treegen_cli.mesh import CARD, MeshOptions, build_mesh, merge_influences
 from treegen_cli.rig import RigOptions, build_rig
 
 
@@ -89,9 +89,13 @@ def test_counts_follow_the_formulas():
     bark = prims["bark"]
     V, T = expected_bark_counts(tree, (16, 8, 6, 4, 3), (2, 1))
     assert (len(bark.positions), len(bark.indices) // 3) == (V, T)
+    # Leaves: a 4-vertex, 2-triangle card each by default; the LeafShape outline on request.
+    assert len(prims["leaves"].positions) == 4 * tree.n_leaves
+    assert len(prims["leaves"].indices) // 3 == 2 * tree.n_leaves
+    _, p1 = mesh(tree, leaf_geometry="shape")
     o = OUTLINES[0]
-    assert len(prims["leaves"].positions) == tree.n_leaves * len(o.points)
-    assert len(prims["leaves"].indices) // 3 == tree.n_leaves * len(o.triangles)
+    assert len(p1["leaves"].positions) == tree.n_leaves * len(o.points)
+    assert len(p1["leaves"].indices) // 3 == tree.n_leaves * len(o.triangles)
     # Other options: coarser rings, more sides; the 1 mm twig stays, with thin_sides.
     _, p2 = mesh(tree, sides=(7, 5), rings_per_segment=(1, 3), thin_sides=4)
     V, T = expected_bark_counts(tree, (7, 5), (1, 3), thin_sides=4)
@@ -164,11 +168,11 @@ def test_every_vertex_bound_and_moving_a_joint_moves_only_its_descendants(budget
         assert np.all(moved[only])                # geometry wholly on the subtree moves
 
 
-def test_leaves_take_their_carrier_rigidly():
+@pytest.mark.parametrize("geometry,P", [("card", 4), ("shape", len(OUTLINES[0].points))])
+def test_leaves_take_their_carrier_rigidly(geometry, P):
     tree = synthetic_tree()
-    rig, prims = mesh(tree, budget=5)
+    rig, prims = mesh(tree, budget=5, leaf_geometry=geometry)
     leaves = prims["leaves"]
-    P = len(OUTLINES[0].points)
     np.testing.assert_array_equal(leaves.joints[:, 0], np.repeat(rig.leaf_joint, P))
     assert np.all(leaves.weights[:, 0] == 1)
     # Normals are the leaf frames' column 2 (flat card, two-sided material).
@@ -176,19 +180,47 @@ def test_leaves_take_their_carrier_rigidly():
                                atol=1e-6)
     # Card UVs span 0..1 and the blade base sits at leaf_pos.
     assert leaves.uvs.min() >= 0 and leaves.uvs.max() <= 1
-    np.testing.assert_allclose(leaves.positions[::P], tree.leaf_pos, atol=1e-6)
+    o = CARD if geometry == "card" else OUTLINES[0]
+    base = o.points[:, 1] == 0                    # the base point (outline) or base edge (card)
+    np.testing.assert_allclose(leaves.positions.reshape(-1, P, 3)[:, base].mean(axis=1),
+                               tree.leaf_pos, atol=1e-6)
 
 
 @pytest.mark.parametrize("shape", sorted(OUTLINES))
-def test_leaf_card_area_matches_tree_leaf_area(shape):
+def test_leaf_shape_area_matches_tree_leaf_area(shape):
+    """Outline geometry draws exactly the physical blade area the wind model uses."""
     tree = synthetic_tree(leaf_shape=shape)
-    rig, prims = mesh(tree)
+    rig, prims = mesh(tree, leaf_geometry="shape")
     leaves = prims["leaves"]
     check_prim(leaves, len(rig.joint_node))
     area = 0.5 * np.linalg.norm(triangle_normals(leaves), axis=1).sum()
     np.testing.assert_allclose(area, tree.leaf_area.sum(), rtol=1e-4)
     assert 0.25 < fill_factor(shape) <= 1.0
     assert leaves.uvs.min() >= 0 and leaves.uvs.max() <= 1
+
+
+@pytest.mark.parametrize("shape", sorted(OUTLINES))
+def test_leaf_cards_are_length_by_width_quads(shape):
+    """Cards draw length × width whatever the LeafShape (its outline lives in the texture);
+    Tree.leaf_area stays the blade area: card area × fill_factor."""
+    tree = synthetic_tree(leaf_shape=shape)
+    rig, prims = mesh(tree)
+    leaves = prims["leaves"]
+    check_prim(leaves, len(rig.joint_node))
+    length, width = tree.leaf_size[:, 0], tree.leaf_size[:, 1]
+    area = 0.5 * np.linalg.norm(triangle_normals(leaves), axis=1)
+    np.testing.assert_allclose(area.reshape(-1, 2).sum(axis=1), length * width, rtol=1e-4)
+    np.testing.assert_allclose(area.sum() * fill_factor(shape), tree.leaf_area.sum(), rtol=1e-4)
+    # Corners: base at leaf_pos ± width/2 along frame column 0, tip + length along column 1.
+    F = tree.leaf_frame
+    corners = (tree.leaf_pos[:, None, :]
+               + (width[:, None] * CARD.points[None, :, 0])[:, :, None] * F[:, None, :, 0]
+               + (length[:, None] * CARD.points[None, :, 1])[:, :, None] * F[:, None, :, 1])
+    np.testing.assert_allclose(leaves.positions.reshape(-1, 4, 3), corners, atol=1e-5)
+    # UVs: the four corners of the 0..1 texture, the same on every card.
+    uv = leaves.uvs.reshape(-1, 4, 2)
+    assert np.all(uv == uv[:1])
+    assert sorted(map(tuple, uv[0].tolist())) == [(0, 0), (0, 1), (1, 0), (1, 1)]
 
 
 def test_merge_influences_merges_sorts_and_normalises():
@@ -207,6 +239,8 @@ def test_bad_options_are_user_errors():
         build_mesh(tree, rig, MeshOptions(rings_per_segment=(0,)))
     with pytest.raises(TreegenError, match="LeafShape"):
         build_mesh(synthetic_tree(leaf_shape=42), rig)
+    with pytest.raises(TreegenError, match="leaf-geometry"):
+        build_mesh(tree, rig, MeshOptions(leaf_geometry="sprite"))
 
 
 @pytest.mark.parametrize("species", ["quaking_aspen", "black_tupelo"])
@@ -227,4 +261,4 @@ def test_species_mesh_is_bound_and_keeps_every_stem(species):
                                 extra_trunk_rings=4 if tree.params.flare > 0 else 0)
     assert (len(bark.positions), len(bark.indices) // 3) == (V, T)
     area = 0.5 * np.linalg.norm(triangle_normals(prims["leaves"]), axis=1).sum()
-    np.testing.assert_allclose(area, tree.leaf_area.sum(), rtol=1e-3)
+    np.testing.assert_allclose(area, np.prod(tree.leaf_size, axis=1).sum(), rtol=1e-3)

@@ -2,9 +2,12 @@
 
 A blade lives in card space: x across the blade (−0.5..0.5 of the leaf width), y along it
 (0 = base at the petiole, 1 = tip, in units of the leaf length), z along the blade normal.
-Each outline is a tiny triangle list drawn once at import; mesh.py stamps it onto every leaf with
-one broadcast. `fill_factor` is the exact area of the drawn triangles, so `Tree.leaf_area`
-(what the wind model pushes on) equals the area the renderer shows.
+Each outline is a tiny triangle list drawn once at import. By default mesh.py draws every leaf
+as a plain length × width card (the "rectangle" below) and the outline belongs in the leaf
+texture's alpha, at the same UVs (u = x + 0.5, v = y); with `leaf_geometry="shape"` it stamps
+the outline itself with one broadcast. `fill_factor` is the exact area of the outline's
+triangles, so `Tree.leaf_area` (what the wind model pushes on) is the physical blade area:
+equal to the drawn area for shape geometry, and card area × fill_factor for cards.
 
 | code | params.py names   | outline here                                        | verts | tris |
 |------|-------------------|-----------------------------------------------------|-------|------|

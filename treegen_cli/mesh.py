@@ -1,8 +1,13 @@
 """Tree + Rig → skinned triangle lists: bark tubes along every stem and a card per leaf.
 
 Result: one "bark" primitive (a ring of `sides + 1` vertices per ring, seam column duplicated for
-UVs, each stem closed by a cone to an apex vertex) and one "leaves" primitive (the LeafShape
-outline stamped on every leaf frame), both bound to the rig's joints. Bark vertex layout: the
+UVs, each stem closed by a cone to an apex vertex) and one "leaves" primitive, both bound to the
+rig's joints. Leaves are cards by default: one length × width quad per leaf (4 vertices,
+2 triangles, UVs 0..1) meant for an alpha-tested texture that carries the LeafShape outline —
+half the vertices of the 8-point ellipse on the willow's 630k leaves. `leaf_geometry="shape"`
+stamps the LeafShape outline itself as geometry instead. Either way `Tree.leaf_area` stays the
+physical blade area (length × width × fill_factor): a card draws length × width, the texture's
+alpha cuts it back to the blade. Bark vertex layout: the
 ring vertices stem by stem (base to tip), then one apex vertex per stem in stem order, so no
 stem, however thin, is ever dropped.
 
@@ -20,7 +25,7 @@ from scipy.spatial.transform import Rotation
 
 from .asset import Primitive
 from .errors import TreegenError
-from .leafshapes import outline
+from .leafshapes import OUTLINES, outline
 from .shapes import flare_factor, taper_radius
 
 
@@ -38,9 +43,13 @@ class MeshOptions:
     point_radius: float = 1e-4    # metres: tips thinner than this end in a point, not a cap,
     point_ratio: float = 0.02     # ... and so do tips thinner than this × the stem's base radius
     leaves: bool = True           # emit the "leaves" primitive
+    leaf_geometry: str = "card"   # "card": a textured quad per leaf; "shape": the LeafShape
+                                  # outline as geometry (see leafshapes.py)
 
 
 MESH_DEFAULTS = MeshOptions()
+LEAF_GEOMETRIES = ("card", "shape")
+CARD = OUTLINES[4]                # the full length × width rectangle, UVs 0..1
 
 
 def _per_level(values: tuple, level: np.ndarray) -> np.ndarray:
@@ -75,6 +84,9 @@ def _check(options: MeshOptions) -> None:
         raise TreegenError(f"--sides {options.sides}: every level needs at least 3 sides")
     if min(options.rings_per_segment) < 1:
         raise TreegenError(f"rings per segment {options.rings_per_segment}: must be >= 1")
+    if options.leaf_geometry not in LEAF_GEOMETRIES:
+        raise TreegenError(f"--leaf-geometry '{options.leaf_geometry}': expected one of "
+                           f"{', '.join(LEAF_GEOMETRIES)}")
 
 
 def _ring_params(tree, options: MeshOptions):
@@ -246,9 +258,11 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
     )
 
 
-def _leaves(tree, rig) -> Primitive:
-    """Stamp the LeafShape outline on every leaf frame (float32 broadcasts: 250k+ leaves)."""
-    o = outline(tree.params.leaf_shape)
+def _leaves(tree, rig, geometry: str = "card") -> Primitive:
+    """Stamp a card (or the LeafShape outline) on every leaf frame (float32 broadcasts)."""
+    o = outline(tree.params.leaf_shape)          # validates the code even for cards
+    if geometry == "card":
+        o = CARD
     L, P = tree.n_leaves, len(o.points)
     F = tree.leaf_frame.astype(np.float32)
     size = tree.leaf_size.astype(np.float32)
@@ -288,5 +302,5 @@ def build_mesh(tree, rig, options: MeshOptions = MESH_DEFAULTS) -> list[Primitiv
     _check(options)
     prims = [_bark(tree, rig, options)]
     if options.leaves and tree.n_leaves:
-        prims.append(_leaves(tree, rig))
+        prims.append(_leaves(tree, rig, options.leaf_geometry))
     return prims

@@ -1,8 +1,12 @@
 """glTF 2.0 writer: Asset → .glb (binary, default) or .gltf + sibling .bin.
 
-A lean writer of our own: every array goes to the binary buffer by numpy concatenation (no
-per-vertex Python), the JSON is built from plain dicts and dumped with sorted keys, so the same
-Asset always gives the same bytes.
+A lean writer of our own: every array goes to the binary buffer as a byte view of a numpy
+array (no per-vertex Python, no tobytes/join copies: a GLB is streamed to disk part by part),
+the JSON is built from plain dicts and dumped with sorted keys, so the same Asset always gives
+the same bytes. Vertex data stays float32 end to end (the Y-up swap is an exact shuffle).
+WEIGHTS_0 is normalized UNSIGNED_BYTE for rigid primitives (leaves: exact) and normalized
+UNSIGNED_SHORT for blended ones (bark), each row summing exactly to 255 / 65535 — a quarter /
+half of float32's bytes; JOINTS_0 is UNSIGNED_BYTE up to 256 joints.
 
 Axes: the generator is Z up, glTF is Y up (right-handed), so every vector goes through
 C: (x, y, z) → (x, z, −y); quaternion vector parts likewise; matrices become C·M·Cᵀ.
@@ -76,34 +80,41 @@ def _continuous(q: np.ndarray) -> np.ndarray:
 
 
 class _Buffer:
-    """Accumulates bufferViews (each 4-byte aligned) and accessors into one binary blob."""
+    """Accumulates bufferViews (each 4-byte aligned) and accessors into one binary blob.
+
+    Parts are kept as byte views of the arrays themselves (no tobytes copy); `write_to` streams
+    them into a file, so a 300 MB buffer is never joined in memory on the way to disk."""
 
     def __init__(self) -> None:
-        self.parts: list[bytes] = []
+        self.parts: list[memoryview] = []
         self.size = 0
         self.views: list[dict] = []
         self.accessors: list[dict] = []
 
-    def view(self, data: bytes, target: int | None) -> int:
+    def view(self, data, target: int | None) -> int:
+        data = memoryview(data).cast("B")
         pad = -self.size % 4
         if pad:
-            self.parts.append(b"\0" * pad)
+            self.parts.append(memoryview(b"\0" * pad))
             self.size += pad
-        v = {"buffer": 0, "byteOffset": self.size, "byteLength": len(data)}
+        v = {"buffer": 0, "byteOffset": self.size, "byteLength": data.nbytes}
         if target is not None:
             v["target"] = target
         self.parts.append(data)
-        self.size += len(data)
+        self.size += data.nbytes
         self.views.append(v)
         return len(self.views) - 1
 
-    def accessor(self, a: np.ndarray, target: int | None = None, bounds: bool = False) -> int:
+    def accessor(self, a: np.ndarray, target: int | None = None, bounds: bool = False,
+                 normalized: bool = False) -> int:
         a = np.ascontiguousarray(a)
+        a = a.astype(a.dtype.newbyteorder("<"), copy=False)    # no copy on little-endian hosts
         comps = 1 if a.ndim == 1 else int(np.prod(a.shape[1:]))
-        acc = {"bufferView": self.view(a.astype(a.dtype.newbyteorder("<"), copy=False).tobytes(),
-                                       target),
-               "componentType": _COMPONENT[a.dtype], "count": int(a.shape[0]),
-               "type": _TYPE[comps]}
+        acc = {"bufferView": self.view(a.reshape(-1).view(np.uint8), target),
+               "componentType": _COMPONENT[a.dtype.newbyteorder("=")],
+               "count": int(a.shape[0]), "type": _TYPE[comps]}
+        if normalized:
+            acc["normalized"] = True
         if bounds:
             flat = a.reshape(len(a), comps)
             acc["min"] = [_num(x) for x in flat.min(axis=0)]
@@ -111,9 +122,16 @@ class _Buffer:
         self.accessors.append(acc)
         return len(self.accessors) - 1
 
+    def padding(self) -> bytes:
+        return b"\0" * (-self.size % 4)
+
     def blob(self) -> bytes:
-        pad = -self.size % 4
-        return b"".join(self.parts) + b"\0" * pad
+        return b"".join([*self.parts, self.padding()])
+
+    def write_to(self, f) -> None:
+        for part in self.parts:
+            f.write(part)
+        f.write(self.padding())
 
 
 def _num(x) -> int | float:
@@ -121,35 +139,58 @@ def _num(x) -> int | float:
 
 
 def _weights(joints: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Float32 weights summing to 1 as exactly as float32 allows; zero-weight slots index 0."""
-    w = np.asarray(weights, dtype=np.float64)
-    w = w / np.where(w.sum(axis=1, keepdims=True) > 0, w.sum(axis=1, keepdims=True), 1.0)
-    w32 = w.astype(np.float32)
-    # put the float32 rounding residual on each row's largest weight
-    top = np.argmax(w32, axis=1)
-    rows = np.arange(len(w32))
-    resid = 1.0 - w32.astype(np.float64).sum(axis=1)
-    w32[rows, top] = (w32[rows, top].astype(np.float64) + resid).astype(np.float32)
-    j = np.where(w32 > 0, joints, 0)
-    return j, w32
+    """Normalised integer weights whose rows sum exactly to the type's maximum; zero-weight
+    slots index joint 0.
+
+    Rigid rows (every weight 0 or 1, like leaves on their carrier) are exact as UNSIGNED_BYTE;
+    blended rows (bark) take UNSIGNED_SHORT, steps of 1/65535, the rounding residual put on
+    each row's largest weight. Result: [.7, .3, 0, 0] → [45875, 19660, 0, 0] (sum 65535)."""
+    w = np.asarray(weights)
+    if w.dtype != np.float64:
+        w = w.astype(np.float32, copy=False)
+    if bool(np.all((w == 0) | (w == 1))) and bool(np.all(np.count_nonzero(w, axis=1) == 1)):
+        q = w.astype(np.uint8) * np.uint8(255)
+    else:
+        w = w.astype(np.float64)
+        s = w.sum(axis=1, keepdims=True)
+        w /= np.where(s > 0, s, 1.0)
+        top = np.argmax(w, axis=1)
+        qi = np.rint(w * 65535.0).astype(np.int64)
+        rows = np.arange(len(qi))
+        qi[rows, top] += 65535 - qi.sum(axis=1)
+        q = qi.astype(np.uint16)
+    j = np.where(q > 0, joints, 0)
+    return j, q
+
+
+def _y_up32(v: np.ndarray) -> np.ndarray:
+    """float32 (V, 3) → new float32 (V, 3) in Y up: an exact shuffle, no float64 detour."""
+    v = np.asarray(v, dtype=np.float32)
+    out = np.empty(v.shape, dtype=np.float32)
+    out[:, 0] = v[:, 0]
+    out[:, 1] = v[:, 2]
+    np.negative(v[:, 1], out=out[:, 2])
+    return out
 
 
 def _primitive(buf: _Buffer, p: Primitive, n_joints: int, material: int) -> dict:
     V = len(p.positions)
-    pos = to_y_up(np.asarray(p.positions, dtype=np.float64)).astype(np.float32)
-    nrm = _unit(to_y_up(np.asarray(p.normals, dtype=np.float64))).astype(np.float32)
+    pos = _y_up32(p.positions)
+    nrm = _y_up32(p.normals)
+    length = np.sqrt(np.einsum("ij,ij->i", nrm, nrm))
+    nrm /= np.where(length > 0, length, np.float32(1.0))[:, None]
     # Asset UVs have their origin bottom-left (OpenGL/USD); glTF's is top-left
-    uv = np.asarray(p.uvs, dtype=np.float32).copy()
-    uv[:, 1] = 1.0 - uv[:, 1]
+    uv = np.array(p.uvs, dtype=np.float32)
+    np.subtract(np.float32(1.0), uv[:, 1], out=uv[:, 1])
     joints, weights = _weights(p.joints, p.weights)
-    joints = joints.astype(np.uint8 if n_joints <= 256 else np.uint16)
-    indices = np.asarray(p.indices).astype(np.uint16 if V < 65535 else np.uint32)
+    joints = joints.astype(np.uint8 if n_joints <= 256 else np.uint16, copy=False)
+    indices = np.asarray(p.indices).astype(np.uint16 if V < 65535 else np.uint32, copy=False)
     attrs = {
         "POSITION": buf.accessor(pos, ARRAY_BUFFER, bounds=True),
         "NORMAL": buf.accessor(nrm, ARRAY_BUFFER),
         "TEXCOORD_0": buf.accessor(uv, ARRAY_BUFFER),
         "JOINTS_0": buf.accessor(joints, ARRAY_BUFFER),
-        "WEIGHTS_0": buf.accessor(weights, ARRAY_BUFFER),
+        "WEIGHTS_0": buf.accessor(weights, ARRAY_BUFFER, normalized=True),
     }
     return {"attributes": attrs, "indices": buf.accessor(indices, ELEMENT_ARRAY_BUFFER),
             "material": material, "mode": 4}
@@ -193,6 +234,12 @@ def _is_default(v: np.ndarray, default) -> bool:
 
 def build(asset: Asset) -> tuple[dict, bytes]:
     """Asset → (glTF JSON dict without buffer uri, binary buffer)."""
+    gltf, buf = _build(asset)
+    return gltf, buf.blob()
+
+
+def _build(asset: Asset) -> tuple[dict, _Buffer]:
+    """Asset → (glTF JSON dict without buffer uri, the unjoined buffer)."""
     buf = _Buffer()
     mat_index = {m.name: i for i, m in enumerate(asset.materials)}
     materials = []
@@ -268,11 +315,10 @@ def build(asset: Asset) -> tuple[dict, bytes]:
         nodes[lod_nodes[0]]["extras"] = {
             "MSFT_screencoverage": [float(lod.screen_coverage) for lod in asset.lods]}
         gltf["extensionsUsed"] = ["MSFT_lod"]
-    blob = buf.blob()
     gltf["accessors"] = buf.accessors
     gltf["bufferViews"] = buf.views
-    gltf["buffers"] = [{"byteLength": len(blob)}]
-    return gltf, blob
+    gltf["buffers"] = [{"byteLength": buf.size + len(buf.padding())}]
+    return gltf, buf
 
 
 def _json_default(o):
@@ -290,14 +336,20 @@ def dumps(gltf: dict) -> bytes:
                       default=_json_default).encode("utf-8")
 
 
-def glb_bytes(gltf: dict, blob: bytes) -> bytes:
-    """GLB container: 12-byte header, JSON chunk (space-padded), BIN chunk (zero-padded)."""
+def _glb_head(gltf: dict, blob_len: int) -> bytes:
+    """Everything of a GLB before the binary payload: 12-byte header, JSON chunk
+    (space-padded), and the BIN chunk header when there is a payload."""
     js = dumps(gltf)
     js += b" " * (-len(js) % 4)
-    bin_chunk = [struct.pack("<I4s", len(blob), b"BIN\0"), blob] if blob else []
-    total = 12 + 8 + len(js) + sum(len(b) for b in bin_chunk)
+    bin_head = struct.pack("<I4s", blob_len, b"BIN\0") if blob_len else b""
+    total = 12 + 8 + len(js) + len(bin_head) + blob_len
     return b"".join([struct.pack("<4sII", b"glTF", 2, total),
-                     struct.pack("<I4s", len(js), b"JSON"), js, *bin_chunk])
+                     struct.pack("<I4s", len(js), b"JSON"), js, bin_head])
+
+
+def glb_bytes(gltf: dict, blob: bytes) -> bytes:
+    """GLB container: 12-byte header, JSON chunk (space-padded), BIN chunk (zero-padded)."""
+    return _glb_head(gltf, len(blob)) + blob
 
 
 def write_gltf_files(asset: Asset, path: str | os.PathLike, binary: bool | None = None) -> None:
@@ -306,13 +358,18 @@ def write_gltf_files(asset: Asset, path: str | os.PathLike, binary: bool | None 
     path = Path(path)
     if binary is None:
         binary = path.suffix.lower() != ".gltf"
-    gltf, blob = build(asset)
+    gltf, buf = _build(asset)
+    blob_len = gltf["buffers"][0]["byteLength"]
     if binary:
-        path.write_bytes(glb_bytes(gltf, blob))
+        with open(path, "wb") as f:                # streamed: the buffer is never joined
+            f.write(_glb_head(gltf, blob_len))
+            if blob_len:
+                buf.write_to(f)
         return
     bin_path = path.with_suffix(".bin")
     gltf["buffers"][0]["uri"] = bin_path.name
-    bin_path.write_bytes(blob)
+    with open(bin_path, "wb") as f:
+        buf.write_to(f)
     path.write_bytes(dumps(gltf))
 
 
@@ -352,13 +409,16 @@ def read_gltf(path: str | os.PathLike) -> tuple[dict, bytes]:
 
 def read_accessor(gltf: dict, blob: bytes, index: int) -> np.ndarray:
     """An accessor as a numpy array (count, components), or (count,) for scalars, (count, 4, 4)
-    row-major for MAT4. Tightly packed views only (what this writer produces)."""
+    row-major for MAT4. Tightly packed views only (what this writer produces). Normalized
+    integer accessors (WEIGHTS_0) come back dequantized as float64 c / type max, per the spec."""
     acc = gltf["accessors"][index]
     view = gltf["bufferViews"][acc["bufferView"]]
     n = _NCOMP[acc["type"]]
     start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
     a = np.frombuffer(blob, dtype=np.dtype(_DTYPE[acc["componentType"]]).newbyteorder("<"),
                       count=acc["count"] * n, offset=start)
+    if acc.get("normalized"):
+        a = a / float(np.iinfo(a.dtype).max)
     if acc["type"] == "MAT4":
         return a.reshape(-1, 4, 4).transpose(0, 2, 1)
     return a if n == 1 else a.reshape(-1, n)
