@@ -1,0 +1,426 @@
+"""LOD: leaf update schedules as keyframe decimation per view distance, and geometric LODs.
+
+The paper (Kondo et al.) updates a branch's leaves only when their accumulated on-screen
+movement would be visible. Baked into a clip, that schedule is a per-joint set of kept keys:
+
+    clip, report = decimate(skeleton, primitives, dense, distance=130.0)
+    # Result: dense (121 keys × J joints) → clip.keys[j] ⊂ 0..120, first and last always kept;
+    # played back (LINEAR slerp or STEP hold) it stays within error_px pixels of the dense clip
+    # at 130 m (report.max_error_px <= error_px).
+
+Thresholds (metres of movement that make one pixel at distance d, times error_px = i):
+  * "exact" (default): one pixel at distance d spans 2·d·tan(fov/2)/width;
+  * "paper": the paper's P/d > i·tan(fov_x)/width, i.e. d·tan(fov)/width (×1.5 looser at 60°).
+
+Two steps per distance:
+  1. Schedule (the paper's rule): walk the dense clip; per joint accumulate P, the movement its
+     own rotation gives the geometry it carries (its leaves and bark and the branches riding on
+     it: angular step × the farthest carried point), keep a key when P crosses the threshold,
+     reset P. Ancestors' rotations are rigid and preserve lengths, so a child's P does not count
+     its parents' motion twice.
+  2. Playback check: reconstruct the decimated clip as an engine would (LINEAR: slerp between a
+     joint's kept keys; STEP: hold the last kept key), compose the hierarchy (wind.pose_world)
+     and measure each joint's representative points — the carried mesh vertices farthest from
+     it, in three independent directions — against the dense clip, in pixels at d. Where the
+     bound is exceeded, the ancestor contributing most to that point's error at that frame gets
+     a key there; repeat until the bound holds (parents' keys move children).
+
+Geometric LODs (`lod_stage_options`): per LOD index a coarser tree — LeafQuality scaled down
+(fewer, larger leaves, same total area), fewer stem sides, the finest stem level dropped far
+away (leaf sizes rescaled so total leaf area is kept), a smaller joint budget.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .asset import Clip, Lod, Primitive, Skeleton
+from .errors import TreegenError
+from .wind import pose_world
+
+
+@dataclass(frozen=True)
+class LodOptions:
+    """View and error model, and the per-LOD coarsening tables (index = LOD; last repeats).
+
+    distances: metres from which each LOD is used, ascending; LOD0 is the first (0 → its clip is
+    dense). fov_deg is horizontal, width in pixels; aspect (width/height) only feeds the screen
+    coverage hint."""
+
+    distances: tuple[float, ...] = (0.0, 10.0, 30.0, 130.0)
+    fov_deg: float = 60.0
+    width: int = 1920
+    error_px: float = 1.0
+    error_form: str = "exact"                  # "exact" 2·d·tan(fov/2)/width, or "paper" d·tan(fov)/width
+    interpolation: str = "LINEAR"              # "LINEAR" (slerp) or "STEP" (the paper's hold)
+    aspect: float = 16.0 / 9.0
+    leaf_quality: tuple[float, ...] = (1.0, 0.5, 0.25, 0.125)   # × the species' LeafQuality
+    sides: tuple[tuple[int, ...], ...] = ((16, 8, 6, 4, 3), (8, 6, 4, 3), (6, 4, 3), (4, 3))
+    joint_fraction: tuple[float, ...] = (1.0, 0.5, 0.25, 0.125)  # × the joint budget
+    drop_levels: tuple[int, ...] = (0, 0, 1, 1)  # finest stem levels dropped (≥ 2 levels remain)
+    max_iterations: int = 200                  # playback-check refinement rounds
+
+    def __post_init__(self) -> None:
+        d = self.distances
+        if not d or any(not math.isfinite(x) or x < 0 for x in d) or list(d) != sorted(d):
+            raise TreegenError(f"--lod-distances {','.join(f'{x:g}' for x in d) or '(none)'}: "
+                               "give one or more ascending distances in metres, each >= 0")
+        if len(set(d)) != len(d):
+            raise TreegenError(f"--lod-distances {','.join(f'{x:g}' for x in d)}: distances repeat")
+        if not 0.0 < self.fov_deg < 180.0:
+            raise TreegenError(f"--fov {self.fov_deg:g}: the horizontal field of view must be in (0, 180) degrees")
+        if self.error_form == "paper" and self.fov_deg >= 90.0:
+            raise TreegenError(f"--fov {self.fov_deg:g}: the paper's tan(fov) form needs fov < 90 degrees")
+        if not 1 <= self.width <= 1_000_000:
+            raise TreegenError(f"--width {self.width}: screen width must be in 1..1000000 pixels")
+        if not (math.isfinite(self.error_px) and 0.0 <= self.error_px <= 1000.0):
+            raise TreegenError(f"--error-px {self.error_px:g}: allowed range 0..1000 pixels")
+        if self.error_form not in ("exact", "paper"):
+            raise TreegenError(f"--error-form {self.error_form!r}: use 'exact' or 'paper'")
+        if self.interpolation not in ("LINEAR", "STEP"):
+            raise TreegenError(f"--interpolation {self.interpolation!r}: use 'linear' or 'step'")
+        if not (self.aspect > 0 and self.max_iterations >= 1):
+            raise TreegenError("LOD aspect must be > 0 and max_iterations >= 1")
+        if (min(self.leaf_quality) <= 0 or max(self.leaf_quality) > 1
+                or min(self.joint_fraction) <= 0 or max(self.joint_fraction) > 1
+                or min(self.drop_levels) < 0 or min(min(s) for s in self.sides) < 3):
+            raise TreegenError("LOD tables: leaf_quality and joint_fraction in (0, 1], "
+                               "drop_levels >= 0, sides >= 3")
+
+
+LOD_DEFAULTS = LodOptions()
+
+
+def _at(table: tuple, index: int):
+    return table[min(index, len(table) - 1)]
+
+
+def pixel_size(distance: float, options: LodOptions = LOD_DEFAULTS) -> float:
+    """Metres spanned by one pixel at `distance` (the threshold before error_px)."""
+    fov = math.radians(options.fov_deg)
+    if options.error_form == "paper":
+        return distance * math.tan(fov) / options.width
+    return 2.0 * distance * math.tan(0.5 * fov) / options.width
+
+
+def screen_coverage(height: float, distance: float, options: LodOptions = LOD_DEFAULTS) -> float:
+    """Fraction of the screen height a tree of `height` metres fills at `distance` (≤ 1)."""
+    if distance <= 0:
+        return 1.0
+    view_height = 2.0 * distance * math.tan(0.5 * math.radians(options.fov_deg)) / options.aspect
+    return float(min(1.0, height / view_height))
+
+
+# ---------------------------------------------------------------------------- quaternions
+
+def _unit_quat(q: np.ndarray) -> np.ndarray:
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def quat_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Rotation angle (radians) between unit quaternions a and b (either sign)."""
+    dot = np.abs(np.sum(a * b, axis=-1))
+    return 2.0 * np.arccos(np.clip(dot, 0.0, 1.0))
+
+
+def slerp(a: np.ndarray, b: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Shortest-path slerp of unit quaternions (..., 4) at t (...) — what glTF LINEAR plays."""
+    dot = np.sum(a * b, axis=-1)
+    b = np.where((dot < 0)[..., None], -b, b)
+    dot = np.abs(dot)
+    theta = np.arccos(np.clip(dot, 0.0, 1.0))
+    s = np.sin(theta)
+    small = s < 1e-9
+    safe = np.where(small, 1.0, s)
+    wa = np.where(small, 1.0 - t, np.sin((1.0 - t) * theta) / safe)
+    wb = np.where(small, t, np.sin(t * theta) / safe)
+    return _unit_quat(wa[..., None] * a + wb[..., None] * b)
+
+
+def playback(rotations: np.ndarray, kept: np.ndarray, interpolation: str = "LINEAR") -> np.ndarray:
+    """Local rotations (K, J, 4) an engine plays from the kept keys `kept` (bool (K, J), rows 0
+    and K−1 all True): LINEAR slerps between a joint's neighbouring kept keys, STEP holds."""
+    K = rotations.shape[0]
+    k = np.arange(K)[:, None]
+    prev = np.maximum.accumulate(np.where(kept, k, -1), axis=0)
+    nxt = np.minimum.accumulate(np.where(kept, k, K)[::-1], axis=0)[::-1]
+    qa = np.take_along_axis(rotations, prev[..., None], axis=0)
+    if interpolation == "STEP":
+        return qa
+    qb = np.take_along_axis(rotations, nxt[..., None], axis=0)
+    span = nxt - prev
+    t = np.where(span > 0, (k - prev) / np.where(span > 0, span, 1), 0.0)
+    return slerp(qa, qb, t)
+
+
+# ---------------------------------------------------------------------------- geometry probes
+
+@dataclass(frozen=True, eq=False)
+class Probes:
+    """Representative points: `local` (P, 3) in the bind frame of joint `joint` (P,); `rest`
+    (P, 3) their rest positions; `reach` (J,) the farthest probe each joint's rotation moves."""
+
+    joint: np.ndarray
+    local: np.ndarray
+    rest: np.ndarray
+    reach: np.ndarray
+
+
+def _farthest(owner: np.ndarray, score: np.ndarray, n: int) -> np.ndarray:
+    """Index of the highest-score candidate per owner (−1 where an owner has none)."""
+    best = np.full(n, -np.inf, dtype=score.dtype)     # same dtype: ufunc.at's fast path
+    np.maximum.at(best, owner, score)
+    hit = score >= best[owner]
+    out = np.full(n, -1, dtype=np.int64)
+    out[owner[hit]] = np.flatnonzero(hit)      # any of the tied maxima
+    return out
+
+
+def probes(skeleton: Skeleton, primitives: list[Primitive]) -> Probes:
+    """Per joint, the carried vertices farthest from it in three independent directions: the
+    farthest one (p1), the one farthest from the line pivot–p1, the one farthest from the plane
+    pivot–p1–p2. Any rotation error moves at least one of them by nearly its full size. Vertices
+    blended between joints count for each joint that moves them (their blended error is at most
+    the largest rigid one). Every joint also probes its own pivot and the pivots of its children,
+    so a joint with no skinned vertex still has a reach."""
+    bind = np.asarray(skeleton.bind_world, dtype=np.float64)
+    parent = np.asarray(skeleton.parent, dtype=np.int64)
+    J = bind.shape[0]
+    pivot = bind[:, :3, 3]
+    pts, own = [pivot.astype(np.float32), pivot[parent >= 0].astype(np.float32)], \
+        [np.arange(J), parent[parent >= 0]]
+    for prim in primitives:
+        w = np.asarray(prim.weights)
+        jn = np.asarray(prim.joints)
+        for s in range(jn.shape[1]):               # ≤ 4 influence slots
+            use = w[:, s] > 0
+            if use.all():
+                pts.append(np.asarray(prim.positions, dtype=np.float32))
+                own.append(jn[:, s])
+            elif use.any():
+                pts.append(np.asarray(prim.positions, dtype=np.float32)[use])
+                own.append(jn[use, s])
+    x = np.concatenate(pts)                        # float32: selection only, millions of rows
+    owner = np.concatenate(own).astype(np.intp)
+    rel = x - pivot[owner].astype(np.float32)
+    r2 = np.einsum("ij,ij->i", rel, rel)
+
+    i1 = _farthest(owner, r2, J)
+    a1 = rel[i1] / np.maximum(np.linalg.norm(rel[i1], axis=1, keepdims=True), 1e-12)
+    along = np.einsum("ij,ij->i", rel, a1[owner])
+    i2 = _farthest(owner, r2 - along * along, J)
+    perp = rel[i2] - np.einsum("ij,ij->i", rel[i2], a1)[:, None] * a1
+    a2 = perp / np.maximum(np.linalg.norm(perp, axis=1, keepdims=True), 1e-12)
+    normal = np.cross(a1, a2)
+    i3 = _farthest(owner, np.abs(np.einsum("ij,ij->i", rel, normal[owner])), J)
+    pick = np.unique(np.concatenate([i1, i2, i3]))
+    joint, rest = owner[pick], x[pick].astype(np.float64)
+    inv = np.linalg.inv(bind[joint])
+    local = np.einsum("pij,pj->pi", inv[:, :3, :3], rest) + inv[:, :3, 3]
+
+    # reach: farthest probe (own or descendant's) from each joint, walking probes up the chain
+    reach = np.zeros(J)
+    cur, at = joint.copy(), rest
+    while cur.size:
+        np.maximum.at(reach, cur, np.linalg.norm(at - pivot[cur], axis=1))
+        up = parent[cur] >= 0
+        cur, at = parent[cur[up]], at[up]
+    return Probes(joint=joint, local=local, rest=x[pick].astype(np.float64), reach=reach)
+
+
+def probe_world(world: np.ndarray, pr: Probes) -> np.ndarray:
+    """World positions (K, P, 3) of the probes under joint world matrices (K, J, 4, 4)."""
+    W = world[:, pr.joint]
+    return np.einsum("kpij,pj->kpi", W[..., :3, :3], pr.local) + W[..., :3, 3]
+
+
+# ---------------------------------------------------------------------------- decimation
+
+@dataclass(frozen=True)
+class DecimationReport:
+    distance: float
+    threshold_m: float           # movement that counts as error_px pixels at this distance
+    keys_dense: int              # K × J
+    keys_kept: int               # Σ_j |keys[j]|
+    max_error_px: float          # measured on composed poses, probes vs the dense clip
+    iterations: int              # playback-check rounds that added keys
+    seconds: float
+
+    @property
+    def kept_fraction(self) -> float:
+        return self.keys_kept / max(self.keys_dense, 1)
+
+
+def _schedule(rotations: np.ndarray, reach: np.ndarray, threshold: float) -> np.ndarray:
+    """The paper's walk: bool (K, J) kept keys. Loops over frames, vectorised over joints."""
+    K, J = rotations.shape[:2]
+    step = quat_angle(rotations[1:], rotations[:-1]) * reach[None]    # (K−1, J) metres
+    kept = np.zeros((K, J), dtype=bool)
+    kept[0] = kept[-1] = True
+    P = np.zeros(J)
+    for k in range(1, K - 1):
+        P += step[k - 1]
+        hit = P > threshold
+        kept[k] = hit
+        P[hit] = 0.0
+    return kept
+
+
+def _errors(skeleton, pr, rotations, kept, interpolation, dense_x):
+    rec = playback(rotations, kept, interpolation)
+    x = probe_world(pose_world(skeleton, rec), pr)
+    return rec, np.linalg.norm(x - dense_x, axis=2)                    # (K, P) metres
+
+
+def decimate(skeleton: Skeleton, primitives: list[Primitive], dense: Clip, distance: float,
+             options: LodOptions = LOD_DEFAULTS, name: str | None = None,
+             pr: Probes | None = None) -> tuple[Clip, DecimationReport]:
+    """The dense clip with a per-joint key schedule for `distance` whose playback stays within
+    options.error_px pixels (see the module doc). distance 0 or error_px 0 keep every key."""
+    t0 = time.perf_counter()
+    rot = _unit_quat(np.asarray(dense.rotations, dtype=np.float64))
+    K, J = rot.shape[:2]
+    threshold = options.error_px * pixel_size(distance, options)
+    name = dense.name if name is None else name
+    if threshold <= 0.0 or K <= 2:
+        clip = replace(dense, name=name, interpolation=options.interpolation, keys=None)
+        return clip, DecimationReport(distance, threshold, K * J, K * J, 0.0, 0,
+                                      time.perf_counter() - t0)
+    pr = probes(skeleton, primitives) if pr is None else pr
+    dense_x = probe_world(pose_world(skeleton, rot), pr)
+    kept = _schedule(rot, pr.reach, threshold)
+
+    parent = np.asarray(skeleton.parent, dtype=np.int64)
+    pivot = np.asarray(skeleton.bind_world)[:, :3, 3]
+    limit = threshold * (1.0 - 1e-9)
+    iterations = 0
+    rec, err = _errors(skeleton, pr, rot, kept, options.interpolation, dense_x)
+    while (err > limit).any():
+        if iterations >= options.max_iterations:   # give up gracefully: key the frames fully
+            bad_k = np.flatnonzero((err > limit).any(axis=1))
+            kept[bad_k] = True
+        else:
+            kk, pp = np.nonzero(err > limit)
+            ang = quat_angle(rec, rot)                                  # (K, J) local error
+            cur = pr.joint[pp].copy()
+            best, best_c = cur.copy(), np.full(cur.shape, -1.0)
+            alive = np.ones(cur.shape, dtype=bool)
+            while alive.any():                                          # one pass per depth
+                c = ang[kk, cur] * np.linalg.norm(pr.rest[pp] - pivot[cur], axis=1)
+                better = alive & (c > best_c)
+                best[better], best_c[better] = cur[better], c[better]
+                alive &= parent[cur] >= 0
+                cur = np.where(alive, parent[cur], cur)
+            kept[kk, best] = True
+        iterations += 1
+        rec, err = _errors(skeleton, pr, rot, kept, options.interpolation, dense_x)
+
+    keys = [np.flatnonzero(kept[:, j]) for j in range(J)]
+    clip = replace(dense, name=name, interpolation=options.interpolation, keys=keys)
+    px = pixel_size(distance, options)
+    report = DecimationReport(distance, threshold, K * J, int(kept.sum()),
+                              float(err.max() / px) if px > 0 else 0.0, iterations,
+                              time.perf_counter() - t0)
+    return clip, report
+
+
+def measure_error_px(skeleton: Skeleton, primitives: list[Primitive], dense: Clip, clip: Clip,
+                     distance: float, options: LodOptions = LOD_DEFAULTS) -> float:
+    """Max on-screen error (pixels at `distance`) of `clip`'s playback against `dense`, measured
+    on the probes of composed poses — an independent check of a decimated clip."""
+    rot = _unit_quat(np.asarray(dense.rotations, dtype=np.float64))
+    K, J = rot.shape[:2]
+    if clip.keys is None:
+        return 0.0
+    kept = np.zeros((K, J), dtype=bool)
+    for j, kj in enumerate(clip.keys):
+        kept[np.asarray(kj, dtype=np.int64), j] = True
+    kept[0] = kept[-1] = True
+    pr = probes(skeleton, primitives)
+    dense_x = probe_world(pose_world(skeleton, rot), pr)
+    _, err = _errors(skeleton, pr, rot, kept, clip.interpolation, dense_x)
+    px = pixel_size(distance, options)
+    return float(err.max() / px) if px > 0 else 0.0
+
+
+# ---------------------------------------------------------------------------- geometric LODs
+
+def lod_levels(params_levels: int, index: int, options: LodOptions = LOD_DEFAULTS) -> int | None:
+    """Stem levels grown for LOD `index` (None: the species' own); never fewer than 2."""
+    drop = _at(options.drop_levels, index)
+    if drop <= 0 or params_levels <= 2:
+        return None
+    return max(2, params_levels - drop)
+
+
+def lod_stage_options(params, index: int, generate_options, rig_options, mesh_options,
+                      options: LodOptions = LOD_DEFAULTS):
+    """(GenerateOptions, RigOptions, MeshOptions) of LOD `index`: LeafQuality and the joint
+    budget scaled down, fewer sides, the finest levels dropped. LOD0 with factors 1 is unchanged."""
+    q = _at(options.leaf_quality, index)
+    gen = generate_options
+    if q < 1.0:
+        gen = replace(gen, leaf_quality=params.leaf_quality * q)
+    levels = lod_levels(params.levels, index, options)
+    if levels is not None:
+        gen = replace(gen, levels=levels)
+    frac = _at(options.joint_fraction, index)
+    rig = replace(rig_options, max_joints=max(1, int(round(rig_options.max_joints * frac)))) \
+        if frac < 1.0 else rig_options
+    mesh = mesh_options if index == 0 else replace(mesh_options, sides=_at(options.sides, index))
+    return gen, rig, mesh
+
+
+def match_leaf_area(tree, target_area: float):
+    """The tree with every leaf scaled by one factor so the total leaf area is `target_area`
+    (dropping a stem level changes the leaf count; LeafQuality alone keeps the area)."""
+    area = float(np.sum(tree.leaf_area))
+    if tree.n_leaves == 0 or area <= 0 or target_area <= 0:
+        return tree
+    return replace(tree, leaf_size=tree.leaf_size * math.sqrt(target_area / area))
+
+
+# ---------------------------------------------------------------------------- the paper's table
+
+def leaf_vertex_joints(lod: Lod) -> np.ndarray:
+    """Leaf vertices carried per joint (J,), from the "leaves" primitive's first influence."""
+    J = len(lod.skeleton.names)
+    counts = np.zeros(J, dtype=np.int64)
+    for p in lod.primitives:
+        if p.name == "leaves" and len(p.joints):
+            counts += np.bincount(np.asarray(p.joints[:, 0], dtype=np.int64), minlength=J)
+    return counts
+
+
+def lod_table_row(lod: Lod, report: DecimationReport | None) -> dict:
+    """One row of the Table-3 analogue: keys kept, max error, the CPU method's leaf-vertex
+    updates per frame (Σ_j kept keys_j × leaf vertices_j / frames) next to all leaf vertices
+    (the all-GPU method's cost per frame), joints, triangles."""
+    clip = lod.clips[0] if lod.clips else None
+    per_joint = leaf_vertex_joints(lod)
+    J = len(lod.skeleton.names)
+    if clip is None:
+        K, kept = 0, np.zeros(J)
+    else:
+        K = len(clip.times)
+        kept = np.full(J, K) if clip.keys is None else np.array([len(k) for k in clip.keys])
+    updates = float(np.sum(kept * per_joint) / K) if K else 0.0
+    row = {
+        "distance_m": lod.distance,
+        "clip": clip.name if clip else None,
+        "keys_kept": int(kept.sum()),
+        "keys_dense": int(K * J),
+        "keys_kept_pct": round(100.0 * kept.sum() / max(K * J, 1), 2),
+        "max_error_px": round(report.max_error_px, 4) if report else 0.0,
+        "leaf_vertex_updates_per_frame": round(updates, 1),
+        "leaf_vertices": int(per_joint.sum()),
+        "joints": J,
+        "triangles": int(sum(len(p.indices) // 3 for p in lod.primitives)),
+        "screen_coverage": round(lod.screen_coverage, 4),
+    }
+    if report is not None:
+        row["decimation_s"] = round(report.seconds, 4)
+    return row
