@@ -156,6 +156,11 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
     click.echo(f"  {time.perf_counter() - t0:.2f} s  ({stages})")
 
 
+from .cli_forest import forest  # noqa: E402  (its body lives in cli_forest.py)
+
+cli.add_command(forest)
+
+
 def _in_file(species: Path, fn, *args):
     """Run a stage; a user error it raises about the tree is reported against the file."""
     try:
