@@ -358,20 +358,30 @@ def lod_levels(params_levels: int, index: int, options: LodOptions = LOD_DEFAULT
 
 def lod_stage_options(params, index: int, generate_options, rig_options, mesh_options,
                       options: LodOptions = LOD_DEFAULTS):
-    """(GenerateOptions, RigOptions, MeshOptions) of LOD `index`: LeafQuality and the joint
-    budget scaled down, fewer sides, the finest levels dropped. LOD0 with factors 1 is unchanged."""
+    """(Params, GenerateOptions, RigOptions, MeshOptions) of LOD `index`: LeafQuality and the
+    joint budget scaled down, fewer sides, the finest levels dropped. When a level is dropped the
+    leaves move to the new finest level, and `Leaves` is scaled by the generator's own count
+    estimate so the leaf count still follows LeafQuality (sizes 1/√quality, as Weber–Penn).
+    LOD0 with factors 1 is unchanged."""
+    from .generate import estimate_counts
+
     q = _at(options.leaf_quality, index)
     gen = generate_options
+    quality = (params.leaf_quality if gen.leaf_quality is None else gen.leaf_quality) * q
     if q < 1.0:
-        gen = replace(gen, leaf_quality=params.leaf_quality * q)
+        gen = replace(gen, leaf_quality=quality)
     levels = lod_levels(params.levels, index, options)
     if levels is not None:
         gen = replace(gen, levels=levels)
+        _, full = estimate_counts(params, leaf_quality=quality)
+        _, fewer = estimate_counts(params, leaf_quality=quality, levels=levels)
+        if fewer > 0 and full > 0:
+            params = replace(params, leaves=params.leaves * full / fewer)
     frac = _at(options.joint_fraction, index)
     rig = replace(rig_options, max_joints=max(1, int(round(rig_options.max_joints * frac)))) \
         if frac < 1.0 else rig_options
     mesh = mesh_options if index == 0 else replace(mesh_options, sides=_at(options.sides, index))
-    return gen, rig, mesh
+    return params, gen, rig, mesh
 
 
 def match_leaf_area(tree, target_area: float):
@@ -395,10 +405,11 @@ def leaf_vertex_joints(lod: Lod) -> np.ndarray:
     return counts
 
 
-def lod_table_row(lod: Lod, report: DecimationReport | None) -> dict:
-    """One row of the Table-3 analogue: keys kept, max error, the CPU method's leaf-vertex
-    updates per frame (Σ_j kept keys_j × leaf vertices_j / frames) next to all leaf vertices
-    (the all-GPU method's cost per frame), joints, triangles."""
+def lod_table_row(lod: Lod, options: LodOptions = LOD_DEFAULTS) -> dict:
+    """One row of the Table-3 analogue: keys kept, max error (measured here, on the LOD's own
+    clip against its dense rotations), the CPU method's leaf-vertex updates per frame
+    (Σ_j kept keys_j × leaf vertices_j / frames) next to all leaf vertices (the all-GPU
+    method's cost per frame), joints, triangles."""
     clip = lod.clips[0] if lod.clips else None
     per_joint = leaf_vertex_joints(lod)
     J = len(lod.skeleton.names)
@@ -408,19 +419,21 @@ def lod_table_row(lod: Lod, report: DecimationReport | None) -> dict:
         K = len(clip.times)
         kept = np.full(J, K) if clip.keys is None else np.array([len(k) for k in clip.keys])
     updates = float(np.sum(kept * per_joint) / K) if K else 0.0
+    error = 0.0
+    if clip is not None and clip.keys is not None:
+        dense = replace(clip, keys=None)
+        error = measure_error_px(lod.skeleton, lod.primitives, dense, clip, lod.distance, options)
     row = {
         "distance_m": lod.distance,
         "clip": clip.name if clip else None,
         "keys_kept": int(kept.sum()),
         "keys_dense": int(K * J),
-        "keys_kept_pct": round(100.0 * kept.sum() / max(K * J, 1), 2),
-        "max_error_px": round(report.max_error_px, 4) if report else 0.0,
+        "keys_kept_pct": round(float(100.0 * kept.sum() / max(K * J, 1)), 2),
+        "max_error_px": round(error, 4),
         "leaf_vertex_updates_per_frame": round(updates, 1),
         "leaf_vertices": int(per_joint.sum()),
         "joints": J,
         "triangles": int(sum(len(p.indices) // 3 for p in lod.primitives)),
-        "screen_coverage": round(lod.screen_coverage, 4),
+        "screen_coverage": round(float(lod.screen_coverage), 4),
     }
-    if report is not None:
-        row["decimation_s"] = round(report.seconds, 4)
     return row

@@ -6,11 +6,12 @@ only composes them, so a newcomer can read `build_asset` top to bottom and see e
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from . import __version__
 from .asset import Asset, Lod, Material
 from .generate import DEFAULTS as GENERATE_DEFAULTS, GenerateOptions, generate
+from .lod import LOD_DEFAULTS, LodOptions, decimate, lod_stage_options, match_leaf_area, screen_coverage
 from .mesh import MESH_DEFAULTS, MeshOptions, build_mesh
 from .params import Params
 from .rig import RIG_DEFAULTS, RigOptions, build_rig
@@ -29,6 +30,7 @@ class MakeOptions:
     rig: RigOptions = RIG_DEFAULTS
     mesh: MeshOptions = MESH_DEFAULTS
     wind: WindOptions | None = WIND_DEFAULTS
+    lod: LodOptions | None = LOD_DEFAULTS   # None: one LOD with the dense clip
 
 
 @dataclass
@@ -54,13 +56,42 @@ def build_lod(tree: Tree, options: MakeOptions, seed: int, timings: Timings) -> 
     return Lod(primitives=primitives, skeleton=rig.skeleton, clips=clips)
 
 
+def build_lods(params: Params, tree: Tree, options: MakeOptions, seed: int,
+               timings: Timings) -> list[Lod]:
+    """One coarser tree per LOD distance (lod.lod_stage_options), each with its own rig, mesh,
+    dense wind (same wind options and seed, so the motion matches) and a clip decimated for its
+    distance ("wind_lod0", ...). LOD0 reuses `tree`; lower LODs regrow it from the same seed."""
+    lo = options.lod
+    area = float(tree.leaf_area.sum())
+    height = float(tree.node_pos[:, 2].max()) if tree.n_nodes else 0.0
+    if tree.n_leaves:
+        height = max(height, float(tree.leaf_pos[:, 2].max()))
+    lods = []
+    for k, distance in enumerate(lo.distances):
+        p, gen, rig, mesh = lod_stage_options(params, k, options.generate, options.rig,
+                                              options.mesh, lo)
+        t = tree if gen == options.generate and p == params else \
+            timings.run("generate", generate, p, seed, gen)
+        if gen.levels is not None:
+            t = match_leaf_area(t, area)
+        lod = build_lod(t, replace(options, rig=rig, mesh=mesh), seed, timings)
+        clips = [timings.run("lod", decimate, lod.skeleton, lod.primitives, c, distance, lo,
+                             f"wind_lod{k}")[0] for c in lod.clips]
+        # MSFT_screencoverage: LOD k is shown while the tree covers more than the coverage at
+        # which LOD k+1 takes over; the last LOD is never culled.
+        coverage = screen_coverage(height, lo.distances[k + 1], lo) if k + 1 < len(lo.distances) else 0.0
+        lods.append(replace(lod, clips=clips, distance=float(distance), screen_coverage=coverage))
+    return lods
+
+
 def build_asset(params: Params, seed: int = 0, options: MakeOptions = MakeOptions(),
                 timings: Timings | None = None) -> tuple[Asset, Tree]:
     """Grow, rig, mesh and animate `params` with `seed`; returns the asset and its tree."""
     timings = timings if timings is not None else Timings()
     tree = timings.run("generate", generate, params, seed, options.generate)
-    lod0 = build_lod(tree, options, seed, timings)
-    asset = Asset(name=params.name, materials=[BARK, LEAF], lods=[lod0],
+    lods = [build_lod(tree, options, seed, timings)] if options.lod is None else \
+        build_lods(params, tree, options, seed, timings)
+    asset = Asset(name=params.name, materials=[BARK, LEAF], lods=lods,
                   extras={"species": params.name, "seed": seed,
                           "generator": f"treegen {__version__}"})
     return asset, tree
