@@ -26,7 +26,7 @@ import os
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 
@@ -392,8 +392,9 @@ def time_offsets(positions: np.ndarray, wind: WindSpec, seed: int = 0) -> np.nda
 
 
 def make_options(layout: Layout, error_px: float | None = None):
-    """MakeOptions for every prototype: the layout's joint budget, short shared-field wind,
-    and LOD options when the pipeline has an LOD stage (fields matched by name)."""
+    """MakeOptions for every prototype: the layout's joint budget, the shared-field wind, and
+    LOD schedules for the layout's camera (fov, width) and error bound."""
+    from .lod import LOD_DEFAULTS
     from .pipeline import MakeOptions
     from .rig import RigOptions
     from .wind import WindOptions
@@ -402,24 +403,11 @@ def make_options(layout: Layout, error_px: float | None = None):
     wind = WindOptions(speed=w.speed, direction_deg=w.direction_deg, gust=w.gust,
                        turbulence=w.turbulence, duration=w.duration, fps=w.fps,
                        field_seed=w.seed) if w.enabled else None
-    options = MakeOptions(rig=RigOptions(max_joints=layout.defaults.max_joints), wind=wind)
-    lod_field = next((f for f in fields(MakeOptions) if f.name in ("lod", "lods")), None)
-    if lod_field is not None:
-        try:
-            from . import lod as lod_module
-            cls = getattr(lod_module, "LodOptions")
-        except (ImportError, AttributeError):
-            return options
-        cam = layout.camera
-        wanted = {"distances": layout.defaults.lod_distances,
-                  "lod_distances": layout.defaults.lod_distances,
-                  "fov_deg": cam.fov_deg, "fov": cam.fov_deg, "width_px": cam.width_px,
-                  "width": cam.width_px,
-                  "error_px": layout.defaults.error_px if error_px is None else error_px}
-        names = {f.name for f in fields(cls)}
-        kwargs = {k: v for k, v in wanted.items() if k in names and v is not None}
-        options = replace(options, **{lod_field.name: cls(**kwargs)})
-    return options
+    cam = layout.camera
+    lod = replace(LOD_DEFAULTS, fov_deg=cam.fov_deg, width=cam.width_px,
+                  error_px=layout.defaults.error_px if error_px is None else error_px,
+                  distances=layout.defaults.lod_distances or LOD_DEFAULTS.distances)
+    return MakeOptions(rig=RigOptions(max_joints=layout.defaults.max_joints), wind=wind, lod=lod)
 
 
 def _build_one(params, seed: int, options) -> Asset:
@@ -593,35 +581,20 @@ def repeat_clip(clip: Clip, times: int = 2) -> Clip:
 # ----------------------------------------------------------------------------- summary
 
 def leaf_updates(lod: Lod) -> tuple[int, float]:
-    """(leaf vertices, leaf-vertex updates per frame on average) for one LOD: a leaf vertex is
-    updated at a frame where its joint or any ancestor keeps a key (the paper's CPU method,
-    hold-until-update); without a clip nothing moves."""
-    leaf = [p for p in lod.primitives if p.name.startswith("lea")]
-    n = sum(len(p.positions) for p in leaf)
-    if not lod.clips or n == 0:
+    """(leaf vertices, leaf-vertex updates per frame on average) of one LOD, counted like
+    `treegen info --lod` (lod.lod_table_row): Σ_j kept keys_j × leaf vertices on joint j / keys.
+    A joint's schedule already follows its world-space movement (parents' motion included),
+    which is the paper's per-branch accumulate-and-reset rule; without a clip nothing moves."""
+    from .lod import leaf_vertex_joints
+
+    per_joint = leaf_vertex_joints(lod)
+    n = int(per_joint.sum())
+    if not lod.clips or len(lod.clips[0].times) == 0:
         return n, 0.0
     clip = lod.clips[0]
-    skel = lod.skeleton
     K = len(clip.times)
-    frames = max(K - 1, 1)
-    J = len(skel.names)
-    from .exchange.gltf import animated_joints
-    moving = np.zeros(J, bool)
-    moving[animated_joints(clip, skel)] = True
-    mask = np.zeros((J, frames), bool)
-    for j in range(J):   # parent-before-child: a parent's key moves the whole subtree
-        if moving[j]:
-            k = np.arange(frames) if clip.keys is None else np.asarray(clip.keys[j], int)
-            mask[j, k[k < frames]] = True
-        if skel.parent[j] >= 0:
-            mask[j] |= mask[skel.parent[j]]
-    rate = mask.mean(axis=1)
-    total = 0.0
-    for p in leaf:
-        w = np.asarray(p.weights)
-        j = np.asarray(p.joints)[np.arange(len(w)), np.argmax(w, axis=1)]
-        total += float(rate[j].sum())
-    return n, total
+    kept = np.full(len(per_joint), K) if clip.keys is None else np.array([len(k) for k in clip.keys])
+    return n, float(np.sum(kept * per_joint) / K)
 
 
 def summary(scene: Scene, written: list[Path], seconds: float) -> dict:
