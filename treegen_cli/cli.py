@@ -28,6 +28,37 @@ def _generate_options(f):
     return f
 
 
+def _lod_options(f):
+    """--lod-distances, --fov, --width, --error-px, --error-form, --interpolation (lod.py)."""
+    f = click.option("--interpolation", type=click.Choice(["linear", "step"]), default="linear",
+                     show_default=True, help="How engines play the decimated keys: slerp between "
+                     "kept keys, or hold each until the next (the paper's update behaviour).")(f)
+    f = click.option("--error-form", type=click.Choice(["exact", "paper"]), default="exact",
+                     show_default=True, help="Pixel size at distance d: exact 2·d·tan(fov/2)/width, "
+                     "or the paper's d·tan(fov)/width.")(f)
+    f = click.option("--error-px", type=float, default=1.0, show_default=True,
+                     help="Allowed on-screen error in pixels (the paper's i); 0 keeps every key.")(f)
+    f = click.option("--width", type=int, default=1920, show_default=True,
+                     help="Screen width in pixels.")(f)
+    f = click.option("--fov", type=float, default=60.0, show_default=True,
+                     help="Horizontal field of view, degrees.")(f)
+    f = click.option("--lod-distances", default="0,10,30,130", show_default=True, metavar="0,10,30,130",
+                     help="Metres from which each LOD is used (LOD0 first; at 0 it keeps the dense clip).")(f)
+    return f
+
+
+def _lod_from(lod_distances, fov, width, error_px, error_form, interpolation):
+    from .lod import LodOptions
+
+    try:
+        distances = tuple(float(v) for v in lod_distances.split(",") if v.strip() != "")
+    except ValueError:
+        raise TreegenError(f"--lod-distances '{lod_distances}': expected comma-separated metres, "
+                           "e.g. 0,10,30,130") from None
+    return LodOptions(distances=distances, fov_deg=fov, width=width, error_px=error_px,
+                      error_form=error_form, interpolation=interpolation.upper())
+
+
 def _load(species: Path):
     from .params import load_params
     return load_params(species)
@@ -43,9 +74,15 @@ def cli():
 @click.argument("species", type=SPECIES)
 @_generate_options
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
-def info(species, seed, max_stems, max_leaves, as_json):
+@click.option("--lod", "with_lod", is_flag=True,
+              help="Also build the LODs and print, per LOD distance, keys kept, max error, leaf-"
+                   "vertex updates per frame vs all leaf vertices, joints, triangles.")
+@_lod_options
+def info(species, seed, max_stems, max_leaves, as_json, with_lod, lod_distances, fov, width,
+         error_px, error_form, interpolation):
     """Grow SPECIES (a Weber–Penn text or Arbaro XML file) and report on the tree:
-    stems per level, leaves, leaf area (m²), height and crown width (m), nodes, seconds."""
+    stems per level, leaves, leaf area (m²), height and crown width (m), nodes, seconds.
+    With --lod: the analogue of the paper's Table 3, one row per LOD distance."""
     from .generate import generate
     from .tree import tree_stats
 
@@ -55,6 +92,10 @@ def info(species, seed, max_stems, max_leaves, as_json):
                     GenerateOptions(max_stems=max_stems, max_leaves=max_leaves))
     seconds = time.perf_counter() - t0
     stats = tree_stats(tree) | {"generate_s": round(seconds, 4), "file": str(species)}
+    if with_lod:
+        stats["lods"] = _lod_rows(species, params, seed, max_stems, max_leaves,
+                                  _lod_from(lod_distances, fov, width, error_px, error_form,
+                                            interpolation))
     if as_json:
         click.echo(json.dumps(stats, indent=2))
         return
@@ -72,6 +113,26 @@ def info(species, seed, max_stems, max_leaves, as_json):
     ]
     for name, value in rows:
         click.echo(f"  {name:<13}{value}")
+    if with_lod:
+        click.echo(f"  LODs (fov {fov:g}°, {width} px, error {error_px:g} px, {error_form}, "
+                   f"{interpolation}): leaf-vertex updates per frame, LOD method vs all-GPU")
+        click.echo(f"    {'LOD':<4}{'dist m':>8}{'keys kept':>16}{'max err px':>11}"
+                   f"{'updates/frame':>15}{'leaf verts':>12}{'joints':>8}{'triangles':>11}")
+        for k, r in enumerate(stats["lods"]):
+            click.echo(f"    {k:<4}{r['distance_m']:>8g}{r['keys_kept']:>9,} {r['keys_kept_pct']:>5.1f}%"
+                       f"{r['max_error_px']:>11.3f}{r['leaf_vertex_updates_per_frame']:>15,.0f}"
+                       f"{r['leaf_vertices']:>12,}{r['joints']:>8}{r['triangles']:>11,}")
+
+
+def _lod_rows(species, params, seed, max_stems, max_leaves, lod_options) -> list[dict]:
+    """The Table-3 rows: the default make pipeline with these LOD options, measured per LOD."""
+    from .lod import lod_table_row
+    from .pipeline import MakeOptions, build_asset
+
+    options = MakeOptions(generate=GenerateOptions(max_stems=max_stems, max_leaves=max_leaves),
+                          lod=lod_options)
+    asset, _tree = _in_file(species, build_asset, params, seed, options)
+    return [lod_table_row(lod, lod_options) for lod in asset.lods]
 
 
 def _int_list(text: str | None, name: str) -> tuple[int, ...] | None:
@@ -111,8 +172,11 @@ def _int_list(text: str | None, name: str) -> tuple[int, ...] | None:
               help="Clip length in seconds (the wind loops over it).")
 @click.option("--fps", type=float, default=30.0, show_default=True, help="Keys per second.")
 @click.option("--no-wind", is_flag=True, help="Write no animation (rest pose only).")
+@_lod_options
+@click.option("--no-lod", is_flag=True, help="Write one LOD with the dense clip.")
 def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels, sides,
-         wind_speed, wind_dir, gust, turbulence, duration, fps, no_wind):
+         wind_speed, wind_dir, gust, turbulence, duration, fps, no_wind, lod_distances, fov, width,
+         error_px, error_form, interpolation, no_lod):
     """Grow SPECIES and write a skinned, wind-animated tree to OUTPUT."""
     from dataclasses import replace
 
@@ -139,7 +203,9 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
     options = MakeOptions(
         generate=GenerateOptions(max_stems=max_stems, max_leaves=max_leaves),
         rig=RigOptions(max_joints=max_joints, joint_levels=_int_list(joint_levels, "--joint-levels")),
-        mesh=mesh, wind=wind)
+        mesh=mesh, wind=wind,
+        lod=None if no_lod else _lod_from(lod_distances, fov, width, error_px, error_form,
+                                          interpolation))
     params = _load(species)
     timings = Timings()
     asset, tree = _in_file(species, build_asset, params, seed, options, timings)
@@ -152,6 +218,12 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
     click.echo(f"  {tree.n_stems:,} stems, {tree.n_leaves:,} leaves; {vertices:,} vertices, "
                f"{triangles:,} triangles; {len(lod0.skeleton.names)} joints; "
                f"{len(lod0.clips[0].times) if lod0.clips else 0} keys")
+    if len(asset.lods) > 1:
+        click.echo("  LODs: " + "; ".join(
+            f"{lod.distance:g} m: {sum(len(p.indices) // 3 for p in lod.primitives):,} tris, "
+            f"{len(lod.skeleton.names)} joints"
+            + (f", {sum(len(k) for k in lod.clips[0].keys):,} keys" if lod.clips and lod.clips[0].keys
+               is not None else "") for lod in asset.lods))
     stages = ", ".join(f"{k} {v:.2f}" for k, v in timings.stages.items())
     click.echo(f"  {time.perf_counter() - t0:.2f} s  ({stages})")
 
