@@ -1,0 +1,338 @@
+"""treegen forest: layout validation, scatter, LOD selection, shared prototype data, writers."""
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+from treegen_cli.cli import cli
+from treegen_cli.errors import TreegenError
+from treegen_cli.exchange.forest_gltf import build_forest
+from treegen_cli.exchange.gltf import read_accessor, read_gltf
+from treegen_cli.forest import (Instance, Scene, WindSpec, build_scene, inside_polygon, load_layout,
+                                parse_layout, phase_rotate, playback, polygon_area, repeat_clip,
+                                run_forest, scatter_points, schema_text, select_lod, time_offsets,
+                                write_scene)
+
+from synthetic import synthetic_asset
+
+SPECIES = Path(__file__).resolve().parents[1] / "species"
+POPLAR, PALM = str(SPECIES / "lombardy_poplar.txt"), str(SPECIES / "palm.txt")
+CAMERA = {"position": [0, -40, 2], "target": [0, 0, 5], "fov_deg": 60, "width_px": 1280}
+FAST = {"max_joints": 12, "lod_distances": [0, 25, 60]}
+
+
+def layout_dict(**over) -> dict:
+    d = {"camera": CAMERA, "wind": {"duration": 1.0, "fps": 8, "seed": 3}, "defaults": FAST,
+         "instances": [
+             {"species": POPLAR, "position": [0, 0], "seed": 1},
+             {"species": PALM, "position": [6, 30, 0.5], "rotation_deg": 90, "scale": 1.5, "seed": 2},
+             {"species": POPLAR, "position": [-4, 80], "seed": 1, "scale": 0.8}],
+         "scatter": [{"species": [{"file": POPLAR}, {"file": PALM, "weight": 2}],
+                      "rectangle": {"min": [-10, -10], "max": [10, 10]}, "count": 9,
+                      "min_spacing": 3, "seed": 5, "variants": 1}]}
+    d.update(over)
+    return d
+
+
+def write_layout(folder: Path, data: dict, name: str = "layout.json") -> Path:
+    p = folder / name
+    p.write_text(json.dumps(data))
+    return p
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("forest")
+    layout = load_layout(write_layout(folder, layout_dict()))
+    return layout, build_scene(layout, workers=2, progress=False)
+
+
+# ----------------------------------------------------------------------------- schema + CLI
+
+def test_schema_is_published_and_printed():
+    schema = json.loads(schema_text())
+    assert schema["$schema"].endswith("2020-12/schema") and "camera" in schema["required"]
+    out = CliRunner().invoke(cli, ["forest", "--schema"])
+    assert out.exit_code == 0 and json.loads(out.output) == schema
+
+
+def test_example_layouts_validate():
+    examples = Path(__file__).resolve().parents[1] / "examples"
+    counts = {p.stem: len(load_layout(p).placements) for p in examples.glob("*.json")}
+    assert counts == {"forest_30m": 16, "forest_130m": 16, "forest_1000": 1000}
+
+
+BAD = [
+    ({"camera": None}, "camera: expected an object, got null"),
+    ({"camera": {"position": [0, 0, 0]}}, "camera.target: required"),
+    ({"camera": {**CAMERA, "fov_deg": 180}}, "camera.fov_deg: 180 is out of range"),
+    ({"camera": {**CAMERA, "position": [0, 0]}}, "camera.position: expected 3 items, got 2"),
+    ({"camera": {**CAMERA, "position": [0, 0, "x"]}}, "camera.position[2]: expected a number"),
+    ({"camera": {**CAMERA, "target": CAMERA["position"]}}, "camera.target: must differ"),
+    ({"wind": {"speed": -1}}, "wind.speed: -1 is out of range"),
+    ({"wind": {"speeed": 1}}, "wind.speeed: unknown key"),
+    ({"defaults": {"max_joints": 2.5}}, "defaults.max_joints: expected an integer"),
+    ({"defaults": {"lod_distances": [0, 30, 30]}}, "defaults.lod_distances: must increase"),
+    ({"instances": [], "scatter": []}, "instances: the layout places no trees"),
+    ({"instances": [{"species": POPLAR}]}, "instances[0].position: required"),
+    ({"instances": [{"species": POPLAR, "position": [0, 0]}, {"species": "nope.txt", "position": [1, 1]}]},
+     "instances[1].species: species file 'nope.txt' not found"),
+    ({"instances": [{"species": POPLAR, "position": [0, 0], "scale": 0}]},
+     "instances[0].scale: 0 is out of range"),
+    ({"instances": [{"species": POPLAR, "position": [0, 0], "seed": -1}]}, "instances[0].seed: -1"),
+    ({"scatter": [{"species": [{"file": PALM}], "count": 3}]},
+     "scatter[0]: give exactly one of 'rectangle' or 'polygon'"),
+    ({"scatter": [{"species": [{"file": PALM}], "polygon": [[0, 0], [1, 0], [0, 1]]}]},
+     "scatter[0]: give exactly one of 'count' or 'density'"),
+    ({"scatter": [{"species": [{"file": PALM, "weight": 0}], "polygon": [[0, 0], [1, 0], [0, 1]], "count": 1}]},
+     "scatter[0].species[0].weight: 0 is out of range"),
+    ({"scatter": [{"species": [{"file": "x/y.txt"}], "polygon": [[0, 0], [1, 0], [0, 1]], "count": 1}]},
+     "scatter[0].species[0].file: species file 'x/y.txt' not found"),
+    ({"scatter": [{"species": [{"file": PALM}], "rectangle": {"min": [0, 0], "max": [0, 5]}, "count": 1}]},
+     "scatter[0].rectangle.max: must exceed min"),
+    ({"scatter": [{"species": [{"file": PALM}], "polygon": [[0, 0], [1, 1], [2, 2]], "count": 1}]},
+     "scatter[0].polygon: has zero area"),
+    ({"scatter": [{"species": [{"file": PALM}], "rectangle": {"min": [0, 0], "max": [10, 10]},
+                   "count": 500, "min_spacing": 2}]}, "scatter[0]: impossible scatter: 500 trees"),
+    ({"scatter": [{"species": [{"file": PALM}], "rectangle": {"min": [0, 0], "max": [10, 10]},
+                   "count": 2, "scale": [2, 1]}]}, "scatter[0].scale: [low, high]"),
+    ({"extra": 1}, "extra: unknown key; allowed:"),
+]
+
+
+@pytest.mark.parametrize("change, message", BAD, ids=[m.split(":")[0] for _, m in BAD])
+def test_bad_layouts_name_the_json_path(tmp_path, change, message):
+    data = layout_dict(**change)
+    with pytest.raises(TreegenError) as e:
+        parse_layout(data, tmp_path / "layout.json")
+    assert message in str(e.value)
+
+
+def test_bad_json_and_nan(tmp_path):
+    p = tmp_path / "l.json"
+    p.write_text('{"camera": ')
+    with pytest.raises(TreegenError, match=r"l.json: line 1 column \d+: invalid JSON"):
+        load_layout(p)
+    p.write_text(json.dumps(layout_dict()).replace('"fov_deg": 60', '"fov_deg": NaN'))
+    with pytest.raises(TreegenError, match=r"camera.fov_deg: expected a number \(finite\), got NaN"):
+        load_layout(p)
+
+
+def test_cli_bad_layout_exits_2_and_writes_nothing(tmp_path):
+    import subprocess
+    import sys
+    layout = write_layout(tmp_path, layout_dict(instances=[{"species": "missing.txt", "position": [0, 0]}]))
+    out = tmp_path / "forest.glb"
+    proc = subprocess.run([sys.executable, "-c", "import sys; from treegen_cli.cli import main; main(sys.argv[1:])",
+                           "forest", str(layout), "-o", str(out)], capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert "instances[0].species: species file 'missing.txt' not found" in proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert list(tmp_path.iterdir()) == [layout]
+
+
+def test_species_paths_are_relative_to_the_layout(tmp_path):
+    sub = tmp_path / "scenes"
+    sub.mkdir()
+    rel = str(Path("..") / "species" / "palm.txt")
+    (tmp_path / "species").mkdir()
+    (tmp_path / "species" / "palm.txt").write_text(Path(PALM).read_text())
+    layout = load_layout(write_layout(sub, layout_dict(instances=[{"species": rel, "position": [1, 2]}],
+                                                       scatter=[])))
+    assert layout.placements[0].species == (tmp_path / "species" / "palm.txt").resolve()
+
+
+# ----------------------------------------------------------------------------- scatter
+
+def test_scatter_rectangle_bounds_and_spacing():
+    rect = np.array([[-5.0, 0.0], [15.0, 0.0], [15.0, 8.0], [-5.0, 8.0]])
+    for seed in range(5):
+        pts = scatter_points(rect, False, 40, 1.5, np.random.default_rng(seed))
+        assert pts.shape == (40, 2)
+        assert np.all(pts >= [-5, 0]) and np.all(pts <= [15, 8])
+        assert cKDTree(pts).query(pts, k=2)[0][:, 1].min() >= 1.5
+
+
+def test_scatter_polygon_bounds_and_spacing():
+    star = np.array([[np.cos(a) * r, np.sin(a) * r] for a, r in
+                     zip(np.linspace(0, 2 * np.pi, 10, endpoint=False), [20, 8] * 5)])
+    pts = scatter_points(star, True, 60, 2.0, np.random.default_rng(1))
+    assert len(pts) == 60 and inside_polygon(pts, star).all()
+    assert cKDTree(pts).query(pts, k=2)[0][:, 1].min() >= 2.0
+    # the point-in-polygon test agrees with the area: a unit square's inside fraction
+    sq = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    assert polygon_area(sq) == 1.0
+    probe = np.random.default_rng(0).uniform(-1, 2, (20000, 2))
+    assert abs(inside_polygon(probe, sq).mean() - 1 / 9) < 0.01
+
+
+def test_density_sets_the_count(tmp_path):
+    data = layout_dict(instances=[], scatter=[{"species": [{"file": PALM}],
+                                               "rectangle": {"min": [0, 0], "max": [20, 10]},
+                                               "density": 0.05, "seed": 2}])
+    layout = parse_layout(data, tmp_path / "l.json")
+    assert len(layout.placements) == 10                      # 0.05 / m² × 200 m²
+    pos = np.array([p.position for p in layout.placements])
+    assert np.all((pos[:, :2] >= 0) & (pos[:, :2] <= [20, 10]))
+
+
+# ----------------------------------------------------------------------------- LOD + phase
+
+def test_select_lod_by_distance_over_scale():
+    starts = [0.0, 10.0, 30.0, 130.0]
+    d = np.array([0.0, 9.9, 10.0, 29.0, 31.0, 500.0])
+    assert select_lod(d, starts).tolist() == [0, 0, 1, 1, 2, 3]
+    assert select_lod([20.0], starts, scale=2.0).tolist() == [1]   # 2× tree at 20 m ≈ 10 m
+    assert select_lod([50.0, 5.0], [0.0]).tolist() == [0, 0]      # single LOD: always LOD0
+
+
+def test_nearer_instances_get_finer_lods(scene):
+    _, sc = scene
+    eff = np.array([i.distance / i.scale for i in sc.instances])
+    lod = np.array([i.lod for i in sc.instances])
+    order = np.argsort(eff)
+    assert np.all(np.diff(lod[order]) >= 0)
+    assert lod.min() < lod.max()                               # the layout spans LODs
+    for i in sc.instances:
+        starts = [l.distance for l in sc.prototypes[i.prototype].lods]
+        assert starts[i.lod] <= i.distance / i.scale
+
+
+def test_time_offsets_follow_the_wind_and_wrap():
+    wind = WindSpec(speed=5.0, direction_deg=0.0, duration=4.0, phase_jitter=0.0)
+    pos = np.array([[0.0, 0, 0], [5.0, 0, 0], [10.0, 3, 0], [25.0, 0, 0]])
+    assert np.allclose(time_offsets(pos, wind), [0.0, 1.0, 2.0, 1.0])   # 25 m: 5 s wraps to 1
+    jit = time_offsets(pos, replace(wind, phase_jitter=0.5))
+    assert np.all((jit >= 0) & (jit < 4.0)) and not np.allclose(jit, [0, 1, 2, 1])
+
+
+def test_phase_rotate_plays_the_shifted_clip_exactly():
+    clip = synthetic_asset(1).lods[0].clips[0]        # sparse keys
+    assert clip.keys is not None
+    n = len(clip.times) - 1
+    base = playback(clip)
+    for shift in range(1, n):
+        rot = phase_rotate(clip, shift)
+        want = np.concatenate([np.roll(base[:n], -shift, axis=0), np.roll(base[:n], -shift, axis=0)[:1]])
+        got = playback(rot)
+        assert np.allclose(np.abs(np.sum(got * want, axis=-1)), 1.0, atol=1e-9)
+        assert all(k[0] == 0 and k[-1] == n for k in rot.keys)
+    twice = repeat_clip(clip, 2)
+    assert len(twice.times) == 2 * n + 1 and np.isclose(twice.times[-1], 2 * clip.times[-1])
+    assert np.allclose(playback(twice)[n:], base)
+
+
+# ----------------------------------------------------------------------------- built scene
+
+def test_instances_and_placement_match_the_layout(scene, tmp_path):
+    layout, sc = scene
+    assert len(sc.instances) == 3 + 9
+    keys = {(p.species, p.seed) for p in layout.placements}
+    assert len(sc.prototypes) == len(keys)                     # each (species, seed) once
+    path = tmp_path / "f.glb"
+    write_scene(sc, path)
+    gltf, blob = read_gltf(path)
+    nodes = gltf["nodes"]
+    roots = gltf["scenes"][0]["nodes"]
+    assert len(roots) == len(layout.placements)
+    for root, p in zip(roots, layout.placements):
+        place = nodes[nodes[root]["children"][0]]
+        x, y, z = p.position
+        assert np.allclose(place.get("translation", [0, 0, 0]), [x, z, -y], atol=1e-6)   # Y up
+        q = place.get("rotation", [0, 0, 0, 1])
+        assert np.allclose(Rotation.from_quat(q).as_rotvec(),
+                           [0, np.radians((p.rotation_deg + 180) % 360 - 180), 0], atol=1e-6)
+        assert np.allclose(place.get("scale", [1, 1, 1]), [p.scale] * 3)
+    # placed joints: each instance's skin uses its own joint nodes, never another's
+    joint_sets = [set(s["joints"]) for s in gltf["skins"]]
+    assert sum(len(s) for s in joint_sets) == len(set().union(*joint_sets))
+
+
+def test_shared_data_is_not_duplicated(scene):
+    _, sc = scene
+    protos = sc.prototypes[:3]
+
+    def blob_size(n):
+        rng = np.random.default_rng(n)
+        inst = [Instance(i % 3, (float(x), float(y), 0.0), float(r), 1.0, 0, float(t))
+                for i, (x, y, r, t) in enumerate(zip(rng.uniform(-50, 50, n), rng.uniform(-50, 50, n),
+                                                     rng.uniform(0, 360, n), rng.uniform(0, 1, n)))]
+        s = Scene("t", protos, inst, sc.camera, phase_variants=4, loop=1.0)
+        gltf, blob = build_forest(s)
+        assert len(gltf["meshes"]) == 3 and len({sk["inverseBindMatrices"] for sk in gltf["skins"]}) == 3
+        return len(blob)
+
+    small, big = blob_size(10), blob_size(100)
+    assert big <= 1.5 * small
+
+
+def test_gltf_forest_validator_clean(scene, tmp_path):
+    from treegen_cli.exchange.validate import ValidatorUnavailable, summary, validate_gltf
+    _, sc = scene
+    for all_lods in (False, True):
+        path = tmp_path / f"f{int(all_lods)}.glb"
+        write_scene(replace(sc, all_lods=all_lods), path)
+        try:
+            report = validate_gltf(path)
+        except ValidatorUnavailable as e:
+            pytest.skip(str(e))
+        assert report["issues"]["numErrors"] == 0 and report["issues"]["numWarnings"] == 0, summary(report)
+        gltf, _ = read_gltf(path)
+        if all_lods:
+            lod_ids = [gltf["nodes"][r]["extensions"]["MSFT_lod"]["ids"] for r in gltf["scenes"][0]["nodes"]]
+            assert all(len(ids) == len(sc.prototypes[0].lods) - 1 for ids in lod_ids)
+            assert gltf["extensionsUsed"] == ["MSFT_lod"]
+
+
+def test_gltf_phase_variants_share_samplers(scene, tmp_path):
+    _, sc = scene
+    gltf, blob = build_forest(sc)
+    anim = gltf["animations"][0]
+    targets = [(c["target"]["node"], c["target"]["path"]) for c in anim["channels"]]
+    assert len(targets) == len(set(targets))
+    assert len(anim["samplers"]) < len(anim["channels"])       # shared across instances
+    # channel rotations are unit quaternions
+    q = read_accessor(gltf, blob, anim["samplers"][0]["output"])
+    assert np.allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-5)
+
+
+def test_usd_forest_validator_clean_and_offsets(scene, tmp_path):
+    from pxr import Usd
+
+    from treegen_cli.exchange.usd import validate_usd
+    _, sc = scene
+    path = tmp_path / "f.usda"
+    write_scene(sc, path)
+    assert validate_usd(path) == []
+    stage = Usd.Stage.Open(str(path))
+    trees = stage.GetPrimAtPath(f"/{sc.name}/Trees").GetChildren()
+    assert len(trees) == len(sc.instances) and all(t.IsInstance() for t in trees)
+    text = path.read_text()
+    n_protos = text.count("def SkelAnimation")
+    assert n_protos == len({(i.prototype, i.lod) for i in sc.instances})   # prototypes once
+    fps = stage.GetTimeCodesPerSecond()
+    for prim, inst in zip(trees, sc.instances):
+        tr = prim.GetAttribute("xformOp:translate").Get()
+        assert np.allclose(tr, inst.position)
+        anim = next(p for p in Usd.PrimRange(prim, Usd.TraverseInstanceProxies())
+                    if p.GetTypeName() == "SkelAnimation")
+        samples = anim.GetAttribute("rotations").GetTimeSamples()
+        offset = round(inst.time_offset * fps) % round(sc.loop * fps)
+        assert samples[0] == -offset                               # its own phase, no new data
+
+
+def test_run_forest_summary(tmp_path):
+    layout = write_layout(tmp_path, layout_dict(scatter=[], defaults={**FAST, "lod_distances": [0]}))
+    s = run_forest(layout, tmp_path / "f.usdz", workers=1, progress=False)
+    assert s["instances"] == 3 and s["prototypes"] == 2 and s["instances_per_lod"] == {"lod0": 3}
+    assert s["bytes"] == (tmp_path / "f.usdz").stat().st_size
+    # a single LOD at distance 0 keeps the dense clip: the CPU method updates every leaf vertex
+    assert s["leaf_vertex_updates_per_frame"] == s["leaf_vertex_updates_per_frame_without_lod"] > 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f.usdz", "layout.json"]
