@@ -515,8 +515,8 @@ def parse_params_xml(data: str | bytes, source: str = "<string>") -> Params:
                            f"{expat.ErrorString(exc.code)}") from None
     except TreegenError:
         raise
-    except (ValueError, UnicodeError) as exc:   # e.g. unknown encoding declaration
-        raise TreegenError(f"{source}: unreadable XML: {exc}") from None
+    except (ValueError, UnicodeError, LookupError) as exc:   # e.g. unknown encoding declaration
+        raise TreegenError(f"{source}: unreadable XML: {_printable(_clip(str(exc), 200))}") from None
     if species_count == 0:
         raise b.fail(None, "no <species> element: not an Arbaro species file")
     return b.build(_default_name(source))
