@@ -1,0 +1,223 @@
+"""LOD: keyframe decimation per view distance (error bound on composed poses) and geometric LODs.
+
+Short clips (1 s at 15 fps) and small joint budgets keep the whole file fast.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from synthetic import bark, chain_skeleton, leaves, sway_clip
+from treegen_cli.errors import TreegenError
+from treegen_cli.lod import (LodOptions, decimate, lod_table_row, measure_error_px, pixel_size,
+                             playback, probes, screen_coverage)
+from treegen_cli.params import load_params
+from treegen_cli.pipeline import MakeOptions, build_asset
+from treegen_cli.rig import RigOptions
+from treegen_cli.wind import WindOptions
+
+SPECIES_DIR = Path(__file__).resolve().parent.parent / "species"
+SPECIES = sorted(p.stem for p in SPECIES_DIR.glob("*.txt"))
+SHORT = WindOptions(duration=1.0, fps=15.0)
+DISTANCES = (0.0, 30.0, 130.0)
+
+
+@lru_cache(maxsize=None)
+def _asset(name: str, lod: bool = True, interpolation: str = "LINEAR", max_joints: int = 48):
+    opts = MakeOptions(rig=RigOptions(max_joints=max_joints), wind=SHORT,
+                       lod=LodOptions(distances=DISTANCES, interpolation=interpolation) if lod else None)
+    asset, _tree = build_asset(load_params(SPECIES_DIR / f"{name}.txt"), 3, opts)
+    return asset
+
+
+def _dense(clip):
+    return replace(clip, keys=None)
+
+
+def _kept(clip) -> np.ndarray:
+    K, J = clip.rotations.shape[:2]
+    kept = np.zeros((K, J), dtype=bool)
+    for j, k in enumerate(clip.keys):
+        kept[k, j] = True
+    return kept
+
+
+def test_pixel_size_forms():
+    exact = pixel_size(130.0, LodOptions())
+    assert exact == pytest.approx(2 * 130 * np.tan(np.radians(30)) / 1920)
+    paper = pixel_size(130.0, LodOptions(error_form="paper"))
+    assert paper == pytest.approx(130 * np.tan(np.radians(60)) / 1920)
+    assert paper / exact == pytest.approx(1.5)            # the paper's form is looser at 60°
+
+
+@pytest.mark.parametrize("species", SPECIES)
+def test_every_lod_within_error_bound(species):
+    """Each LOD's own clip, played back and composed, stays within error_px at its distance
+    (measured independently of the decimation's bookkeeping); clips named wind_lodK."""
+    asset = _asset(species)
+    assert len(asset.lods) == len(DISTANCES)
+    for k, lod in enumerate(asset.lods):
+        (clip,) = lod.clips
+        assert clip.name == f"wind_lod{k}"
+        assert lod.distance == DISTANCES[k]
+        if lod.distance == 0.0:
+            assert clip.keys is None                          # d → 0: the dense clip
+            continue
+        err = measure_error_px(lod.skeleton, lod.primitives, _dense(clip), clip, lod.distance)
+        assert err <= 1.0 + 1e-9
+        kept = _kept(clip)
+        assert kept[0].all() and kept[-1].all()               # the clip still loops
+    cover = [lod.screen_coverage for lod in asset.lods]
+    assert cover == sorted(cover, reverse=True) and cover[-1] == 0.0
+
+
+def test_keys_fall_with_distance_and_step_mode():
+    lod = _asset("quaking_aspen", lod=False).lods[0]
+    dense = lod.clips[0]
+    pr = probes(lod.skeleton, lod.primitives)
+    for interp in ("LINEAR", "STEP"):
+        opts = LodOptions(interpolation=interp)
+        kept = []
+        for d in (5.0, 30.0, 130.0, 500.0):
+            clip, rep = decimate(lod.skeleton, lod.primitives, dense, d, opts, pr=pr)
+            assert rep.max_error_px <= 1.0
+            assert rep.max_error_px == pytest.approx(
+                measure_error_px(lod.skeleton, lod.primitives, dense, clip, d, opts))
+            kept.append(rep.keys_kept)
+        assert kept == sorted(kept, reverse=True) and kept[-1] < kept[0]
+        assert kept[-1] < 0.5 * dense.rotations.shape[0] * dense.rotations.shape[1]
+
+
+def test_zero_distance_or_zero_error_keeps_dense_clip():
+    lod = _asset("quaking_aspen", lod=False).lods[0]
+    dense = lod.clips[0]
+    for d, e in ((0.0, 1.0), (130.0, 0.0)):
+        clip, rep = decimate(lod.skeleton, lod.primitives, dense, d, LodOptions(error_px=e))
+        assert clip.keys is None and rep.keys_kept == rep.keys_dense
+        assert np.array_equal(clip.rotations, dense.rotations)
+    # nearly zero distance: every joint that moves keeps (almost) every key
+    clip, rep = decimate(lod.skeleton, lod.primitives, dense, 1e-4)
+    moving = np.any(np.abs(np.diff(dense.rotations, axis=0)) > 1e-6, axis=(0, 2))
+    counts = np.array([len(k) for k in clip.keys])
+    assert counts[moving].min() >= dense.rotations.shape[0] - 2
+
+
+def test_step_holds_between_kept_keys():
+    lod = _asset("quaking_aspen", lod=False).lods[0]
+    dense = lod.clips[0]
+    clip, rep = decimate(lod.skeleton, lod.primitives, dense, 60.0, LodOptions(interpolation="STEP"))
+    assert clip.interpolation == "STEP" and rep.max_error_px <= 1.0
+    kept = _kept(clip)
+    played = playback(dense.rotations, kept, "STEP")
+    K = kept.shape[0]
+    prev = np.maximum.accumulate(np.where(kept, np.arange(K)[:, None], -1), axis=0)
+    held = np.take_along_axis(dense.rotations, prev[..., None], axis=0)
+    assert np.array_equal(played, held)
+    assert np.array_equal(played[kept], dense.rotations[kept])
+    # LINEAR reproduces kept keys exactly (up to sign) and lies between them elsewhere
+    lin = playback(dense.rotations, kept, "LINEAR")
+    dot = np.abs(np.sum(lin[kept] * dense.rotations[kept], axis=-1))
+    assert np.allclose(dot, 1.0)
+
+
+def test_parents_keys_move_children_synthetic_chain():
+    """A chain whose every joint sways: at a distance where per-joint decisions alone would
+    fail, the composed check still holds the bound."""
+    skel = chain_skeleton(6)
+    prims = [bark(skel, 6), leaves(skel, 4)]
+    dense = sway_clip(skel, "wind", n_keys=61, duration=2.0)
+    for d in (20.0, 60.0, 200.0):
+        for interp in ("LINEAR", "STEP"):
+            opts = LodOptions(interpolation=interp)
+            clip, rep = decimate(skel, prims, dense, d, opts)
+            assert measure_error_px(skel, prims, dense, clip, d, opts) <= 1.0
+            assert rep.keys_kept < rep.keys_dense
+
+
+def test_lod_meshes_keep_leaf_area_and_coarsen():
+    for name in ("quaking_aspen", "black_tupelo"):
+        asset = _asset(name)
+        areas, tris, joints, leaf_verts = [], [], [], []
+        for lod in asset.lods:
+            leaf = next(p for p in lod.primitives if p.name == "leaves")
+            v = leaf.positions[leaf.indices.reshape(-1, 3)].astype(np.float64)
+            areas.append(0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1).sum())
+            tris.append(sum(len(p.indices) // 3 for p in lod.primitives))
+            joints.append(len(lod.skeleton.names))
+            leaf_verts.append(len(leaf.positions))
+        assert np.allclose(areas, areas[0], rtol=0.05), areas
+        assert tris == sorted(tris, reverse=True) and tris[-1] < tris[0]
+        assert joints == sorted(joints, reverse=True) and joints[-1] < joints[0]
+        assert leaf_verts[-1] < leaf_verts[0]
+
+
+def test_table_rows():
+    asset = _asset("quaking_aspen")
+    rows = [lod_table_row(lod) for lod in asset.lods]
+    assert rows[0]["keys_kept_pct"] == 100.0
+    assert rows[0]["leaf_vertex_updates_per_frame"] == rows[0]["leaf_vertices"]
+    for r in rows[1:]:
+        assert r["max_error_px"] <= 1.0
+        assert r["leaf_vertex_updates_per_frame"] < r["leaf_vertices"]
+    assert rows[-1]["keys_kept_pct"] < rows[1]["keys_kept_pct"]
+    json.dumps(rows)                                          # plain JSON types
+
+
+def test_screen_coverage():
+    o = LodOptions()
+    assert screen_coverage(10.0, 0.0, o) == 1.0
+    view_h = 2 * 100 * np.tan(np.radians(30)) / o.aspect
+    assert screen_coverage(10.0, 100.0, o) == pytest.approx(10.0 / view_h)
+
+
+@pytest.mark.parametrize("kwargs", [dict(distances=(30.0, 10.0)), dict(distances=()),
+                                    dict(distances=(-1.0,)), dict(fov_deg=0.0), dict(width=0),
+                                    dict(error_px=-1.0), dict(error_form="x"),
+                                    dict(interpolation="CUBICSPLINE")])
+def test_bad_options(kwargs):
+    with pytest.raises(TreegenError):
+        LodOptions(**kwargs)
+
+
+def test_written_lods_validate(tmp_path):
+    from treegen_cli.exchange import export
+    from treegen_cli.exchange.usd import validate_usd
+    from treegen_cli.exchange.validate import ValidatorUnavailable, summary, validate_gltf
+
+    asset = _asset("quaking_aspen", max_joints=24)
+    glb = tmp_path / "aspen.glb"
+    export(asset, glb)
+    raw = glb.read_bytes()
+    n = int.from_bytes(raw[12:16], "little")
+    doc = json.loads(raw[20:20 + n])
+    assert [a["name"] for a in doc["animations"]] == [f"wind_lod{k}" for k in range(len(DISTANCES))]
+    assert "MSFT_lod" in doc["extensionsUsed"] and "MSFT_lod" not in doc.get("extensionsRequired", [])
+    try:
+        report = validate_gltf(glb)
+    except ValidatorUnavailable as e:
+        pytest.skip(str(e))
+    finally:
+        usd = tmp_path / "aspen.usda"
+        export(asset, usd)
+        assert validate_usd(usd) == []
+    assert report["issues"]["numErrors"] == 0, summary(report)
+
+
+def test_cli_info_lod_json():
+    from treegen_cli.cli import cli
+
+    res = CliRunner().invoke(cli, ["info", str(SPECIES_DIR / "quaking_aspen.txt"), "--lod", "--json",
+                                   "--lod-distances", "0,130", "--interpolation", "step"])
+    assert res.exit_code == 0, res.output
+    rows = json.loads(res.output)["lods"]
+    assert [r["distance_m"] for r in rows] == [0.0, 130.0]
+    assert rows[1]["max_error_px"] <= 1.0 and rows[1]["keys_kept_pct"] < 100.0
+    res = CliRunner().invoke(cli, ["info", str(SPECIES_DIR / "quaking_aspen.txt"), "--lod",
+                                   "--lod-distances", "30,10"])
+    assert res.exit_code != 0
