@@ -11,6 +11,7 @@ from dataclasses import dataclass, field, replace
 from . import __version__
 from .asset import Asset, Lod, Material
 from .generate import DEFAULTS as GENERATE_DEFAULTS, GenerateOptions, generate
+from .limits import LIMITS_DEFAULTS, Limits, check_keys, check_mesh
 from .lod import LOD_DEFAULTS, LodOptions, decimate, lod_stage_options, match_leaf_area, screen_coverage
 from .mesh import MESH_DEFAULTS, MeshOptions, build_mesh
 from .params import Params
@@ -31,6 +32,7 @@ class MakeOptions:
     mesh: MeshOptions = MESH_DEFAULTS
     wind: WindOptions | None = WIND_DEFAULTS
     lod: LodOptions | None = LOD_DEFAULTS   # None: one LOD with the dense clip
+    limits: Limits = LIMITS_DEFAULTS        # refuse oversized meshes / clips before building
 
 
 @dataclass
@@ -48,7 +50,10 @@ class Timings:
 
 def build_lod(tree: Tree, options: MakeOptions, seed: int, timings: Timings) -> Lod:
     """Rig, skin and animate one grown tree."""
+    check_mesh(tree, options.mesh, options.limits)
     rig = timings.run("rig", build_rig, tree, options.rig)
+    if options.wind is not None:
+        check_keys(len(rig.skeleton.names), options.wind, options.limits)
     primitives = timings.run("mesh", build_mesh, tree, rig, options.mesh)
     clips = []
     if options.wind is not None:

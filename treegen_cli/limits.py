@@ -1,0 +1,94 @@
+"""Refuse oversized work before allocating it: mesh vertices and joint keys.
+
+The generator already refuses too many stems/leaves from the parameters alone
+(generate.estimate_counts, --max-stems/--max-leaves). Once the tree exists its stems, nodes and
+leaves are known, so the mesh size follows from the mesh options almost exactly, and the clip's
+size is joints × frames. Each refusal names the estimate and the flag that raises the limit.
+
+    check_mesh(tree, MeshOptions(), Limits(max_vertices=1_000_000))   # before build_mesh
+    check_keys(n_joints, WindOptions(), Limits())                      # before bake_wind
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import TreegenError
+
+
+@dataclass(frozen=True)
+class Limits:
+    """max_vertices: per LOD mesh (bark + leaves); max_keys: joint-keys per clip (joints × keys).
+    20M vertices is ~1 GB of float32 attributes in memory; 5M joint-keys ~160 MB while baking."""
+
+    max_vertices: int = 20_000_000
+    max_keys: int = 5_000_000
+
+
+LIMITS_DEFAULTS = Limits()
+
+
+def _per_level(values, level: np.ndarray) -> np.ndarray:
+    v = np.asarray(values, dtype=np.int64)
+    return v[np.minimum(level, len(v) - 1)]
+
+
+def estimate_vertices(tree, options) -> tuple[int, int]:
+    """(bark, leaf) vertex counts mesh.build_mesh will emit for `tree` with MeshOptions
+    `options`: exact, or slightly over where flare rings merge with node rings. Bark: rings × (sides + 1) per stem plus one apex; leaves: outline points each."""
+    from .leafshapes import OUTLINES, outline
+
+    level = tree.stem_level.astype(np.int64)
+    segments = np.maximum(tree.stem_node_count.astype(np.int64) - 1, 0)
+    rings = segments * _per_level(options.rings_per_segment, level) + 1
+    p = tree.params
+    if p.flare > 0 and options.flare_rings > 0:
+        rings = rings + np.where((level == 0) & ~tree.stem_clone.astype(bool),
+                                 options.flare_rings, 0)
+    sides = _per_level(options.sides, level)
+    if p.lobes > 0 and p.lobe_depth != 0:
+        sides = np.where(level == 0, np.maximum(sides, 4 * p.lobes), sides)
+    sides = np.where(tree.stem_radius < options.thin_radius,
+                     np.minimum(sides, options.thin_sides), sides)
+    tip = tree.stem_node_start.astype(np.int64) + tree.stem_node_count - 1
+    pointed = tree.node_radius[tip] < np.maximum(options.point_radius,
+                                                 options.point_ratio * tree.stem_radius)
+    rings = rings - pointed                 # a pointed tip closes on its apex, without a ring
+    bark = int(np.sum(rings * (sides + 1)) + tree.n_stems)
+    leaves = 0
+    if options.leaves and tree.n_leaves:
+        shape = OUTLINES[4] if options.leaf_geometry == "card" else outline(p.leaf_shape)
+        leaves = tree.n_leaves * len(shape.points)
+    return bark, leaves
+
+
+def frame_count(wind) -> int:
+    """Keys per joint track of a baked clip (one per frame plus the closing loop key)."""
+    if wind is None:
+        return 0
+    return max(1, int(round(wind.fps * wind.duration))) + 1
+
+
+def check_mesh(tree, options, limits: Limits = LIMITS_DEFAULTS) -> int:
+    """Raise TreegenError if the mesh would exceed limits.max_vertices; return the estimate."""
+    bark, leaves = estimate_vertices(tree, options)
+    total = bark + leaves
+    if total > limits.max_vertices:
+        raise TreegenError(
+            f"species '{tree.params.name}' would need about {total:,} mesh vertices "
+            f"({bark:,} bark, {leaves:,} leaves), over the limit of {limits.max_vertices:,}; "
+            f"raise it with --max-vertices N (or use fewer --sides / lower LeafQuality)")
+    return total
+
+
+def check_keys(n_joints: int, wind, limits: Limits = LIMITS_DEFAULTS) -> int:
+    """Raise TreegenError if joints × keys of the clip would exceed limits.max_keys."""
+    frames = frame_count(wind)
+    total = int(n_joints) * frames
+    if total > limits.max_keys:
+        raise TreegenError(
+            f"the wind clip would hold about {total:,} joint-keys ({n_joints:,} joints × "
+            f"{frames:,} keys), over the limit of {limits.max_keys:,}; raise it with "
+            f"--max-keys N (or lower --max-joints, --fps or --duration)")
+    return total
