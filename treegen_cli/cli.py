@@ -91,6 +91,9 @@ def info(species, seed, max_stems, max_leaves, as_json, with_lod, lod_distances,
     tree = _in_file(species, generate, params, seed,
                     GenerateOptions(max_stems=max_stems, max_leaves=max_leaves))
     seconds = time.perf_counter() - t0
+    from .progress import current_reporter
+    current_reporter().detail(f"  generate  {seconds:8.3f} s  ({tree.n_stems:,} stems, "
+                              f"{tree.n_nodes:,} nodes, {tree.n_leaves:,} leaves)")
     stats = tree_stats(tree) | {"generate_s": round(seconds, 4), "file": str(species)}
     if with_lod:
         stats["lods"] = _lod_rows(species, params, seed, max_stems, max_leaves,
@@ -174,15 +177,24 @@ def _int_list(text: str | None, name: str) -> tuple[int, ...] | None:
 @click.option("--no-wind", is_flag=True, help="Write no animation (rest pose only).")
 @_lod_options
 @click.option("--no-lod", is_flag=True, help="Write one LOD with the dense clip.")
+@click.option("--max-vertices", type=int, default=20_000_000, show_default=True,
+              help="Refuse meshes with more vertices than this per LOD (counted from the grown "
+                   "tree before the mesh is built).")
+@click.option("--max-keys", type=int, default=5_000_000, show_default=True,
+              help="Refuse wind clips with more joint-keys (joints × keys) than this.")
+@click.option("--json", "as_json", is_flag=True,
+              help="Print a machine-readable summary (files, bytes, counts, seconds per stage).")
 def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels, sides,
          wind_speed, wind_dir, gust, turbulence, duration, fps, no_wind, lod_distances, fov, width,
-         error_px, error_form, interpolation, no_lod):
+         error_px, error_form, interpolation, no_lod, max_vertices, max_keys, as_json):
     """Grow SPECIES and write a skinned, wind-animated tree to OUTPUT."""
     from dataclasses import replace
 
     from .exchange import WRITERS, export, supported_suffixes
     from .mesh import MESH_DEFAULTS
-    from .pipeline import MakeOptions, Timings, build_asset
+    from .limits import Limits
+    from .pipeline import MakeOptions, build_asset
+    from .progress import current_reporter
     from .rig import RigOptions
     from .wind import WindOptions
 
@@ -205,11 +217,20 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
         rig=RigOptions(max_joints=max_joints, joint_levels=_int_list(joint_levels, "--joint-levels")),
         mesh=mesh, wind=wind,
         lod=None if no_lod else _lod_from(lod_distances, fov, width, error_px, error_form,
-                                          interpolation))
+                                          interpolation),
+        limits=Limits(max_vertices=max_vertices, max_keys=max_keys))
     params = _load(species)
-    timings = Timings()
-    asset, tree = _in_file(species, build_asset, params, seed, options, timings)
-    written = timings.run("write", export, asset, output)
+    rep = current_reporter()
+    per_lod = 3 if wind is None else 5                  # generate, rig, mesh (, wind, lod)
+    timings = rep.timings(total=per_lod if options.lod is None else
+                          len(options.lod.distances) * per_lod + 1)   # (+ write)
+    with rep.live():
+        asset, tree = _in_file(species, build_asset, params, seed, options, timings)
+        written = timings.run("write", export, asset, output)
+    if as_json:
+        click.echo(json.dumps(make_summary(asset, tree, written, timings.stages,
+                                           time.perf_counter() - t0), indent=2))
+        return
     lod0 = asset.lods[0]
     vertices = sum(len(p.positions) for p in lod0.primitives)
     triangles = sum(len(p.indices) // 3 for p in lod0.primitives)
@@ -233,6 +254,28 @@ from .cli_forest import forest  # noqa: E402  (its body lives in cli_forest.py)
 cli.add_command(forest)
 
 
+def make_summary(asset, tree, written, stages: dict, seconds: float) -> dict:
+    """`treegen make --json`: what was written and how big, per LOD, and seconds per stage."""
+    def lod_row(lod):
+        clip = lod.clips[0] if lod.clips else None
+        keys = 0 if clip is None else len(clip.times)
+        joint_keys = 0 if clip is None else (
+            sum(len(k) for k in clip.keys) if clip.keys is not None else keys * len(lod.skeleton.names))
+        return {"distance_m": lod.distance,
+                "vertices": sum(len(p.positions) for p in lod.primitives),
+                "triangles": sum(len(p.indices) // 3 for p in lod.primitives),
+                "joints": len(lod.skeleton.names), "keys": keys, "joint_keys": joint_keys}
+
+    lods = [lod_row(lod) for lod in asset.lods]
+    return {"file": str(written[0]), "files": [str(p) for p in written],
+            "bytes": sum(p.stat().st_size for p in written),
+            "species": asset.name, "seed": tree.seed, "stems": tree.n_stems,
+            "leaves": tree.n_leaves, **{k: lods[0][k] for k in ("vertices", "triangles", "joints",
+                                                               "keys", "joint_keys")},
+            "lods": lods, "seconds": round(seconds, 4),
+            "stages_s": {k: round(v, 4) for k, v in stages.items()}}
+
+
 def _in_file(species: Path, fn, *args):
     """Run a stage; a user error it raises about the tree is reported against the file."""
     try:
@@ -245,6 +288,9 @@ def _in_file(species: Path, fn, *args):
 
 def main(argv: list[str] | None = None) -> None:
     """Entry point: run the CLI, turning user errors into one line and exit code 2."""
+    from .progress import add_output_options
+
+    add_output_options(cli)     # -q/--quiet, -v/--verbose on every registered command
     try:
         cli.main(args=argv, prog_name="treegen", standalone_mode=False)
     except TreegenError as e:
