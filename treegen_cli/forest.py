@@ -57,8 +57,21 @@ _TYPES = {
     "string": lambda v: isinstance(v, str),
     "boolean": lambda v: isinstance(v, bool),
     "integer": lambda v: isinstance(v, int) and not isinstance(v, bool),
-    "number": lambda v: isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v),
+    "number": lambda v: isinstance(v, (int, float)) and not isinstance(v, bool) and _finite(v),
 }
+MAX_TREES = 100_000
+
+
+def _finite(v) -> bool:
+    try:
+        return math.isfinite(float(v))
+    except OverflowError:          # an integer too large for a float
+        return False
+
+
+def _show(value) -> str:
+    text = json.dumps(value) if not isinstance(value, (dict, list)) else type(value).__name__
+    return text if len(text) <= 40 else text[:37] + "..."
 
 
 def _join(path: str, key) -> str:
@@ -75,7 +88,7 @@ def check_schema(value, schema: dict, root: dict, path: str = "") -> None:
     where = path or "(top level)"
     kind = schema.get("type")
     if kind and not _TYPES[kind](value):
-        shown = json.dumps(value) if not isinstance(value, (dict, list)) else type(value).__name__
+        shown = _show(value)
         article = "an" if kind[0] in "aeiou" else "a"
         extra = " (finite)" if kind == "number" else ""
         raise TreegenError(f"{where}: expected {article} {kind}{extra}, got {shown}")
@@ -86,7 +99,7 @@ def check_schema(value, schema: dict, root: dict, path: str = "") -> None:
                 or (xlo is not None and value <= xlo) or (xhi is not None and value >= xhi):
             left = f"[{lo:g}" if lo is not None else (f"({xlo:g}" if xlo is not None else "(-inf")
             right = f"{hi:g}]" if hi is not None else (f"{xhi:g})" if xhi is not None else "inf)")
-            raise TreegenError(f"{where}: {value!r} is out of range; allowed {left}, {right}")
+            raise TreegenError(f"{where}: {_show(value)} is out of range; allowed {left}, {right}")
     if kind == "string" and len(value) < schema.get("minLength", 0):
         raise TreegenError(f"{where}: must not be empty")
     if kind == "array":
@@ -189,10 +202,23 @@ def load_layout(path: str | os.PathLike) -> Layout:
         raise TreegenError(f"{path}: {e}") from None
 
 
-def _species_file(base: Path, value: str, where: str) -> Path:
-    p = (base / value).resolve()
-    if not p.is_file():
-        raise TreegenError(f"{where}: species file '{value}' not found (looked for {p})")
+def _species_file(base: Path, value: str, where: str, checked: dict) -> Path:
+    """The resolved species file; parsed once per layout so a bad file is reported at the
+    JSON path that names it (before anything is built or written)."""
+    from .params import load_params
+
+    try:
+        p = (base / value).resolve()
+        ok = p.is_file()
+    except (OSError, ValueError):
+        ok = False
+    if not ok:
+        raise TreegenError(f"{where}: species file '{_show(value)[1:-1]}' not found")
+    if p not in checked:
+        try:
+            checked[p] = load_params(p)
+        except TreegenError as e:
+            raise TreegenError(f"{where}: {e}") from None
     return p
 
 
@@ -218,16 +244,20 @@ def parse_layout(data, path: Path) -> Layout:
         raise TreegenError("instances: the layout places no trees (give 'instances' or 'scatter')")
 
     placements: list[Placement] = []
+    checked: dict = {}
     for i, inst in enumerate(data.get("instances", [])):
         where = f"instances[{i}]"
         pos = [float(x) for x in inst["position"]] + [0.0] * (3 - len(inst["position"]))
         placements.append(Placement(
-            species=_species_file(base, inst["species"], f"{where}.species"),
+            species=_species_file(base, inst["species"], f"{where}.species", checked),
             seed=int(inst.get("seed", defaults.seed)), position=tuple(pos),
             rotation_deg=float(inst.get("rotation_deg", defaults.rotation_deg)),
             scale=float(inst.get("scale", defaults.scale)), source=where))
     for s, sc in enumerate(data.get("scatter", [])):
-        placements.extend(_scatter_placements(sc, f"scatter[{s}]", base, defaults))
+        placements.extend(_scatter_placements(sc, f"scatter[{s}]", base, defaults, checked))
+        if len(placements) > MAX_TREES:
+            raise TreegenError(f"scatter[{s}]: the layout places {len(placements):,} trees; "
+                               f"at most {MAX_TREES:,}")
     return Layout(name=str(data.get("name") or path.stem), path=path, camera=camera, wind=wind,
                   defaults=defaults, placements=placements)
 
@@ -302,7 +332,8 @@ def scatter_points(region: np.ndarray, is_polygon: bool, count: int, min_spacing
     return accepted
 
 
-def _scatter_placements(sc: dict, where: str, base: Path, defaults: Defaults) -> list[Placement]:
+def _scatter_placements(sc: dict, where: str, base: Path, defaults: Defaults,
+                        checked: dict) -> list[Placement]:
     if ("rectangle" in sc) == ("polygon" in sc):
         raise TreegenError(f"{where}: give exactly one of 'rectangle' or 'polygon'")
     if ("count" in sc) == ("density" in sc):
@@ -323,17 +354,20 @@ def _scatter_placements(sc: dict, where: str, base: Path, defaults: Defaults) ->
             raise TreegenError(f"{where}.{key}: [low, high] with low <= high, got {sc[key]}")
     if "scale" in sc and sc["scale"][0] <= 0:
         raise TreegenError(f"{where}.scale: scales must be > 0, got {sc['scale']}")
-    files = [_species_file(base, s["file"], f"{where}.species[{i}].file")
+    files = [_species_file(base, s["file"], f"{where}.species[{i}].file", checked)
              for i, s in enumerate(sc["species"])]
     weights = np.array([float(s.get("weight", 1.0)) for s in sc["species"]])
-    count = int(sc["count"]) if "count" in sc else int(round(sc["density"] * area))
+    count = int(sc["count"]) if "count" in sc else sc["density"] * area
+    if count > MAX_TREES:
+        raise TreegenError(f"{where}: {count:,.0f} trees (density × area); at most {MAX_TREES:,}")
+    count = int(round(count))
     seed = int(sc.get("seed", defaults.seed))
     rng = np.random.default_rng([seed, 0x5CA77E4])
     pts = scatter_points(region, is_poly, count, float(sc.get("min_spacing", 0.0)), rng, where)
     kind = rng.choice(len(files), size=count, p=weights / weights.sum())
     variant = rng.integers(0, int(sc.get("variants", 3)), size=count)
-    s_lo, s_hi = sc.get("scale", [defaults.scale, defaults.scale])
-    r_lo, r_hi = sc.get("rotation_deg", [0.0, 360.0])
+    s_lo, s_hi = (float(x) + 0.0 for x in sc.get("scale", [defaults.scale, defaults.scale]))
+    r_lo, r_hi = (float(x) + 0.0 for x in sc.get("rotation_deg", [0.0, 360.0]))   # -0.0 → 0.0
     scale = rng.uniform(s_lo, s_hi, size=count)
     rot = rng.uniform(r_lo, r_hi, size=count)
     z = float(sc.get("z", 0.0))
