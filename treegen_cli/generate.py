@@ -355,7 +355,7 @@ def estimate_counts(p: Params, leaf_quality: float | None = None, levels: int | 
         lp = p.level[level]
         grow = (1.0 + lp.seg_splits) ** max(int(lp.curve_res) - 1, 0)
         if level == 0:
-            grow *= 1 + p.base_splits
+            grow *= 1 + min(p.base_splits, 8)     # the generator splits at most 8 ways
         return originals * min(grow, 1e6)
 
     originals = [max(1, int(round(p.level[0].branches))) if p.level[0].branches > 0 else 1]
