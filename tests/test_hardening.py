@@ -208,3 +208,180 @@ def test_scale_v_above_scale_never_gives_a_non_positive_tree():
         tree = generate(p, seed, SMALL.generate)
         assert tree.scale > 0 and np.all(np.isfinite(tree.node_pos))
         assert tree.node_pos[:, 2].max() > 0
+
+
+# ----------------------------------------------------------------------------- atomic writes
+
+def treegen(*args, **kw):
+    return subprocess.run([sys.executable, "-m", "treegen_cli", *map(str, args)],
+                          capture_output=True, text=True, cwd=ROOT, **kw)
+
+
+def _kill_mid_write(species_file: Path, out: Path) -> list[str]:
+    """Start `treegen make`, SIGKILL it while the writer fills the staging folder; return the
+    names left in the folder. Fails if the run finished before it could be killed."""
+    proc = subprocess.Popen([sys.executable, "-m", "treegen_cli", "make", str(species_file),
+                             "-o", str(out), "--no-lod", "--duration", "1", "--fps", "10"],
+                            cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        while proc.poll() is None:
+            staging = [d for d in out.parent.iterdir()
+                       if d.name.startswith(f".{out.name}.") and d.name.endswith(".tmp")]
+            if staging and (staging[0] / out.name).exists():
+                os.kill(proc.pid, signal.SIGKILL)
+                break
+            time.sleep(0.0005)
+        proc.wait(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == -signal.SIGKILL, "the run finished before it could be killed"
+    return sorted(p.name for p in out.parent.iterdir())
+
+
+@pytest.mark.parametrize("suffix", [".glb", ".usdc"])
+def test_a_run_killed_mid_write_leaves_the_previous_file_intact(tmp_path, suffix):
+    out = tmp_path / f"out{suffix}"
+    proc = treegen("make", SPECIES / "shave_grass.txt", "-o", out, "--no-lod", "--no-wind")
+    assert proc.returncode == 0, proc.stderr
+    before = out.read_bytes()
+    left = _kill_mid_write(SPECIES / "black_tupelo.txt", out)
+    assert out.read_bytes() == before                      # byte-identical, not half-written
+    # Only the hidden staging folder of the killed run may remain, never a visible partial file.
+    assert [n for n in left if not n.startswith(".")] == [out.name]
+    assert all(n.startswith(f".{out.name}.") and n.endswith(".tmp") for n in left if n != out.name)
+    # A later run is not disturbed by the leftover and replaces the file.
+    proc = treegen("make", SPECIES / "shave_grass.txt", "-o", out, "--no-lod", "--duration", "0.5")
+    assert proc.returncode == 0, proc.stderr
+    assert out.read_bytes() != before
+
+
+def test_a_run_killed_mid_write_leaves_nothing_when_there_was_no_file(tmp_path):
+    out = tmp_path / "fresh.glb"
+    left = _kill_mid_write(SPECIES / "black_tupelo.txt", out)
+    assert not out.exists() and all(n.startswith(".") for n in left)
+
+
+# ----------------------------------------------------------------------------- limits
+
+@pytest.mark.parametrize("name", ["quaking_aspen", "palm"])
+@pytest.mark.parametrize("mesh", [MeshOptions(), MeshOptions(sides=(7, 5), leaf_geometry="shape",
+                                                             rings_per_segment=(3, 2, 1))])
+def test_vertex_estimate_matches_the_built_mesh(name, mesh):
+    tree = generate(load_params(SPECIES / f"{name}.txt"), 1)
+    bark, leaves = estimate_vertices(tree, mesh)
+    prims = {p.name: p for p in build_mesh(tree, build_rig(tree), mesh)}
+    assert bark == len(prims["bark"].positions)
+    assert leaves == len(prims["leaves"].positions)
+
+
+def test_oversized_mesh_and_clip_are_refused_before_building_naming_the_flag():
+    p = load_params(SPECIES / "quaking_aspen.txt")
+    tree = generate(p, 0)
+    need = sum(estimate_vertices(tree, MeshOptions()))
+    opts = MakeOptions(lod=None, wind=WindOptions(duration=1, fps=10))
+    from dataclasses import replace
+    with pytest.raises(TreegenError, match=rf"{need:,} mesh vertices.*--max-vertices"):
+        build_asset(p, 0, replace(opts, limits=Limits(max_vertices=need - 1)))
+    asset, _ = build_asset(p, 0, replace(opts, limits=Limits(max_vertices=need, max_keys=10**6)))
+    joints = len(asset.lods[0].skeleton.names)
+    keys = joints * frame_count(opts.wind)
+    assert keys == joints * len(asset.lods[0].clips[0].times)
+    with pytest.raises(TreegenError, match=rf"{keys:,} joint-keys.*--max-keys"):
+        build_asset(p, 0, replace(opts, limits=Limits(max_keys=keys - 1)))
+    assert check_keys(joints, None, Limits(max_keys=0)) == 0      # no wind, no keys
+
+
+def test_cli_refuses_oversized_work_with_exit_2_and_writes_nothing(tmp_path):
+    out = tmp_path / "x.glb"
+    for flag, needle in (("--max-vertices", "mesh vertices"), ("--max-keys", "joint-keys")):
+        proc = treegen("make", SPECIES / "quaking_aspen.txt", "-o", out, flag, "100")
+        assert proc.returncode == 2 and "Traceback" not in proc.stderr
+        assert needle in proc.stderr and flag in proc.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+# ----------------------------------------------------------------------------- output
+
+FAST = ("--no-lod", "--duration", "0.5", "--fps", "10")
+
+
+def test_piped_make_prints_no_progress_artefacts(tmp_path):
+    proc = treegen("make", SPECIES / "quaking_aspen.txt", "-o", tmp_path / "a.glb", *FAST)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr == ""
+    for stream in (proc.stdout,):
+        assert "\x1b" not in stream and "\r" not in stream
+    assert proc.stdout.startswith("wrote ")
+
+
+def test_quiet_prints_nothing_on_success_and_errors_still_show(tmp_path):
+    for cmd in (("make", SPECIES / "quaking_aspen.txt", "-o", tmp_path / "a.glb", "-q", *FAST),
+                ("info", SPECIES / "quaking_aspen.txt", "--quiet")):
+        proc = treegen(*cmd)
+        assert proc.returncode == 0, proc.stderr
+        assert proc.stdout == "" and proc.stderr == ""
+    assert (tmp_path / "a.glb").stat().st_size > 0
+    proc = treegen("make", SPECIES / "nope.txt", "-o", tmp_path / "b.glb", "-q")
+    assert proc.returncode == 2 and "nope.txt" in proc.stderr and proc.stdout == ""
+
+
+def test_verbose_reports_each_stage_on_stderr(tmp_path):
+    proc = treegen("make", SPECIES / "quaking_aspen.txt", "-o", tmp_path / "a.glb", "-v", *FAST)
+    assert proc.returncode == 0, proc.stderr
+    stages = [l.split()[0] for l in proc.stderr.splitlines()]
+    assert stages == ["generate", "rig", "mesh", "wind", "write"]
+    assert all(l.rstrip().endswith(" s") for l in proc.stderr.splitlines())
+    assert "\x1b" not in proc.stderr and "\r" not in proc.stderr
+    info = treegen("info", SPECIES / "quaking_aspen.txt", "--verbose")
+    assert "generate" in info.stderr and "nodes" in info.stderr
+    both = treegen("info", SPECIES / "quaking_aspen.txt", "-q", "-v")
+    assert both.returncode == 2 and "--quiet" in both.stderr
+
+
+def test_make_json_summary_parses_and_matches_the_file(tmp_path):
+    from treegen_cli.exchange.gltf import read_gltf
+
+    out = tmp_path / "a.glb"
+    proc = treegen("make", SPECIES / "quaking_aspen.txt", "-o", out, "--json", "--duration", "0.5",
+                   "--fps", "10")
+    assert proc.returncode == 0, proc.stderr
+    s = json.loads(proc.stdout)
+    assert s["file"] == str(out) and s["bytes"] == out.stat().st_size
+    assert set(s["stages_s"]) >= {"generate", "rig", "mesh", "wind", "write"}
+    assert all(v >= 0 for v in s["stages_s"].values()) and s["seconds"] > 0
+    assert s["keys"] == 6 and s["joint_keys"] == s["joints"] * 6        # 0.5 s × 10 fps + 1
+    gltf, _ = read_gltf(out)
+    assert s["joints"] == len(gltf["skins"][0]["joints"])
+    assert len(s["lods"]) == 4 and s["lods"][0]["vertices"] == s["vertices"]
+    assert s["triangles"] > 0 and s["vertices"] > s["triangles"] / 2
+    # --json output survives --quiet: it was asked for explicitly.
+    quiet = treegen("make", SPECIES / "quaking_aspen.txt", "-o", out, "--json", "-q", *FAST)
+    assert json.loads(quiet.stdout)["vertices"] == s["vertices"] and quiet.stderr == ""
+
+
+def test_progress_shows_on_a_terminal_and_is_cleared(tmp_path):
+    import pty
+
+    master, slave = pty.openpty()
+    proc = subprocess.Popen([sys.executable, "-m", "treegen_cli", "make",
+                             str(SPECIES / "quaking_aspen.txt"), "-o", str(tmp_path / "a.glb"),
+                             *FAST], cwd=ROOT, stdout=subprocess.PIPE, stderr=slave,
+                            stdin=subprocess.DEVNULL)
+    os.close(slave)
+    seen = b""
+    while True:
+        try:
+            chunk = os.read(master, 65536)
+        except OSError:
+            break
+        if not chunk:
+            break
+        seen += chunk
+    out = proc.stdout.read().decode()
+    proc.wait()
+    os.close(master)
+    assert proc.returncode == 0
+    assert b"generate" in seen or b"mesh" in seen or b"write" in seen   # the live display
+    assert seen.endswith(b"\x1b[2K") or b"\x1b[?25h" in seen          # cleared, cursor back
+    assert "\x1b" not in out and out.startswith("wrote ")               # stdout stays clean
