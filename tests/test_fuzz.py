@@ -10,6 +10,7 @@ plus a handful of CLI runs with nasty files (no traceback, exit code 2).
 """
 from __future__ import annotations
 
+import copy
 import json
 import math
 import re
@@ -220,6 +221,14 @@ def test_mutated_arbaro_files_raise_only_treegen_error(data):
     only_treegen_errors(data, "fuzz.xml")
 
 
+@pytest.mark.parametrize("decl", ["bogus-enc", "utf-99", "x" * 300])
+def test_unknown_xml_encoding_is_a_user_error(decl):
+    # Regression (found by this fuzzer): expat raised LookupError for unknown encodings.
+    data = f"<?xml version='1.0' encoding='{decl}'?><arbaro><species name='x'/></arbaro>".encode()
+    with pytest.raises(TreegenError, match="unreadable XML"):
+        parse_params_bytes(data, "enc.xml")
+
+
 def test_unmutated_arbaro_fixtures_parse():
     # The mutation base itself is valid, so mutations explore the edge of the valid region.
     for path in ARBARO:
@@ -259,6 +268,15 @@ JSON_NASTY = [float("nan"), float("inf"), -float("inf"), 1e308, -1e308, 5e-324, 
               {"min": [-1e308, -1e308], "max": [1e308, 1e308]}, [float("nan"), 0, 0]]
 
 
+NASTY_ST = st.sampled_from(JSON_NASTY)          # drawn values are deep-copied before use
+EXTRA_KEY_ST = st.sampled_from(["extra", "count", "density", "polygon", "rectangle",
+                                "lod_distances", "species", ""])
+JSON_VALUES = st.recursive(
+    st.none() | st.booleans() | st.integers(-10**20, 10**20) | st.floats() | st.text(max_size=6),
+    lambda ch: st.lists(ch, max_size=4) | st.dictionaries(st.text(max_size=6), ch, max_size=3),
+    max_leaves=8)
+
+
 def _paths(value, prefix=()):
     """Every (path, value) in a JSON tree, containers included."""
     yield prefix, value
@@ -285,18 +303,14 @@ def layouts(draw):
     """The base layout with 1–4 tree mutations: a node replaced by a nasty value or a random
     JSON value, deleted, duplicated into a list, or given an unknown sibling key."""
     tree = json.loads(json.dumps(BASE_LAYOUT))
-    json_values = st.recursive(
-        st.none() | st.booleans() | st.integers(-10**20, 10**20) | st.floats() | st.text(max_size=6),
-        lambda ch: st.lists(ch, max_size=4) | st.dictionaries(st.text(max_size=6), ch, max_size=3),
-        max_leaves=8)
     for _ in range(draw(st.integers(1, 4))):
         paths = [p for p, _ in _paths(tree)]
         path = draw(st.sampled_from(paths))
         op = draw(st.integers(0, 5))
         if op <= 1:
-            tree = _set(tree, path, draw(st.sampled_from(JSON_NASTY)))
+            tree = _set(tree, path, copy.deepcopy(draw(NASTY_ST)))
         elif op == 2:
-            tree = _set(tree, path, draw(json_values))
+            tree = _set(tree, path, draw(JSON_VALUES))
         elif op == 3 and path:
             parent = tree
             for k in path[:-1]:
@@ -307,14 +321,12 @@ def layouts(draw):
             for k in path:
                 node = node[k]
             if isinstance(node, dict):
-                node[draw(st.sampled_from(["extra", "count", "density", "polygon", "rectangle",
-                                           "lod_distances", "species", ""]))] = \
-                    draw(st.sampled_from(JSON_NASTY))
+                node[draw(EXTRA_KEY_ST)] = copy.deepcopy(draw(NASTY_ST))
         else:
             node = tree
             for k in path:
                 node = node[k]
-            tree = _set(tree, path, [node, node])
+            tree = _set(tree, path, [node, copy.deepcopy(node)])
     return tree
 
 
@@ -345,6 +357,19 @@ def test_mutated_layouts_raise_only_treegen_error(tree):
                                   '{"camera": {"position": [0,0,0], "target": [0,0,0]}}'])))
 def test_random_layout_text_raises_only_treegen_error(text):
     _layout_only_treegen_errors(text)
+
+
+@pytest.mark.parametrize("patch", [
+    {"instances": [{"species": "palm.txt", "position": [10**400, 0]}]},          # int > float
+    {"scatter": [{"species": [{"file": "palm.txt"}], "density": 10,
+                  "rectangle": {"min": [-1e308, -1e308], "max": [1e308, 1e308]}}]},  # inf area
+    {"scatter": [{"species": [{"file": "palm.txt"}], "count": 5, "min_spacing": 1e308,
+                  "rectangle": {"min": [0, 0], "max": [1, 1]}}]},                # inf spacing²
+    {"scatter": [{"species": [{"file": "palm.txt"}], "count": 3,
+                  "polygon": [[0, 0], [0, 0], [0, 0]]}]},                        # zero area
+])
+def test_layout_regressions_found_by_fuzzing(patch):
+    _layout_only_treegen_errors(json.dumps({**BASE_LAYOUT, **patch}))
 
 
 def test_base_layout_is_valid():
