@@ -111,3 +111,26 @@ def test_real_mesh_is_validator_clean(tmp_path, geometry):
     assert uv_type == (UNSIGNED_SHORT if geometry == "card" else FLOAT)
     pos = read_accessor(gltf, blob, leaves["POSITION"])
     assert len(pos) == tree.n_leaves * (4 if geometry == "card" else 8)
+
+
+def test_flat_leaf_cards_leave_normals_to_the_client(tmp_path):
+    """Cards flagged flat_normals get no NORMAL: the flat normals a client must compute from
+    the positions (counter-clockwise faces) are the mesh's own leaf normals."""
+    tree = synthetic_tree(leaf_shape=6)                  # folded palm outline: two planes
+    rig = build_rig(tree, RigOptions(max_joints=5))
+    for geometry in ("card", "shape"):
+        bark, leaves = build_mesh(tree, rig, MeshOptions(leaf_geometry=geometry))
+        assert leaves.flat_normals and not bark.flat_normals
+        p = tmp_path / f"{geometry}.glb"
+        export(Asset("t", list(MATERIALS), [Lod([bark, leaves], rig.skeleton)]), p)
+        gltf, blob = read_gltf(p)
+        bark_a, leaf_a = (q["attributes"] for q in gltf["meshes"][0]["primitives"])
+        assert "NORMAL" in bark_a and "NORMAL" not in leaf_a
+        pos = read_accessor(gltf, blob, leaf_a["POSITION"]).astype(np.float64)
+        tri = read_accessor(gltf, blob, gltf["meshes"][0]["primitives"][1]["indices"])
+        t = pos[tri.reshape(-1, 3)]
+        face = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+        face /= np.linalg.norm(face, axis=1, keepdims=True)
+        y_up = np.stack([leaves.normals[:, 0], leaves.normals[:, 2], -leaves.normals[:, 1]], -1)
+        own = y_up[leaves.indices.reshape(-1, 3)]                  # (T, 3 corners, 3)
+        np.testing.assert_allclose(np.broadcast_to(face[:, None], own.shape), own, atol=1e-4)

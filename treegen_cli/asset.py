@@ -32,6 +32,10 @@ class Primitive:
     indices: np.ndarray                    # uint32 (T*3,), counter-clockwise front faces
     joints: np.ndarray                     # uint16 (V, 4), indices into Skeleton joints
     weights: np.ndarray                    # float32 (V, 4), rows sum to 1, unused slots 0
+    flat_normals: bool = False             # True: every vertex normal is the face normal of
+                                           # each triangle using it (planar leaf cards), so a
+                                           # writer may omit normals (glTF clients then compute
+                                           # exactly these flat normals)
 
 
 @dataclass(frozen=True, eq=False)

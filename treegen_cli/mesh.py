@@ -258,6 +258,19 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
     )
 
 
+def _faces_flat(o) -> bool:
+    """Whether every outline vertex normal is the face normal of its triangles, also after the
+    stamp's anisotropic length × width scaling (checked at two aspect ratios)."""
+    for aspect in (1.0, 3.0):
+        p = o.points * [1.0, aspect, 1.0]
+        a, b, c = (p[o.triangles[:, k]] for k in range(3))
+        fn = np.cross(b - a, c - a)
+        fn /= np.linalg.norm(fn, axis=1, keepdims=True)
+        if not np.allclose(o.normals[o.triangles], fn[:, None, :], atol=1e-9):
+            return False
+    return True
+
+
 def _leaves(tree, rig, geometry: str = "card") -> Primitive:
     """Stamp a card (or the LeafShape outline) on every leaf frame (float32 broadcasts)."""
     o = outline(tree.params.leaf_shape)          # validates the code even for cards
@@ -294,6 +307,7 @@ def _leaves(tree, rig, geometry: str = "card") -> Primitive:
         positions=pos.reshape(-1, 3), normals=nrm,
         uvs=np.tile(o.uvs.astype(np.float32), (L, 1)),
         indices=idx.ravel(), joints=joints, weights=weights,
+        flat_normals=_faces_flat(o),     # frames are rotations: flat stays flat
     )
 
 

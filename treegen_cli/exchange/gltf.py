@@ -7,7 +7,10 @@ the same bytes. Vertex data stays float32 end to end (the Y-up swap is an exact 
 WEIGHTS_0 is normalized UNSIGNED_BYTE for rigid primitives (leaves: exact) and normalized
 UNSIGNED_SHORT for blended ones (bark), each row summing exactly to 255 / 65535 — a quarter /
 half of float32's bytes; JOINTS_0 is UNSIGNED_BYTE up to 256 joints; TEXCOORD_0 made only
-of 0s and 1s (leaf cards) is normalized UNSIGNED_SHORT (exact). All core glTF 2.0, no extension.
+of 0s and 1s (leaf cards) is normalized UNSIGNED_SHORT (exact). NORMAL is left out of
+primitives whose normals are their faces' flat normals (Primitive.flat_normals: planar leaf
+cards), as the spec has clients compute flat normals then — a third of a card's bytes. All core
+glTF 2.0, no extension.
 
 Axes: the generator is Z up, glTF is Y up (right-handed), so every vector goes through
 C: (x, y, z) → (x, z, −y); quaternion vector parts likewise; matrices become C·M·Cᵀ.
@@ -146,22 +149,24 @@ def _weights(joints: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.nd
 
     Rigid rows (every weight 0 or 1, like leaves on their carrier) are exact as UNSIGNED_BYTE;
     blended rows (bark) take UNSIGNED_SHORT, steps of 1/65535, the rounding residual put on
-    each row's largest weight. Result: [.7, .3, 0, 0] → [45875, 19660, 0, 0] (sum 65535)."""
+    each row's largest weight. Result: [.7, .3, 0, 0] → [45875, 19660, 0, 0] (sum 65535).
+    Row sums and maxima go column by column: numpy's axis-1 reductions over (V, 4) are slow."""
     w = np.asarray(weights)
     if w.dtype != np.float64:
         w = w.astype(np.float32, copy=False)
+    cols = range(w.shape[1])
     flat = w.reshape(-1)
-    row_sum = sum(w[:, k] for k in range(w.shape[1]))      # column adds: axis-1 sums are slow
-    if bool(np.all((flat == 0) | (flat == 1))) and bool(np.all(row_sum == 1)):
+    if bool(np.all((flat == 0) | (flat == 1))) and bool(np.all(sum(w[:, k] for k in cols) == 1)):
         q = w.astype(np.uint8) * np.uint8(255)
     else:
         w = w.astype(np.float64)
-        s = w.sum(axis=1, keepdims=True)
-        w /= np.where(s > 0, s, 1.0)
-        top = np.argmax(w, axis=1)
-        qi = np.rint(w * 65535.0).astype(np.int64)
-        rows = np.arange(len(qi))
-        qi[rows, top] += 65535 - qi.sum(axis=1)
+        s = sum(w[:, k] for k in cols)
+        w *= (65535.0 / np.where(s > 0, s, 1.0))[:, None]
+        top = np.zeros(len(w), dtype=np.int64)
+        for k in cols[1:]:
+            top[w[:, k] > w[np.arange(len(w)), top]] = k
+        qi = np.rint(w).astype(np.int64)
+        qi[np.arange(len(qi)), top] += 65535 - sum(qi[:, k] for k in cols)
         q = qi.astype(np.uint16)
     j = np.where(q > 0, joints, 0)
     return j, q
@@ -180,9 +185,6 @@ def _y_up32(v: np.ndarray) -> np.ndarray:
 def _primitive(buf: _Buffer, p: Primitive, n_joints: int, material: int) -> dict:
     V = len(p.positions)
     pos = _y_up32(p.positions)
-    nrm = _y_up32(p.normals)
-    length = np.sqrt(np.einsum("ij,ij->i", nrm, nrm))
-    nrm /= np.where(length > 0, length, np.float32(1.0))[:, None]
     # Asset UVs have their origin bottom-left (OpenGL/USD); glTF's is top-left
     uv = np.array(p.uvs, dtype=np.float32)
     np.subtract(np.float32(1.0), uv[:, 1], out=uv[:, 1])
@@ -193,9 +195,13 @@ def _primitive(buf: _Buffer, p: Primitive, n_joints: int, material: int) -> dict
     joints, weights = _weights(p.joints, p.weights)
     joints = joints.astype(np.uint8 if n_joints <= 256 else np.uint16, copy=False)
     indices = np.asarray(p.indices).astype(np.uint16 if V < 65535 else np.uint32, copy=False)
-    attrs = {
-        "POSITION": buf.accessor(pos, ARRAY_BUFFER, bounds=True),
-        "NORMAL": buf.accessor(nrm, ARRAY_BUFFER),
+    attrs = {"POSITION": buf.accessor(pos, ARRAY_BUFFER, bounds=True)}
+    if not p.flat_normals:       # flat cards: clients compute exactly these normals themselves
+        nrm = _y_up32(p.normals)
+        length = np.sqrt(np.einsum("ij,ij->i", nrm, nrm))
+        nrm /= np.where(length > 0, length, np.float32(1.0))[:, None]
+        attrs["NORMAL"] = buf.accessor(nrm, ARRAY_BUFFER)
+    attrs |= {
         "TEXCOORD_0": buf.accessor(uv, ARRAY_BUFFER, normalized=uv_corners),
         "JOINTS_0": buf.accessor(joints, ARRAY_BUFFER),
         "WEIGHTS_0": buf.accessor(weights, ARRAY_BUFFER, normalized=True),
