@@ -281,18 +281,25 @@ def _leaves(tree, rig, geometry: str = "card") -> Primitive:
     size = tree.leaf_size.astype(np.float32)
     length, width = size[:, 0:1], size[:, 1:2]                    # (L, 1)
     pts = o.points.astype(np.float32)
+    base = tree.leaf_pos.astype(np.float32)
+    # Blade axes scaled once, then one (L, 3) pass per outline point (P ≤ 16, not per leaf).
+    across, along = F[:, :, 0] * width, F[:, :, 1] * length
+    up = F[:, :, 2] * width if np.any(pts[:, 2]) else None        # folded blades (palm)
     pos = np.empty((L, P, 3), dtype=np.float32)
-    pos[:] = tree.leaf_pos.astype(np.float32)[:, None, :]
-    pos += (width * pts[:, 0])[:, :, None] * F[:, None, :, 0]
-    pos += (length * pts[:, 1])[:, :, None] * F[:, None, :, 1]
-    flat = not np.any(pts[:, 2])
-    if not flat:                                                  # folded blades (palm)
-        pos += (width * pts[:, 2])[:, :, None] * F[:, None, :, 2]
-    if flat and np.allclose(o.normals, [0.0, 0.0, 1.0]):
-        n = F[:, :, 2] / np.linalg.norm(F[:, :, 2], axis=1, keepdims=True)
+    for k, (x, y, z) in enumerate(pts):
+        out = pos[:, k]
+        np.multiply(across, x, out=out)
+        out += base
+        if y:
+            out += y * along
+        if z and up is not None:
+            out += z * up
+    nl = o.normals.astype(np.float32)
+    if np.all(nl == [0.0, 0.0, 1.0]):                             # flat blade: the frame normal
+        n = F[:, :, 2]
+        n = n / np.sqrt(np.einsum("ij,ij->i", n, n))[:, None]
         nrm = np.repeat(n, P, axis=0)
     else:
-        nl = o.normals.astype(np.float32)
         nrm = (nl[None, :, 0, None] * F[:, None, :, 0] + nl[None, :, 1, None] * F[:, None, :, 1]
                + nl[None, :, 2, None] * F[:, None, :, 2])
         nrm = (nrm / np.linalg.norm(nrm, axis=2, keepdims=True)).reshape(-1, 3)

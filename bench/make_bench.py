@@ -1,0 +1,80 @@
+"""Whole-process `treegen make` benchmark (issue 3): the four Weber–Penn paper species to GLB,
+each run as its own `treegen make` process (python -c ... cli.main()) (imports, generation, LODs, writing and
+interpreter exit all count). Prints seconds (median of --repeat runs), peak resident MB (the
+child's ru_maxrss, median) and the file size. Target: weeping willow under 4 s and under 1 GB.
+
+    python bench/make_bench.py [--repeat 3] [--seed 0] [--root DIR] [species ...] [-- make options]
+
+e.g. `python bench/make_bench.py weeping_willow -- --no-lod --leaf-geometry shape`.
+
+Measured: see the table below (filled in from a real run).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+PAPER_SPECIES = ("quaking_aspen", "black_tupelo", "weeping_willow", "ca_black_oak")
+
+
+def run_once(species: Path, out: Path, seed: int, extra: list[str],
+             root: Path = ROOT) -> tuple[float, float, str]:
+    """(wall seconds, peak RSS MB, stdout) of one whole `treegen make` process. The child is
+    reaped with os.wait4 for its own rusage (RUSAGE_CHILDREN would be a max over all runs)."""
+    cmd = [sys.executable, "-c", "from treegen_cli.cli import main; main()",
+           "make", str(species), "-o", str(out), "--seed", str(seed), *extra]
+    env = dict(os.environ, PYTHONPATH=str(root) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    with tempfile.TemporaryFile() as log, tempfile.TemporaryFile() as err:
+        t0 = time.perf_counter()
+        proc = subprocess.Popen(cmd, cwd=root, env=env, stdout=log, stderr=err)
+        _, status, usage = os.wait4(proc.pid, 0)
+        seconds = time.perf_counter() - t0
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        log.seek(0), err.seek(0)
+        if proc.returncode != 0:
+            raise SystemExit(f"{' '.join(cmd)} failed:\n{err.read().decode()}")
+        return seconds, usage.ru_maxrss / 1024.0, log.read().decode()   # Linux: KiB
+
+
+def main() -> None:
+    argv = sys.argv[1:]
+    extra: list[str] = []
+    if "--" in argv:
+        i = argv.index("--")
+        argv, extra = argv[:i], argv[i + 1:]
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("species", nargs="*", default=list(PAPER_SPECIES),
+                    help="species names (species/<name>.txt) or paths")
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--root", type=Path, default=ROOT,
+                    help="treegen checkout to run (e.g. an older `git archive` for before/after)")
+    args = ap.parse_args(argv)
+
+    print(f"treegen make, whole process, median of {args.repeat}"
+          + (f"; options: {' '.join(extra)}" if extra else ""))
+    print(f"{'species':<18} {'seconds':>8} {'peak MB':>8} {'file MB':>8} {'vertices':>10} "
+          f"{'triangles':>10}")
+    with tempfile.TemporaryDirectory(prefix="make_bench.") as tmp:
+        for name in args.species:
+            species = Path(name) if name.endswith((".txt", ".xml")) else \
+                ROOT / "species" / f"{name}.txt"
+            out = Path(tmp) / f"{species.stem}.glb"
+            runs = [run_once(species, out, args.seed, extra, args.root) for _ in range(args.repeat)]
+            m = re.search(r"([\d,]+) vertices, ([\d,]+) triangles", runs[-1][2])
+            verts, tris = (m.group(1), m.group(2)) if m else ("?", "?")
+            print(f"{species.stem:<18} {statistics.median(r[0] for r in runs):>8.2f} "
+                  f"{statistics.median(r[1] for r in runs):>8.0f} "
+                  f"{out.stat().st_size / 1e6:>8.1f} {verts:>10} {tris:>10}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
