@@ -192,6 +192,8 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
 
     from .exchange import WRITERS, export, supported_suffixes
     from .mesh import MESH_DEFAULTS
+    import numpy as np
+
     from .limits import Limits
     from .pipeline import MakeOptions, build_asset
     from .progress import current_reporter
@@ -227,6 +229,9 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
     with rep.live():
         asset, tree = _in_file(species, build_asset, params, seed, options, timings)
         written = timings.run("write", export, asset, output)
+    per_level = np.bincount(tree.stem_level.astype(np.int64)).tolist() if tree.n_stems else []
+    rep.detail(f"  counts    stems per level {per_level}, {tree.n_nodes:,} nodes, "
+               f"{tree.n_leaves:,} leaves, {len(asset.lods)} LOD(s)")
     if as_json:
         click.echo(json.dumps(make_summary(asset, tree, written, timings.stages,
                                            time.perf_counter() - t0), indent=2))
