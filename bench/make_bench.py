@@ -7,7 +7,16 @@ child's ru_maxrss, median) and the file size. Target: weeping willow under 4 s a
 
 e.g. `python bench/make_bench.py weeping_willow -- --no-lod --leaf-geometry shape`.
 
-Measured: see the table below (filled in from a real run).
+Measured on the shared 2-core box, seed 0, median of 3 (seconds / peak MB / file MB). "before" is
+commit 6b90909 (one LOD, 8-vertex leaf outlines, float32 weights, joined in-memory buffers),
+run with --root on a `git archive` of it; "no LOD" is today's code with --no-lod (the same
+single-LOD tree as before); "default" adds the 4 LODs that `make` now writes by default.
+
+    species          before                 no LOD                default (4 LODs)
+    quaking_aspen    0.87 s  127 MB  13 MB   0.63 s   91 MB   5 MB   1.15 s  103 MB   8 MB
+    black_tupelo     1.10 s  191 MB  28 MB   0.71 s  121 MB  13 MB   1.42 s  149 MB  27 MB
+    weeping_willow   6.66 s 1267 MB 331 MB   2.50 s  499 MB  96 MB   4.55 s  661 MB 187 MB
+    ca_black_oak     1.24 s  246 MB  42 MB   0.95 s  128 MB  15 MB   1.28 s  153 MB  27 MB
 """
 from __future__ import annotations
 
