@@ -285,3 +285,21 @@ def test_leaves_attach_to_nodes_of_their_stem(species_tree):
     seg = np.linalg.norm(t.node_pos[t.leaf_node + 1] - t.node_pos[t.leaf_node], axis=1)
     reach = np.linalg.norm(t.leaf_pos - t.node_pos[t.leaf_node], axis=1)
     assert np.all(reach <= seg + abs(p.leaf_stem_len) * t.leaf_size[:, 0] + 1e-9)
+
+
+@pytest.mark.parametrize("name", ["quaking_aspen", "weeping_willow", "european_larch", "palm"])
+def test_regrow_leaves_equals_a_full_regrow(name):
+    """Geometric LODs take the stems from LOD0 and regrow only leaves: it must be exactly what
+    generate() would grow with the same overrides."""
+    from treegen_cli.generate import regrow_leaves
+
+    p = load_params(SPECIES[0].parent / f"{name}.txt")
+    tree = generate(p, 4)
+    for levels, quality, leaves in [(None, 0.5, p.leaves), (p.levels - 1, 0.25, p.leaves * 3)]:
+        q = dataclasses.replace(p, leaves=leaves)
+        opts = GenerateOptions(levels=levels, leaf_quality=quality)
+        a, b = generate(q, 4, opts), regrow_leaves(tree, q, opts)
+        assert a.params == b.params
+        for f in dataclasses.fields(a):
+            if isinstance(getattr(a, f.name), np.ndarray):
+                assert np.array_equal(getattr(a, f.name), getattr(b, f.name)), f.name

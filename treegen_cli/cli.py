@@ -164,6 +164,10 @@ def _int_list(text: str | None, name: str) -> tuple[int, ...] | None:
 @click.option("--sides", default=None, metavar="16,8,6,4,3",
               help="Cross-section sides per stem level, trunk first; the last value repeats "
                    "[default: 16,8,6,4,3].")
+@click.option("--leaf-geometry", type=click.Choice(["card", "shape"]), default="card",
+              show_default=True,
+              help="card: one textured quad per leaf (the leaf outline belongs in the texture's "
+                   "alpha); shape: the species' LeafShape outline as geometry.")
 @click.option("--wind-speed", type=float, default=4.0, show_default=True, help="Mean wind speed, m/s.")
 @click.option("--wind-dir", type=float, default=0.0, show_default=True,
               help="Direction the wind blows towards, degrees (0 = +X, 90 = +Y in Z-up terms).")
@@ -185,7 +189,7 @@ def _int_list(text: str | None, name: str) -> tuple[int, ...] | None:
 @click.option("--json", "as_json", is_flag=True,
               help="Print a machine-readable summary (files, bytes, counts, seconds per stage).")
 def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels, sides,
-         wind_speed, wind_dir, gust, turbulence, duration, fps, no_wind, lod_distances, fov, width,
+         leaf_geometry, wind_speed, wind_dir, gust, turbulence, duration, fps, no_wind, lod_distances, fov, width,
          error_px, error_form, interpolation, no_lod, max_vertices, max_keys, as_json):
     """Grow SPECIES and write a skinned, wind-animated tree to OUTPUT."""
     from dataclasses import replace
@@ -206,7 +210,7 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
                            f"supported: {', '.join(supported_suffixes())}")
     if max_joints < 1:
         raise TreegenError(f"--max-joints {max_joints}: the joint budget must be at least 1")
-    mesh = MESH_DEFAULTS
+    mesh = replace(MESH_DEFAULTS, leaf_geometry=leaf_geometry)
     side_list = _int_list(sides, "--sides")
     if side_list is not None:
         if min(side_list) < 3 or max(side_list) > 64:

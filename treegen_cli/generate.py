@@ -76,7 +76,7 @@ def _rot_z(angle: np.ndarray) -> np.ndarray:
 
 
 def _unit(v: np.ndarray, fallback: np.ndarray | None = None) -> np.ndarray:
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    n = np.sqrt(np.einsum("...i,...i->...", v, v))[..., None]
     out = v / np.maximum(n, 1e-12)
     if fallback is not None:
         out = np.where(n > 1e-9, out, fallback)
@@ -379,8 +379,8 @@ def _refuse(kind: str, count: float, limit: int, flag: str, name: str):
         f"raise it with {flag} N (or lower the species' Branches/Leaves/LeafQuality)")
 
 
-def generate(p: Params, seed: int = 0, options: GenerateOptions = DEFAULTS) -> Tree:
-    """Grow the whole Weber–Penn tree for `p` and `seed` as a struct of arrays."""
+def _prepare(p: Params, options: GenerateOptions) -> tuple[Params, int]:
+    """Apply the overrides and refuse oversized trees before anything is allocated."""
     if options.leaf_quality is not None:
         p = replace(p, leaf_quality=options.leaf_quality)
     n_levels = p.levels if options.levels is None else max(0, min(options.levels, p.levels))
@@ -389,6 +389,12 @@ def generate(p: Params, seed: int = 0, options: GenerateOptions = DEFAULTS) -> T
         _refuse("stems", est_stems, options.max_stems, "--max-stems", p.name)
     if est_leaves > options.max_leaves:
         _refuse("leaves", est_leaves, options.max_leaves, "--max-leaves", p.name)
+    return p, n_levels
+
+
+def generate(p: Params, seed: int = 0, options: GenerateOptions = DEFAULTS) -> Tree:
+    """Grow the whole Weber–Penn tree for `p` and `seed` as a struct of arrays."""
+    p, n_levels = _prepare(p, options)
 
     rng = np.random.default_rng([seed, 0, _TREE])
     scale_tree = float(_vary(rng, p.scale, p.scale_v, 1)[0])
@@ -708,3 +714,62 @@ def _leaves(p: Params, ctx: _LevelContext, seed: int, n_levels: int, options: Ge
     size = np.tile([length, width], (k, 1))
     return {"stem": ctx.g0 + stem, "node": pnode, "pos": blade_pos, "frame": leaf_frame,
             "size": size}
+
+
+def regrow_leaves(tree: Tree, p: Params, options: GenerateOptions = DEFAULTS) -> Tree:
+    """What `generate(p, tree.seed, options)` grows, for a `p`/`options` that differ from the
+    tree's only in its leaves (Leaves, LeafQuality) and a lower or equal Levels — the geometric
+    LODs. Stems of the kept levels come from the same random streams, so they are taken from
+    `tree` as they are and only the leaves grow again: same arrays, a fraction of the time."""
+    p, n_levels = _prepare(p, options)
+    if n_levels > tree.params.levels or replace(p, leaves=tree.params.leaves,
+                                                leaf_quality=tree.params.leaf_quality,
+                                                levels=tree.params.levels) != tree.params:
+        return generate(p, tree.seed, options)
+    present = int(tree.stem_level.max()) if tree.n_stems else 0
+    last = min(max(n_levels, 1) - 1, present)
+    n_stems = int(np.searchsorted(tree.stem_level, last, side="right"))
+    n_nodes = int(tree.stem_node_start[n_stems]) if n_stems < tree.n_stems else tree.n_nodes
+    g0 = int(np.searchsorted(tree.stem_level, last, side="left"))
+    n0 = int(tree.stem_node_start[g0])
+    lvl = np.arange(g0, n_stems)
+    clone = tree.stem_clone[lvl]
+    origin = np.where(clone, tree.stem_parent[lvl] - g0, np.arange(lvl.shape[0]))
+    while True:                                   # clones of clones: jump to the original
+        nxt = np.where(clone[origin], origin[origin], origin)
+        if np.array_equal(nxt, origin):
+            break
+        origin = nxt
+    res = max(1, int(p.level[last].curve_res))
+    length = tree.stem_length[lvl]
+    seg_len = length / res
+    first_seg = np.rint(tree.node_z[tree.stem_node_start[lvl]] / np.maximum(seg_len, 1e-300)
+                        ).astype(np.int64)
+    orig_parent = tree.stem_parent[g0 + origin]
+    parent_length = np.where(orig_parent >= 0, tree.stem_length[np.maximum(orig_parent, 0)], 1.0)
+    ctx = _LevelContext(level=last, g0=g0, node_start=tree.stem_node_start[lvl].astype(np.int64),
+                        counts=tree.stem_node_count[lvl].astype(np.int64), first_seg=first_seg,
+                        origin=origin, length=length, seg_len=seg_len,
+                        radius=tree.stem_radius[lvl], offset_on_parent=tree.stem_offset[g0 + origin],
+                        parent_length=parent_length, node_pos=tree.node_pos[n0:n_nodes],
+                        node_frame=tree.node_frame[n0:n_nodes],
+                        node_radius=tree.node_radius[n0:n_nodes], node_z=tree.node_z[n0:n_nodes],
+                        n_originals=int(np.count_nonzero(~clone)))
+    if n_levels >= 1:
+        leaves = _leaves(p, ctx, tree.seed, n_levels, options)
+    else:
+        leaves = {k: np.zeros((0,) + t) for k, t in
+                  (("stem", ()), ("node", ()), ("pos", (3,)), ("frame", (3, 3)), ("size", (2,)))}
+    s, n = slice(0, n_stems), slice(0, n_nodes)
+    return replace(
+        tree, params=p,
+        stem_level=tree.stem_level[s], stem_parent=tree.stem_parent[s],
+        stem_parent_node=tree.stem_parent_node[s], stem_offset=tree.stem_offset[s],
+        stem_length=tree.stem_length[s], stem_radius=tree.stem_radius[s],
+        stem_clone=tree.stem_clone[s], stem_node_start=tree.stem_node_start[s],
+        stem_node_count=tree.stem_node_count[s], node_stem=tree.node_stem[n],
+        node_pos=tree.node_pos[n], node_frame=tree.node_frame[n], node_radius=tree.node_radius[n],
+        node_z=tree.node_z[n],
+        leaf_stem=leaves["stem"].astype(np.int32), leaf_node=leaves["node"].astype(np.int32),
+        leaf_pos=leaves["pos"].astype(np.float64), leaf_frame=leaves["frame"].astype(np.float64),
+        leaf_size=leaves["size"].astype(np.float64))

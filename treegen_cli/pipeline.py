@@ -10,7 +10,7 @@ from dataclasses import dataclass, field, replace
 
 from . import __version__
 from .asset import Asset, Lod, Material
-from .generate import DEFAULTS as GENERATE_DEFAULTS, GenerateOptions, generate
+from .generate import DEFAULTS as GENERATE_DEFAULTS, GenerateOptions, generate, regrow_leaves
 from .limits import LIMITS_DEFAULTS, Limits, check_keys, check_mesh
 from .lod import LOD_DEFAULTS, LodOptions, decimate, lod_stage_options, match_leaf_area, screen_coverage
 from .mesh import MESH_DEFAULTS, MeshOptions, build_mesh
@@ -76,7 +76,7 @@ def build_lods(params: Params, tree: Tree, options: MakeOptions, seed: int,
         p, gen, rig, mesh = lod_stage_options(params, k, options.generate, options.rig,
                                               options.mesh, lo)
         t = tree if gen == options.generate and p == params else \
-            timings.run("generate", generate, p, seed, gen)
+            timings.run("generate", regrow_leaves, tree, p, gen)
         if gen.levels is not None:
             t = match_leaf_area(t, area)
         lod = build_lod(t, replace(options, rig=rig, mesh=mesh), seed, timings)
