@@ -1,0 +1,484 @@
+"""Headless OpenGL renderer for previews: moderngl on an EGL context (Mesa llvmpipe will do).
+
+What it draws, so a picture says something about the asset before an engine opens it:
+  - a sky gradient and a ground plane fading into the horizon,
+  - the tree skinned in the vertex shader exactly like an engine does (per vertex Σ wᵢ·Sᵢ with
+    Sᵢ = joint world matrix · inverse bind matrix, four influences), so a broken skin shows,
+  - a sun with a shadow map (the tree shades itself and the ground) plus a sky/ground
+    hemisphere ambient; leaves are lit from both sides with some light through them,
+  - 2×2 supersampling, box-filtered down on the CPU.
+
+World space here is Y up (glTF's), metres. Everything the renderer needs comes in a `Scene`;
+loading files and assets into one is preview.py's job.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from .errors import TreegenError
+
+FOV_DEG = 30.0                      # vertical field of view of the preview camera
+SUPERSAMPLE = 2                     # rendered at SUPERSAMPLE× the size, box-filtered down
+SHADOW_SIZE = 2048                  # shadow map texels per side
+SKY_ZENITH = (0.23, 0.42, 0.78)     # linear RGB
+SKY_HORIZON = (0.72, 0.80, 0.90)
+GROUND = (0.20, 0.21, 0.13)
+SUN_COLOR = (2.6, 2.45, 2.2)        # linear, HDR (tone-mapped in the shader)
+
+
+@dataclass(frozen=True, eq=False)
+class Part:
+    """One skinned triangle list with one material (Y up)."""
+
+    name: str
+    positions: np.ndarray       # float32 (V, 3), rest pose
+    normals: np.ndarray         # float32 (V, 3)
+    indices: np.ndarray         # uint32 (T*3,)
+    joints: np.ndarray          # (V, 4) ints, into the scene's skinning matrices
+    weights: np.ndarray         # float32 (V, 4)
+    color: tuple[float, float, float]   # linear base colour
+    double_sided: bool = False  # leaves: lit from both faces, light passes through
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """What to draw: parts plus a way to pose them. `skinning(t)` gives (T, J, 4, 4) matrices
+    (column-vector, Y up) for times t in seconds; None means the rest pose (identities)."""
+
+    parts: list[Part]
+    n_joints: int
+    duration: float = 0.0                                    # wind loop length, s (0: static)
+    skinning: Callable[[np.ndarray], np.ndarray] | None = None
+    label: str = ""
+
+    def pose(self, t: np.ndarray) -> np.ndarray:
+        t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        if self.skinning is None:
+            return np.broadcast_to(np.eye(4), (len(t), self.n_joints, 4, 4)).copy()
+        return self.skinning(t)
+
+
+def skin_points(points: np.ndarray, joints: np.ndarray, weights: np.ndarray,
+                skinning: np.ndarray) -> np.ndarray:
+    """Linear blend skinning on the CPU: Σ_k w_k · S[j_k] · p for (V, 3) points and (J, 4, 4)
+    matrices. Used for framing (animated bounds) and as the reference for the shader."""
+    p = np.asarray(points, dtype=np.float64)
+    out = np.zeros_like(p)
+    for k in range(joints.shape[1]):          # four influence slots, not vertices
+        m = skinning[np.asarray(joints[:, k], dtype=np.int64)]
+        out += weights[:, k, None] * (np.einsum("vij,vj->vi", m[:, :3, :3], p) + m[:, :3, 3])
+    return out
+
+
+# --------------------------------------------------------------------------------- cameras
+
+def look_at(eye: np.ndarray, target: np.ndarray, up=(0.0, 1.0, 0.0)) -> np.ndarray:
+    f = np.asarray(target, float) - eye
+    f /= np.linalg.norm(f)
+    r = np.cross(f, up)
+    if np.linalg.norm(r) < 1e-9:
+        r = np.cross(f, (0.0, 0.0, 1.0))
+    r /= np.linalg.norm(r)
+    u = np.cross(r, f)
+    m = np.eye(4)
+    m[0, :3], m[1, :3], m[2, :3] = r, u, -f
+    m[:3, 3] = -m[:3, :3] @ eye
+    return m
+
+
+def perspective(fov_deg: float, aspect: float, near: float, far: float) -> np.ndarray:
+    f = 1.0 / np.tan(np.radians(fov_deg) / 2)
+    m = np.zeros((4, 4))
+    m[0, 0], m[1, 1] = f / aspect, f
+    m[2, 2], m[2, 3] = (far + near) / (near - far), 2 * far * near / (near - far)
+    m[3, 2] = -1.0
+    return m
+
+
+def orthographic(half: float, near: float, far: float) -> np.ndarray:
+    m = np.eye(4)
+    m[0, 0] = m[1, 1] = 1.0 / half
+    m[2, 2], m[2, 3] = -2.0 / (far - near), -(far + near) / (far - near)
+    return m
+
+
+def direction(azimuth_deg: float, elevation_deg: float) -> np.ndarray:
+    """Unit vector (Y up) from the tree towards the viewer. Azimuth is measured in the
+    generator's Z-up frame, counter-clockwise from +X (so 0 looks from +X, -90 from −Y)."""
+    a, e = np.radians(azimuth_deg), np.radians(elevation_deg)
+    zx, zy, zz = np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)
+    return np.array([zx, zz, -zy])             # Z up → Y up: (x, y, z) → (x, z, −y)
+
+
+@dataclass(frozen=True)
+class Camera:
+    eye: np.ndarray
+    target: np.ndarray
+    near: float
+    far: float
+    fov_deg: float = FOV_DEG
+
+    def view_proj(self, aspect: float = 1.0) -> np.ndarray:
+        return perspective(self.fov_deg, aspect, self.near, self.far) @ look_at(self.eye, self.target)
+
+
+def frame_points(points: np.ndarray, azimuth_deg: float, elevation_deg: float,
+                 margin: float = 0.08, fov_deg: float = FOV_DEG) -> Camera:
+    """A camera looking from (azimuth, elevation) that fits every point inside the view with
+    `margin` (fraction of the half-height) to spare, centred on the points' screen extent."""
+    pts = np.asarray(points, dtype=np.float64)
+    lo, hi = pts.min(0), pts.max(0)
+    target = 0.5 * (lo + hi)
+    radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-3)
+    back = direction(azimuth_deg, elevation_deg)
+    tan_half = np.tan(np.radians(fov_deg) / 2) * (1.0 - margin)
+    dist = 3.0 * radius
+    for _ in range(4):   # fit distance, re-centre on the projected extent, fit again
+        view = look_at(target + back * dist, target)
+        v = pts @ view[:3, :3].T + view[:3, 3]      # camera space, looking down −z
+        depth = -v[:, 2]
+        x, y = v[:, 0] / depth, v[:, 1] / depth     # tangents of the view angles
+        cx, cy = 0.5 * (x.min() + x.max()), 0.5 * (y.min() + y.max())
+        right, up = view[0, :3], view[1, :3]
+        target = target + dist * (cx * right + cy * up)
+        # distance at which every point's |x|,|y| tangent from the new centre fits tan_half
+        rel = pts - target
+        along = rel @ back                          # towards the camera
+        lateral = np.maximum(np.abs(rel @ right), np.abs(rel @ up))
+        dist = float(np.max(along + lateral / tan_half))
+    near = max(dist - radius * 1.5, dist * 0.02)
+    return Camera(eye=target + back * dist, target=target, near=near, far=dist + radius * 60)
+
+
+# --------------------------------------------------------------------------------- shaders
+
+_COMMON = """
+uniform vec3 sun_dir;          // towards the sun
+uniform vec3 sun_color;
+uniform mat4 light_vp;
+uniform sampler2DShadow shadow_map;
+uniform float shadow_bias;
+uniform vec3 sky_zenith;
+uniform vec3 sky_horizon;
+uniform vec3 ground_color;
+
+float sun_visibility(vec3 p, vec3 n) {
+    vec4 l = light_vp * vec4(p + n * shadow_bias, 1.0);
+    vec3 c = l.xyz / l.w * 0.5 + 0.5;
+    if (any(lessThan(c.xy, vec2(0.0))) || any(greaterThan(c.xy, vec2(1.0)))) return 1.0;
+    float s = 0.0;
+    vec2 texel = 1.0 / vec2(textureSize(shadow_map, 0));
+    for (int i = -1; i <= 1; i++)
+        for (int j = -1; j <= 1; j++)
+            s += texture(shadow_map, vec3(c.xy + vec2(i, j) * texel, c.z - 0.0015));
+    return s / 9.0;
+}
+
+vec3 sky(vec3 d) {
+    float h = clamp(d.y, 0.0, 1.0);
+    return mix(sky_horizon, sky_zenith, pow(h, 0.6));
+}
+
+vec3 tonemap(vec3 c) {   // Reinhard on luminance-ish, then sRGB-like gamma
+    c = c / (1.0 + c * 0.35);
+    return pow(clamp(c, 0.0, 1.0), vec3(1.0 / 2.2));
+}
+"""
+
+_TREE_VS = """
+#version 330
+uniform mat4 view_proj;
+uniform sampler2D skin;        // texel (c, j): column c of joint j's skinning matrix
+in vec3 in_pos;
+in vec3 in_normal;
+in vec4 in_joints;
+in vec4 in_weights;
+out vec3 v_pos;
+out vec3 v_normal;
+
+mat4 joint_matrix(float j) {
+    int r = int(j + 0.5);
+    return mat4(texelFetch(skin, ivec2(0, r), 0), texelFetch(skin, ivec2(1, r), 0),
+                texelFetch(skin, ivec2(2, r), 0), texelFetch(skin, ivec2(3, r), 0));
+}
+
+void main() {
+    mat4 m = in_weights.x * joint_matrix(in_joints.x) + in_weights.y * joint_matrix(in_joints.y)
+           + in_weights.z * joint_matrix(in_joints.z) + in_weights.w * joint_matrix(in_joints.w);
+    vec4 p = m * vec4(in_pos, 1.0);
+    v_pos = p.xyz;
+    v_normal = mat3(m) * in_normal;
+    gl_Position = view_proj * p;
+}
+"""
+
+_TREE_FS = """
+#version 330
+""" + _COMMON + """
+uniform vec3 base_color;
+uniform bool leaf;
+uniform vec3 crown_center;
+uniform vec3 crown_radius;
+in vec3 v_pos;
+in vec3 v_normal;
+out vec4 f_color;
+
+float hash(uint x) {
+    x ^= x >> 16; x *= 0x7feb352du; x ^= x >> 15; x *= 0x846ca68bu; x ^= x >> 16;
+    return float(x) / 4294967295.0;
+}
+
+void main() {
+    vec3 n = normalize(v_normal);
+    if (!gl_FrontFacing) n = -n;                       // light the face we look at
+    vec3 albedo = base_color;
+    if (leaf) {                                        // per-leaf tint (2 triangles a card)
+        float h = hash(uint(gl_PrimitiveID) >> 1u);
+        albedo *= vec3(0.85 + 0.3 * h, 0.8 + 0.4 * h, 0.8 + 0.2 * h);
+    }
+    float ndl = dot(n, sun_dir);
+    float vis = sun_visibility(v_pos, n);
+    float direct = max(ndl, 0.0) + (leaf ? 0.45 * max(-ndl, 0.0) : 0.0);
+    // inner crown gets less sky: a cheap ambient occlusion from the depth in the crown
+    float r = length((v_pos - crown_center) / crown_radius);
+    float ao = mix(0.45, 1.0, smoothstep(0.1, 1.0, r));
+    vec3 hemi = mix(ground_color * 0.6, sky_zenith * 0.9 + 0.1, 0.5 + 0.5 * n.y);
+    vec3 c = albedo * (sun_color * direct * vis + hemi * ao);
+    f_color = vec4(tonemap(c), 1.0);
+}
+"""
+
+_DEPTH_FS = """
+#version 330
+void main() {}
+"""
+
+_SKY_VS = """
+#version 330
+in vec2 in_ndc;
+out vec2 v_ndc;
+void main() { v_ndc = in_ndc; gl_Position = vec4(in_ndc, 0.9999, 1.0); }
+"""
+
+_SKY_FS = """
+#version 330
+""" + _COMMON + """
+uniform mat4 inv_view_proj;
+in vec2 v_ndc;
+out vec4 f_color;
+void main() {
+    vec4 a = inv_view_proj * vec4(v_ndc, -1.0, 1.0);
+    vec4 b = inv_view_proj * vec4(v_ndc, 1.0, 1.0);
+    vec3 d = normalize(b.xyz / b.w - a.xyz / a.w);
+    f_color = vec4(tonemap(sky(d)), 1.0);
+}
+"""
+
+_GROUND_VS = """
+#version 330
+uniform mat4 view_proj;
+uniform float ground_y;
+uniform float ground_half;
+uniform vec3 ground_center;
+in vec2 in_xz;
+out vec3 v_pos;
+void main() {
+    v_pos = vec3(ground_center.x + in_xz.x * ground_half, ground_y,
+                 ground_center.z + in_xz.y * ground_half);
+    gl_Position = view_proj * vec4(v_pos, 1.0);
+}
+"""
+
+_GROUND_FS = """
+#version 330
+""" + _COMMON + """
+uniform vec3 eye;
+uniform float fog_start;
+uniform float fog_end;
+in vec3 v_pos;
+out vec4 f_color;
+void main() {
+    vec3 n = vec3(0.0, 1.0, 0.0);
+    float vis = sun_visibility(v_pos, n);
+    vec3 c = ground_color * (sun_color * max(sun_dir.y, 0.0) * vis + sky_zenith * 0.8);
+    float fog = smoothstep(fog_start, fog_end, length(v_pos.xz - eye.xz));
+    vec3 d = normalize(v_pos - eye);
+    f_color = vec4(tonemap(mix(c, sky(vec3(d.x, 0.0, d.z)), fog)), 1.0);
+}
+"""
+
+
+def _context():
+    try:
+        import moderngl
+    except ImportError as e:
+        raise TreegenError(f"preview needs moderngl (pip install moderngl): {e}") from None
+    try:
+        return moderngl.create_standalone_context(backend="egl", require=330)
+    except Exception as e:   # no EGL / no GPU driver: say so in one line
+        msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        raise TreegenError(f"preview: cannot create a headless OpenGL (EGL) context: {msg}") from None
+
+
+def egl_available() -> bool:
+    """True when a headless OpenGL 3.3 context can be made here (tests skip otherwise)."""
+    try:
+        ctx = _context()
+    except TreegenError:
+        return False
+    ctx.release()
+    return True
+
+
+@dataclass
+class _GpuPart:
+    vao: object
+    depth_vao: object
+    part: Part
+
+
+class Renderer:
+    """Draws one Scene from one Camera, any number of poses; owns its GL context."""
+
+    def __init__(self, scene: Scene, width: int, height: int, supersample: int = SUPERSAMPLE):
+        if width < 8 or height < 8 or width > 8192 or height > 8192:
+            raise TreegenError(f"--size {width}x{height}: each side must be in 8..8192 pixels")
+        self.scene = scene
+        self.width, self.height, self.ss = width, height, supersample
+        ctx = self.ctx = _context()
+        self.tree_prog = ctx.program(vertex_shader=_TREE_VS, fragment_shader=_TREE_FS)
+        self.depth_prog = ctx.program(vertex_shader=_TREE_VS, fragment_shader=_DEPTH_FS)
+        self.sky_prog = ctx.program(vertex_shader=_SKY_VS, fragment_shader=_SKY_FS)
+        self.ground_prog = ctx.program(vertex_shader=_GROUND_VS, fragment_shader=_GROUND_FS)
+        W, H = width * supersample, height * supersample
+        self.color = ctx.renderbuffer((W, H), 4)
+        self.depth = ctx.depth_renderbuffer((W, H))
+        self.fbo = ctx.framebuffer(color_attachments=[self.color], depth_attachment=self.depth)
+        self.shadow_tex = ctx.depth_texture((SHADOW_SIZE, SHADOW_SIZE))
+        self.shadow_tex.compare_func = "<="
+        self.shadow_tex.repeat_x = self.shadow_tex.repeat_y = False
+        self.shadow_fbo = ctx.framebuffer(depth_attachment=self.shadow_tex)
+        self.skin_tex = ctx.texture((4, max(scene.n_joints, 1)), 4, dtype="f4")
+        self.parts = [self._upload(p) for p in scene.parts if len(p.indices)]
+        quad = np.array([-1, -1, 1, -1, -1, 1, 1, 1], dtype="f4")
+        self.sky_vao = ctx.vertex_array(self.sky_prog, [(ctx.buffer(quad.tobytes()), "2f", "in_ndc")])
+        self.ground_vao = ctx.vertex_array(self.ground_prog, [(ctx.buffer(quad.tobytes()), "2f", "in_xz")])
+        self._setup_lighting()
+
+    def _upload(self, p: Part) -> _GpuPart:
+        ctx = self.ctx
+        bufs = [(ctx.buffer(np.ascontiguousarray(p.positions, "f4").tobytes()), "3f", "in_pos"),
+                (ctx.buffer(np.ascontiguousarray(p.normals, "f4").tobytes()), "3f", "in_normal"),
+                (ctx.buffer(np.ascontiguousarray(p.joints, "f4").tobytes()), "4f", "in_joints"),
+                (ctx.buffer(np.ascontiguousarray(p.weights, "f4").tobytes()), "4f", "in_weights")]
+        ibo = ctx.buffer(np.ascontiguousarray(p.indices, "u4").tobytes())
+        vao = ctx.vertex_array(self.tree_prog, bufs, index_buffer=ibo, index_element_size=4)
+        dvao = ctx.vertex_array(self.depth_prog, [b for b in bufs if b[2] != "in_normal"],
+                                index_buffer=ibo, index_element_size=4)
+        return _GpuPart(vao, dvao, p)
+
+    def _setup_lighting(self) -> None:
+        pts = np.concatenate([p.positions for p in self.scene.parts if len(p.positions)] or
+                             [np.zeros((1, 3), np.float32)]).astype(np.float64)
+        lo, hi = pts.min(0), pts.max(0)
+        self.bounds = (lo, hi)
+        leaves = [p.positions for p in self.scene.parts if p.double_sided and len(p.positions)]
+        crown = np.concatenate(leaves).astype(np.float64) if leaves else pts
+        clo, chi = crown.min(0), crown.max(0)
+        self.crown_center = 0.5 * (clo + chi)
+        self.crown_radius = np.maximum(0.5 * (chi - clo), 0.05 * max(float(np.max(hi - lo)), 1e-3))
+
+    def _set(self, prog, name, value) -> None:
+        if name in prog:
+            u = prog[name]
+            if isinstance(value, np.ndarray) and value.shape == (4, 4):
+                u.write(np.ascontiguousarray(value.T, dtype="f4").tobytes())
+            elif isinstance(value, (bool, np.bool_)):
+                u.value = bool(value)
+            elif isinstance(value, int):
+                u.value = value
+            else:
+                u.value = tuple(float(v) for v in np.ravel(value)) if np.ndim(value) else float(value)
+
+    def render(self, camera: Camera, skinning: np.ndarray | None = None,
+               sun_azimuth_deg: float = 0.0, sun_elevation_deg: float = 50.0) -> np.ndarray:
+        """One frame as uint8 (height, width, 3), top row first."""
+        ctx = self.ctx
+        J = max(self.scene.n_joints, 1)
+        skin = np.broadcast_to(np.eye(4), (J, 4, 4)) if skinning is None else skinning
+        self.skin_tex.write(np.ascontiguousarray(np.transpose(skin, (0, 2, 1)), "f4").tobytes())
+        self.skin_tex.use(location=0)
+        self.shadow_tex.use(location=1)
+
+        lo, hi = self.bounds
+        center = 0.5 * (lo + hi)
+        radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-3) * 1.1
+        sun = direction(sun_azimuth_deg, sun_elevation_deg)
+        light_vp = orthographic(radius, 0.0, 4 * radius) @ look_at(center + sun * 2 * radius, center)
+        view_proj = camera.view_proj(self.width / self.height)
+        texel_world = 2 * radius / SHADOW_SIZE
+        common = {"sun_dir": sun, "sun_color": SUN_COLOR, "light_vp": light_vp,
+                  "shadow_map": 1, "shadow_bias": 1.5 * texel_world, "sky_zenith": SKY_ZENITH,
+                  "sky_horizon": SKY_HORIZON, "ground_color": GROUND}
+
+        # shadow pass: depth of the posed tree from the sun
+        self.shadow_fbo.use()
+        ctx.viewport = (0, 0, SHADOW_SIZE, SHADOW_SIZE)
+        self.shadow_fbo.clear(depth=1.0)
+        ctx.enable(ctx.DEPTH_TEST)
+        ctx.disable(ctx.CULL_FACE)
+        self._set(self.depth_prog, "view_proj", light_vp)
+        self._set(self.depth_prog, "skin", 0)
+        for g in self.parts:
+            g.depth_vao.render()
+
+        # main pass
+        self.fbo.use()
+        ctx.viewport = (0, 0, self.width * self.ss, self.height * self.ss)
+        self.fbo.clear(0.0, 0.0, 0.0, 1.0, depth=1.0)
+        ctx.disable(ctx.DEPTH_TEST)
+        for k, v in common.items():
+            self._set(self.sky_prog, k, v)
+        self._set(self.sky_prog, "inv_view_proj", np.linalg.inv(view_proj))
+        self.sky_vao.render(mode=ctx.TRIANGLE_STRIP)
+        ctx.enable(ctx.DEPTH_TEST)
+        size = float(np.max(hi - lo))
+        for k, v in common.items():
+            self._set(self.ground_prog, k, v)
+        self._set(self.ground_prog, "view_proj", view_proj)
+        self._set(self.ground_prog, "ground_y", lo[1])
+        self._set(self.ground_prog, "ground_half", 40 * size)
+        self._set(self.ground_prog, "ground_center", center)
+        self._set(self.ground_prog, "eye", camera.eye)
+        dist = float(np.linalg.norm(camera.eye - camera.target))
+        self._set(self.ground_prog, "fog_start", dist + 0.5 * size)
+        self._set(self.ground_prog, "fog_end", dist + 8 * size)
+        self.ground_vao.render(mode=ctx.TRIANGLE_STRIP)
+        for k, v in common.items():
+            self._set(self.tree_prog, k, v)
+        self._set(self.tree_prog, "view_proj", view_proj)
+        self._set(self.tree_prog, "skin", 0)
+        self._set(self.tree_prog, "crown_center", self.crown_center)
+        self._set(self.tree_prog, "crown_radius", self.crown_radius)
+        for g in self.parts:
+            self._set(self.tree_prog, "base_color", g.part.color)
+            self._set(self.tree_prog, "leaf", g.part.double_sided)
+            g.vao.render()
+
+        W, H = self.width * self.ss, self.height * self.ss
+        data = np.frombuffer(self.fbo.read(components=3, alignment=1), dtype=np.uint8)
+        img = data.reshape(H, W, 3)[::-1].astype(np.float32)
+        img = img.reshape(self.height, self.ss, self.width, self.ss, 3).mean(axis=(1, 3))
+        return np.round(img).astype(np.uint8)
+
+    def release(self) -> None:
+        self.ctx.release()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.release()
