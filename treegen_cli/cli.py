@@ -262,6 +262,12 @@ from .cli_forest import forest  # noqa: E402  (its body lives in cli_forest.py)
 
 cli.add_command(forest)
 
+from .preview import preview_command  # noqa: E402  (body in preview.py)
+from .species_list import species_command  # noqa: E402  (body in species_list.py)
+
+cli.add_command(preview_command)
+cli.add_command(species_command)
+
 
 def make_summary(asset, tree, written, stages: dict, seconds: float) -> dict:
     """`treegen make --json`: what was written and how big, per LOD, and seconds per stage."""

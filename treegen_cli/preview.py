@@ -9,9 +9,11 @@ renderer applies them per vertex, so what you see is what the file's skin and an
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import click
 import numpy as np
 
 from .errors import TreegenError
@@ -585,3 +587,73 @@ def save_gif(frames: list[np.ndarray], path: str | os.PathLike, fps: float) -> P
         images[0].save(tmp, format="GIF", save_all=True, append_images=images[1:],
                        duration=int(round(1000 / fps)), loop=0, optimize=False, disposal=1)
     return path
+
+
+# ------------------------------------------------------------------------------ command
+
+def _size(text: str) -> tuple[int, int]:
+    m = re.fullmatch(r"\s*(\d+)\s*(?:[xX×]\s*(\d+))?\s*", text or "")
+    if not m:
+        raise TreegenError(f"--size '{text}': expected pixels as N or WxH, e.g. 512 or 800x600")
+    w = int(m.group(1))
+    h = int(m.group(2)) if m.group(2) else w
+    if not (8 <= w <= 8192 and 8 <= h <= 8192):
+        raise TreegenError(f"--size '{text}': each side must be in 8..8192 pixels")
+    return w, h
+
+
+@click.command("preview")
+@click.argument("input_path", metavar="INPUT", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
+              help="Still image of the rest pose: .png (optimised) or .jpg.")
+@click.option("--animate", type=click.Path(dir_okay=False, path_type=Path),
+              help="Animated GIF of the whole wind loop (first frame = last frame), skinned on "
+                   "the GPU from the file's joints and keys, like an engine.")
+@click.option("--azimuth", type=float, default=DEFAULTS.azimuth, show_default=True,
+              help="Camera bearing, degrees counter-clockwise from +X seen from above "
+                   "(Z-up tree space); -90 looks along +Y, so the default wind blows left → right.")
+@click.option("--elevation", type=float, default=DEFAULTS.elevation, show_default=True,
+              help="Camera height angle above the horizon, degrees (-89..89).")
+@click.option("--size", "size", default=str(DEFAULTS.width), show_default=True, metavar="N|WxH",
+              help="Image size in pixels (square N, or width x height).")
+@click.option("--lod", type=int, default=0, show_default=True,
+              help="Which LOD to render (0 = full detail).")
+@click.option("--seed", type=int, default=0, show_default=True,
+              help="Seed when INPUT is a species file.")
+@click.option("--fps", type=float, default=DEFAULTS.fps, show_default=True,
+              help="GIF frames per second of the wind loop (frames = duration × fps + 1).")
+def preview_command(input_path, output, animate, azimuth, elevation, size, lod, seed, fps):
+    """Render INPUT headless (OpenGL on EGL; no display needed): a species file (.txt .xml,
+    grown in-process) or a tree written by `treegen make` (.glb .gltf .usda .usdc .usdz).
+    Lit by a sun with shadows and sky light, bark and leaf colours from the materials, framed
+    automatically from the bounds of the whole animation."""
+    import time
+
+    if output is None and animate is None:
+        raise TreegenError("preview: give an image with -o out.png and/or --animate out.gif")
+    if output is not None and output.suffix.lower() not in IMAGE_SUFFIXES:
+        raise TreegenError(f"{output}: unknown image extension '{output.suffix or '(none)'}'; "
+                           f"supported: {' '.join(IMAGE_SUFFIXES)}")
+    if animate is not None and animate.suffix.lower() not in ANIMATION_SUFFIXES:
+        raise TreegenError(f"{animate}: unknown animation extension '{animate.suffix or '(none)'}'"
+                           f"; supported: {' '.join(ANIMATION_SUFFIXES)}")
+    if not -89.0 <= elevation <= 89.0:
+        raise TreegenError(f"--elevation {elevation:g}: allowed range -89..89 degrees")
+    if not 0.5 <= fps <= 60.0:
+        raise TreegenError(f"--fps {fps:g}: allowed range 0.5..60 frames per second")
+    if lod < 0:
+        raise TreegenError(f"--lod {lod}: must be 0 or more")
+    width, height = _size(size)
+    options = PreviewOptions(azimuth=azimuth, elevation=elevation, width=width, height=height,
+                             lod=lod, seed=seed, fps=fps)
+    t0 = time.perf_counter()
+    scene = load_scene(input_path, options)
+    if output is not None:
+        save_image(render_still(scene, options), output)
+        click.echo(f"wrote {output}  ({width}×{height}, LOD {lod})")
+    if animate is not None:
+        frames = render_loop(scene, options)
+        save_gif(frames, animate, fps)
+        click.echo(f"wrote {animate}  ({width}×{height}, {len(frames)} frames over "
+                   f"{scene.duration:.2f} s, LOD {lod})")
+    click.echo(f"  {time.perf_counter() - t0:.2f} s")
