@@ -430,7 +430,7 @@ def scene_from_usd(path: Path, lod: int = 0) -> Scene:
             duration = (max(codes) - min(codes)) / tcps
     start = stage.GetStartTimeCode() if stage.HasAuthoredTimeCodeRange() else 0.0
 
-    def skinning(t: np.ndarray) -> np.ndarray:
+    def skinning(t: np.ndarray, _keep=(stage, cache)) -> np.ndarray:   # the query needs both alive
         out = np.empty((len(t), J, 4, 4))
         for i, ti in enumerate(np.atleast_1d(t)):     # frames (tens), not vertices
             xf = skel_query.ComputeSkinningTransforms(Usd.TimeCode(start + float(ti) * tcps))

@@ -25,7 +25,7 @@ SUPERSAMPLE = 2                     # rendered at SUPERSAMPLE× the size, box-fi
 SHADOW_SIZE = 2048                  # shadow map texels per side
 SKY_ZENITH = (0.23, 0.42, 0.78)     # linear RGB
 SKY_HORIZON = (0.72, 0.80, 0.90)
-GROUND = (0.20, 0.21, 0.13)
+GROUND = (0.085, 0.10, 0.045)
 SUN_COLOR = (2.6, 2.45, 2.2)        # linear, HDR (tone-mapped in the shader)
 
 
@@ -454,8 +454,8 @@ class Renderer:
         self._set(self.ground_prog, "ground_center", center)
         self._set(self.ground_prog, "eye", camera.eye)
         dist = float(np.linalg.norm(camera.eye - camera.target))
-        self._set(self.ground_prog, "fog_start", dist + 0.5 * size)
-        self._set(self.ground_prog, "fog_end", dist + 8 * size)
+        self._set(self.ground_prog, "fog_start", dist + 1.0 * size)
+        self._set(self.ground_prog, "fog_end", dist + 25 * size)
         self.ground_vao.render(mode=ctx.TRIANGLE_STRIP)
         for k, v in common.items():
             self._set(self.tree_prog, k, v)
