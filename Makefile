@@ -21,7 +21,7 @@ GALLERY_SPECIES = $(basename $(notdir $(wildcard species/*.txt)))
 gallery:
 	@mkdir -p docs/gallery
 	@for s in $(GALLERY_SPECIES); do \
-		treegen preview species/$$s.txt -o docs/gallery/$$s.png --size 320 -q || exit 1; \
+		treegen preview species/$$s.txt -o docs/gallery/$$s.png --size 320 --png-colors 256 -q || exit 1; \
 		echo "docs/gallery/$$s.png"; done
 	treegen preview species/quaking_aspen.txt --animate docs/gallery/quaking_aspen_wind.gif --size 240 --fps 10 -q
 	@ls -l docs/gallery

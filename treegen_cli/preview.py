@@ -551,8 +551,8 @@ def render_loop(scene: Scene, options: PreviewOptions = DEFAULTS) -> list[np.nda
     return frames
 
 
-def save_image(pixels: np.ndarray, path: str | os.PathLike) -> Path:
-    """PNG (optimised) or JPEG, written atomically."""
+def save_image(pixels: np.ndarray, path: str | os.PathLike, colors: int = 0) -> Path:
+    """PNG (optimised; `colors` > 0 quantises to a palette, ~3× smaller) or JPEG, atomically."""
     from PIL import Image
 
     from .exchange import staged
@@ -564,6 +564,9 @@ def save_image(pixels: np.ndarray, path: str | os.PathLike) -> Path:
     img = Image.fromarray(pixels)
     with staged(path) as tmp:
         if path.suffix.lower() == ".png":
+            if colors:
+                img = img.quantize(colors=colors, method=Image.Quantize.MEDIANCUT,
+                                   dither=Image.Dither.FLOYDSTEINBERG)
             img.save(tmp, format="PNG", optimize=True)
         else:
             img.save(tmp, format="JPEG", quality=90)
@@ -622,7 +625,11 @@ def _size(text: str) -> tuple[int, int]:
               help="Seed when INPUT is a species file.")
 @click.option("--fps", type=float, default=DEFAULTS.fps, show_default=True,
               help="GIF frames per second of the wind loop (frames = duration × fps + 1).")
-def preview_command(input_path, output, animate, azimuth, elevation, size, lod, seed, fps):
+@click.option("--png-colors", type=click.IntRange(0, 256), default=0, show_default=True,
+              help="Quantise the PNG to this many palette colours (smaller files, e.g. 256 "
+                   "for a README); 0 keeps full colour.")
+def preview_command(input_path, output, animate, azimuth, elevation, size, lod, seed, fps,
+                    png_colors):
     """Render INPUT headless (OpenGL on EGL; no display needed): a species file (.txt .xml,
     grown in-process) or a tree written by `treegen make` (.glb .gltf .usda .usdc .usdz).
     Lit by a sun with shadows and sky light, bark and leaf colours from the materials, framed
@@ -649,7 +656,7 @@ def preview_command(input_path, output, animate, azimuth, elevation, size, lod, 
     t0 = time.perf_counter()
     scene = load_scene(input_path, options)
     if output is not None:
-        save_image(render_still(scene, options), output)
+        save_image(render_still(scene, options), output, png_colors)
         click.echo(f"wrote {output}  ({width}×{height}, LOD {lod})")
     if animate is not None:
         frames = render_loop(scene, options)
