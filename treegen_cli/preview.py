@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import re
+import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -255,7 +256,7 @@ def scene_from_gltf(path: Path, lod: int = 0) -> Scene:
         return _gltf_scene(gltf, blob, read_accessor, lod, path)
     except TreegenError:
         raise
-    except (OSError, ValueError, KeyError, IndexError, TypeError) as e:
+    except (OSError, ValueError, KeyError, IndexError, TypeError, struct.error) as e:
         raise TreegenError(f"{path}: not a readable glTF file ({type(e).__name__}: {e})") from None
 
 
@@ -513,12 +514,13 @@ def framing_points(scene: Scene, times: np.ndarray, max_points: int = 20000) -> 
     return np.concatenate(out) if out else np.zeros((1, 3))
 
 
-def _camera(scene: Scene, options: PreviewOptions, times: np.ndarray):
+def camera_for(scene: Scene, options: PreviewOptions, times: np.ndarray):
+    """One camera that fits the tree at every one of `times` (up to 12 sampled)."""
     sample = times if len(times) <= 12 else times[np.linspace(0, len(times) - 1, 12).astype(int)]
     return frame_points(framing_points(scene, sample), options.azimuth, options.elevation)
 
 
-def _sun(options: PreviewOptions) -> tuple[float, float]:
+def sun_angles(options: PreviewOptions) -> tuple[float, float]:
     az = options.azimuth - 50.0 if options.sun_azimuth is None else options.sun_azimuth
     return az, options.sun_elevation
 
@@ -528,9 +530,9 @@ def render_still(scene: Scene, options: PreviewOptions = DEFAULTS) -> np.ndarray
     from .render import Renderer
 
     times = np.zeros(1)
-    camera = _camera(scene, options, times)
+    camera = camera_for(scene, options, times)
     with Renderer(scene, options.width, options.height) as r:
-        az, el = _sun(options)
+        az, el = sun_angles(options)
         return r.render(camera, scene.pose(times)[0], az, el)
 
 
@@ -542,10 +544,10 @@ def render_loop(scene: Scene, options: PreviewOptions = DEFAULTS) -> list[np.nda
     if scene.duration <= 0 or scene.skinning is None:
         raise TreegenError(f"{scene.label}: has no wind animation to render (made with --no-wind?)")
     times = _sample_times(scene.duration, options.fps)
-    camera = _camera(scene, options, times)
+    camera = camera_for(scene, options, times)
     frames = []
     with Renderer(scene, options.width, options.height) as r:
-        az, el = _sun(options)
+        az, el = sun_angles(options)
         for pose in scene.pose(times):             # frames: tens
             frames.append(r.render(camera, pose, az, el))
     return frames

@@ -404,8 +404,10 @@ class Renderer:
                 u.value = tuple(float(v) for v in np.ravel(value)) if np.ndim(value) else float(value)
 
     def render(self, camera: Camera, skinning: np.ndarray | None = None,
-               sun_azimuth_deg: float = 0.0, sun_elevation_deg: float = 50.0) -> np.ndarray:
-        """One frame as uint8 (height, width, 3), top row first."""
+               sun_azimuth_deg: float = 0.0, sun_elevation_deg: float = 50.0,
+               draw_tree: bool = True) -> np.ndarray:
+        """One frame as uint8 (height, width, 3), top row first. `draw_tree=False` renders the
+        same view without the tree itself (its shadow stays): the background, for tests."""
         ctx = self.ctx
         J = max(self.scene.n_joints, 1)
         skin = np.broadcast_to(np.eye(4), (J, 4, 4)) if skinning is None else skinning
@@ -463,7 +465,7 @@ class Renderer:
         self._set(self.tree_prog, "skin", 0)
         self._set(self.tree_prog, "crown_center", self.crown_center)
         self._set(self.tree_prog, "crown_radius", self.crown_radius)
-        for g in self.parts:
+        for g in self.parts if draw_tree else []:
             self._set(self.tree_prog, "base_color", g.part.color)
             self._set(self.tree_prog, "leaf", g.part.double_sided)
             g.vao.render()
