@@ -336,3 +336,23 @@ def test_run_forest_summary(tmp_path):
     # a single LOD at distance 0 keeps the dense clip: the CPU method updates every leaf vertex
     assert s["leaf_vertex_updates_per_frame"] == s["leaf_vertex_updates_per_frame_without_lod"] > 0
     assert sorted(p.name for p in tmp_path.iterdir()) == ["f.usdz", "layout.json"]
+
+
+def test_oversized_forest_is_refused_naming_the_flag(tmp_path):
+    """A layout over --max-trees is refused before anything is built or written."""
+    import json as _json
+    import subprocess
+    import sys
+
+    species = Path(__file__).resolve().parent.parent / "species" / "palm.txt"
+    layout = {"camera": {"position": [0, -30, 2], "target": [0, 0, 2]},
+              "scatter": [{"species": [{"file": str(species)}], "rectangle": {"min": [-50, -50], "max": [50, 50]},
+                           "count": 300}]}
+    path = tmp_path / "big.json"
+    path.write_text(_json.dumps(layout))
+    out = tmp_path / "f.glb"
+    proc = subprocess.run([sys.executable, "-m", "treegen_cli", "forest", str(path), "-o", str(out),
+                           "--max-trees", "100"], capture_output=True, text=True)
+    assert proc.returncode == 2, proc.stderr
+    assert "--max-trees" in proc.stderr and "scatter[0]" in proc.stderr
+    assert "Traceback" not in proc.stderr and not out.exists()

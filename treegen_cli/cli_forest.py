@@ -23,8 +23,10 @@ from .errors import TreegenError
                    "layout's defaults.error_px, else 1].")
 @click.option("--workers", type=int, default=None,
               help="Processes building prototypes [default: all cores].")
+@click.option("--max-trees", type=int, default=100_000, show_default=True,
+              help="Refuse layouts that place more trees than this (checked before building).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
-def forest(layout, output, schema, all_lods, error_px, workers, as_json):
+def forest(layout, output, schema, all_lods, error_px, workers, max_trees, as_json):
     """Build the forest described by LAYOUT (JSON; see --schema): each distinct (species, seed)
     tree is built once and instanced, each instance at the LOD its camera distance calls for."""
     from .forest import run_forest, schema_text
@@ -38,7 +40,8 @@ def forest(layout, output, schema, all_lods, error_px, workers, as_json):
         raise TreegenError("forest: give an output file with -o, e.g. -o forest.glb")
     if workers is not None and workers < 1:
         raise TreegenError(f"--workers {workers}: must be at least 1")
-    s = run_forest(layout, output, all_lods=all_lods, error_px=error_px, workers=workers)
+    s = run_forest(layout, output, all_lods=all_lods, error_px=error_px, workers=workers,
+                   max_trees=max_trees)
     if as_json:
         click.echo(json.dumps(s, indent=2))
         return

@@ -183,7 +183,7 @@ class Layout:
     placements: list[Placement]
 
 
-def load_layout(path: str | os.PathLike) -> Layout:
+def load_layout(path: str | os.PathLike, max_trees: int = MAX_TREES) -> Layout:
     """Read, validate and expand a layout file (scatters become placements)."""
     path = Path(path)
     try:
@@ -197,7 +197,7 @@ def load_layout(path: str | os.PathLike) -> Layout:
     except json.JSONDecodeError as e:
         raise TreegenError(f"{path}: line {e.lineno} column {e.colno}: invalid JSON ({e.msg})") from None
     try:
-        return parse_layout(data, path)
+        return parse_layout(data, path, max_trees)
     except TreegenError as e:
         raise TreegenError(f"{path}: {e}") from None
 
@@ -222,7 +222,7 @@ def _species_file(base: Path, value: str, where: str, checked: dict) -> Path:
     return p
 
 
-def parse_layout(data, path: Path) -> Layout:
+def parse_layout(data, path: Path, max_trees: int = MAX_TREES) -> Layout:
     """Validate decoded JSON `data` of the layout at `path`; messages start with the JSON path."""
     schema = layout_schema()
     check_schema(data, schema, schema)
@@ -254,10 +254,14 @@ def parse_layout(data, path: Path) -> Layout:
             rotation_deg=float(inst.get("rotation_deg", defaults.rotation_deg)),
             scale=float(inst.get("scale", defaults.scale)), source=where))
     for s, sc in enumerate(data.get("scatter", [])):
-        placements.extend(_scatter_placements(sc, f"scatter[{s}]", base, defaults, checked))
-        if len(placements) > MAX_TREES:
-            raise TreegenError(f"scatter[{s}]: the layout places {len(placements):,} trees; "
-                               f"at most {MAX_TREES:,}")
+        placements.extend(_scatter_placements(sc, f"scatter[{s}]", base, defaults, checked,
+                                              max_trees - len(placements)))
+        if len(placements) > max_trees:
+            raise TreegenError(f"scatter[{s}]: the layout places {len(placements):,} trees, over "
+                               f"the limit of {max_trees:,}; raise it with --max-trees N")
+    if len(placements) > max_trees:
+        raise TreegenError(f"instances: the layout places {len(placements):,} trees, over the "
+                           f"limit of {max_trees:,}; raise it with --max-trees N")
     return Layout(name=str(data.get("name") or path.stem), path=path, camera=camera, wind=wind,
                   defaults=defaults, placements=placements)
 
@@ -333,7 +337,7 @@ def scatter_points(region: np.ndarray, is_polygon: bool, count: int, min_spacing
 
 
 def _scatter_placements(sc: dict, where: str, base: Path, defaults: Defaults,
-                        checked: dict) -> list[Placement]:
+                        checked: dict, max_trees: int = MAX_TREES) -> list[Placement]:
     if ("rectangle" in sc) == ("polygon" in sc):
         raise TreegenError(f"{where}: give exactly one of 'rectangle' or 'polygon'")
     if ("count" in sc) == ("density" in sc):
@@ -358,8 +362,9 @@ def _scatter_placements(sc: dict, where: str, base: Path, defaults: Defaults,
              for i, s in enumerate(sc["species"])]
     weights = np.array([float(s.get("weight", 1.0)) for s in sc["species"]])
     count = int(sc["count"]) if "count" in sc else sc["density"] * area
-    if count > MAX_TREES:
-        raise TreegenError(f"{where}: {count:,.0f} trees (density × area); at most {MAX_TREES:,}")
+    if count > max_trees:
+        raise TreegenError(f"{where}: {count:,.0f} trees (density × area), over the limit of "
+                           f"{max(max_trees, 0):,}; raise it with --max-trees N")
     count = int(round(count))
     seed = int(sc.get("seed", defaults.seed))
     rng = np.random.default_rng([seed, 0x5CA77E4])
@@ -679,7 +684,8 @@ def write_scene(scene: Scene, path: str | os.PathLike) -> list[Path]:
 
 
 def run_forest(layout_path, output, all_lods: bool = False, error_px: float | None = None,
-               workers: int | None = None, progress: bool | None = None) -> dict:
+               workers: int | None = None, progress: bool | None = None,
+               max_trees: int = MAX_TREES) -> dict:
     """The whole command: validate (nothing written on error), build, write, summarise."""
     t0 = time.perf_counter()
     output = Path(output)
@@ -688,7 +694,7 @@ def run_forest(layout_path, output, all_lods: bool = False, error_px: float | No
                            f"supported: {', '.join(SUFFIXES)}")
     if error_px is not None and not (math.isfinite(error_px) and 0 <= error_px <= 100):
         raise TreegenError(f"--error-px {error_px}: allowed range 0..100 pixels")
-    layout = load_layout(layout_path)
+    layout = load_layout(layout_path, max_trees)
     scene = build_scene(layout, all_lods, error_px, workers, progress)
     t1 = time.perf_counter()
     written = write_scene(scene, output)
