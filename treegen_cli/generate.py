@@ -250,7 +250,6 @@ def _split(rng, p, level, seg, res, counts, act, frame, correction, n_stems,
     stems["first"] = np.concatenate([stems["first"], np.full(n_new, seg)])
 
     # members: the original (member 0) and its clones (members 1..k)
-    member_src = np.concatenate([splitting, src])
     member_idx = np.concatenate([np.zeros(splitting.shape[0], dtype=np.int64),
                                  np.arange(n_new) - np.repeat(np.cumsum(k) - k, k) + 1])
     group_k = np.concatenate([k, np.repeat(k, k)])

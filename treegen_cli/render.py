@@ -13,7 +13,7 @@ loading files and assets into one is preview.py's job.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np

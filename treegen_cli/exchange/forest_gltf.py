@@ -28,20 +28,8 @@ import numpy as np
 from .. import __version__
 from ..forest import Scene, phase_rotate
 from .gltf import (_Buffer, _continuous, _is_default, _primitive, _unit, animated_joints, dumps,
-                   glb_bytes, matrix_to_y_up, quat_to_y_up, to_y_up)
+                   glb_bytes, material_dict, matrix_to_y_up, quat_to_y_up, to_y_up)
 
-
-def _material_dict(m) -> dict:
-    d = {"name": m.name,
-         "pbrMetallicRoughness": {"baseColorFactor": [float(c) for c in m.base_color],
-                                  "metallicFactor": float(m.metallic),
-                                  "roughnessFactor": float(m.roughness)}}
-    if m.double_sided:
-        d["doubleSided"] = True
-    if m.alpha_cutoff is not None:
-        d["alphaMode"] = "MASK"
-        d["alphaCutoff"] = float(m.alpha_cutoff)
-    return d
 
 
 class _Shared:
@@ -61,7 +49,7 @@ class _Shared:
     def material(self, m) -> int:
         if m not in self._mat:
             self._mat[m] = len(self.materials)
-            self.materials.append(_material_dict(m))
+            self.materials.append(material_dict(m))
         return self._mat[m]
 
     def mesh(self, p: int, k: int) -> int:

@@ -26,7 +26,7 @@ import numpy as np
 
 from ..errors import TreegenError
 from ..forest import Scene, repeat_clip
-from .usd import SUFFIXES, _identifier, _sample_rate, _snap, build_stage
+from .usd import SUFFIXES, _identifier, _sample_rate, _snap, build_stage, new_stage
 
 
 def _prototype_asset(asset, lods: list[int], loop: bool):
@@ -43,15 +43,10 @@ def build_forest_stage(scene: Scene):
     """The whole forest as an in-memory stage (one layer)."""
     from pxr import Gf, Kind, Sdf, Usd, UsdGeom
 
-    stage = Usd.Stage.CreateInMemory()
+    stage, root_path = new_stage(
+        scene.name, "treegen: forest of instanced, skinned Weber-Penn trees (UsdSkel)",
+        Kind.Tokens.assembly)
     layer = stage.GetRootLayer()
-    layer.documentation = "treegen: forest of instanced, skinned Weber-Penn trees (UsdSkel)"
-    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
-    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
-    root_path = Sdf.Path("/" + _identifier(scene.name))
-    root = UsdGeom.Xform.Define(stage, root_path).GetPrim()
-    Usd.ModelAPI(root).SetKind(Kind.Tokens.assembly)
-    stage.SetDefaultPrim(root)
     protos_path = root_path.AppendChild("Prototypes")
     stage.CreateClassPrim(protos_path)
 

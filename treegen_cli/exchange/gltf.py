@@ -252,22 +252,25 @@ def build(asset: Asset) -> tuple[dict, bytes]:
     return gltf, buf.blob()
 
 
+def material_dict(m) -> dict:
+    """A Material as a glTF metallic-roughness material (MASK when a leaf cutout is expected)."""
+    d = {"name": m.name,
+         "pbrMetallicRoughness": {"baseColorFactor": [float(c) for c in m.base_color],
+                                  "metallicFactor": float(m.metallic),
+                                  "roughnessFactor": float(m.roughness)}}
+    if m.double_sided:
+        d["doubleSided"] = True
+    if m.alpha_cutoff is not None:
+        d["alphaMode"] = "MASK"
+        d["alphaCutoff"] = float(m.alpha_cutoff)
+    return d
+
+
 def _build(asset: Asset) -> tuple[dict, _Buffer]:
     """Asset → (glTF JSON dict without buffer uri, the unjoined buffer)."""
     buf = _Buffer()
     mat_index = {m.name: i for i, m in enumerate(asset.materials)}
-    materials = []
-    for m in asset.materials:
-        d = {"name": m.name,
-             "pbrMetallicRoughness": {"baseColorFactor": [float(c) for c in m.base_color],
-                                      "metallicFactor": float(m.metallic),
-                                      "roughnessFactor": float(m.roughness)}}
-        if m.double_sided:
-            d["doubleSided"] = True
-        if m.alpha_cutoff is not None:
-            d["alphaMode"] = "MASK"
-            d["alphaCutoff"] = float(m.alpha_cutoff)
-        materials.append(d)
+    materials = [material_dict(m) for m in asset.materials]
 
     nodes: list[dict] = []
     meshes, skins, animations, lod_nodes = [], [], [], []

@@ -105,24 +105,33 @@ def validate_usd(path, all_variants: bool = True) -> list[str]:
 
 # --------------------------------------------------------------------------- stage building
 
+def new_stage(name: str, documentation: str, kind):
+    """An in-memory stage in generator space (Z up, metres) whose default prim is an Xform
+    named after `name` with model kind `kind`; returns (stage, root path)."""
+    from pxr import Sdf, Usd, UsdGeom
+
+    stage = Usd.Stage.CreateInMemory()
+    stage.GetRootLayer().documentation = documentation
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    root_path = Sdf.Path("/" + _identifier(name))
+    root = UsdGeom.Xform.Define(stage, root_path).GetPrim()
+    Usd.ModelAPI(root).SetKind(kind)
+    stage.SetDefaultPrim(root)
+    return stage, root_path
+
+
 def build_stage(asset: Asset):
     """The whole asset as an in-memory stage (one anonymous layer)."""
-    from pxr import Kind, Sdf, Usd, UsdGeom
+    from pxr import Kind
 
     if not asset.lods:
         raise TreegenError(f"asset {asset.name!r}: no LODs to write")
-    stage = Usd.Stage.CreateInMemory()
-    layer = stage.GetRootLayer()
-    layer.documentation = "treegen: skinned Weber-Penn tree (UsdSkel)"
+    stage, root_path = new_stage(asset.name, "treegen: skinned Weber-Penn tree (UsdSkel)",
+                                 Kind.Tokens.component)
     if asset.extras:
-        layer.customLayerData = {"treegen": {str(k): str(v) for k, v in sorted(asset.extras.items())}}
-    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
-    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
-
-    root_path = Sdf.Path("/" + _identifier(asset.name))
-    root = UsdGeom.Xform.Define(stage, root_path).GetPrim()
-    Usd.ModelAPI(root).SetKind(Kind.Tokens.component)
-    stage.SetDefaultPrim(root)
+        stage.GetRootLayer().customLayerData = {
+            "treegen": {str(k): str(v) for k, v in sorted(asset.extras.items())}}
 
     materials = {m.name: _define_material(stage, root_path.AppendChild("Looks"), m)
                  for m in asset.materials}
