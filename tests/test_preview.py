@@ -192,3 +192,22 @@ def test_species_lists_every_bundled_file_with_counts(capsys):
     assert (palm["stems"], palm["leaves"]) == (tree.n_stems, tree.n_leaves)
     assert describe(ROOT / "species" / "quaking_aspen.txt").startswith("Quaking Aspen (Populus")
     assert describe(SMALL) == "Fan palm — Arbaro trees/fanpalm.xml"
+
+
+def test_preview_json_summary(tmp_path):
+    """--json prints what was written, machine-readable."""
+    import json as _json
+    import subprocess
+    import sys
+
+    from treegen_cli.render import egl_available
+
+    if not egl_available():
+        pytest.skip("no EGL context on this machine")
+    out = tmp_path / "p.png"
+    proc = subprocess.run([sys.executable, "-m", "treegen_cli", "preview",
+                           str(Path(__file__).resolve().parent.parent / "species" / "palm.txt"),
+                           "-o", str(out), "--size", "64", "--json"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    summary = _json.loads(proc.stdout)
+    assert summary["image"] == str(out) and summary["width"] == 64 and out.exists()

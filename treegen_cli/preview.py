@@ -8,6 +8,8 @@ renderer applies them per vertex, so what you see is what the file's skin and an
 """
 from __future__ import annotations
 
+import json
+
 import os
 import re
 import struct
@@ -630,8 +632,9 @@ def _size(text: str) -> tuple[int, int]:
 @click.option("--png-colors", type=click.IntRange(0, 256), default=0, show_default=True,
               help="Quantise the PNG to this many palette colours (smaller files, e.g. 256 "
                    "for a README); 0 keeps full colour.")
+@click.option("--json", "as_json", is_flag=True, help="Print what was written as JSON.")
 def preview_command(input_path, output, animate, azimuth, elevation, size, lod, seed, fps,
-                    png_colors):
+                    png_colors, as_json):
     """Render INPUT headless (OpenGL on EGL; no display needed): a species file (.txt .xml,
     grown in-process) or a tree written by `treegen make` (.glb .gltf .usda .usdc .usdz).
     Lit by a sun with shadows and sky light, bark and leaf colours from the materials, framed
@@ -657,12 +660,22 @@ def preview_command(input_path, output, animate, azimuth, elevation, size, lod, 
                              lod=lod, seed=seed, fps=fps)
     t0 = time.perf_counter()
     scene = load_scene(input_path, options)
+    lines, summary = [], {"input": str(input_path), "width": width, "height": height, "lod": lod}
     if output is not None:
         save_image(render_still(scene, options), output, png_colors)
-        click.echo(f"wrote {output}  ({width}×{height}, LOD {lod})")
+        lines.append(f"wrote {output}  ({width}×{height}, LOD {lod})")
+        summary["image"] = str(output)
     if animate is not None:
         frames = render_loop(scene, options)
         save_gif(frames, animate, fps)
-        click.echo(f"wrote {animate}  ({width}×{height}, {len(frames)} frames over "
-                   f"{scene.duration:.2f} s, LOD {lod})")
-    click.echo(f"  {time.perf_counter() - t0:.2f} s")
+        lines.append(f"wrote {animate}  ({width}×{height}, {len(frames)} frames over "
+                     f"{scene.duration:.2f} s, LOD {lod})")
+        summary |= {"animation": str(animate), "frames": len(frames),
+                    "duration_s": round(float(scene.duration), 4)}
+    summary["seconds"] = round(time.perf_counter() - t0, 3)
+    if as_json:
+        click.echo(json.dumps(summary, indent=2))
+        return
+    for line in lines:
+        click.echo(line)
+    click.echo(f"  {summary['seconds']:.2f} s")
