@@ -303,3 +303,19 @@ def test_regrow_leaves_equals_a_full_regrow(name):
         for f in dataclasses.fields(a):
             if isinstance(getattr(a, f.name), np.ndarray):
                 assert np.array_equal(getattr(a, f.name), getattr(b, f.name)), f.name
+
+
+def test_branch_dist_zero_makes_whorls():
+    """nBranchDist 0 gathers each parent segment's children at the segment base (conifers);
+    1 keeps the paper's even spread."""
+    p = _level(_params(levels=2), 1, branches=24)
+    p = _level(p, 0, curve_res=6)
+    even = generate(_level(p, 1, branch_dist=1.0), seed=0)
+    whorl = generate(_level(p, 1, branch_dist=0.0), seed=0)
+    seg_len = whorl.stem_length[0] / 6
+    offsets = whorl.stem_offset[whorl.stem_level == 1]
+    assert len(np.unique(np.round(offsets, 9))) <= 6
+    on_boundary = np.isclose(offsets / seg_len, np.round(offsets / seg_len)) | \
+        np.isclose(offsets, whorl.stem_length[0] * whorl.params.base_size)
+    assert np.all(on_boundary)
+    assert len(np.unique(np.round(even.stem_offset[even.stem_level == 1], 9))) == 24

@@ -563,6 +563,16 @@ def _down_angles(rng, down: float, down_v: float, z, length, base) -> np.ndarray
     return down + down_v * (1.0 - 2.0 * shape_ratio(0, np.clip(rel, 0.0, 1.0)))
 
 
+def _branch_dist(z: np.ndarray, seg_len: np.ndarray, z_lo: np.ndarray, branch_dist: float):
+    """Arbaro's nBranchDist: 1 spreads children evenly along each parent segment (the paper);
+    0 gathers a segment's children at its base, as whorls (conifers); between, in between."""
+    if branch_dist >= 1.0 or z.shape[0] == 0:
+        return z
+    seg = np.floor(z / np.maximum(seg_len, 1e-12))
+    start = seg * seg_len
+    return np.maximum(start + (z - start) * max(branch_dist, 0.0), z_lo)
+
+
 def _assign_members(ctx: _LevelContext, rng, origin_of: np.ndarray, z: np.ndarray) -> np.ndarray:
     """Pick, for each child at distance z on an original stem, one of the split members alive
     there. A split shares its stem's children among the members instead of multiplying them,
@@ -602,6 +612,7 @@ def _children(p: Params, ctx: _LevelContext, seed: int, scale_tree: float,
         _refuse("stems", expected, options.max_stems, "--max-stems", p.name)
 
     n, orig, j, z = _placements(totals, base, L)
+    z = _branch_dist(z, ctx.seg_len[orig], base[orig], lp.branch_dist)
     k = orig.shape[0]
     stem = _assign_members(ctx, rng, orig, z)
     pos, pframe, prad, pnode = ctx.attach(stem, z)
