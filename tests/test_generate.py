@@ -101,7 +101,18 @@ def test_level2_counts_follow_the_length_formula():
     assert np.allclose(t.stem_length[l2], 0.5 * (t.stem_length[parents] - 0.6 * t.stem_offset[l2]))
     # radius: r_parent·(L/L_parent)^RatioPower, capped by the parent's radius there
     cap = t.stem_radius[parents] * (t.stem_length[l2] / t.stem_length[parents]) ** p.ratio_power
-    assert np.all(t.stem_radius[l2] <= cap + 1e-12)
+    node = t.stem_parent_node[l2]
+    frac = (t.stem_offset[l2] - t.node_z[node]) / (t.node_z[node + 1] - t.node_z[node])
+    at_attach = t.node_radius[node] + (t.node_radius[node + 1] - t.node_radius[node]) * frac
+    assert np.allclose(t.stem_radius[l2], np.minimum(cap, at_attach))
+    # a low RatioPower makes children as thick as their parent: the cap must bind
+    fat = generate(dataclasses.replace(p, ratio_power=0.1), seed=5)
+    l2 = fat.stem_level == 2
+    node = fat.stem_parent_node[l2]
+    frac = (fat.stem_offset[l2] - fat.node_z[node]) / (fat.node_z[node + 1] - fat.node_z[node])
+    at_attach = fat.node_radius[node] + (fat.node_radius[node + 1] - fat.node_radius[node]) * frac
+    assert np.any(np.isclose(fat.stem_radius[l2], at_attach))
+    assert np.all(fat.stem_radius[l2] <= at_attach + 1e-12)
 
 
 def test_leaf_counts_and_sizes():
@@ -134,13 +145,15 @@ def test_whorled_leaves_share_offsets():
 
 
 def test_alternating_rotate_flips_sides():
-    p = _level(_params(levels=2), 1, rotate=-90.0, rotate_v=0.0, down_angle=60)
+    p = _level(_params(levels=2), 1, rotate=-120.0, rotate_v=0.0, down_angle=60)
     t = generate(p, seed=0)
     kids = np.flatnonzero(t.stem_level == 1)
     d = t.node_frame[t.stem_node_start[kids], :, 2][:, :2]
     ang = np.degrees(np.arctan2(d[:, 1], d[:, 0]))
-    turn = np.abs((np.diff(ang) + 180) % 360 - 180)
-    assert np.allclose(turn, 180.0, atol=1e-6)        # ±(180 + nRotate) = ±90 → opposite sides
+    turn = (np.diff(ang) + 360) % 360
+    # ±(180 + nRotate) = ±60 about the trunk: successive children turn by 240° then 120°
+    assert np.allclose(turn[0::2], turn[0], atol=1e-6) and np.allclose(turn[1::2], turn[1], atol=1e-6)
+    assert sorted([round(turn[0]), round(turn[1])]) == [120, 240]
 
 
 def test_negative_down_angle_v_varies_along_parent():
@@ -319,3 +332,59 @@ def test_branch_dist_zero_makes_whorls():
         np.isclose(offsets, whorl.stem_length[0] * whorl.params.base_size)
     assert np.all(on_boundary)
     assert len(np.unique(np.round(even.stem_offset[even.stem_level == 1], 9))) == 24
+
+
+def test_split_correction_brings_split_limbs_back_to_their_declination():
+    """After a split each member tilts by the split angle and its remaining segments turn back
+    by the same amount in total, however many splits it went through."""
+    p = _level(_params(levels=1, attraction_up=0.0), 0, curve_res=12, curve=0.0, curve_v=0.0,
+               seg_splits=0.3, split_angle=30.0, split_angle_v=0.0)
+    t = generate(p, seed=0)
+    assert t.stem_clone.sum() >= 3
+    tips = t.stem_node_start + t.stem_node_count - 1
+    lean = np.degrees(np.arccos(np.clip(t.node_frame[tips, :, 2][:, 2], -1, 1)))
+    # the last split a member went through: its own start or a clone split off it later
+    seg_of = np.rint(t.node_z[t.stem_node_start] / (t.stem_length / 12)).astype(int)
+    last_split = seg_of.copy()
+    np.maximum.at(last_split, t.stem_parent[t.stem_clone], seg_of[t.stem_clone])
+    # a split at the last inner node (11) has no segment left to correct on
+    early = last_split <= 10
+    assert early.sum() >= 3
+    assert np.all(lean[early] < 1e-4)                  # degrees
+    assert np.any(lean[~early] > 10.0)                 # the uncorrected ones still lean
+
+
+def test_helix_members_keep_their_own_helix_after_a_split():
+    p = _level(_params(levels=1), 0, curve_res=6, curve_v=-30.0, seg_splits=0.5,
+               split_angle=40.0, split_angle_v=0.0)
+    t = generate(p, seed=0)
+    clones = np.flatnonzero(t.stem_clone)
+    assert clones.size
+    for c in clones:
+        mine = t.node_frame[t.stem_node_start[c]:t.stem_node_start[c] + t.stem_node_count[c], :, 2]
+        parent = t.stem_parent[c]
+        first = t.stem_node_start[parent] + (t.stem_node_start[c] - t.stem_node_start[c]) \
+            + int(round(t.node_z[t.stem_node_start[c]] / (t.stem_length[0] / 6))) \
+            - int(round(t.node_z[t.stem_node_start[parent]] / (t.stem_length[0] / 6)))
+        theirs = t.node_frame[first:first + len(mine), :, 2]
+        # after the split node the member and its origin point in different directions
+        assert np.all(np.einsum("ij,ij->i", mine[1:-1], theirs[1:len(mine) - 1]) < 0.9999)
+
+
+def test_prune_ratio_blends_pruned_and_free_length():
+    """Final length L0 − (L0 − L_fit)·PruneRatio: half pruning lands between none and full."""
+    p = _params(levels=2, prune_width=0.25, prune_width_peak=0.5)
+    free, half, full = (generate(dataclasses.replace(p, prune_ratio=r), seed=0) for r in (0, .5, 1))
+    L0, Lh, Lf = (t.stem_length[t.stem_level == 1] for t in (free, half, full))
+    assert len(L0) == len(Lh) == len(Lf)          # nothing pruned away entirely here
+    assert np.all(Lf <= L0 + 1e-12) and np.any(Lf < 0.9 * L0)
+    assert np.allclose(Lh, L0 - (L0 - Lf) * 0.5, rtol=1e-9)
+
+
+def test_curve_turns_the_stem_by_ncurve():
+    """nCurve turns a stem by nCurve/nCurveRes per segment after the first (Arbaro's count)."""
+    p = _level(_params(levels=1), 0, curve_res=5, curve=60.0, curve_v=0.0)
+    t = generate(p, seed=0)
+    d = t.node_frame[: t.stem_node_count[0] - 1, :, 2]
+    turn = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", d[1:], d[:-1]), -1, 1)))
+    assert np.allclose(turn, 12.0, atol=1e-6)

@@ -159,19 +159,19 @@ def _grow_level(p: Params, level: int, batch: _Level, length: np.ndarray, seed: 
 
     helix = lp.curve_v < 0
     if helix:
+        # a helix: from segment 1 on the direction leans |nCurveV| off the stem's initial axis
+        # and circles it once per stem; splits turn a member's axis with its frame
         helix_axis = frame[:, :, 2].copy()
         tilt = np.radians(-lp.curve_v)
-        base_frame = frame @ _rot_x(np.full(m, tilt))
-        phase0 = np.zeros(m)
 
     split_carry = 0.0
     for seg in range(res):
         a = act.shape[0]
         if seg > 0:
             if helix:
-                # a helix: the direction circles the stem's initial axis at a fixed angle
-                ax = helix_axis[stems["origin"][act]]
-                frame = _rot_axis(ax, phase0[act] + 2.0 * np.pi * seg / res) @ base_frame[stems["origin"][act]]
+                if seg == 1:
+                    frame = frame @ _rot_x(np.full(a, tilt))
+                frame = _rot_axis(helix_axis[act], np.full(a, 2.0 * np.pi / res)) @ frame
             else:
                 if lp.curve_back == 0:
                     bend = np.full(a, lp.curve / res)
@@ -204,13 +204,18 @@ def _grow_level(p: Params, level: int, batch: _Level, length: np.ndarray, seed: 
                 counts = np.zeros(a, dtype=np.int64)
             counts = np.minimum(counts, 8)
             if counts.any():
+                before, act_before = frame, act
                 frame, act, correction, n_new = _split(
                     rng, p, level, seg, res, counts, act, frame, correction, n_stems,
                     stems)
                 pos = np.concatenate([pos, np.repeat(pos[counts > 0], counts[counts > 0], axis=0)])
                 n_stems += n_new
                 if helix:
-                    phase0 = np.concatenate([phase0, np.zeros(n_new)])
+                    src = np.concatenate([np.arange(a), np.repeat(np.arange(a), counts)])
+                    turn = np.einsum("nij,nkj->nik", frame, before[src])   # new · oldᵀ
+                    axis = np.einsum("nij,nj->ni", turn, helix_axis[act_before[src]])
+                    helix_axis = np.concatenate([helix_axis, np.zeros((n_new, 3))])
+                    helix_axis[act] = axis
         rec_stem.append(act.copy())
         rec_seg.append(np.full(act.shape[0], seg))
         rec_pos.append(pos.copy())
@@ -259,7 +264,9 @@ def _split(rng, p, level, seg, res, counts, act, frame, correction, n_stems,
     nm = f.shape[0]
     angle = np.maximum(0.0, lp.split_angle + _spread(rng, nm, lp.split_angle_v) - decl)
     if level == 0 and seg == 1 and p.base_splits > 0:
-        fan = member_idx * 360.0 / (group_k + 1) + rng.uniform(0, 360.0 / (group_k + 1), nm)
+        # evenly around, one random turn per group, so no two leaders crowd each other
+        turn = rng.uniform(0, 360.0 / (k + 1))
+        fan = member_idx * 360.0 / (group_k + 1) + np.concatenate([turn, np.repeat(turn, k)])
     else:
         fan_width = 20.0 + 0.75 * (30.0 + np.abs(decl - 90.0)) * rng.uniform(0, 1, nm) ** 2
         fan = (member_idx / np.maximum(group_k, 1) - 0.5) * 2.0 * fan_width
@@ -272,9 +279,10 @@ def _split(rng, p, level, seg, res, counts, act, frame, correction, n_stems,
     frame = frame.copy()
     frame[splitting] = f[: splitting.shape[0]]
     frame = np.concatenate([frame, f[splitting.shape[0]:]])
-    correction = np.concatenate([correction, np.zeros(n_new)])
-    correction[act[splitting]] = corr[: splitting.shape[0]]
-    correction[new_local] = corr[splitting.shape[0]:]
+    # corrections add up over successive splits; a clone carries its origin's so far
+    correction = np.concatenate([correction, correction[act[src]]])
+    correction[act[splitting]] += corr[: splitting.shape[0]]
+    correction[new_local] += corr[splitting.shape[0]:]
     act = np.concatenate([act, new_local])
     return frame, act, correction, n_new
 
@@ -289,13 +297,14 @@ def _inside_envelope(p: Params, scale_tree: float, pts: np.ndarray) -> np.ndarra
 
 
 def _grow_pruned(p: Params, level: int, batch: _Level, scale_tree: float, seed: int,
-                 steps: int) -> tuple[_Grown, np.ndarray]:
+                 steps: int) -> tuple[_Level, _Grown, np.ndarray]:
     """Grow a level; with PruneRatio > 0 shorten stems that leave the envelope (bisection on
-    each stem's length with the same random draws), final L0 − (L0 − L_fit)·PruneRatio."""
+    each stem's length with the same random draws), final L0 − (L0 − L_fit)·PruneRatio.
+    Stems pruned away entirely (no length fits) are removed, as in the paper."""
     length = batch.length.copy()
     grown = _grow_level(p, level, batch, length, seed)
     if p.prune_ratio <= 0.0 or level == 0:
-        return grown, length
+        return batch, grown, length
     def outside_by_stem(g: _Grown) -> np.ndarray:
         bad = ~_inside_envelope(p, scale_tree, g.node_pos)
         out = np.zeros(batch.pos.shape[0], dtype=bool)
@@ -303,7 +312,7 @@ def _grow_pruned(p: Params, level: int, batch: _Level, scale_tree: float, seed: 
         return out
     out = outside_by_stem(grown)
     if not out.any():
-        return grown, length
+        return batch, grown, length
     lo = np.zeros_like(length)
     hi = np.ones_like(length)
     hi[~out] = 1.0
@@ -317,7 +326,30 @@ def _grow_pruned(p: Params, level: int, batch: _Level, scale_tree: float, seed: 
     fit = batch.length * lo
     final = batch.length - (batch.length - fit) * p.prune_ratio
     final = np.maximum(final, 1e-3 * batch.length)
-    return _grow_level(p, level, batch, final, seed), final
+    grown = _grow_level(p, level, batch, final, seed)
+    keep = (lo > 0.0) | (p.prune_ratio < 1.0)
+    if keep.all() or not keep.any():
+        return batch, grown, final
+    return _keep_originals(batch, grown, final, keep)
+
+
+def _keep_originals(batch: _Level, grown: _Grown, length: np.ndarray, keep: np.ndarray):
+    """The level without the original stems `~keep` and their split members."""
+    new_origin = np.cumsum(keep) - 1
+    stem_keep = keep[grown.stem_origin]
+    local = np.full(stem_keep.shape[0], -1)
+    local[stem_keep] = np.arange(int(stem_keep.sum()))
+    node_keep = stem_keep[grown.node_stem]
+    parent = grown.stem_parent[stem_keep]
+    kept = _Grown(
+        stem_parent=np.where(parent >= 0, local[np.maximum(parent, 0)], -1),
+        stem_origin=new_origin[grown.stem_origin[stem_keep]],
+        stem_first_seg=grown.stem_first_seg[stem_keep],
+        node_stem=local[grown.node_stem[node_keep]], node_seg=grown.node_seg[node_keep],
+        node_pos=grown.node_pos[node_keep], node_frame=grown.node_frame[node_keep])
+    trimmed = _Level(**{f: getattr(batch, f)[keep] for f in
+                        ("pos", "frame", "length", "radius", "parent", "parent_node", "offset")})
+    return trimmed, kept, length[keep]
 
 
 # ---------------------------------------------------------------------------- the generator
@@ -409,7 +441,8 @@ def generate(p: Params, seed: int = 0, options: GenerateOptions = DEFAULTS) -> T
     rot_r = np.radians(rot)
     pos0 = np.stack([dist * np.cos(rot_r), dist * np.sin(rot_r), np.zeros(trunks)], axis=1)
     frame0 = _rot_z(rot_r) @ _rot_x(np.radians(down))
-    length0 = _vary(rng, lp0.length, lp0.length_v, trunks) * scale_tree
+    # a trunk is never shorter than a millimetre per metre of tree (0Length 0 is legal)
+    length0 = np.maximum(_vary(rng, lp0.length, lp0.length_v, trunks), 1e-3) * scale_tree
     radius0 = length0 * p.ratio * _vary(rng, p.scale0, p.scale0_v, trunks)
     batch = _Level(pos=pos0, frame=frame0, length=length0, radius=radius0,
                    parent=np.full(trunks, -1), parent_node=np.full(trunks, -1),
@@ -420,7 +453,7 @@ def generate(p: Params, seed: int = 0, options: GenerateOptions = DEFAULTS) -> T
     total_stems = 0
     for level in range(max(n_levels, 1)):
         lp = p.level[level]
-        grown, length = _grow_pruned(p, level, batch, scale_tree, seed, options.prune_steps)
+        batch, grown, length = _grow_pruned(p, level, batch, scale_tree, seed, options.prune_steps)
         origin = grown.stem_origin
         res = max(1, int(lp.curve_res))
         n_local = origin.shape[0]
@@ -438,7 +471,7 @@ def generate(p: Params, seed: int = 0, options: GenerateOptions = DEFAULTS) -> T
         s_rad = batch.radius[origin]
         node_radius = taper_radius(s_rad[grown.node_stem], s_len[grown.node_stem], lp.taper, node_z)
         if level == 0:
-            node_radius = node_radius * flare_factor(p.flare, node_z / s_len[grown.node_stem])
+            node_radius = node_radius * flare_factor(p.flare, node_z / np.maximum(s_len[grown.node_stem], 1e-12))
         # clones hang off the node of their split origin; originals off the batch's parent node
         clone = grown.stem_parent >= 0
         parent = np.where(clone, g0 + grown.stem_parent, batch.parent[origin])
@@ -468,7 +501,7 @@ def generate(p: Params, seed: int = 0, options: GenerateOptions = DEFAULTS) -> T
                 last = True
         if last:
             if n_levels >= 1:
-                leaves = _leaves(p, ctx, seed, n_levels, options)
+                leaves = _leaves(p, ctx, seed, n_levels, options, scale_tree)
             break
 
     if leaves is None:
@@ -598,7 +631,8 @@ def _children(p: Params, ctx: _LevelContext, seed: int, scale_tree: float,
     rng = np.random.default_rng([seed, child_level, _CHILDREN])
     m = ctx.n_originals
     L = ctx.length[:m]
-    base = p.base_size * L if ctx.level == 0 else np.zeros_like(L)
+    # the bare base of the trunk is BaseSize of the tree's scale (the paper's base_length)
+    base = np.minimum(p.base_size * scale_tree, L) if ctx.level == 0 else np.zeros_like(L)
     if ctx.level == 0:
         totals = np.full(m, lp.branches)
     elif ctx.level == 1:
@@ -620,7 +654,8 @@ def _children(p: Params, ctx: _LevelContext, seed: int, scale_tree: float,
     down = _down_angles(rng, lp.down_angle, lp.down_angle_v, z, L[orig], base[orig])
     frame = pframe @ _rot_z(np.radians(rot)) @ _rot_x(np.radians(down))
 
-    length_child_max = lp.length + _spread(rng, k, lp.length_v)
+    # one draw of nLength ± nLengthV per parent: its children share their maximum length
+    length_child_max = (lp.length + _spread(rng, m, lp.length_v))[orig]
     Lp = L[orig]
     if ctx.level == 0:
         rel = (Lp - z) / np.maximum(Lp - base[orig], 1e-12)
@@ -637,7 +672,8 @@ def _children(p: Params, ctx: _LevelContext, seed: int, scale_tree: float,
                   parent=(ctx.g0 + stem)[keep], parent_node=pnode[keep], offset=z[keep])
 
 
-def _leaves(p: Params, ctx: _LevelContext, seed: int, n_levels: int, options: GenerateOptions):
+def _leaves(p: Params, ctx: _LevelContext, seed: int, n_levels: int, options: GenerateOptions,
+            scale_tree: float):
     """Leaves on the last stem level, oriented by the leaf level's angles and LeafBend."""
     lp = p.level[min(n_levels, len(p.level) - 1)]
     rng = np.random.default_rng([seed, n_levels, _LEAVES])
@@ -657,7 +693,7 @@ def _leaves(p: Params, ctx: _LevelContext, seed: int, n_levels: int, options: Ge
             rel = np.ones_like(L)
         distrib = int(p.leaf_distrib) if 0 <= int(p.leaf_distrib) <= 7 else 4
         totals = abs(p.leaves) * shape_ratio(distrib, np.clip(rel, 0, 1)) * quality
-        z_lo = p.base_size * L if ctx.level == 0 else np.zeros_like(L)
+        z_lo = np.minimum(p.base_size * scale_tree, L) if ctx.level == 0 else np.zeros_like(L)
     if totals.sum() > options.max_leaves:
         _refuse("leaves", totals.sum(), options.max_leaves, "--max-leaves", p.name)
 
@@ -766,7 +802,7 @@ def regrow_leaves(tree: Tree, p: Params, options: GenerateOptions = DEFAULTS) ->
                         node_radius=tree.node_radius[n0:n_nodes], node_z=tree.node_z[n0:n_nodes],
                         n_originals=int(np.count_nonzero(~clone)))
     if n_levels >= 1:
-        leaves = _leaves(p, ctx, tree.seed, n_levels, options)
+        leaves = _leaves(p, ctx, tree.seed, n_levels, options, tree.scale)
     else:
         leaves = {k: np.zeros((0,) + t) for k, t in
                   (("stem", ()), ("node", ()), ("pos", (3,)), ("frame", (3, 3)), ("size", (2,)))}
