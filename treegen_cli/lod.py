@@ -20,8 +20,9 @@ Two steps per distance:
      its parents' motion twice.
   2. Playback check: reconstruct the decimated clip as an engine would (LINEAR: slerp between a
      joint's kept keys; STEP: hold the last kept key), compose the hierarchy (wind.pose_world)
-     and measure each joint's representative points — the carried mesh vertices farthest from
-     it, in three independent directions — against the dense clip, in pixels at d. Where the
+     and measure each joint's probes — the corners of a principal-axes box around everything
+     it moves, whose error bounds every skinned vertex's (see `probes`) — against the dense
+     clip, in pixels at d, on every frame. Where the
      bound is exceeded, the ancestor contributing most to that point's error at that frame gets
      a key there (per joint, the worst frame between two of its kept keys); repeat until the
      bound holds (parents' keys move children). Under LINEAR step 1 runs against
@@ -110,11 +111,13 @@ def pixel_size(distance: float, options: LodOptions = LOD_DEFAULTS) -> float:
 
 
 def screen_coverage(height: float, distance: float, options: LodOptions = LOD_DEFAULTS) -> float:
-    """Fraction of the screen height a tree of `height` metres fills at `distance` (≤ 1)."""
+    """Screen height a tree of `height` metres fills at `distance`, as a fraction of the view
+    (above 1 when it overflows the screen; not clamped, so glTF's MSFT_screencoverage switches
+    LODs at the same distances as USD's distance heuristic)."""
     if distance <= 0:
         return 1.0
     view_height = 2.0 * distance * math.tan(0.5 * math.radians(options.fov_deg)) / options.aspect
-    return float(min(1.0, height / view_height))
+    return float(height / view_height)
 
 
 # ---------------------------------------------------------------------------- quaternions
@@ -172,23 +175,56 @@ class Probes:
     reach: np.ndarray
 
 
-def _farthest(owner: np.ndarray, score: np.ndarray, n: int) -> np.ndarray:
-    """Index of the highest-score candidate per owner (−1 where an owner has none)."""
-    best = np.full(n, -np.inf, dtype=score.dtype)     # same dtype: ufunc.at's fast path
-    np.maximum.at(best, owner, score)
-    hit = score >= best[owner]
-    out = np.full(n, -1, dtype=np.int64)
-    out[owner[hit]] = np.flatnonzero(hit)      # any of the tied maxima
-    return out
+def _hull_vertices(points: np.ndarray) -> np.ndarray:
+    """Indices of the convex hull's corners of `points` (n, 3); all points when they are too
+    few or too flat for a 3-D hull."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    n = points.shape[0]
+    if n <= 8:
+        return np.arange(n)
+    try:
+        return ConvexHull(points).vertices
+    except (QhullError, ValueError):
+        if n <= 4096:
+            return np.arange(n)
+        return ConvexHull(points, qhull_options="QJ").vertices     # flat: joggled corners
 
 
-def probes(skeleton: Skeleton, primitives: list[Primitive]) -> Probes:
-    """Per joint, the carried vertices farthest from it in three independent directions: the
-    farthest one (p1), the one farthest from the line pivot–p1, the one farthest from the plane
-    pivot–p1–p2. Any rotation error moves at least one of them by nearly its full size. Vertices
-    blended between joints count for each joint that moves them (their blended error is at most
-    the largest rigid one). Every joint also probes its own pivot and the pivots of its children,
-    so a joint with no skinned vertex still has a reach."""
+def _box_corners(x: np.ndarray, owner: np.ndarray, J: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per joint, the 8 corners of a box around its points, aligned with their principal axes
+    (a tight box for a branch's elongated cloud). Returns (joint (P,), corner positions (P, 3))."""
+    order = np.argsort(owner.astype(np.uint16), kind="stable")   # radix sort: joints < 65536
+    bounds = np.searchsorted(owner[order], np.arange(J + 1))
+    xs = x[order]
+    signs = np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], dtype=bool)
+    joints, corners = [], []
+    for j in range(J):                             # a few hundred joints, numpy within each
+        pts = xs[bounds[j]:bounds[j + 1]].astype(np.float64)
+        if not len(pts):
+            continue
+        mean = pts.mean(axis=0)
+        d = pts - mean
+        _, axes = np.linalg.eigh(d.T @ d + np.eye(3) * 1e-12)   # columns: principal axes
+        u = d @ axes
+        ext = np.where(signs, u.max(axis=0), u.min(axis=0))      # (8, 3)
+        joints.append(np.full(8, j))
+        corners.append(mean + ext @ axes.T)
+    return np.concatenate(joints), np.concatenate(corners)
+
+
+def probes(skeleton: Skeleton, primitives: list[Primitive], exact: bool = False) -> Probes:
+    """Points whose pose error bounds the error of every vertex a joint moves.
+
+    Why a few points suffice: a joint's pose error is a rigid-motion difference, affine in the
+    vertex's position, so its size is a convex function of the position and peaks at a corner
+    of any convex set holding the joint's vertices. A vertex blended between joints moves by
+    the weighted mean of its joints' errors, never more than the largest of them, and it counts
+    for each joint that moves it. `exact=False` (decimation): the 8 corners of a box around each
+    joint's vertices — a guaranteed, slightly pessimistic bound that is cheap to evaluate on
+    every frame. `exact=True` (measuring): the corners of each joint's convex hull, the true
+    maximum over all vertices. Every joint also probes its own pivot and its children's, so a
+    joint with no skinned vertex has a reach."""
     bind = np.asarray(skeleton.bind_world, dtype=np.float64)
     parent = np.asarray(skeleton.parent, dtype=np.int64)
     J = bind.shape[0]
@@ -206,20 +242,23 @@ def probes(skeleton: Skeleton, primitives: list[Primitive]) -> Probes:
             elif use.any():
                 pts.append(np.asarray(prim.positions, dtype=np.float32)[use])
                 own.append(jn[use, s])
-    x = np.concatenate(pts)                        # float32: selection only, millions of rows
+    x = np.concatenate(pts)
     owner = np.concatenate(own).astype(np.intp)
-    rel = x - pivot[owner].astype(np.float32)
-    r2 = np.einsum("ij,ij->i", rel, rel)
-
-    i1 = _farthest(owner, r2, J)
-    a1 = rel[i1] / np.maximum(np.linalg.norm(rel[i1], axis=1, keepdims=True), 1e-12)
-    along = np.einsum("ij,ij->i", rel, a1[owner])
-    i2 = _farthest(owner, r2 - along * along, J)
-    perp = rel[i2] - np.einsum("ij,ij->i", rel[i2], a1)[:, None] * a1
-    a2 = perp / np.maximum(np.linalg.norm(perp, axis=1, keepdims=True), 1e-12)
-    normal = np.cross(a1, a2)
-    i3 = _farthest(owner, np.abs(np.einsum("ij,ij->i", rel, normal[owner])), J)
-    pick = np.unique(np.concatenate([i1, i2, i3]))
+    if exact:
+        order = np.argsort(owner, kind="stable")
+        bounds = np.searchsorted(owner[order], np.arange(J + 1))
+        picks = []
+        for j in range(J):                        # one qhull call per joint (≤ a few hundred)
+            rows = order[bounds[j]:bounds[j + 1]]
+            if rows.size:
+                picks.append(rows[_hull_vertices(x[rows].astype(np.float64))])
+        pick = np.concatenate(picks)
+    else:
+        joint_of, corners = _box_corners(x, owner, J)
+        x = np.concatenate([x, corners.astype(np.float32)])
+        owner = np.concatenate([owner, joint_of])
+        pick = np.concatenate([np.arange(J + int(np.count_nonzero(parent >= 0))),
+                               x.shape[0] - corners.shape[0] + np.arange(corners.shape[0])])
     joint, rest = owner[pick], x[pick].astype(np.float64)
     inv = np.linalg.inv(bind[joint])
     local = np.einsum("pij,pj->pi", inv[:, :3, :3], rest) + inv[:, :3, 3]
@@ -248,7 +287,7 @@ class DecimationReport:
     threshold_m: float           # movement that counts as error_px pixels at this distance
     keys_dense: int              # K × J
     keys_kept: int               # Σ_j |keys[j]|
-    max_error_px: float          # measured on composed poses, probes vs the dense clip
+    max_error_px: float          # bound on composed poses (box-corner probes) vs the dense clip
     iterations: int              # playback-check rounds that added keys
     seconds: float
 
@@ -352,7 +391,7 @@ def measure_error_px(skeleton: Skeleton, primitives: list[Primitive], dense: Cli
     for j, kj in enumerate(clip.keys):
         kept[np.asarray(kj, dtype=np.int64), j] = True
     kept[0] = kept[-1] = True
-    pr = probes(skeleton, primitives)
+    pr = probes(skeleton, primitives, exact=True)
     dense_x = probe_world(pose_world(skeleton, rot), pr)
     _, err = _errors(skeleton, pr, rot, kept, clip.interpolation, dense_x)
     px = pixel_size(distance, options)
