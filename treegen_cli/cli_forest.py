@@ -40,8 +40,10 @@ def forest(layout, output, schema, all_lods, error_px, workers, max_trees, as_js
         raise TreegenError("forest: give an output file with -o, e.g. -o forest.glb")
     if workers is not None and workers < 1:
         raise TreegenError(f"--workers {workers}: must be at least 1")
+    from .progress import current_reporter
+
     s = run_forest(layout, output, all_lods=all_lods, error_px=error_px, workers=workers,
-                   max_trees=max_trees)
+                   max_trees=max_trees, progress=current_reporter().show_progress)
     if as_json:
         click.echo(json.dumps(s, indent=2))
         return
