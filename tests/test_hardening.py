@@ -10,7 +10,7 @@ import signal
 import subprocess
 import sys
 import time
-from dataclasses import fields
+
 from pathlib import Path
 
 import numpy as np

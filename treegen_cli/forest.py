@@ -557,26 +557,18 @@ def build_scene(layout: Layout, all_lods: bool = False, error_px: float | None =
 def playback(clip: Clip) -> np.ndarray:
     """(K, J, 4) rotations the clip plays at every one of its times (kept keys interpolated:
     slerp for LINEAR, hold for STEP)."""
-    from .exchange.usd import slerp
+    from .lod import playback as play_keys
 
     rot = np.asarray(clip.rotations, float)
     if clip.keys is None:
         return rot
-    times = np.asarray(clip.times, float)
     K, J = rot.shape[:2]
-    frames = np.arange(K)
-    out = np.empty_like(rot)
-    for j in range(J):          # per joint; frames vectorised
-        kj = np.unique(np.r_[np.asarray(clip.keys[j], int), 0, K - 1])
-        p = np.clip(np.searchsorted(kj, frames, side="right") - 1, 0, len(kj) - 1)
-        a, b = kj[p], kj[np.minimum(p + 1, len(kj) - 1)]
-        if clip.interpolation.upper() == "STEP":
-            out[:, j] = rot[a, j]
-            continue
-        span = times[b] - times[a]
-        u = np.where(span > 0, (times - times[a]) / np.where(span > 0, span, 1.0), 0.0)
-        out[:, j] = slerp(rot[a, j], rot[b, j], u)
-    return out
+    kept = np.zeros((K, J), dtype=bool)
+    for j, kj in enumerate(clip.keys):
+        kept[np.asarray(kj, dtype=np.int64), j] = True
+    kept[0] = kept[-1] = True
+    return play_keys(rot / np.linalg.norm(rot, axis=-1, keepdims=True), kept,
+                     clip.interpolation.upper())
 
 
 def phase_rotate(clip: Clip, shift: int) -> Clip:

@@ -647,7 +647,6 @@ def _children(p: Params, ctx: _LevelContext, seed: int, scale_tree: float,
 
     n, orig, j, z = _placements(totals, base, L)
     z = _branch_dist(z, ctx.seg_len[orig], base[orig], lp.branch_dist)
-    k = orig.shape[0]
     stem = _assign_members(ctx, rng, orig, z)
     pos, pframe, prad, pnode = ctx.attach(stem, z)
     rot = _rotations(rng, lp.rotate, lp.rotate_v, orig, j, n)

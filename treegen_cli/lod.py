@@ -42,6 +42,7 @@ import numpy as np
 
 from .asset import Clip, Lod, Primitive, Skeleton
 from .errors import TreegenError
+from .quat import slerp, unit as unit_quat
 from .wind import pose_world
 
 
@@ -122,28 +123,10 @@ def screen_coverage(height: float, distance: float, options: LodOptions = LOD_DE
 
 # ---------------------------------------------------------------------------- quaternions
 
-def _unit_quat(q: np.ndarray) -> np.ndarray:
-    return q / np.linalg.norm(q, axis=-1, keepdims=True)
-
-
 def quat_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Rotation angle (radians) between unit quaternions a and b (either sign)."""
     dot = np.abs(np.sum(a * b, axis=-1))
     return 2.0 * np.arccos(np.clip(dot, 0.0, 1.0))
-
-
-def slerp(a: np.ndarray, b: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Shortest-path slerp of unit quaternions (..., 4) at t (...) — what glTF LINEAR plays."""
-    dot = np.sum(a * b, axis=-1)
-    b = np.where((dot < 0)[..., None], -b, b)
-    dot = np.abs(dot)
-    theta = np.arccos(np.clip(dot, 0.0, 1.0))
-    s = np.sin(theta)
-    small = s < 1e-9
-    safe = np.where(small, 1.0, s)
-    wa = np.where(small, 1.0 - t, np.sin((1.0 - t) * theta) / safe)
-    wb = np.where(small, t, np.sin(t * theta) / safe)
-    return _unit_quat(wa[..., None] * a + wb[..., None] * b)
 
 
 def playback(rotations: np.ndarray, kept: np.ndarray, interpolation: str = "LINEAR") -> np.ndarray:
@@ -323,7 +306,7 @@ def decimate(skeleton: Skeleton, primitives: list[Primitive], dense: Clip, dista
     """The dense clip with a per-joint key schedule for `distance` whose playback stays within
     options.error_px pixels (see the module doc). distance 0 or error_px 0 keep every key."""
     t0 = time.perf_counter()
-    rot = _unit_quat(np.asarray(dense.rotations, dtype=np.float64))
+    rot = unit_quat(np.asarray(dense.rotations, dtype=np.float64))
     K, J = rot.shape[:2]
     threshold = options.error_px * pixel_size(distance, options)
     name = dense.name if name is None else name
@@ -383,7 +366,7 @@ def measure_error_px(skeleton: Skeleton, primitives: list[Primitive], dense: Cli
                      distance: float, options: LodOptions = LOD_DEFAULTS) -> float:
     """Max on-screen error (pixels at `distance`) of `clip`'s playback against `dense`, measured
     on the probes of composed poses — an independent check of a decimated clip."""
-    rot = _unit_quat(np.asarray(dense.rotations, dtype=np.float64))
+    rot = unit_quat(np.asarray(dense.rotations, dtype=np.float64))
     K, J = rot.shape[:2]
     if clip.keys is None:
         return 0.0

@@ -93,7 +93,7 @@ def sample_track(times: np.ndarray, values: np.ndarray, t: np.ndarray,
                  interpolation: str = "LINEAR", rotation: bool = True) -> np.ndarray:
     """Keys (K,), values (K, M, n) → (T, M, n) at times t (T,), held at the ends. LINEAR
     rotations slerp, other paths lerp; STEP holds the previous key (glTF semantics)."""
-    from .exchange.usd import slerp
+    from .quat import slerp
 
     times = np.asarray(times, dtype=np.float64)
     values = np.asarray(values, dtype=np.float64)

@@ -35,6 +35,7 @@ from scipy.spatial.transform import Rotation
 
 from .asset import Clip, Skeleton
 from .errors import TreegenError
+from .quat import mul as quat_mul
 from .rig import Rig
 from .tree import Tree
 
@@ -359,15 +360,6 @@ def wind_velocity(points: np.ndarray, groups: np.ndarray, options: WindOptions, 
 
 # ---------------------------------------------------------------------------------------------
 # the bake
-
-def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product a ∘ b of xyzw quaternions, broadcasting (scipy's Rotation.__mul__ is
-    ~10× slower on a few hundred thousand pairs)."""
-    av, aw = a[..., :3], a[..., 3:]
-    bv, bw = b[..., :3], b[..., 3:]
-    return np.concatenate([aw * bv + bw * av + np.cross(av, bv),
-                           aw * bw - np.sum(av * bv, axis=-1, keepdims=True)], axis=-1)
-
 
 def _frames(options: WindOptions) -> tuple[int, np.ndarray]:
     n = max(1, int(round(options.fps * options.duration)))

@@ -24,6 +24,7 @@ from scipy.spatial.transform import Rotation
 
 from ..asset import Asset, Clip, Lod, Material, Primitive, Skeleton
 from ..errors import TreegenError
+from ..quat import slerp
 
 SUFFIXES = (".usda", ".usdc", ".usdz")
 USDZ_MTIME = 946684800  # 2000-01-01: fixed zip entry time for reproducible .usdz bytes
@@ -388,20 +389,6 @@ def resample_clip(clip: Clip, joints: np.ndarray) -> tuple[np.ndarray, np.ndarra
         u = np.where(span > 0, (times[frames] - times[a]) / np.where(span > 0, span, 1.0), 0.0)
         out[:, c] = slerp(rot[a, j], rot[b, j], u)
     return frames, out
-
-
-def slerp(q0: np.ndarray, q1: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """Row-wise shortest-arc slerp of xyzw quaternions (N, 4) at fractions u (N,)."""
-    d = np.sum(q0 * q1, axis=-1)
-    q1 = np.where(d[:, None] < 0, -q1, q1)
-    d = np.abs(d)
-    theta = np.arccos(np.clip(d, -1.0, 1.0))
-    s = np.sin(theta)
-    small = s < 1e-9
-    w0 = np.where(small, 1.0 - u, np.sin((1.0 - u) * theta) / np.where(small, 1.0, s))
-    w1 = np.where(small, u, np.sin(u * theta) / np.where(small, 1.0, s))
-    q = w0[:, None] * q0 + w1[:, None] * q1
-    return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
 
 def _moving_joints(clip: Clip, skel: Skeleton) -> np.ndarray:
