@@ -96,7 +96,8 @@ def info(species, seed, max_stems, max_leaves, as_json, with_lod, lod_distances,
                               f"{tree.n_nodes:,} nodes, {tree.n_leaves:,} leaves)")
     stats = tree_stats(tree) | {"generate_s": round(seconds, 4), "file": str(species)}
     if with_lod:
-        stats["lods"] = _lod_rows(species, params, seed, max_stems, max_leaves,
+        stats["lods"] = _lod_rows(species, params, seed, tree,
+                                  GenerateOptions(max_stems=max_stems, max_leaves=max_leaves),
                                   _lod_from(lod_distances, fov, width, error_px, error_form,
                                             interpolation))
     if as_json:
@@ -127,14 +128,14 @@ def info(species, seed, max_stems, max_leaves, as_json, with_lod, lod_distances,
                        f"{r['leaf_vertices']:>12,}{r['joints']:>8}{r['triangles']:>11,}")
 
 
-def _lod_rows(species, params, seed, max_stems, max_leaves, lod_options) -> list[dict]:
-    """The Table-3 rows: the default make pipeline with these LOD options, measured per LOD."""
+def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> list[dict]:
+    """The Table-3 rows: the default make pipeline with these LOD options, on the tree `info`
+    already grew, measured per LOD."""
     from .lod import lod_table_row
-    from .pipeline import MakeOptions, build_asset
+    from .pipeline import MakeOptions, Timings, build_asset
 
-    options = MakeOptions(generate=GenerateOptions(max_stems=max_stems, max_leaves=max_leaves),
-                          lod=lod_options)
-    asset, _tree = _in_file(species, build_asset, params, seed, options)
+    options = MakeOptions(generate=generate_options, lod=lod_options)
+    asset, _tree = _in_file(species, build_asset, params, seed, options, Timings(), tree)
     return [lod_table_row(lod, lod_options) for lod in asset.lods]
 
 
@@ -195,13 +196,12 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
     from dataclasses import replace
 
     from .exchange import WRITERS, export, supported_suffixes
-    from .mesh import MESH_DEFAULTS
-    import numpy as np
-
     from .limits import Limits
+    from .mesh import MESH_DEFAULTS
     from .pipeline import MakeOptions, build_asset
     from .progress import current_reporter
     from .rig import RigOptions
+    from .tree import tree_stats
     from .wind import WindOptions
 
     t0 = time.perf_counter()
@@ -233,27 +233,20 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
     with rep.live():
         asset, tree = _in_file(species, build_asset, params, seed, options, timings)
         written = timings.run("write", export, asset, output)
-    per_level = np.bincount(tree.stem_level.astype(np.int64)).tolist() if tree.n_stems else []
+    per_level = tree_stats(tree)["stems_per_level"]
     rep.detail(f"  counts    stems per level {per_level}, {tree.n_nodes:,} nodes, "
                f"{tree.n_leaves:,} leaves, {len(asset.lods)} LOD(s)")
+    s = make_summary(asset, tree, written, timings.stages, time.perf_counter() - t0)
     if as_json:
-        click.echo(json.dumps(make_summary(asset, tree, written, timings.stages,
-                                           time.perf_counter() - t0), indent=2))
+        click.echo(json.dumps(s, indent=2))
         return
-    lod0 = asset.lods[0]
-    vertices = sum(len(p.positions) for p in lod0.primitives)
-    triangles = sum(len(p.indices) // 3 for p in lod0.primitives)
-    size = sum(p.stat().st_size for p in written)
-    click.echo(f"wrote {', '.join(str(p) for p in written)}  ({size / 1e6:.2f} MB)")
-    click.echo(f"  {tree.n_stems:,} stems, {tree.n_leaves:,} leaves; {vertices:,} vertices, "
-               f"{triangles:,} triangles; {len(lod0.skeleton.names)} joints; "
-               f"{len(lod0.clips[0].times) if lod0.clips else 0} keys")
-    if len(asset.lods) > 1:
+    click.echo(f"wrote {', '.join(s['files'])}  ({s['bytes'] / 1e6:.2f} MB)")
+    click.echo(f"  {s['stems']:,} stems, {s['leaves']:,} leaves; {s['vertices']:,} vertices, "
+               f"{s['triangles']:,} triangles; {s['joints']} joints; {s['keys']} keys")
+    if len(s["lods"]) > 1:
         click.echo("  LODs: " + "; ".join(
-            f"{lod.distance:g} m: {sum(len(p.indices) // 3 for p in lod.primitives):,} tris, "
-            f"{len(lod.skeleton.names)} joints"
-            + (f", {sum(len(k) for k in lod.clips[0].keys):,} keys" if lod.clips and lod.clips[0].keys
-               is not None else "") for lod in asset.lods))
+            f"{r['distance_m']:g} m: {r['triangles']:,} tris, {r['joints']} joints"
+            + (f", {r['joint_keys']:,} keys" if r["decimated"] else "") for r in s["lods"]))
     stages = ", ".join(f"{k} {v:.2f}" for k, v in timings.stages.items())
     click.echo(f"  {time.perf_counter() - t0:.2f} s  ({stages})")
 
@@ -279,7 +272,8 @@ def make_summary(asset, tree, written, stages: dict, seconds: float) -> dict:
         return {"distance_m": lod.distance,
                 "vertices": sum(len(p.positions) for p in lod.primitives),
                 "triangles": sum(len(p.indices) // 3 for p in lod.primitives),
-                "joints": len(lod.skeleton.names), "keys": keys, "joint_keys": joint_keys}
+                "joints": len(lod.skeleton.names), "keys": keys, "joint_keys": joint_keys,
+                "decimated": clip is not None and clip.keys is not None}
 
     lods = [lod_row(lod) for lod in asset.lods]
     return {"file": str(written[0]), "files": [str(p) for p in written],

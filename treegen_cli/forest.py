@@ -557,17 +557,12 @@ def build_scene(layout: Layout, all_lods: bool = False, error_px: float | None =
 def playback(clip: Clip) -> np.ndarray:
     """(K, J, 4) rotations the clip plays at every one of its times (kept keys interpolated:
     slerp for LINEAR, hold for STEP)."""
-    from .lod import playback as play_keys
+    from .lod import kept_mask, playback as play_keys
 
     rot = np.asarray(clip.rotations, float)
     if clip.keys is None:
         return rot
-    K, J = rot.shape[:2]
-    kept = np.zeros((K, J), dtype=bool)
-    for j, kj in enumerate(clip.keys):
-        kept[np.asarray(kj, dtype=np.int64), j] = True
-    kept[0] = kept[-1] = True
-    return play_keys(rot / np.linalg.norm(rot, axis=-1, keepdims=True), kept,
+    return play_keys(rot / np.linalg.norm(rot, axis=-1, keepdims=True), kept_mask(clip),
                      clip.interpolation.upper())
 
 
@@ -613,19 +608,11 @@ def repeat_clip(clip: Clip, times: int = 2) -> Clip:
 
 def leaf_updates(lod: Lod) -> tuple[int, float]:
     """(leaf vertices, leaf-vertex updates per frame on average) of one LOD, counted like
-    `treegen info --lod` (lod.lod_table_row): Σ_j kept keys_j × leaf vertices on joint j / keys.
-    A joint's schedule already follows its world-space movement (parents' motion included),
-    which is the paper's per-branch accumulate-and-reset rule; without a clip nothing moves."""
-    from .lod import leaf_vertex_joints
+    `treegen info --lod`. A joint's schedule already follows its world-space movement (parents'
+    motion included), which is the paper's per-branch accumulate-and-reset rule."""
+    from .lod import leaf_updates as lod_leaf_updates
 
-    per_joint = leaf_vertex_joints(lod)
-    n = int(per_joint.sum())
-    if not lod.clips or len(lod.clips[0].times) == 0:
-        return n, 0.0
-    clip = lod.clips[0]
-    K = len(clip.times)
-    kept = np.full(len(per_joint), K) if clip.keys is None else np.array([len(k) for k in clip.keys])
-    return n, float(np.sum(kept * per_joint) / K)
+    return lod_leaf_updates(lod)
 
 
 def summary(scene: Scene, written: list[Path], seconds: float) -> dict:

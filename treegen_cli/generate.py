@@ -504,10 +504,6 @@ def generate(p: Params, seed: int = 0, options: GenerateOptions = DEFAULTS) -> T
                 leaves = _leaves(p, ctx, seed, n_levels, options, scale_tree)
             break
 
-    if leaves is None:
-        leaves = {k: np.zeros((0,) + t) for k, t in
-                  (("stem", ()), ("node", ()), ("pos", (3,)), ("frame", (3, 3)), ("size", (2,)))}
-
     return Tree(
         params=p, seed=seed, scale=float(scale_tree),
         stem_level=out.cat("stem_level", np.int8), stem_parent=out.cat("stem_parent", np.int32),
@@ -519,9 +515,18 @@ def generate(p: Params, seed: int = 0, options: GenerateOptions = DEFAULTS) -> T
         node_stem=out.cat("node_stem", np.int32), node_pos=out.cat("node_pos", np.float64, (3,)),
         node_frame=out.cat("node_frame", np.float64, (3, 3)),
         node_radius=out.cat("node_radius", np.float64), node_z=out.cat("node_z", np.float64),
-        leaf_stem=leaves["stem"].astype(np.int32), leaf_node=leaves["node"].astype(np.int32),
-        leaf_pos=leaves["pos"].astype(np.float64), leaf_frame=leaves["frame"].astype(np.float64),
-        leaf_size=leaves["size"].astype(np.float64))
+        **_leaf_fields(leaves))
+
+
+def _leaf_fields(leaves: dict | None) -> dict:
+    """The Tree's leaf arrays from `_leaves`' output (None: a tree without leaves)."""
+    if leaves is None:
+        leaves = {k: np.zeros((0,) + t) for k, t in
+                  (("stem", ()), ("node", ()), ("pos", (3,)), ("frame", (3, 3)), ("size", (2,)))}
+    return dict(leaf_stem=leaves["stem"].astype(np.int32), leaf_node=leaves["node"].astype(np.int32),
+                leaf_pos=leaves["pos"].astype(np.float64),
+                leaf_frame=leaves["frame"].astype(np.float64),
+                leaf_size=leaves["size"].astype(np.float64))
 
 
 def _parent_length(out: _Builder, parent: np.ndarray) -> np.ndarray:
@@ -800,11 +805,7 @@ def regrow_leaves(tree: Tree, p: Params, options: GenerateOptions = DEFAULTS) ->
                         node_frame=tree.node_frame[n0:n_nodes],
                         node_radius=tree.node_radius[n0:n_nodes], node_z=tree.node_z[n0:n_nodes],
                         n_originals=int(np.count_nonzero(~clone)))
-    if n_levels >= 1:
-        leaves = _leaves(p, ctx, tree.seed, n_levels, options, tree.scale)
-    else:
-        leaves = {k: np.zeros((0,) + t) for k, t in
-                  (("stem", ()), ("node", ()), ("pos", (3,)), ("frame", (3, 3)), ("size", (2,)))}
+    leaves = _leaves(p, ctx, tree.seed, n_levels, options, tree.scale) if n_levels >= 1 else None
     s, n = slice(0, n_stems), slice(0, n_nodes)
     return replace(
         tree, params=p,
@@ -815,6 +816,4 @@ def regrow_leaves(tree: Tree, p: Params, options: GenerateOptions = DEFAULTS) ->
         stem_node_count=tree.stem_node_count[s], node_stem=tree.node_stem[n],
         node_pos=tree.node_pos[n], node_frame=tree.node_frame[n], node_radius=tree.node_radius[n],
         node_z=tree.node_z[n],
-        leaf_stem=leaves["stem"].astype(np.int32), leaf_node=leaves["node"].astype(np.int32),
-        leaf_pos=leaves["pos"].astype(np.float64), leaf_frame=leaves["frame"].astype(np.float64),
-        leaf_size=leaves["size"].astype(np.float64))
+        **_leaf_fields(leaves))

@@ -29,15 +29,11 @@ class Limits:
 LIMITS_DEFAULTS = Limits()
 
 
-def _per_level(values, level: np.ndarray) -> np.ndarray:
-    v = np.asarray(values, dtype=np.int64)
-    return v[np.minimum(level, len(v) - 1)]
-
-
 def estimate_vertices(tree, options) -> tuple[int, int]:
     """(bark, leaf) vertex counts mesh.build_mesh will emit for `tree` with MeshOptions
     `options`: exact, or slightly over where flare rings merge with node rings. Bark: rings × (sides + 1) per stem plus one apex; leaves: outline points each."""
     from .leafshapes import OUTLINES, outline
+    from .mesh import _per_level, pointed_tips, stem_sides
 
     level = tree.stem_level.astype(np.int64)
     segments = np.maximum(tree.stem_node_count.astype(np.int64) - 1, 0)
@@ -46,14 +42,8 @@ def estimate_vertices(tree, options) -> tuple[int, int]:
     if p.flare > 0 and options.flare_rings > 0:
         rings = rings + np.where((level == 0) & ~tree.stem_clone.astype(bool),
                                  options.flare_rings, 0)
-    sides = _per_level(options.sides, level)
-    if p.lobes > 0 and p.lobe_depth != 0:
-        sides = np.where(level == 0, np.maximum(sides, 4 * p.lobes), sides)
-    sides = np.where(tree.stem_radius < options.thin_radius,
-                     np.minimum(sides, options.thin_sides), sides)
-    tip = tree.stem_node_start.astype(np.int64) + tree.stem_node_count - 1
-    pointed = tree.node_radius[tip] < np.maximum(options.point_radius,
-                                                 options.point_ratio * tree.stem_radius)
+    sides = stem_sides(tree, options)
+    pointed = pointed_tips(tree, options)
     rings = rings - pointed                 # a pointed tip closes on its apex, without a ring
     bark = int(np.sum(rings * (sides + 1)) + tree.n_stems)
     leaves = 0
@@ -65,9 +55,11 @@ def estimate_vertices(tree, options) -> tuple[int, int]:
 
 def frame_count(wind) -> int:
     """Keys per joint track of a baked clip (one per frame plus the closing loop key)."""
+    from .wind import loop_times
+
     if wind is None:
         return 0
-    return max(1, int(round(wind.fps * wind.duration))) + 1
+    return len(loop_times(wind.duration, wind.fps))
 
 
 def check_mesh(tree, options, limits: Limits = LIMITS_DEFAULTS) -> int:

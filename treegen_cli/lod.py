@@ -253,7 +253,7 @@ def probes(skeleton: Skeleton, primitives: list[Primitive], exact: bool = False)
         np.maximum.at(reach, cur, np.linalg.norm(at - pivot[cur], axis=1))
         up = parent[cur] >= 0
         cur, at = parent[cur[up]], at[up]
-    return Probes(joint=joint, local=local, rest=x[pick].astype(np.float64), reach=reach)
+    return Probes(joint=joint, local=local, rest=rest, reach=reach)
 
 
 def probe_world(world: np.ndarray, pr: Probes) -> np.ndarray:
@@ -308,7 +308,8 @@ def decimate(skeleton: Skeleton, primitives: list[Primitive], dense: Clip, dista
     t0 = time.perf_counter()
     rot = unit_quat(np.asarray(dense.rotations, dtype=np.float64))
     K, J = rot.shape[:2]
-    threshold = options.error_px * pixel_size(distance, options)
+    px = pixel_size(distance, options)
+    threshold = options.error_px * px
     name = dense.name if name is None else name
     if threshold <= 0.0 or K <= 2:
         clip = replace(dense, name=name, interpolation=options.interpolation, keys=None)
@@ -355,11 +356,23 @@ def decimate(skeleton: Skeleton, primitives: list[Primitive], dense: Clip, dista
 
     keys = [np.flatnonzero(kept[:, j]) for j in range(J)]
     clip = replace(dense, name=name, interpolation=options.interpolation, keys=keys)
-    px = pixel_size(distance, options)
     report = DecimationReport(distance, threshold, K * J, int(kept.sum()),
                               float(err.max() / px) if px > 0 else 0.0, iterations,
                               time.perf_counter() - t0)
     return clip, report
+
+
+def kept_mask(clip: Clip) -> np.ndarray:
+    """Bool (K, J): which keys each joint's track keeps (all when clip.keys is None); the first
+    and last keys are always kept, so the clip loops."""
+    K, J = np.shape(clip.rotations)[:2]
+    if clip.keys is None:
+        return np.ones((K, J), dtype=bool)
+    kept = np.zeros((K, J), dtype=bool)
+    for j, kj in enumerate(clip.keys):
+        kept[np.asarray(kj, dtype=np.int64), j] = True
+    kept[0] = kept[-1] = True
+    return kept
 
 
 def measure_error_px(skeleton: Skeleton, primitives: list[Primitive], dense: Clip, clip: Clip,
@@ -367,13 +380,9 @@ def measure_error_px(skeleton: Skeleton, primitives: list[Primitive], dense: Cli
     """Max on-screen error (pixels at `distance`) of `clip`'s playback against `dense`, measured
     on the probes of composed poses — an independent check of a decimated clip."""
     rot = unit_quat(np.asarray(dense.rotations, dtype=np.float64))
-    K, J = rot.shape[:2]
     if clip.keys is None:
         return 0.0
-    kept = np.zeros((K, J), dtype=bool)
-    for j, kj in enumerate(clip.keys):
-        kept[np.asarray(kj, dtype=np.int64), j] = True
-    kept[0] = kept[-1] = True
+    kept = kept_mask(clip)
     pr = probes(skeleton, primitives, exact=True)
     dense_x = probe_world(pose_world(skeleton, rot), pr)
     _, err = _errors(skeleton, pr, rot, kept, clip.interpolation, dense_x)
@@ -440,20 +449,36 @@ def leaf_vertex_joints(lod: Lod) -> np.ndarray:
     return counts
 
 
+def _keys_per_joint(clip: Clip | None, n_joints: int) -> np.ndarray:
+    """Keys each joint's track keeps (J,); zeros without a clip."""
+    if clip is None:
+        return np.zeros(n_joints, dtype=np.int64)
+    K = len(clip.times)
+    return np.full(n_joints, K) if clip.keys is None else np.array([len(k) for k in clip.keys])
+
+
+def leaf_updates(lod: Lod) -> tuple[int, float]:
+    """(leaf vertices, leaf-vertex updates per frame on average) of one LOD: the CPU method's
+    cost, Σ_j kept keys_j × leaf vertices on joint j / keys; without a clip nothing moves."""
+    per_joint = leaf_vertex_joints(lod)
+    clip = lod.clips[0] if lod.clips else None
+    K = len(clip.times) if clip is not None else 0
+    if K == 0:
+        return int(per_joint.sum()), 0.0
+    kept = _keys_per_joint(clip, len(per_joint))
+    return int(per_joint.sum()), float(np.sum(kept * per_joint) / K)
+
+
 def lod_table_row(lod: Lod, options: LodOptions = LOD_DEFAULTS) -> dict:
     """One row of the Table-3 analogue: keys kept, max error (measured here, on the LOD's own
     clip against its dense rotations), the CPU method's leaf-vertex updates per frame
     (Σ_j kept keys_j × leaf vertices_j / frames) next to all leaf vertices (the all-GPU
     method's cost per frame), joints, triangles."""
     clip = lod.clips[0] if lod.clips else None
-    per_joint = leaf_vertex_joints(lod)
     J = len(lod.skeleton.names)
-    if clip is None:
-        K, kept = 0, np.zeros(J)
-    else:
-        K = len(clip.times)
-        kept = np.full(J, K) if clip.keys is None else np.array([len(k) for k in clip.keys])
-    updates = float(np.sum(kept * per_joint) / K) if K else 0.0
+    K = len(clip.times) if clip is not None else 0
+    kept = _keys_per_joint(clip, J)
+    leaf_vertices, updates = leaf_updates(lod)
     error = 0.0
     if clip is not None and clip.keys is not None:
         dense = replace(clip, keys=None)
@@ -466,7 +491,7 @@ def lod_table_row(lod: Lod, options: LodOptions = LOD_DEFAULTS) -> dict:
         "keys_kept_pct": round(float(100.0 * kept.sum() / max(K * J, 1)), 2),
         "max_error_px": round(error, 4),
         "leaf_vertex_updates_per_frame": round(updates, 1),
-        "leaf_vertices": int(per_joint.sum()),
+        "leaf_vertices": leaf_vertices,
         "joints": J,
         "triangles": int(sum(len(p.indices) // 3 for p in lod.primitives)),
         "screen_coverage": round(float(lod.screen_coverage), 4),

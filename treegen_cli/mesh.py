@@ -57,6 +57,25 @@ def _per_level(values: tuple, level: np.ndarray) -> np.ndarray:
     return v[np.minimum(level, len(v) - 1)]
 
 
+def stem_sides(tree, options: MeshOptions) -> np.ndarray:
+    """Cross-section sides per stem (S,): per level, raised on a lobed trunk so the lobes show,
+    cut to thin_sides on stems thinner than thin_radius."""
+    level = tree.stem_level.astype(np.int64)
+    p = tree.params
+    sides = _per_level(options.sides, level).astype(np.int64)
+    if p.lobes > 0 and p.lobe_depth != 0:
+        sides = np.where(level == 0, np.maximum(sides, 4 * p.lobes), sides)
+    return np.where(tree.stem_radius < options.thin_radius,
+                    np.minimum(sides, options.thin_sides), sides)
+
+
+def pointed_tips(tree, options: MeshOptions) -> np.ndarray:
+    """Bool (S,): stems whose tip is thin enough to close on an apex instead of a capped ring."""
+    tip = tree.stem_node_start.astype(np.int64) + tree.stem_node_count - 1
+    return tree.node_radius[tip] < np.maximum(options.point_radius,
+                                              options.point_ratio * tree.stem_radius)
+
+
 def merge_influences(joints: np.ndarray, weights: np.ndarray):
     """(K, n ≤ 4) joint/weight slots → (K, 4): duplicates merged, sorted by weight, normalised,
     unused slots (0, 0.0).   Result: ([3, 5, 3, 0], [.2, .3, .5, 0]) → ([3, 5, 0, 0], [.7, .3, 0, 0])"""
@@ -170,20 +189,15 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
 
     # Pointed tips drop their zero-radius ring and close on the apex; others get a cone cap.
     tip = start + cnt - 1
-    pointed = tree.node_radius[tip] < np.maximum(options.point_radius,
-                                                 options.point_ratio * tree.stem_radius)
+    pointed = pointed_tips(tree, options)
     emit = ~(pointed[rs] & (i == last[rs]))
     rs, centre, frame, z, radius, slope, a, b, t = (
         x[emit] for x in (rs, centre, frame, z, radius, slope, a, b, t))
     trunk = level[rs] == 0
     R = rs.size
 
-    sides = _per_level(options.sides, level).astype(np.int64)
     lobed = p.lobes > 0 and p.lobe_depth != 0
-    if lobed:
-        sides = np.where(level == 0, np.maximum(sides, 4 * p.lobes), sides)
-    sides = np.where(tree.stem_radius < options.thin_radius,
-                     np.minimum(sides, options.thin_sides), sides)
+    sides = stem_sides(tree, options)
     sd = sides[rs]
     nv = sd + 1                                         # seam column duplicated for UVs
     v0 = np.cumsum(nv) - nv

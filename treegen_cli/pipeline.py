@@ -16,7 +16,7 @@ from .lod import LOD_DEFAULTS, LodOptions, decimate, lod_stage_options, match_le
 from .mesh import MESH_DEFAULTS, MeshOptions, build_mesh
 from .params import Params
 from .rig import RIG_DEFAULTS, RigOptions, build_rig
-from .tree import Tree
+from .tree import Tree, tree_height
 from .wind import DEFAULTS as WIND_DEFAULTS, WindOptions, bake_wind
 
 BARK = Material("bark", base_color=(0.36, 0.27, 0.19, 1.0), roughness=0.92)
@@ -68,9 +68,7 @@ def build_lods(params: Params, tree: Tree, options: MakeOptions, seed: int,
     distance ("wind_lod0", ...). LOD0 reuses `tree`; lower LODs regrow it from the same seed."""
     lo = options.lod
     area = float(tree.leaf_area.sum())
-    height = float(tree.node_pos[:, 2].max()) if tree.n_nodes else 0.0
-    if tree.n_leaves:
-        height = max(height, float(tree.leaf_pos[:, 2].max()))
+    height = tree_height(tree)
     lods = []
     for k, distance in enumerate(lo.distances):
         p, gen, rig, mesh = lod_stage_options(params, k, options.generate, options.rig,
@@ -90,10 +88,12 @@ def build_lods(params: Params, tree: Tree, options: MakeOptions, seed: int,
 
 
 def build_asset(params: Params, seed: int = 0, options: MakeOptions = MakeOptions(),
-                timings: Timings | None = None) -> tuple[Asset, Tree]:
-    """Grow, rig, mesh and animate `params` with `seed`; returns the asset and its tree."""
+                timings: Timings | None = None, tree: Tree | None = None) -> tuple[Asset, Tree]:
+    """Grow, rig, mesh and animate `params` with `seed`; returns the asset and its tree.
+    `tree`: the tree `generate(params, seed, options.generate)` already grew, to reuse."""
     timings = timings if timings is not None else Timings()
-    tree = timings.run("generate", generate, params, seed, options.generate)
+    if tree is None:
+        tree = timings.run("generate", generate, params, seed, options.generate)
     lods = [build_lod(tree, options, seed, timings)] if options.lod is None else \
         build_lods(params, tree, options, seed, timings)
     asset = Asset(name=params.name, materials=[BARK, LEAF], lods=lods,

@@ -74,6 +74,14 @@ class Tree:
         return self.leaf_size[:, 0] * self.leaf_size[:, 1] * fill_factor(self.params.leaf_shape)
 
 
+def tree_height(tree: Tree) -> float:
+    """Top of the tree (m): the highest node or leaf."""
+    top = tree.node_pos[:, 2].max() if tree.n_nodes else 0.0
+    if tree.n_leaves:
+        top = max(top, tree.leaf_pos[:, 2].max())
+    return float(top)
+
+
 def tree_stats(tree: Tree) -> dict:
     """The figures `treegen info` reports: counts per level, leaf area, height, crown width."""
     levels = np.bincount(tree.stem_level.astype(np.int64), minlength=1) if tree.n_stems else []
@@ -90,7 +98,7 @@ def tree_stats(tree: Tree) -> dict:
         "nodes": tree.n_nodes,
         "leaves": tree.n_leaves,
         "leaf_area_m2": round(float(tree.leaf_area.sum()), 4),
-        "height_m": round(float(pts[:, 2].max()) if len(pts) else 0.0, 4),
+        "height_m": round(tree_height(tree), 4),
         "crown_width_m": round(width, 4),
         "trunk_radius_m": round(float(tree.node_radius[0]) if tree.n_nodes else 0.0, 4),
     }

@@ -35,7 +35,7 @@ from scipy.spatial.transform import Rotation
 
 from .asset import Clip, Skeleton
 from .errors import TreegenError
-from .quat import mul as quat_mul
+from .quat import mul as quat_mul, unit as quat_unit
 from .rig import Rig
 from .tree import Tree
 
@@ -129,8 +129,10 @@ def joint_depth(parent: np.ndarray) -> np.ndarray:
     raise ValueError("joint parents contain a cycle")
 
 
-def _levels(parent: np.ndarray) -> list[np.ndarray]:
-    """Joint indices grouped by depth, root level first."""
+def depth_levels(parent: np.ndarray) -> list[np.ndarray]:
+    """Joint indices grouped by depth, root level first (empty list for no joints)."""
+    if len(parent) == 0:
+        return []
     depth = joint_depth(parent)
     order = np.argsort(depth, kind="stable")
     bounds = np.searchsorted(depth[order], np.arange(depth.max() + 2))
@@ -151,7 +153,7 @@ def pose_world(skeleton: Skeleton, rotations: np.ndarray) -> np.ndarray:
     local[..., 3, 3] = 1.0
     world = np.empty_like(local)
     parent = np.asarray(skeleton.parent)
-    for idx in _levels(parent):
+    for idx in depth_levels(parent):
         roots = idx[parent[idx] < 0]
         kids = idx[parent[idx] >= 0]
         world[:, roots] = local[:, roots]
@@ -249,7 +251,7 @@ def joint_loads(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS) -> JointL
     i_sub = np.bincount(owner, weights=mass * np.einsum("ij,ij->i", rel, rel) + rod, minlength=n_j)
 
     parent = np.asarray(skel.parent, dtype=np.int64)
-    for idx in reversed(_levels(parent)[1:]):      # deepest first: parallel-axis accumulation
+    for idx in reversed(depth_levels(parent)[1:]):      # deepest first: parallel-axis accumulation
         p = parent[idx]
         d = pivot[idx] - pivot[p]
         np.add.at(i_sub, p, i_sub[idx] + 2.0 * np.einsum("ij,ij->i", s_sub[idx], d)
@@ -361,9 +363,16 @@ def wind_velocity(points: np.ndarray, groups: np.ndarray, options: WindOptions, 
 # ---------------------------------------------------------------------------------------------
 # the bake
 
+def loop_times(duration: float, fps: float) -> np.ndarray:
+    """Key times of a looping clip: n = max(1, round(duration·fps)) intervals, 0..duration
+    inclusive (the closing key repeats the first)."""
+    n = max(1, int(round(fps * duration)))
+    return np.linspace(0.0, duration, n + 1)
+
+
 def _frames(options: WindOptions) -> tuple[int, np.ndarray]:
-    n = max(1, int(round(options.fps * options.duration)))
-    return n, np.linspace(0.0, options.duration, n + 1)
+    times = loop_times(options.duration, options.fps)
+    return len(times) - 1, times
 
 
 def drag_pressure(v: np.ndarray, options: WindOptions) -> np.ndarray:
@@ -374,22 +383,21 @@ def drag_pressure(v: np.ndarray, options: WindOptions) -> np.ndarray:
     return (0.5 * AIR_DENSITY) * soften * speed * v
 
 
-def wind_angles(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int = 0,
-                loads: JointLoads | None = None) -> np.ndarray:
+def wind_angles(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int = 0) -> np.ndarray:
     """World-frame rotation vectors (J, n, 3) of each joint's deviation from rest over one
     period (n = fps·duration samples, the closing key not repeated); root row is zero."""
     n, _ = _frames(options)
     n_j = rig.skeleton.parent.shape[0]
     if options.speed == 0.0 or n_j < 2:
         return np.zeros((n_j, n, 3))
-    ld = loads if loads is not None else joint_loads(tree, rig, options)
+    ld = joint_loads(tree, rig, options)
     v = wind_velocity(ld.pivot, rig.joint_stem, options, seed, n)           # (J, n, 3)
     pressure = drag_pressure(v, options)
     force = ld.area[:, None, None] * pressure                               # (J, n, 3)
     torque = np.cross(ld.area_moment[:, None, :], pressure)                 # about own pivot
 
     parent = np.asarray(rig.skeleton.parent, dtype=np.int64)
-    for idx in reversed(_levels(parent)[1:]):
+    for idx in reversed(depth_levels(parent)[1:]):
         p = parent[idx]
         d = ld.pivot[idx] - ld.pivot[p]
         np.add.at(torque, p, torque[idx] + np.cross(d[:, None, :], force[idx]))
@@ -429,7 +437,7 @@ def bake_wind(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int =
         half = 0.5 * np.linalg.norm(local, axis=2, keepdims=True)
         sinc = np.sinc(half / np.pi) * 0.5                                    # sin(h)/(2h)
         delta = np.concatenate([local * sinc, np.cos(half)], axis=2)          # (m, n, 4) xyzw
-        q_rest = rest[idx] / np.linalg.norm(rest[idx], axis=1, keepdims=True)
+        q_rest = quat_unit(rest[idx])
         q = quat_mul(q_rest[:, None, :], delta)
         # keep the rest quaternion's hemisphere so LINEAR (slerp) keys never flip
         flip = np.einsum("jkc,jc->jk", q, rest[idx]) < 0.0
