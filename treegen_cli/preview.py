@@ -50,13 +50,14 @@ DEFAULTS = PreviewOptions()
 
 # ------------------------------------------------------------------------------ math helpers
 
-_C = np.eye(4)
-_C[:3, :3] = [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]   # Z up → Y up
+def _z_up_to_y_up() -> np.ndarray:
+    """4×4 Z-up → Y-up change of axes, the glTF writer's convention (imported lazily: the CLI
+    loads this module for every command)."""
+    from .exchange.gltf import Z_UP_TO_Y_UP
 
-
-def _y_up(v: np.ndarray) -> np.ndarray:
-    v = np.asarray(v)
-    return np.stack([v[..., 0], v[..., 2], -v[..., 1]], axis=-1)
+    c = np.eye(4)
+    c[:3, :3] = Z_UP_TO_Y_UP
+    return c
 
 
 def quat_matrix(q: np.ndarray) -> np.ndarray:
@@ -146,7 +147,7 @@ class PoseRig:
 
     def skinning(self, t: np.ndarray) -> np.ndarray:
         """(T, J, 4, 4) skinning matrices in Y-up world space at times t."""
-        from .wind import joint_depth
+        from .wind import depth_levels
 
         t = np.atleast_1d(np.asarray(t, dtype=np.float64))
         T, J = len(t), len(self.parent)
@@ -159,9 +160,7 @@ class PoseRig:
         local = trs(pose["translation"], pose["rotation"], pose["scale"])
         world = np.empty_like(local)
         parent = np.asarray(self.parent)
-        depth = joint_depth(parent)
-        for d in range(int(depth.max()) + 1 if J else 0):   # one batch per depth level
-            idx = np.flatnonzero(depth == d)
+        for idx in depth_levels(parent):                     # one batch per depth level
             roots, kids = idx[parent[idx] < 0], idx[parent[idx] >= 0]
             world[:, roots] = self.root_world[roots] @ local[:, roots]
             if kids.size:
@@ -170,16 +169,12 @@ class PoseRig:
         return self.to_world @ skin @ self.to_world.T
 
 
-def _sample_times(duration: float, fps: float) -> np.ndarray:
-    """Frame times covering the loop inclusively: the last frame is the first one again."""
-    n = max(1, int(round(duration * fps)))
-    return np.linspace(0.0, duration, n + 1)
-
-
 # ------------------------------------------------------------------------------ from an Asset
 
 def scene_from_asset(asset, lod: int = 0, label: str = "") -> Scene:
     """An in-memory Asset (generator space, Z up) as a Scene."""
+    from .exchange.gltf import to_y_up
+
     _check_lod(lod, len(asset.lods), label or asset.name)
     L = asset.lods[lod]
     mats = {m.name: m for m in asset.materials}
@@ -187,8 +182,8 @@ def scene_from_asset(asset, lod: int = 0, label: str = "") -> Scene:
     for p in L.primitives:
         m = mats.get(p.material)
         parts.append(Part(
-            name=p.name, positions=_y_up(p.positions).astype(np.float32),
-            normals=_y_up(p.normals).astype(np.float32),
+            name=p.name, positions=to_y_up(p.positions).astype(np.float32),
+            normals=to_y_up(p.normals).astype(np.float32),
             indices=np.asarray(p.indices, np.uint32), joints=np.asarray(p.joints),
             weights=np.asarray(p.weights, np.float32),
             color=tuple(m.base_color[:3]) if m else (0.6, 0.6, 0.6),
@@ -211,7 +206,7 @@ def scene_from_asset(asset, lod: int = 0, label: str = "") -> Scene:
                   rotation=np.asarray(sk.rest_rotation), scale=np.ones((J, 3)),
                   root_world=np.broadcast_to(np.eye(4), (J, 4, 4)),
                   inverse_bind=np.linalg.inv(np.asarray(sk.bind_world, dtype=np.float64)),
-                  channels=channels, to_world=_C)
+                  channels=channels, to_world=_z_up_to_y_up())
     return Scene(parts=parts, n_joints=J, duration=rig.duration,
                  skinning=rig.skinning if channels else None, label=label or asset.name)
 
@@ -226,6 +221,8 @@ def _check_lod(lod: int, n: int, what) -> None:
 
 def _node_world(gltf: dict) -> tuple[np.ndarray, np.ndarray]:
     """(parent per node, rest world matrix per node) from the node hierarchy."""
+    from .wind import depth_levels
+
     nodes = gltf.get("nodes", [])
     n = len(nodes)
     parent = np.full(n, -1, dtype=np.int64)
@@ -240,11 +237,8 @@ def _node_world(gltf: dict) -> tuple[np.ndarray, np.ndarray]:
             local[i] = trs(np.asarray(node.get("translation", [0, 0, 0]), float),
                            np.asarray(node.get("rotation", [0, 0, 0, 1]), float),
                            np.asarray(node.get("scale", [1, 1, 1]), float))
-    from .wind import joint_depth
-    depth = joint_depth(parent) if n else np.zeros(0, np.int64)
     world = local.copy()
-    for d in range(1, int(depth.max()) + 1 if n else 0):
-        idx = np.flatnonzero(depth == d)
+    for idx in depth_levels(parent)[1:]:          # roots keep their local matrix
         world[idx] = world[parent[idx]] @ local[idx]
     return parent, world
 
@@ -375,7 +369,7 @@ def scene_from_usd(path: Path, lod: int = 0) -> Scene:
         raise TreegenError(f"{path}: not a readable USD file ({msg[:200]})") from None
     if stage is None:
         raise TreegenError(f"{path}: not a readable USD file")
-    to_world = _C if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z else np.eye(4)
+    to_world = _z_up_to_y_up() if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z else np.eye(4)
     skel_roots = [p for p in stage.Traverse() if p.IsA(UsdSkel.Root)]
     if not skel_roots:
         raise TreegenError(f"{path}: no UsdSkel SkelRoot (treegen preview reads skinned trees)")
@@ -527,32 +521,50 @@ def sun_angles(options: PreviewOptions) -> tuple[float, float]:
     return az, options.sun_elevation
 
 
-def render_still(scene: Scene, options: PreviewOptions = DEFAULTS) -> np.ndarray:
-    """The rest pose (t = 0) as uint8 (height, width, 3)."""
+def _renderer(scene: Scene, options: PreviewOptions, renderer=None):
+    """`renderer` as a no-op context, or a new Renderer for `scene` (an EGL context)."""
+    from contextlib import nullcontext
+
     from .render import Renderer
 
+    return nullcontext(renderer) if renderer is not None else \
+        Renderer(scene, options.width, options.height)
+
+
+def render_still(scene: Scene, options: PreviewOptions = DEFAULTS, renderer=None) -> np.ndarray:
+    """The rest pose (t = 0) as uint8 (height, width, 3); `renderer`: an open one to reuse."""
     times = np.zeros(1)
     camera = camera_for(scene, options, times)
-    with Renderer(scene, options.width, options.height) as r:
+    with _renderer(scene, options, renderer) as r:
         az, el = sun_angles(options)
         return r.render(camera, scene.pose(times)[0], az, el)
 
 
-def render_loop(scene: Scene, options: PreviewOptions = DEFAULTS) -> list[np.ndarray]:
+def render_loop(scene: Scene, options: PreviewOptions = DEFAULTS,
+                renderer=None) -> list[np.ndarray]:
     """Frames over the whole wind loop, first and last at t = 0 and t = duration (equal poses
     for a looping clip); one fixed camera that fits every frame."""
-    from .render import Renderer
-
     if scene.duration <= 0 or scene.skinning is None:
         raise TreegenError(f"{scene.label}: has no wind animation to render (made with --no-wind?)")
-    times = _sample_times(scene.duration, options.fps)
+    from .wind import loop_times
+
+    times = loop_times(scene.duration, options.fps)
     camera = camera_for(scene, options, times)
     frames = []
-    with Renderer(scene, options.width, options.height) as r:
+    with _renderer(scene, options, renderer) as r:
         az, el = sun_angles(options)
         for pose in scene.pose(times):             # frames: tens
             frames.append(r.render(camera, pose, az, el))
     return frames
+
+
+def _check_suffix(path, allowed: tuple[str, ...], kind: str) -> Path:
+    """`path` as a Path, or a TreegenError naming the supported extensions."""
+    path = Path(path)
+    if path.suffix.lower() not in allowed:
+        raise TreegenError(f"{path}: unknown {kind} extension '{path.suffix or '(none)'}'; "
+                           f"supported: {' '.join(allowed)}")
+    return path
 
 
 def save_image(pixels: np.ndarray, path: str | os.PathLike, colors: int = 0) -> Path:
@@ -561,10 +573,7 @@ def save_image(pixels: np.ndarray, path: str | os.PathLike, colors: int = 0) -> 
 
     from .exchange import staged
 
-    path = Path(path)
-    if path.suffix.lower() not in IMAGE_SUFFIXES:
-        raise TreegenError(f"{path}: unknown image extension '{path.suffix or '(none)'}'; "
-                           f"supported: {' '.join(IMAGE_SUFFIXES)}")
+    path = _check_suffix(path, IMAGE_SUFFIXES, "image")
     img = Image.fromarray(pixels)
     with staged(path) as tmp:
         if path.suffix.lower() == ".png":
@@ -583,10 +592,7 @@ def save_gif(frames: list[np.ndarray], path: str | os.PathLike, fps: float) -> P
 
     from .exchange import staged
 
-    path = Path(path)
-    if path.suffix.lower() not in ANIMATION_SUFFIXES:
-        raise TreegenError(f"{path}: unknown animation extension '{path.suffix or '(none)'}'; "
-                           f"supported: {' '.join(ANIMATION_SUFFIXES)}")
+    path = _check_suffix(path, ANIMATION_SUFFIXES, "animation")
     stack = np.concatenate(frames[:: max(1, len(frames) // 8)], axis=0)
     palette = Image.fromarray(stack).quantize(colors=255, method=Image.Quantize.MEDIANCUT)
     images = [Image.fromarray(f).quantize(palette=palette, dither=Image.Dither.NONE) for f in frames]
@@ -643,12 +649,10 @@ def preview_command(input_path, output, animate, azimuth, elevation, size, lod, 
 
     if output is None and animate is None:
         raise TreegenError("preview: give an image with -o out.png and/or --animate out.gif")
-    if output is not None and output.suffix.lower() not in IMAGE_SUFFIXES:
-        raise TreegenError(f"{output}: unknown image extension '{output.suffix or '(none)'}'; "
-                           f"supported: {' '.join(IMAGE_SUFFIXES)}")
-    if animate is not None and animate.suffix.lower() not in ANIMATION_SUFFIXES:
-        raise TreegenError(f"{animate}: unknown animation extension '{animate.suffix or '(none)'}'"
-                           f"; supported: {' '.join(ANIMATION_SUFFIXES)}")
+    if output is not None:                        # fail before anything is grown or rendered
+        _check_suffix(output, IMAGE_SUFFIXES, "image")
+    if animate is not None:
+        _check_suffix(animate, ANIMATION_SUFFIXES, "animation")
     if not -89.0 <= elevation <= 89.0:
         raise TreegenError(f"--elevation {elevation:g}: allowed range -89..89 degrees")
     if not 0.5 <= fps <= 60.0:
@@ -661,17 +665,18 @@ def preview_command(input_path, output, animate, azimuth, elevation, size, lod, 
     t0 = time.perf_counter()
     scene = load_scene(input_path, options)
     lines, summary = [], {"input": str(input_path), "width": width, "height": height, "lod": lod}
-    if output is not None:
-        save_image(render_still(scene, options), output, png_colors)
-        lines.append(f"wrote {output}  ({width}×{height}, LOD {lod})")
-        summary["image"] = str(output)
-    if animate is not None:
-        frames = render_loop(scene, options)
-        save_gif(frames, animate, fps)
-        lines.append(f"wrote {animate}  ({width}×{height}, {len(frames)} frames over "
-                     f"{scene.duration:.2f} s, LOD {lod})")
-        summary |= {"animation": str(animate), "frames": len(frames),
-                    "duration_s": round(float(scene.duration), 4)}
+    with _renderer(scene, options) as renderer:   # one GL context for the still and the loop
+        if output is not None:
+            save_image(render_still(scene, options, renderer), output, png_colors)
+            lines.append(f"wrote {output}  ({width}×{height}, LOD {lod})")
+            summary["image"] = str(output)
+        if animate is not None:
+            frames = render_loop(scene, options, renderer)
+            save_gif(frames, animate, fps)
+            lines.append(f"wrote {animate}  ({width}×{height}, {len(frames)} frames over "
+                         f"{scene.duration:.2f} s, LOD {lod})")
+            summary |= {"animation": str(animate), "frames": len(frames),
+                        "duration_s": round(float(scene.duration), 4)}
     summary["seconds"] = round(time.perf_counter() - t0, 3)
     if as_json:
         click.echo(json.dumps(summary, indent=2))
