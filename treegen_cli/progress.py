@@ -31,11 +31,10 @@ _META_KEY = "treegen.reporter"
 
 @dataclass
 class Reporter:
-    """Output policy of one command run. `progress=None`: decide from sys.stderr.isatty()."""
+    """Output policy of one command run; progress shows only on an interactive stderr."""
 
     quiet: bool = False
     verbose: bool = False
-    progress: bool | None = None
     _live: object | None = field(default=None, repr=False)
     _task: object | None = field(default=None, repr=False)
 
@@ -43,17 +42,10 @@ class Reporter:
     def show_progress(self) -> bool:
         if self.quiet:
             return False
-        if self.progress is not None:
-            return self.progress
         try:
             return sys.stderr.isatty() and os.environ.get("TERM") != "dumb"
         except (AttributeError, ValueError):
             return False
-
-    def echo(self, message: str = "") -> None:
-        """A line of the normal summary (stdout), silent under --quiet."""
-        if not self.quiet:
-            click.echo(message)
 
     def detail(self, message: str) -> None:
         """A --verbose line (stderr), printed above the progress display when one is live."""
@@ -65,7 +57,7 @@ class Reporter:
             click.echo(message, err=True)
 
     @contextlib.contextmanager
-    def live(self, what: str = "working"):
+    def live(self):
         """Show the progress display for the block (terminal only); always cleared after."""
         if not self.show_progress:
             yield self
@@ -77,7 +69,7 @@ class Reporter:
         with Progress(SpinnerColumn(), TextColumn("{task.description:<10}"), BarColumn(),
                       TimeElapsedColumn(), console=console, transient=True) as prog:
             self._live = prog
-            self._task = prog.add_task(what, total=None)
+            self._task = prog.add_task("working", total=None)
             try:
                 yield self
             finally:

@@ -27,8 +27,9 @@ import numpy as np
 
 from .. import __version__
 from ..forest import Scene, phase_rotate
-from .gltf import (_Buffer, _continuous, _is_default, _primitive, _unit, animated_joints, dumps,
-                   glb_bytes, material_dict, matrix_to_y_up, quat_to_y_up, to_y_up)
+from .gltf import (_Buffer, _is_default, _primitive, animated_joints, inverse_bind_accessor,
+                   joint_fields, material_dict, rotation_samplers, set_msft_lod, to_y_up,
+                   write_files)
 
 
 
@@ -42,6 +43,7 @@ class _Shared:
         self.meshes: list[dict] = []
         self._mesh: dict = {}
         self._ibm: dict = {}
+        self._joints: dict = {}
         self._inputs: dict = {}
         self._tracks: dict = {}
         self.samplers: list[dict] = []
@@ -66,12 +68,20 @@ class _Shared:
 
     def ibm(self, p: int, k: int) -> int:
         if (p, k) not in self._ibm:
-            sk = self.scene.prototypes[p].lods[k].skeleton
-            m = matrix_to_y_up(np.linalg.inv(np.asarray(sk.bind_world, dtype=np.float64)))
-            m[:, 3, :] = (0.0, 0.0, 0.0, 1.0)
-            self._ibm[(p, k)] = self.buf.accessor(
-                m.transpose(0, 2, 1).reshape(len(m), 16).astype(np.float32))   # column-major
+            self._ibm[(p, k)] = inverse_bind_accessor(self.buf, self.scene.prototypes[p].lods[k].skeleton)
         return self._ibm[(p, k)]
+
+    def joints(self, p: int, k: int) -> tuple[list[dict], list[list[int]]]:
+        """Per joint of LOD k: its node's rest TRS fields and its children (joint indices);
+        the same for every tree of the prototype, so computed once."""
+        if (p, k) not in self._joints:
+            sk = self.scene.prototypes[p].lods[k].skeleton
+            parent = np.asarray(sk.parent)
+            kids: list[list[int]] = [[] for _ in range(len(parent))]
+            for j in np.flatnonzero(parent >= 0):
+                kids[parent[j]].append(int(j))
+            self._joints[(p, k)] = (joint_fields(sk), kids)
+        return self._joints[(p, k)]
 
     def tracks(self, p: int, k: int, v: int) -> list[tuple[int, int]]:
         """[(joint, sampler index)] of variant v of LOD k's first clip (empty if static)."""
@@ -85,23 +95,21 @@ class _Shared:
             joints = animated_joints(base, lod.skeleton)
             n = len(base.times) - 1
             clip = phase_rotate(base, round(v * n / self.scene.phase_variants))
-            rot = _unit(quat_to_y_up(clip.rotations))
-            times = np.asarray(clip.times, np.float32)
-            for j in joints:        # per joint (tens), keys vectorised
-                keys = np.arange(len(times)) if clip.keys is None else np.asarray(clip.keys[j], np.int64)
-                ident = (times.tobytes(), keys.tobytes())
-                if ident not in self._inputs:
-                    self._inputs[ident] = self.buf.accessor(times[keys], bounds=True)
-                output = self.buf.accessor(_continuous(rot[keys, j]).astype(np.float32))
-                self.samplers.append({"input": self._inputs[ident], "output": output,
-                                      "interpolation": clip.interpolation})
-                out.append((int(j), len(self.samplers) - 1))
+            for j, sampler in rotation_samplers(self.buf, clip, joints, self._inputs):
+                self.samplers.append(sampler)
+                out.append((j, len(self.samplers) - 1))
         self._tracks[key] = out
         return out
 
 
 def build_forest(scene: Scene) -> tuple[dict, bytes]:
     """Scene → (glTF JSON dict without buffer uri, binary buffer)."""
+    gltf, buf = _build_forest(scene)
+    return gltf, buf.blob()
+
+
+def _build_forest(scene: Scene) -> tuple[dict, _Buffer]:
+    """Scene → (glTF JSON dict without buffer uri, the unjoined buffer)."""
     buf = _Buffer()
     sh = _Shared(scene, buf)
     nodes: list[dict] = []
@@ -137,19 +145,12 @@ def build_forest(scene: Scene) -> tuple[dict, bytes]:
             nodes.append({"name": f"{name}_lod{k}", "mesh": sh.mesh(inst.prototype, k),
                           "skin": len(skins), "children": [place]})
             nodes.append(place_node)
-            jt = to_y_up(np.asarray(sk.rest_translation, np.float64))
-            jq = _unit(quat_to_y_up(sk.rest_rotation))
-            kids_of = [[] for _ in range(J)]
-            for j in np.flatnonzero(parent >= 0):
-                kids_of[parent[j]].append(int(joint_nodes[j]))
-            for j in range(J):      # one JSON node per joint
-                n = {"name": f"{name}_lod{k}_{sk.names[j]}"}
-                if not _is_default(jt[j], [0, 0, 0]):
-                    n["translation"] = [float(x) for x in jt[j]]
-                if not _is_default(jq[j], [0, 0, 0, 1]):
-                    n["rotation"] = [float(x) for x in jq[j]]
-                if kids_of[j]:
-                    n["children"] = kids_of[j]
+            fields, kids = sh.joints(inst.prototype, k)
+            first = int(joint_nodes[0]) if J else 0
+            for j in range(J):      # one JSON node per joint, fields shared with the prototype
+                n = {"name": f"{name}_lod{k}_{sk.names[j]}", **fields[j]}
+                if kids[j]:
+                    n["children"] = [first + c for c in kids[j]]
                 nodes.append(n)
             skins.append({"name": f"{name}_lod{k}_skin", "joints": [int(x) for x in joint_nodes],
                           "inverseBindMatrices": sh.ibm(inst.prototype, k), "skeleton": place})
@@ -158,9 +159,7 @@ def build_forest(scene: Scene) -> tuple[dict, bytes]:
                                  "target": {"node": int(joint_nodes[j]), "path": "rotation"}})
             lod_nodes.append(mesh_node)
         if len(lod_nodes) > 1:
-            nodes[lod_nodes[0]]["extensions"] = {"MSFT_lod": {"ids": lod_nodes[1:]}}
-            nodes[lod_nodes[0]]["extras"] = {
-                "MSFT_screencoverage": [float(l.screen_coverage) for l in asset.lods]}
+            set_msft_lod(nodes[lod_nodes[0]], lod_nodes[1:], asset.lods)
         roots.append(lod_nodes[0])
 
     gltf: dict = {
@@ -175,21 +174,14 @@ def build_forest(scene: Scene) -> tuple[dict, bytes]:
         gltf["animations"] = [{"name": "wind", "samplers": sh.samplers, "channels": channels}]
     if any("extensions" in n for n in nodes):
         gltf["extensionsUsed"] = ["MSFT_lod"]
-    blob = buf.blob()
     gltf["accessors"] = buf.accessors
     gltf["bufferViews"] = buf.views
-    gltf["buffers"] = [{"byteLength": len(blob)}]
-    return gltf, blob
+    gltf["buffers"] = [{"byteLength": buf.size + len(buf.padding())}]
+    return gltf, buf
 
 
 def write_forest_gltf_files(scene: Scene, path: str | os.PathLike) -> None:
     """Write straight to `path` (.glb, or .gltf + `<stem>.bin`); forest.write_scene stages it."""
     path = Path(path)
-    gltf, blob = build_forest(scene)
-    if path.suffix.lower() != ".gltf":
-        path.write_bytes(glb_bytes(gltf, blob))
-        return
-    bin_path = path.with_suffix(".bin")
-    gltf["buffers"][0]["uri"] = bin_path.name
-    bin_path.write_bytes(blob)
-    path.write_bytes(dumps(gltf))
+    gltf, buf = _build_forest(scene)
+    write_files(gltf, buf, path, binary=path.suffix.lower() != ".gltf")

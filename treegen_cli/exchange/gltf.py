@@ -220,26 +220,64 @@ def animated_joints(clip: Clip, skeleton: Skeleton) -> np.ndarray:
     return np.flatnonzero((dot < 1.0 - 1e-12).any(axis=0))
 
 
+def rotation_samplers(buf: _Buffer, clip: Clip, joints: np.ndarray,
+                      inputs: dict) -> list[tuple[int, dict]]:
+    """[(joint, sampler)] for the rotation tracks of `joints`, each with only its kept keys
+    (Y up, sign-continuous). `inputs` caches input accessors by (times, key set), so tracks
+    with the same schedule share one."""
+    K = len(clip.times)
+    rot = _unit(quat_to_y_up(clip.rotations))
+    times = np.asarray(clip.times, dtype=np.float32)
+    out = []
+    for j in joints:                    # loop over joints (a few hundred), not keys or vertices
+        keys = np.arange(K) if clip.keys is None else np.asarray(clip.keys[j], dtype=np.int64)
+        ident = (times.tobytes(), keys.tobytes())
+        if ident not in inputs:
+            inputs[ident] = buf.accessor(times[keys], bounds=True)
+        output = buf.accessor(_continuous(rot[keys, j]).astype(np.float32))
+        out.append((int(j), {"input": inputs[ident], "output": output,
+                             "interpolation": clip.interpolation}))
+    return out
+
+
 def _animation(buf: _Buffer, clip: Clip, skeleton: Skeleton, joint_nodes: np.ndarray) -> dict | None:
     joints = animated_joints(clip, skeleton)
     if len(joints) == 0:
         return None
-    K = len(clip.times)
-    rot = _unit(quat_to_y_up(clip.rotations))
-    times = np.asarray(clip.times, dtype=np.float32)
-    inputs: dict[bytes, int] = {}      # key set → shared input accessor
     samplers, channels = [], []
-    for j in joints:                    # loop over joints (a few hundred), not keys or vertices
-        keys = np.arange(K) if clip.keys is None else np.asarray(clip.keys[j], dtype=np.int64)
-        ident = keys.tobytes()
-        if ident not in inputs:
-            inputs[ident] = buf.accessor(times[keys], bounds=True)
-        out = buf.accessor(_continuous(rot[keys, j]).astype(np.float32))
-        samplers.append({"input": inputs[ident], "output": out,
-                         "interpolation": clip.interpolation})
+    for j, sampler in rotation_samplers(buf, clip, joints, {}):
+        samplers.append(sampler)
         channels.append({"sampler": len(samplers) - 1,
                          "target": {"node": int(joint_nodes[j]), "path": "rotation"}})
     return {"name": clip.name, "samplers": samplers, "channels": channels}
+
+
+def joint_fields(skeleton: Skeleton) -> list[dict]:
+    """Per joint, its glTF node's rest TRS fields (Y up; defaults left out)."""
+    t = to_y_up(np.asarray(skeleton.rest_translation, dtype=np.float64))
+    q = _unit(quat_to_y_up(skeleton.rest_rotation))
+    out = []
+    for j in range(len(skeleton.names)):   # one JSON node per joint
+        n = {}
+        if not _is_default(t[j], [0, 0, 0]):
+            n["translation"] = [float(x) for x in t[j]]
+        if not _is_default(q[j], [0, 0, 0, 1]):
+            n["rotation"] = [float(x) for x in q[j]]
+        out.append(n)
+    return out
+
+
+def inverse_bind_accessor(buf: _Buffer, skeleton: Skeleton) -> int:
+    """Accessor of the skin's inverse bind matrices (Y up, column-major float32)."""
+    ibm = matrix_to_y_up(np.linalg.inv(np.asarray(skeleton.bind_world, dtype=np.float64)))
+    ibm[:, 3, :] = (0.0, 0.0, 0.0, 1.0)
+    return buf.accessor(ibm.transpose(0, 2, 1).reshape(len(ibm), 16).astype(np.float32))
+
+
+def set_msft_lod(node: dict, lower: list[int], lods: list) -> None:
+    """Make `node` the LOD0 of an MSFT_lod chain: lower LOD node ids and screen coverages."""
+    node["extensions"] = {"MSFT_lod": {"ids": lower}}
+    node["extras"] = {"MSFT_screencoverage": [float(lod.screen_coverage) for lod in lods]}
 
 
 def _is_default(v: np.ndarray, default) -> bool:
@@ -281,26 +319,17 @@ def _build(asset: Asset) -> tuple[dict, _Buffer]:
         joint_nodes = mesh_node + 1 + np.arange(J)
         lod_nodes.append(mesh_node)
         nodes.append({})    # filled below, once children are known
-        t = to_y_up(np.asarray(sk.rest_translation, dtype=np.float64))
-        q = _unit(quat_to_y_up(sk.rest_rotation))
         parent = np.asarray(sk.parent)
-        for j in range(J):  # one JSON node per joint
-            n = {"name": sk.names[j]}
-            if not _is_default(t[j], [0, 0, 0]):
-                n["translation"] = [float(x) for x in t[j]]
-            if not _is_default(q[j], [0, 0, 0, 1]):
-                n["rotation"] = [float(x) for x in q[j]]
+        for j, fields in enumerate(joint_fields(sk)):
+            n = {"name": sk.names[j], **fields}
             kids = np.flatnonzero(parent == j)
             if len(kids):
                 n["children"] = [int(x) for x in joint_nodes[kids]]
             nodes.append(n)
         roots = np.flatnonzero(parent < 0)
-        ibm = matrix_to_y_up(np.linalg.inv(np.asarray(sk.bind_world, dtype=np.float64)))
-        ibm[:, 3, :] = (0.0, 0.0, 0.0, 1.0)
         skin = {"name": f"{asset.name}_lod{k}_skin",
                 "joints": [int(x) for x in joint_nodes],
-                "inverseBindMatrices": buf.accessor(
-                    ibm.transpose(0, 2, 1).reshape(J, 16).astype(np.float32))}  # column-major
+                "inverseBindMatrices": inverse_bind_accessor(buf, sk)}
         if len(roots) == 1:
             skin["skeleton"] = int(joint_nodes[roots[0]])
         skins.append(skin)
@@ -328,9 +357,7 @@ def _build(asset: Asset) -> tuple[dict, _Buffer]:
     if animations:
         gltf["animations"] = animations
     if len(asset.lods) > 1:
-        nodes[lod_nodes[0]]["extensions"] = {"MSFT_lod": {"ids": lod_nodes[1:]}}
-        nodes[lod_nodes[0]]["extras"] = {
-            "MSFT_screencoverage": [float(lod.screen_coverage) for lod in asset.lods]}
+        set_msft_lod(nodes[lod_nodes[0]], lod_nodes[1:], asset.lods)
         gltf["extensionsUsed"] = ["MSFT_lod"]
     gltf["accessors"] = buf.accessors
     gltf["bufferViews"] = buf.views
@@ -376,6 +403,11 @@ def write_gltf_files(asset: Asset, path: str | os.PathLike, binary: bool | None 
     if binary is None:
         binary = path.suffix.lower() != ".gltf"
     gltf, buf = _build(asset)
+    write_files(gltf, buf, path, binary)
+
+
+def write_files(gltf: dict, buf: _Buffer, path: Path, binary: bool) -> None:
+    """A built glTF: .glb streamed (the buffer is never joined), or JSON + `<stem>.bin`."""
     blob_len = gltf["buffers"][0]["byteLength"]
     if binary:
         with open(path, "wb") as f:                # streamed: the buffer is never joined
