@@ -21,6 +21,16 @@ def mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
                            aw * bw - np.sum(av * bv, axis=-1, keepdims=True)], axis=-1)
 
 
+def continuous(q: np.ndarray) -> np.ndarray:
+    """Flip signs along axis 0 so consecutive keys have a non-negative dot: the same
+    rotations, but no importer that lerps or slerps takes the long way round."""
+    if len(q) < 2:
+        return q
+    dot = np.einsum("k...i,k...i->k...", q[1:], q[:-1])
+    flips = np.concatenate([np.ones((1,) + dot.shape[1:]), np.where(dot < 0, -1.0, 1.0)])
+    return q * np.cumprod(flips, axis=0)[..., None]
+
+
 def slerp(a: np.ndarray, b: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Shortest-path slerp of unit quaternions (..., 4) at fractions t (...): what glTF's
     LINEAR rotation sampler plays between two keys."""

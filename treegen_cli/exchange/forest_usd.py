@@ -18,7 +18,6 @@ exchange.usd); otherwise one prototype prim per (prototype, LOD) actually used.
 """
 from __future__ import annotations
 
-import os
 from dataclasses import replace
 from pathlib import Path
 
@@ -26,7 +25,8 @@ import numpy as np
 
 from ..errors import TreegenError
 from ..forest import Scene, repeat_clip
-from .usd import SUFFIXES, _identifier, _sample_rate, _snap, build_stage, new_stage
+from .usd import (_identifier, _sample_rate, _snap, build_stage, check_suffix, new_stage,
+                  write_stage)
 
 
 def _prototype_asset(asset, lods: list[int], loop: bool):
@@ -113,27 +113,7 @@ def build_forest_stage(scene: Scene):
 
 def write_forest_usd(scene: Scene, path) -> None:
     """Write the forest to exactly `path` (.usda text, .usdc crate, .usdz package)."""
-    from pxr import Sdf
-
     path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in SUFFIXES:
-        raise TreegenError(f"{path}: unknown USD extension {suffix!r}; allowed {', '.join(SUFFIXES)}")
+    check_suffix(path)                    # before the stage is built
     stage = build_forest_stage(scene)     # keep the stage alive: it owns the layer
-    layer = stage.GetRootLayer()
-    if suffix in (".usda", ".usdc"):
-        if not layer.Export(str(path), args={"format": suffix[1:]}):
-            raise TreegenError(f"{path}: could not write the USD layer")
-        return
-    inner = path.with_name(path.stem + ".usdc")
-    tmp = path.parent / ("." + inner.name)
-    try:
-        if not layer.Export(str(tmp), args={"format": "usdc"}):
-            raise TreegenError(f"{path}: could not write the USD layer")
-        os.utime(tmp, (946684800, 946684800))
-        writer = Sdf.ZipFileWriter.CreateNew(str(path))
-        writer.AddFile(str(tmp), inner.name)
-        if not writer.Save():
-            raise TreegenError(f"{path}: could not write the usdz package")
-    finally:
-        tmp.unlink(missing_ok=True)
+    write_stage(stage, path, path.stem + ".usdc")

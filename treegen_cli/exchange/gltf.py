@@ -39,6 +39,7 @@ import numpy as np
 
 from .. import __version__
 from ..asset import Asset, Clip, Primitive, Skeleton
+from ..quat import continuous as _continuous
 
 # glTF enums
 FLOAT, UNSIGNED_BYTE, UNSIGNED_SHORT, UNSIGNED_INT = 5126, 5121, 5123, 5125
@@ -73,15 +74,6 @@ def matrix_to_y_up(m: np.ndarray) -> np.ndarray:
 def _unit(v: np.ndarray) -> np.ndarray:
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     return v / np.where(n > 0, n, 1.0)
-
-
-def _continuous(q: np.ndarray) -> np.ndarray:
-    """Flip signs along axis 0 so consecutive keys have a non-negative dot (no long-way slerp)."""
-    if len(q) < 2:
-        return q
-    dot = np.einsum("k...i,k...i->k...", q[1:], q[:-1])
-    flips = np.concatenate([np.ones((1,) + dot.shape[1:]), np.where(dot < 0, -1.0, 1.0)])
-    return q * np.cumprod(flips, axis=0)[..., None]
 
 
 class _Buffer:

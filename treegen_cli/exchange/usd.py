@@ -24,7 +24,7 @@ from scipy.spatial.transform import Rotation
 
 from ..asset import Asset, Clip, Lod, Material, Primitive, Skeleton
 from ..errors import TreegenError
-from ..quat import slerp
+from ..quat import continuous
 
 SUFFIXES = (".usda", ".usdc", ".usdz")
 USDZ_MTIME = 946684800  # 2000-01-01: fixed zip entry time for reproducible .usdz bytes
@@ -38,29 +38,39 @@ def write_usd(asset: Asset, path, **_opts) -> None:
     The caller (exchange registry) does temp-file + rename; a temp name with the right suffix
     works for all three formats. Other writers' options (`_opts`) are accepted and ignored.
     """
+    check_suffix(path)                            # before the stage is built
+    write_stage(build_stage(asset), path, _identifier(asset.name) + ".usdc")
+
+
+def check_suffix(path) -> str:
+    """The lower-case USD suffix of `path`, or a TreegenError naming the allowed ones."""
+    suffix = Path(path).suffix.lower()
+    if suffix not in SUFFIXES:
+        raise TreegenError(f"{path}: unknown USD extension {suffix!r}; allowed {', '.join(SUFFIXES)}")
+    return suffix
+
+
+def write_stage(stage, path, inner_name: str) -> None:
+    """Write a stage's root layer to exactly `path`: .usda text, .usdc crate, or a .usdz
+    package whose single entry `inner_name` is the crate (no external files to collect)."""
     from pxr import Sdf
 
     path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in SUFFIXES:
-        raise TreegenError(f"{path}: unknown USD extension {suffix!r}; allowed {', '.join(SUFFIXES)}")
-    stage = build_stage(asset)
+    suffix = check_suffix(path)
     layer = stage.GetRootLayer()
     if suffix in (".usda", ".usdc"):
         if not layer.Export(str(path), args={"format": suffix[1:]}):
             raise TreegenError(f"{path}: could not write the USD layer")
         return
-    # .usdz: a zip whose first entry is the root layer (crate). Built with Sdf's own zip
-    # writer (no dependency discovery needed: the asset references no external files).
     tmpdir = tempfile.mkdtemp(prefix="treegen-usdz-", dir=path.parent if path.parent.exists() else None)
     try:
-        inner = os.path.join(tmpdir, _identifier(asset.name) + ".usdc")
+        inner = os.path.join(tmpdir, inner_name)
         if not layer.Export(inner, args={"format": "usdc"}):
             raise TreegenError(f"{path}: could not write the USD layer")
-        # the zip entry carries the file's mtime: pin it so the same Asset gives the same bytes
+        # the zip entry carries the file's mtime: pin it so the same stage gives the same bytes
         os.utime(inner, (USDZ_MTIME, USDZ_MTIME))
         writer = Sdf.ZipFileWriter.CreateNew(str(path))
-        writer.AddFile(inner, os.path.basename(inner))
+        writer.AddFile(inner, inner_name)
         if not writer.Save():
             raise TreegenError(f"{path}: could not write the usdz package")
     finally:
@@ -269,11 +279,7 @@ def _define_animation(stage, path, clip: Clip, skel: Skeleton, joint_paths, tcps
 
     moving = _moving_joints(clip, skel)
     frames, rot = resample_clip(clip, moving)
-    # same rotation, but consecutive samples on one hemisphere: importers that lerp are safe
-    if len(rot) > 1:
-        dots = np.einsum("kji,kji->kj", rot[1:], rot[:-1])
-        signs = np.cumprod(np.r_[np.ones((1, rot.shape[1])), np.where(dots < 0, -1.0, 1.0)], axis=0)
-        rot = rot * signs[..., None]
+    rot = continuous(rot)        # consecutive samples on one hemisphere: lerping importers are safe
     anim = UsdSkel.Animation.Define(stage, path)
     anim.CreateJointsAttr(Vt.TokenArray([joint_paths[j] for j in moving]))
     anim.CreateTranslationsAttr(Vt.Vec3fArray.FromNumpy(
@@ -367,28 +373,20 @@ def resample_clip(clip: Clip, joints: np.ndarray) -> tuple[np.ndarray, np.ndarra
     for STEP also the frame before each kept key); rotations: each joint's own playback value
     at those frames (see _define_animation).
     """
+    from ..lod import kept_mask, playback
+
     rot = np.asarray(clip.rotations, np.float64)
-    times = np.asarray(clip.times, np.float64)
-    K = len(times)
+    K = len(clip.times)
     if clip.keys is None:
         return np.arange(K), rot[:, joints]
-    keys = [np.unique(np.r_[np.asarray(clip.keys[j], np.int64), 0, K - 1]) for j in joints]
-    frames = np.unique(np.concatenate(keys + [np.zeros(1, np.int64), [K - 1]]))
+    kept = kept_mask(clip)
+    ends = np.zeros(K, dtype=bool)
+    ends[[0, -1]] = True
+    frames = np.flatnonzero(kept[:, joints].any(axis=1) | ends)
     step = clip.interpolation.upper() == "STEP"
     if step:
         frames = np.unique(np.r_[frames, np.maximum(frames - 1, 0)])
-    out = np.empty((len(frames), len(joints), 4))
-    for c, (j, kj) in enumerate(zip(joints, keys)):   # loop over joints only; frames vectorised
-        p = np.clip(np.searchsorted(kj, frames, side="right") - 1, 0, len(kj) - 1)
-        a = kj[p]
-        if step:
-            out[:, c] = rot[a, j]
-            continue
-        b = kj[np.minimum(p + 1, len(kj) - 1)]
-        span = times[b] - times[a]
-        u = np.where(span > 0, (times[frames] - times[a]) / np.where(span > 0, span, 1.0), 0.0)
-        out[:, c] = slerp(rot[a, j], rot[b, j], u)
-    return frames, out
+    return frames, playback(rot, kept, "STEP" if step else "LINEAR")[frames][:, joints]
 
 
 def _moving_joints(clip: Clip, skel: Skeleton) -> np.ndarray:
@@ -470,24 +468,16 @@ def _animated_bounds(lod: Lod) -> tuple[np.ndarray, np.ndarray]:
         return lo, hi
     corner_sel = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)], bool)
     corners = np.where(corner_sel[None], box_hi[has, None, :], box_lo[has, None, :])   # (Jh, 8, 3)
-    parent = np.asarray(skel.parent)
+    from ..wind import pose_world
+
     rest_q = np.asarray(skel.rest_rotation, np.float64)
-    t = np.asarray(skel.rest_translation, np.float64)
     for clip in clips:
         K = len(clip.times)
         q = np.broadcast_to(rest_q, (K, J, 4)).copy()
         moving = _moving_joints(clip, skel)
         q[:, moving] = np.asarray(clip.rotations, np.float64)[:, moving]
-        rot = Rotation.from_quat(q.reshape(-1, 4)).as_matrix().reshape(K, J, 3, 3)
-        w_rot = np.empty_like(rot)
-        w_pos = np.empty((K, J, 3))
-        for j in range(J):   # forward kinematics: loop over joints, frames vectorised
-            if parent[j] < 0:
-                w_rot[:, j], w_pos[:, j] = rot[:, j], np.broadcast_to(t[j], (K, 3))
-            else:
-                pr = w_rot[:, parent[j]]
-                w_rot[:, j] = pr @ rot[:, j]
-                w_pos[:, j] = w_pos[:, parent[j]] + pr @ t[j]
+        world = pose_world(skel, q)                    # forward kinematics by depth level
+        w_rot, w_pos = world[..., :3, :3], world[..., :3, 3]
         posed = np.einsum("kjab,jcb->kjca", w_rot[:, has], corners) + w_pos[:, has, None, :]
         lo = np.minimum(lo, posed.min(axis=(0, 1, 2)))
         hi = np.maximum(hi, posed.max(axis=(0, 1, 2)))
