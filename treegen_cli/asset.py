@@ -79,3 +79,12 @@ class Asset:
     materials: list[Material]
     lods: list[Lod]                        # lods[0] is the full-detail tree
     extras: dict = field(default_factory=dict)  # provenance (species, seed, treegen version)
+
+
+def lod_bounds(lod: Lod) -> tuple[np.ndarray, np.ndarray]:
+    """(min, max) corners of a LOD's rest-pose geometry; zeros when it has none."""
+    pts = [np.asarray(p.positions, np.float64) for p in lod.primitives if len(p.positions)]
+    if not pts:
+        return np.zeros(3), np.zeros(3)
+    allp = np.concatenate(pts)
+    return allp.min(0), allp.max(0)

@@ -12,7 +12,7 @@ from pathlib import Path
 import click
 
 from . import __version__
-from .errors import TreegenError
+from .errors import TreegenError, in_file as _in_file
 from .generate import GenerateOptions
 
 SPECIES = click.Path(dir_okay=False, path_type=Path)
@@ -283,16 +283,6 @@ def make_summary(asset, tree, written, stages: dict, seconds: float) -> dict:
                                                                "keys", "joint_keys")},
             "lods": lods, "seconds": round(seconds, 4),
             "stages_s": {k: round(v, 4) for k, v in stages.items()}}
-
-
-def _in_file(species: Path, fn, *args):
-    """Run a stage; a user error it raises about the tree is reported against the file."""
-    try:
-        return fn(*args)
-    except TreegenError as e:
-        if str(e).startswith(str(species)):
-            raise
-        raise TreegenError(f"{species}: {e}") from None
 
 
 def main(argv: list[str] | None = None) -> None:

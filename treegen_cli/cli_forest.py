@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from .errors import TreegenError
+from .limits import MAX_TREES
 
 
 @click.command()
@@ -23,7 +24,7 @@ from .errors import TreegenError
                    "layout's defaults.error_px, else 1].")
 @click.option("--workers", type=int, default=None,
               help="Processes building prototypes [default: all cores].")
-@click.option("--max-trees", type=int, default=100_000, show_default=True,
+@click.option("--max-trees", type=int, default=MAX_TREES, show_default=True,
               help="Refuse layouts that place more trees than this (checked before building).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 def forest(layout, output, schema, all_lods, error_px, workers, max_trees, as_json):

@@ -12,3 +12,13 @@ class TreegenError(Exception):
     """
 
     exit_code = 2
+
+
+def in_file(path, fn, *args):
+    """Run `fn(*args)`; a user error it raises is reported against `path` (once)."""
+    try:
+        return fn(*args)
+    except TreegenError as e:
+        if str(e).startswith(str(path)):
+            raise
+        raise TreegenError(f"{path}: {e}") from None

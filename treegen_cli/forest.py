@@ -32,8 +32,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .asset import Asset, Clip, Lod
-from .errors import TreegenError
+from .asset import Asset, Clip, Lod, lod_bounds
+from .limits import MAX_TREES
+from .errors import TreegenError, in_file as _in_file
 
 SCHEMA_NAME = "layout.schema.json"
 HEX_PACKING = 2.0 / math.sqrt(3.0)    # most disks of diameter s per s² of area (hexagonal)
@@ -59,7 +60,6 @@ _TYPES = {
     "integer": lambda v: isinstance(v, int) and not isinstance(v, bool),
     "number": lambda v: isinstance(v, (int, float)) and not isinstance(v, bool) and _finite(v),
 }
-MAX_TREES = 100_000
 
 
 def _finite(v) -> bool:
@@ -132,10 +132,6 @@ class Camera:
     fov_deg: float = 60.0
     width_px: int = 1920
 
-    def pixel_size(self, distance: np.ndarray) -> np.ndarray:
-        """Metres one pixel spans at `distance` (exact form 2·d·tan(fov/2)/width)."""
-        return 2.0 * np.asarray(distance) * math.tan(math.radians(self.fov_deg) / 2) / self.width_px
-
 
 @dataclass(frozen=True)
 class WindSpec:
@@ -181,6 +177,7 @@ class Layout:
     wind: WindSpec
     defaults: Defaults
     placements: list[Placement]
+    params: dict = field(default_factory=dict)   # species file → its Params, parsed once
 
 
 def load_layout(path: str | os.PathLike, max_trees: int = MAX_TREES) -> Layout:
@@ -263,7 +260,7 @@ def parse_layout(data, path: Path, max_trees: int = MAX_TREES) -> Layout:
         raise TreegenError(f"instances: the layout places {len(placements):,} trees, over the "
                            f"limit of {max_trees:,}; raise it with --max-trees N")
     return Layout(name=str(data.get("name") or path.stem), path=path, camera=camera, wind=wind,
-                  defaults=defaults, placements=placements)
+                  defaults=defaults, placements=placements, params=checked)
 
 
 # ----------------------------------------------------------------------------- scatter
@@ -457,12 +454,13 @@ def _build_one(params, seed: int, options) -> Asset:
 
 
 def build_prototypes(keys: list[tuple[Path, int]], options, workers: int | None = None,
-                     progress: bool | None = None) -> list[Asset]:
+                     progress: bool | None = None, parsed: dict | None = None) -> list[Asset]:
     """Each (species file, seed) built once, in a process pool on all cores (workers=1: in
-    this process). A rich progress bar on an interactive stderr only."""
+    this process). A rich progress bar on an interactive stderr only. `parsed`: species
+    already read (the layout's), so no file is parsed twice."""
     from .params import load_params
 
-    params = {}
+    params = dict(parsed or {})
     for path, _seed in keys:
         if path not in params:
             params[path] = load_params(path)
@@ -499,17 +497,9 @@ def build_prototypes(keys: list[tuple[Path, int]], options, workers: int | None 
     return out  # type: ignore[return-value]
 
 
-def _in_file(path: Path, fn, *args):
-    try:
-        return fn(*args)
-    except TreegenError as e:
-        raise TreegenError(f"{path}: {e}") from None
-
-
 def _crown_center(asset: Asset) -> np.ndarray:
-    pts = np.concatenate([np.asarray(p.positions, float) for p in asset.lods[0].primitives
-                          if len(p.positions)] or [np.zeros((1, 3))])
-    return 0.5 * (pts.min(0) + pts.max(0))
+    lo, hi = lod_bounds(asset.lods[0])
+    return 0.5 * (lo + hi)
 
 
 def _rotz(deg: np.ndarray) -> np.ndarray:
@@ -527,7 +517,7 @@ def build_scene(layout: Layout, all_lods: bool = False, error_px: float | None =
     keys = sorted({(p.species, p.seed) for p in layout.placements}, key=lambda k: (str(k[0]), k[1]))
     index = {k: i for i, k in enumerate(keys)}
     options = make_options(layout, error_px)
-    prototypes = build_prototypes(keys, options, workers, progress)
+    prototypes = build_prototypes(keys, options, workers, progress, layout.params)
     t1 = time.perf_counter()
     placements = layout.placements
     proto = np.array([index[(p.species, p.seed)] for p in placements], int)
@@ -642,15 +632,20 @@ def summary(scene: Scene, written: list[Path], seconds: float) -> dict:
 
 # ----------------------------------------------------------------------------- writing
 
-def write_scene(scene: Scene, path: str | os.PathLike) -> list[Path]:
-    """Write the scene atomically; the suffix picks glTF (.glb/.gltf) or USD."""
-    from .exchange import staged
-
-    path = Path(path)
+def _check_suffix(path: Path) -> str:
     suffix = path.suffix.lower()
     if suffix not in SUFFIXES:
         raise TreegenError(f"{path}: unknown output extension '{suffix or '(none)'}'; "
                            f"supported: {', '.join(SUFFIXES)}")
+    return suffix
+
+
+def write_scene(scene: Scene, path: str | os.PathLike) -> list[Path]:
+    """Write the scene atomically; the suffix picks glTF (.glb/.gltf) or USD."""
+    from .exchange import staged, written
+
+    path = Path(path)
+    suffix = _check_suffix(path)
     with staged(path) as tmp:
         if suffix in (".glb", ".gltf"):
             from .exchange.forest_gltf import write_forest_gltf_files
@@ -658,8 +653,8 @@ def write_scene(scene: Scene, path: str | os.PathLike) -> list[Path]:
         else:
             from .exchange.forest_usd import write_forest_usd
             write_forest_usd(scene, tmp)
-        names = sorted(os.listdir(tmp.parent), key=lambda n: (n != path.name, n))
-    return [path.parent / n for n in names]
+        files = written(tmp, path)
+    return files
 
 
 def run_forest(layout_path, output, all_lods: bool = False, error_px: float | None = None,
@@ -668,9 +663,7 @@ def run_forest(layout_path, output, all_lods: bool = False, error_px: float | No
     """The whole command: validate (nothing written on error), build, write, summarise."""
     t0 = time.perf_counter()
     output = Path(output)
-    if output.suffix.lower() not in SUFFIXES:
-        raise TreegenError(f"{output}: unknown output extension '{output.suffix or '(none)'}'; "
-                           f"supported: {', '.join(SUFFIXES)}")
+    _check_suffix(output)
     if error_px is not None and not (math.isfinite(error_px) and 0 <= error_px <= 100):
         raise TreegenError(f"--error-px {error_px}: allowed range 0..100 pixels")
     layout = load_layout(layout_path, max_trees)

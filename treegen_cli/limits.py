@@ -16,6 +16,8 @@ import numpy as np
 
 from .errors import TreegenError
 
+MAX_TREES = 100_000      # trees a forest layout may place (treegen forest --max-trees)
+
 
 @dataclass(frozen=True)
 class Limits:

@@ -101,8 +101,14 @@ def export(asset: Asset, path: str | os.PathLike, **opts) -> list[Path]:
     if writer is None:
         raise TreegenError(f"{path}: unknown output extension '{suffix or '(none)'}'; "
                            f"supported: {', '.join(supported_suffixes())}")
-    before = set()
     with staged(path) as tmp:
         writer(asset, tmp, **opts)
-        before = sorted(os.listdir(tmp.parent), key=lambda n: (n != path.name, n))
-    return [path.parent / n for n in before]
+        files = written(tmp, path)
+    return files
+
+
+def written(tmp: Path, path: Path) -> list[Path]:
+    """Where the files a writer put beside `tmp` (in its staging folder) land: `path`'s
+    folder, main file first (a .gltf also writes its .bin)."""
+    names = sorted(os.listdir(tmp.parent), key=lambda n: (n != path.name, n))
+    return [path.parent / n for n in names]

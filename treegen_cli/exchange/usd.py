@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..asset import Asset, Clip, Lod, Material, Primitive, Skeleton
+from ..asset import Asset, Clip, Lod, Material, Primitive, Skeleton, lod_bounds
 from ..errors import TreegenError
 from ..quat import continuous
 
@@ -190,7 +190,7 @@ def _define_lod_root(stage, root_path, asset: Asset, materials, tcps) -> None:
     bounds = []
     for name, lod in zip(names, asset.lods):
         _define_lod(stage, lods_path.AppendChild(name), lod, asset, materials, tcps)
-        bounds.append(_bounds(lod))
+        bounds.append(lod_bounds(lod))
 
     lod_root = UsdLod.RootAPI.Apply(lods_prim)
     lod_root.CreateLodDefaultIndexAttr(0)
@@ -423,14 +423,6 @@ def _trs_matrices(t: np.ndarray, q: np.ndarray) -> np.ndarray:
     return m
 
 
-def _bounds(lod: Lod) -> tuple[np.ndarray, np.ndarray]:
-    pts = [np.asarray(p.positions, np.float64) for p in lod.primitives if len(p.positions)]
-    if not pts:
-        return np.zeros(3), np.zeros(3)
-    allp = np.concatenate(pts)
-    return allp.min(0), allp.max(0)
-
-
 def _animated_bounds(lod: Lod) -> tuple[np.ndarray, np.ndarray]:
     """A box holding the skinned geometry at rest and at every key of every clip.
 
@@ -439,7 +431,7 @@ def _animated_bounds(lod: Lod) -> tuple[np.ndarray, np.ndarray]:
     union of the joints' posed boxes. Slerp between keys can bulge slightly past the keyed
     poses: a 2% margin covers it.
     """
-    lo, hi = _bounds(lod)
+    lo, hi = lod_bounds(lod)
     skel = lod.skeleton
     J = len(skel.names)
     clips = [c for c in lod.clips if len(c.times)]
