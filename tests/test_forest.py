@@ -15,8 +15,9 @@ from treegen_cli.cli import cli
 from treegen_cli.errors import TreegenError
 from treegen_cli.exchange.forest_gltf import build_forest
 from treegen_cli.exchange.gltf import read_accessor, read_gltf
+from treegen_cli.clip import phase_rotate, playback, repeat_clip
 from treegen_cli.forest import (Instance, Scene, WindSpec, build_scene, inside_polygon, load_layout,
-                                parse_layout, phase_rotate, playback, polygon_area, repeat_clip,
+                                parse_layout, polygon_area,
                                 run_forest, scatter_points, schema_text, select_lod, time_offsets,
                                 write_scene)
 

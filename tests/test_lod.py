@@ -15,8 +15,9 @@ from click.testing import CliRunner
 
 from synthetic import bark, chain_skeleton, leaves, sway_clip
 from treegen_cli.errors import TreegenError
+from treegen_cli.clip import play_keys as playback
 from treegen_cli.lod import (LodOptions, decimate, lod_table_row, measure_error_px, pixel_size,
-                             playback, probes, screen_coverage)
+                             probes, screen_coverage)
 from treegen_cli.params import load_params
 from treegen_cli.pipeline import MakeOptions, build_asset
 from treegen_cli.rig import RigOptions
@@ -226,7 +227,7 @@ def test_cli_info_lod_json():
 
 def _skinned(lod, rotations: np.ndarray) -> np.ndarray:
     """Every vertex of the LOD under linear blend skinning for each frame: (K, V, 3)."""
-    from treegen_cli.wind import pose_world
+    from treegen_cli.skeleton import pose_world
 
     world = pose_world(lod.skeleton, rotations)                        # (K, J, 4, 4)
     skin = world @ np.linalg.inv(np.asarray(lod.skeleton.bind_world))  # (K, J, 4, 4)

@@ -9,7 +9,8 @@ import pytest
 
 from treegen_cli.cli import main
 from treegen_cli.errors import TreegenError
-from treegen_cli.preview import (PreviewOptions, camera_for, load_scene, sample_track,
+from treegen_cli.clip import sample_track
+from treegen_cli.preview import (PreviewOptions, camera_for, load_scene,
                                  scene_from_asset, scene_from_gltf, scene_from_usd, sun_angles)
 from treegen_cli.render import Renderer, egl_available, skin_points
 from treegen_cli.species_list import describe, species_dir, species_files

@@ -11,14 +11,14 @@ from treegen_cli.asset import Skeleton
 from treegen_cli.errors import TreegenError
 from treegen_cli.params import Params
 from treegen_cli.rig import Rig
+from treegen_cli.quat import mul as quat_mul
+from treegen_cli.skeleton import pose_world
 from treegen_cli.tree import Tree
 from treegen_cli.wind import (
     AIR_DENSITY,
     WindOptions,
     bake_wind,
     joint_loads,
-    pose_world,
-    quat_mul,
     wind_angles,
     wind_velocity,
 )

@@ -544,56 +544,6 @@ def build_scene(layout: Layout, all_lods: bool = False, error_px: float | None =
 
 # ----------------------------------------------------------------------------- clips
 
-def playback(clip: Clip) -> np.ndarray:
-    """(K, J, 4) rotations the clip plays at every one of its times (kept keys interpolated:
-    slerp for LINEAR, hold for STEP)."""
-    from .lod import kept_mask, playback as play_keys
-
-    rot = np.asarray(clip.rotations, float)
-    if clip.keys is None:
-        return rot
-    return play_keys(rot / np.linalg.norm(rot, axis=-1, keepdims=True), kept_mask(clip),
-                     clip.interpolation.upper())
-
-
-def phase_rotate(clip: Clip, shift: int) -> Clip:
-    """The looping clip started `shift` frames later: key arrays rotated, the kept keys moved
-    along, and the wrap frame keyed with the value the clip plays there, so the rotated clip
-    plays exactly the original one shifted (slerp split at a point on its own arc is exact).
-
-    Result (K=5, shift 1): rotations (a,b,c,d,a) → (b,c,d,a,b)."""
-    K = len(clip.times)
-    n = K - 1
-    shift = shift % n if n > 0 else 0
-    if shift == 0:
-        return clip
-    played = playback(clip)
-    body = np.roll(played[:n], -shift, axis=0)
-    rot = np.concatenate([body, body[:1]])
-    keys = None
-    if clip.keys is not None:
-        keys = [np.unique(np.r_[(np.asarray(k, int)[np.asarray(k, int) < n] - shift) % n, 0, n])
-                for k in clip.keys]
-    return replace(clip, rotations=rot, keys=keys)
-
-
-def repeat_clip(clip: Clip, times: int = 2) -> Clip:
-    """The looping clip played `times` periods in a row (USD: room for per-instance offsets)."""
-    K = len(clip.times)
-    n = K - 1
-    if n <= 0 or times <= 1:
-        return clip
-    period = float(clip.times[-1] - clip.times[0])
-    t = np.concatenate([clip.times[:n] + r * period for r in range(times)] + [clip.times[-1:] + (times - 1) * period])
-    rot = np.concatenate([clip.rotations[:n]] * times + [clip.rotations[-1:]])
-    keys = None
-    if clip.keys is not None:
-        keys = [np.unique(np.concatenate([np.asarray(k, int)[np.asarray(k, int) < n] + r * n
-                                          for r in range(times)] + [[0, times * n]]))
-                for k in clip.keys]
-    return replace(clip, times=t, rotations=rot, keys=keys)
-
-
 # ----------------------------------------------------------------------------- summary
 
 def leaf_updates(lod: Lod) -> tuple[int, float]:

@@ -57,7 +57,7 @@ def estimate_vertices(tree, options) -> tuple[int, int]:
 
 def frame_count(wind) -> int:
     """Keys per joint track of a baked clip (one per frame plus the closing loop key)."""
-    from .wind import loop_times
+    from .clip import loop_times
 
     if wind is None:
         return 0

@@ -19,7 +19,7 @@ Two steps per distance:
      reset P. Ancestors' rotations are rigid and preserve lengths, so a child's P does not count
      its parents' motion twice.
   2. Playback check: reconstruct the decimated clip as an engine would (LINEAR: slerp between a
-     joint's kept keys; STEP: hold the last kept key), compose the hierarchy (wind.pose_world)
+     joint's kept keys; STEP: hold the last kept key), compose the hierarchy (skeleton.pose_world)
      and measure each joint's probes — the corners of a principal-axes box around everything
      it moves, whose error bounds every skinned vertex's (see `probes`) — against the dense
      clip, in pixels at d, on every frame. Where the
@@ -42,8 +42,9 @@ import numpy as np
 
 from .asset import Clip, Lod, Primitive, Skeleton
 from .errors import TreegenError
-from .quat import slerp, unit as unit_quat
-from .wind import pose_world
+from .clip import kept_mask, play_keys
+from .quat import angle as quat_angle, unit as unit_quat
+from .skeleton import pose_world
 
 
 @dataclass(frozen=True)
@@ -119,30 +120,6 @@ def screen_coverage(height: float, distance: float, options: LodOptions = LOD_DE
         return 1.0
     view_height = 2.0 * distance * math.tan(0.5 * math.radians(options.fov_deg)) / options.aspect
     return float(height / view_height)
-
-
-# ---------------------------------------------------------------------------- quaternions
-
-def quat_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Rotation angle (radians) between unit quaternions a and b (either sign)."""
-    dot = np.abs(np.sum(a * b, axis=-1))
-    return 2.0 * np.arccos(np.clip(dot, 0.0, 1.0))
-
-
-def playback(rotations: np.ndarray, kept: np.ndarray, interpolation: str = "LINEAR") -> np.ndarray:
-    """Local rotations (K, J, 4) an engine plays from the kept keys `kept` (bool (K, J), rows 0
-    and K−1 all True): LINEAR slerps between a joint's neighbouring kept keys, STEP holds."""
-    K = rotations.shape[0]
-    k = np.arange(K)[:, None]
-    prev = np.maximum.accumulate(np.where(kept, k, -1), axis=0)
-    nxt = np.minimum.accumulate(np.where(kept, k, K)[::-1], axis=0)[::-1]
-    qa = np.take_along_axis(rotations, prev[..., None], axis=0)
-    if interpolation == "STEP":
-        return qa
-    qb = np.take_along_axis(rotations, nxt[..., None], axis=0)
-    span = nxt - prev
-    t = np.where(span > 0, (k - prev) / np.where(span > 0, span, 1), 0.0)
-    return slerp(qa, qb, t)
 
 
 # ---------------------------------------------------------------------------- geometry probes
@@ -295,7 +272,7 @@ def _schedule(rotations: np.ndarray, reach: np.ndarray, threshold: float) -> np.
 
 
 def _errors(skeleton, pr, rotations, kept, interpolation, dense_x):
-    rec = playback(rotations, kept, interpolation)
+    rec = play_keys(rotations, kept, interpolation)
     x = probe_world(pose_world(skeleton, rec), pr)
     return rec, np.linalg.norm(x - dense_x, axis=2)                    # (K, P) metres
 
@@ -360,19 +337,6 @@ def decimate(skeleton: Skeleton, primitives: list[Primitive], dense: Clip, dista
                               float(err.max() / px) if px > 0 else 0.0, iterations,
                               time.perf_counter() - t0)
     return clip, report
-
-
-def kept_mask(clip: Clip) -> np.ndarray:
-    """Bool (K, J): which keys each joint's track keeps (all when clip.keys is None); the first
-    and last keys are always kept, so the clip loops."""
-    K, J = np.shape(clip.rotations)[:2]
-    if clip.keys is None:
-        return np.ones((K, J), dtype=bool)
-    kept = np.zeros((K, J), dtype=bool)
-    for j, kj in enumerate(clip.keys):
-        kept[np.asarray(kj, dtype=np.int64), j] = True
-    kept[0] = kept[-1] = True
-    return kept
 
 
 def measure_error_px(skeleton: Skeleton, primitives: list[Primitive], dense: Clip, clip: Clip,

@@ -19,8 +19,10 @@ from pathlib import Path
 import click
 import numpy as np
 
+from .clip import loop_times, sample_track
 from .errors import TreegenError
 from .render import Part, Scene, frame_points, skin_points
+from .skeleton import forward, trs
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 ANIMATION_SUFFIXES = (".gif",)
@@ -60,62 +62,6 @@ def _z_up_to_y_up() -> np.ndarray:
     return c
 
 
-def quat_matrix(q: np.ndarray) -> np.ndarray:
-    """(…, 4) xyzw → (…, 3, 3). Built from pairwise products, so q and −q give bit-identical
-    matrices (glTF tracks may flip signs between keys)."""
-    q = np.asarray(q, dtype=np.float64)
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    m = np.empty(q.shape[:-1] + (3, 3))
-    m[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    m[..., 0, 1] = 2 * (x * y - z * w)
-    m[..., 0, 2] = 2 * (x * z + y * w)
-    m[..., 1, 0] = 2 * (x * y + z * w)
-    m[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    m[..., 1, 2] = 2 * (y * z - x * w)
-    m[..., 2, 0] = 2 * (x * z - y * w)
-    m[..., 2, 1] = 2 * (y * z + x * w)
-    m[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return m
-
-
-def trs(t: np.ndarray, q: np.ndarray, s: np.ndarray | None = None) -> np.ndarray:
-    """Local matrices T·R·S from (…, 3), (…, 4) xyzw, (…, 3)."""
-    q = np.asarray(q, dtype=np.float64)
-    m = np.zeros(q.shape[:-1] + (4, 4))
-    r = quat_matrix(q)
-    m[..., :3, :3] = r if s is None else r * np.asarray(s, dtype=np.float64)[..., None, :]
-    m[..., :3, 3] = t
-    m[..., 3, 3] = 1.0
-    return m
-
-
-def sample_track(times: np.ndarray, values: np.ndarray, t: np.ndarray,
-                 interpolation: str = "LINEAR", rotation: bool = True) -> np.ndarray:
-    """Keys (K,), values (K, M, n) → (T, M, n) at times t (T,), held at the ends. LINEAR
-    rotations slerp, other paths lerp; STEP holds the previous key (glTF semantics)."""
-    from .quat import slerp
-
-    times = np.asarray(times, dtype=np.float64)
-    values = np.asarray(values, dtype=np.float64)
-    K = len(times)
-    t = np.clip(np.asarray(t, dtype=np.float64), times[0], times[-1])
-    if K == 1:
-        return np.broadcast_to(values[:1], (len(t),) + values.shape[1:]).copy()
-    if interpolation == "STEP":
-        return values[np.clip(np.searchsorted(times, t, side="right") - 1, 0, K - 1)]
-    if interpolation != "LINEAR":
-        raise TreegenError(f"animation interpolation '{interpolation}' is not supported by preview "
-                           "(LINEAR and STEP are)")
-    i = np.clip(np.searchsorted(times, t, side="right") - 1, 0, K - 2)
-    u = (t - times[i]) / np.maximum(times[i + 1] - times[i], 1e-12)
-    a, b = values[i], values[i + 1]                           # (T, M, n)
-    if not rotation:
-        return a + (b - a) * u[:, None, None]
-    T, M = a.shape[:2]
-    return slerp(a.reshape(-1, 4), b.reshape(-1, 4), np.repeat(u, M)).reshape(T, M, 4)
-
-
 @dataclass(frozen=True, eq=False)
 class Channel:
     """One animated property of some joints, all on the same key times."""
@@ -147,8 +93,6 @@ class PoseRig:
 
     def skinning(self, t: np.ndarray) -> np.ndarray:
         """(T, J, 4, 4) skinning matrices in Y-up world space at times t."""
-        from .wind import depth_levels
-
         t = np.atleast_1d(np.asarray(t, dtype=np.float64))
         T, J = len(t), len(self.parent)
         pose = {"translation": np.broadcast_to(self.translation, (T, J, 3)).copy(),
@@ -158,13 +102,7 @@ class PoseRig:
             pose[c.path][:, c.joints] = sample_track(c.times, c.values, t, c.interpolation,
                                                      rotation=c.path == "rotation")
         local = trs(pose["translation"], pose["rotation"], pose["scale"])
-        world = np.empty_like(local)
-        parent = np.asarray(self.parent)
-        for idx in depth_levels(parent):                     # one batch per depth level
-            roots, kids = idx[parent[idx] < 0], idx[parent[idx] >= 0]
-            world[:, roots] = self.root_world[roots] @ local[:, roots]
-            if kids.size:
-                world[:, kids] = world[:, parent[kids]] @ local[:, kids]
+        world = forward(self.parent, local, self.root_world)
         skin = world @ self.inverse_bind
         return self.to_world @ skin @ self.to_world.T
 
@@ -221,8 +159,6 @@ def _check_lod(lod: int, n: int, what) -> None:
 
 def _node_world(gltf: dict) -> tuple[np.ndarray, np.ndarray]:
     """(parent per node, rest world matrix per node) from the node hierarchy."""
-    from .wind import depth_levels
-
     nodes = gltf.get("nodes", [])
     n = len(nodes)
     parent = np.full(n, -1, dtype=np.int64)
@@ -237,10 +173,7 @@ def _node_world(gltf: dict) -> tuple[np.ndarray, np.ndarray]:
             local[i] = trs(np.asarray(node.get("translation", [0, 0, 0]), float),
                            np.asarray(node.get("rotation", [0, 0, 0, 1]), float),
                            np.asarray(node.get("scale", [1, 1, 1]), float))
-    world = local.copy()
-    for idx in depth_levels(parent)[1:]:          # roots keep their local matrix
-        world[idx] = world[parent[idx]] @ local[idx]
-    return parent, world
+    return parent, forward(parent, local)
 
 
 def scene_from_gltf(path: Path, lod: int = 0) -> Scene:
@@ -546,8 +479,6 @@ def render_loop(scene: Scene, options: PreviewOptions = DEFAULTS,
     for a looping clip); one fixed camera that fits every frame."""
     if scene.duration <= 0 or scene.skinning is None:
         raise TreegenError(f"{scene.label}: has no wind animation to render (made with --no-wind?)")
-    from .wind import loop_times
-
     times = loop_times(scene.duration, options.fps)
     camera = camera_for(scene, options, times)
     frames = []

@@ -33,10 +33,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .asset import Clip, Skeleton
+from .asset import Clip
+from .clip import loop_times
 from .errors import TreegenError
 from .quat import mul as quat_mul, unit as quat_unit
 from .rig import Rig
+from .skeleton import depth_levels
 from .tree import Tree
 
 AIR_DENSITY = 1.2          # kg/m³ at sea level, 20 °C
@@ -110,56 +112,6 @@ _RANGES = {
 }
 
 DEFAULTS = WindOptions()
-
-
-# ---------------------------------------------------------------------------------------------
-# hierarchy helpers (shared with LOD work)
-
-def joint_depth(parent: np.ndarray) -> np.ndarray:
-    """Depth of each joint (root 0), vectorised by repeated parent lookups (one pass per level)."""
-    parent = np.asarray(parent, dtype=np.int64)
-    depth = np.zeros(parent.shape[0], dtype=np.int64)
-    has_parent = parent >= 0
-    safe = np.where(has_parent, parent, 0)
-    for _ in range(parent.shape[0] + 1):
-        new = np.where(has_parent, depth[safe] + 1, 0)
-        if np.array_equal(new, depth):
-            return depth
-        depth = new
-    raise ValueError("joint parents contain a cycle")
-
-
-def depth_levels(parent: np.ndarray) -> list[np.ndarray]:
-    """Joint indices grouped by depth, root level first (empty list for no joints)."""
-    if len(parent) == 0:
-        return []
-    depth = joint_depth(parent)
-    order = np.argsort(depth, kind="stable")
-    bounds = np.searchsorted(depth[order], np.arange(depth.max() + 2))
-    return [order[bounds[d]:bounds[d + 1]] for d in range(depth.max() + 1)]
-
-
-def pose_world(skeleton: Skeleton, rotations: np.ndarray) -> np.ndarray:
-    """World matrices (K, J, 4, 4) of every joint in every frame of `rotations` (K, J, 4) xyzw.
-
-    Translations stay at rest; composes parent-before-child one depth level at a time, so the
-    cost is a few numpy ops per level, not per joint.
-    """
-    rotations = np.asarray(rotations, dtype=np.float64)
-    k, j = rotations.shape[:2]
-    local = np.zeros((k, j, 4, 4))
-    local[..., :3, :3] = Rotation.from_quat(rotations.reshape(-1, 4)).as_matrix().reshape(k, j, 3, 3)
-    local[..., :3, 3] = skeleton.rest_translation[None]
-    local[..., 3, 3] = 1.0
-    world = np.empty_like(local)
-    parent = np.asarray(skeleton.parent)
-    for idx in depth_levels(parent):
-        roots = idx[parent[idx] < 0]
-        kids = idx[parent[idx] >= 0]
-        world[:, roots] = local[:, roots]
-        if kids.size:
-            world[:, kids] = world[:, parent[kids]] @ local[:, kids]
-    return world
 
 
 # ---------------------------------------------------------------------------------------------
@@ -362,13 +314,6 @@ def wind_velocity(points: np.ndarray, groups: np.ndarray, options: WindOptions, 
 
 # ---------------------------------------------------------------------------------------------
 # the bake
-
-def loop_times(duration: float, fps: float) -> np.ndarray:
-    """Key times of a looping clip: n = max(1, round(duration·fps)) intervals, 0..duration
-    inclusive (the closing key repeats the first)."""
-    n = max(1, int(round(fps * duration)))
-    return np.linspace(0.0, duration, n + 1)
-
 
 def _frames(options: WindOptions) -> tuple[int, np.ndarray]:
     times = loop_times(options.duration, options.fps)

@@ -26,8 +26,9 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..forest import Scene, phase_rotate
-from .gltf import (_Buffer, _is_default, _primitive, animated_joints, inverse_bind_accessor,
+from ..clip import moving_joints, phase_rotate
+from ..forest import Scene
+from .gltf import (_Buffer, _is_default, _primitive, inverse_bind_accessor,
                    joint_fields, material_dict, rotation_samplers, set_msft_lod, to_y_up,
                    write_files)
 
@@ -92,7 +93,7 @@ class _Shared:
         out: list[tuple[int, int]] = []
         if lod.clips and len(lod.clips[0].times) > 1:
             base = lod.clips[0]
-            joints = animated_joints(base, lod.skeleton)
+            joints = moving_joints(base, lod.skeleton)
             n = len(base.times) - 1
             clip = phase_rotate(base, round(v * n / self.scene.phase_variants))
             for j, sampler in rotation_samplers(self.buf, clip, joints, self._inputs):

@@ -24,7 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import TreegenError
-from ..forest import Scene, repeat_clip
+from ..clip import repeat_clip
+from ..forest import Scene
 from .usd import (_identifier, _sample_rate, _snap, build_stage, check_suffix, new_stage,
                   write_stage)
 

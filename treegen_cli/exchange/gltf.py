@@ -39,6 +39,7 @@ import numpy as np
 
 from .. import __version__
 from ..asset import Asset, Clip, Primitive, Skeleton
+from ..clip import moving_joints
 from ..quat import continuous as _continuous
 
 # glTF enums
@@ -202,16 +203,6 @@ def _primitive(buf: _Buffer, p: Primitive, n_joints: int, material: int) -> dict
             "material": material, "mode": 4}
 
 
-def animated_joints(clip: Clip, skeleton: Skeleton) -> np.ndarray:
-    """Joints that get a channel: Clip.animated, else those whose rotation ever leaves rest."""
-    if clip.animated is not None:
-        return np.flatnonzero(np.asarray(clip.animated, dtype=bool))
-    rest = _unit(np.asarray(skeleton.rest_rotation, dtype=np.float64))
-    rot = _unit(np.asarray(clip.rotations, dtype=np.float64))
-    dot = np.abs(np.einsum("kji,ji->kj", rot, rest))
-    return np.flatnonzero((dot < 1.0 - 1e-12).any(axis=0))
-
-
 def rotation_samplers(buf: _Buffer, clip: Clip, joints: np.ndarray,
                       inputs: dict) -> list[tuple[int, dict]]:
     """[(joint, sampler)] for the rotation tracks of `joints`, each with only its kept keys
@@ -233,7 +224,7 @@ def rotation_samplers(buf: _Buffer, clip: Clip, joints: np.ndarray,
 
 
 def _animation(buf: _Buffer, clip: Clip, skeleton: Skeleton, joint_nodes: np.ndarray) -> dict | None:
-    joints = animated_joints(clip, skeleton)
+    joints = moving_joints(clip, skeleton)
     if len(joints) == 0:
         return None
     samplers, channels = [], []

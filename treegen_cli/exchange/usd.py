@@ -20,11 +20,12 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from ..asset import Asset, Clip, Lod, Material, Primitive, Skeleton, lod_bounds
+from ..clip import moving_joints, union_timeline
 from ..errors import TreegenError
 from ..quat import continuous
+from ..skeleton import pose_world, trs
 
 SUFFIXES = (".usda", ".usdc", ".usdz")
 USDZ_MTIME = 946684800  # 2000-01-01: fixed zip entry time for reproducible .usdz bytes
@@ -254,7 +255,7 @@ def _define_skeleton(stage, path, skel: Skeleton) -> list[str]:
     s.CreateJointNamesAttr(Vt.TokenArray(list(skel.names)))
     bind = np.ascontiguousarray(np.transpose(np.asarray(skel.bind_world, np.float64), (0, 2, 1)))
     s.CreateBindTransformsAttr(Vt.Matrix4dArray.FromNumpy(bind))
-    rest = _trs_matrices(skel.rest_translation, skel.rest_rotation)
+    rest = trs(skel.rest_translation, skel.rest_rotation)
     s.CreateRestTransformsAttr(Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(np.transpose(rest, (0, 2, 1)))))
     return joint_paths
 
@@ -278,7 +279,7 @@ def _define_animation(stage, path, clip: Clip, skel: Skeleton, joint_paths, tcps
     from pxr import UsdSkel, Vt
 
     moving = _moving_joints(clip, skel)
-    frames, rot = resample_clip(clip, moving)
+    frames, rot = union_timeline(clip, moving)
     rot = continuous(rot)        # consecutive samples on one hemisphere: lerping importers are safe
     anim = UsdSkel.Animation.Define(stage, path)
     anim.CreateJointsAttr(Vt.TokenArray([joint_paths[j] for j in moving]))
@@ -366,35 +367,10 @@ def _define_material(stage, looks_path, m: Material):
 
 # --------------------------------------------------------------------------- numeric helpers
 
-def resample_clip(clip: Clip, joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(frames (U,), rotations (U, len(joints), 4) xyzw) as USD will store them.
-
-    frames: the union of the kept key indices of `joints` (every key when clip.keys is None;
-    for STEP also the frame before each kept key); rotations: each joint's own playback value
-    at those frames (see _define_animation).
-    """
-    from ..lod import kept_mask, playback
-
-    rot = np.asarray(clip.rotations, np.float64)
-    K = len(clip.times)
-    if clip.keys is None:
-        return np.arange(K), rot[:, joints]
-    kept = kept_mask(clip)
-    ends = np.zeros(K, dtype=bool)
-    ends[[0, -1]] = True
-    frames = np.flatnonzero(kept[:, joints].any(axis=1) | ends)
-    step = clip.interpolation.upper() == "STEP"
-    if step:
-        frames = np.unique(np.r_[frames, np.maximum(frames - 1, 0)])
-    return frames, playback(rot, kept, "STEP" if step else "LINEAR")[frames][:, joints]
-
-
 def _moving_joints(clip: Clip, skel: Skeleton) -> np.ndarray:
     """Joints that get animation tracks: the same rule as the glTF writer's channels (so both
     formats animate the same joints); never empty (a still clip keeps the root)."""
-    from .gltf import animated_joints
-
-    moving = animated_joints(clip, skel)
+    moving = moving_joints(clip, skel)
     return moving if moving.size else np.zeros(1, np.int64)
 
 
@@ -410,17 +386,6 @@ def _joint_paths(skel: Skeleton) -> list[str]:
             raise TreegenError(f"skeleton joint {j}: parent {parent} does not come before it")
         paths.append(name if parent < 0 else f"{paths[parent]}/{name}")
     return paths
-
-
-def _trs_matrices(t: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """(J, 4, 4) column-vector matrices from translations and xyzw quaternions."""
-    t = np.asarray(t, np.float64)
-    m = np.zeros((len(t), 4, 4))
-    if len(t):
-        m[:, :3, :3] = Rotation.from_quat(np.asarray(q, np.float64)).as_matrix()
-    m[:, :3, 3] = t
-    m[:, 3, 3] = 1.0
-    return m
 
 
 def _animated_bounds(lod: Lod) -> tuple[np.ndarray, np.ndarray]:
@@ -460,8 +425,6 @@ def _animated_bounds(lod: Lod) -> tuple[np.ndarray, np.ndarray]:
         return lo, hi
     corner_sel = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)], bool)
     corners = np.where(corner_sel[None], box_hi[has, None, :], box_lo[has, None, :])   # (Jh, 8, 3)
-    from ..wind import pose_world
-
     rest_q = np.asarray(skel.rest_rotation, np.float64)
     for clip in clips:
         K = len(clip.times)
