@@ -16,7 +16,9 @@ from treegen_cli.errors import TreegenError
 from treegen_cli.exchange.forest_gltf import build_forest
 from treegen_cli.exchange.gltf import read_accessor, read_gltf
 from treegen_cli.clip import phase_rotate, playback, repeat_clip
-from treegen_cli.forest import (Instance, Scene, WindSpec, build_scene, inside_polygon, load_layout,
+from treegen_cli.asset import Forest, Instance
+from treegen_cli.prepare import prepare_forest
+from treegen_cli.forest import (WindSpec, build_scene, inside_polygon, load_layout,
                                 parse_layout, polygon_area,
                                 run_forest, scatter_points, schema_text, select_lod, time_offsets,
                                 write_scene)
@@ -262,10 +264,10 @@ def test_shared_data_is_not_duplicated(scene):
 
     def blob_size(n):
         rng = np.random.default_rng(n)
-        inst = [Instance(i % 3, (float(x), float(y), 0.0), float(r), 1.0, 0, float(t))
+        inst = [Instance(i % 3, (float(x), float(y), 0.0), float(r), 1.0, 0, float(t), variant=i % 4)
                 for i, (x, y, r, t) in enumerate(zip(rng.uniform(-50, 50, n), rng.uniform(-50, 50, n),
                                                      rng.uniform(0, 360, n), rng.uniform(0, 1, n)))]
-        s = Scene("t", protos, inst, sc.camera, phase_variants=4, loop=1.0)
+        s = prepare_forest(Forest("t", protos, inst, phase_variants=4, loop=1.0))
         gltf, blob = build_forest(s)
         assert len(gltf["meshes"]) == 3 and len({sk["inverseBindMatrices"] for sk in gltf["skins"]}) == 3
         return len(blob)

@@ -13,11 +13,17 @@ from synthetic import bark, chain_skeleton, leaves, synthetic_asset, MATERIALS
 from treegen_cli import __version__
 from treegen_cli.asset import Asset, Lod
 from treegen_cli.errors import TreegenError
-from treegen_cli.exchange import WRITERS, export, supported_suffixes
+from treegen_cli.exchange import WRITERS, export as _export, supported_suffixes
+from treegen_cli.prepare import prepare
 from treegen_cli.exchange.gltf import (UNSIGNED_BYTE, UNSIGNED_INT, UNSIGNED_SHORT,
                                        quat_to_y_up, read_accessor, read_gltf, to_y_up,
                                        write_gltf)
 from treegen_cli.exchange.validate import summary, validate_gltf
+
+def export(asset, path, **opts):
+    """Hand-built assets go through the prepare stage, as the pipeline's do."""
+    return _export(prepare(asset), path, **opts)
+
 
 
 def _clean(path) -> dict:
@@ -323,7 +329,7 @@ def test_step_and_explicit_animated(tmp_path):
                                animated=np.array([False, False, True]), keys=None)
     asset = dataclasses.replace(asset, lods=[dataclasses.replace(asset.lods[0], clips=[clip])])
     p = tmp_path / "step.glb"
-    write_gltf(asset, p)
+    write_gltf(prepare(asset), p)
     _clean(p)
     gltf, _ = read_gltf(p)
     anim = gltf["animations"][0]

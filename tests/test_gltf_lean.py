@@ -11,12 +11,18 @@ import pytest
 from synthetic import MATERIALS, synthetic_asset
 from synthetic_tree import synthetic_tree
 from treegen_cli.asset import Asset, Lod, Primitive
-from treegen_cli.exchange import export
+from treegen_cli.exchange import export as _export
+from treegen_cli.prepare import prepare
 from treegen_cli.exchange.gltf import (FLOAT, UNSIGNED_BYTE, UNSIGNED_SHORT, build, glb_bytes,
                                        read_accessor, read_gltf)
 from treegen_cli.exchange.validate import summary, validate_gltf
 from treegen_cli.mesh import MeshOptions, build_mesh
 from treegen_cli.rig import RigOptions, build_rig
+
+def export(asset, path, **opts):
+    """Hand-built assets go through the prepare stage, as the pipeline's do."""
+    return _export(prepare(asset), path, **opts)
+
 
 
 def _raw(gltf, blob, index):
@@ -88,8 +94,8 @@ def test_streamed_glb_equals_in_memory_bytes(tmp_path):
     asset = synthetic_asset(3)
     p = tmp_path / "s.glb"
     export(asset, p)
-    assert p.read_bytes() == glb_bytes(*build(asset))
-    gltf, blob = build(asset)
+    assert p.read_bytes() == glb_bytes(*build(prepare(asset)))
+    gltf, blob = build(prepare(asset))
     assert gltf["buffers"][0]["byteLength"] == len(blob) and len(blob) % 4 == 0
 
 

@@ -188,7 +188,11 @@ def test_bad_options(kwargs):
 
 
 def test_written_lods_validate(tmp_path):
-    from treegen_cli.exchange import export
+    from treegen_cli.exchange import export as _export
+    from treegen_cli.prepare import prepare
+
+    def export(a, p):
+        return _export(prepare(a), p)
     from treegen_cli.exchange.usd import validate_usd
     from treegen_cli.exchange.validate import ValidatorUnavailable, summary, validate_gltf
 

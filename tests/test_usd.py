@@ -13,9 +13,15 @@ from pxr import Gf, Usd, UsdGeom, UsdLod, UsdShade, UsdSkel, Vt  # noqa: E402
 
 from synthetic import synthetic_asset  # noqa: E402
 from treegen_cli.errors import TreegenError  # noqa: E402
-from treegen_cli.exchange.usd import validate_usd, write_usd  # noqa: E402
+from treegen_cli.exchange.usd import validate_usd, write_usd as _write_usd  # noqa: E402
+from treegen_cli.prepare import prepare  # noqa: E402
 
 FORMATS = ("usda", "usdc", "usdz")
+
+def write_usd(asset, path, **opts):
+    """Hand-built assets go through the prepare stage, as the pipeline's do."""
+    return _write_usd(prepare(asset), path, **opts)
+
 
 
 @pytest.fixture(scope="module")
@@ -342,7 +348,10 @@ def test_validator_looks_inside_non_default_variants(tmp_path):
 def test_usd_and_gltf_agree(tmp_path):
     """Same Asset through both writers: the USD skinned rest pose equals the glTF rest geometry
     (brought back to Z up) and both animate the same joints with the same rotations."""
-    from treegen_cli.exchange import export
+    from treegen_cli.exchange import export as _export
+
+    def export(a, p):
+        return _export(prepare(a), p)
     from treegen_cli.exchange.gltf import quat_to_y_up, read_accessor, read_gltf
 
     asset = synthetic_asset(lods=1)

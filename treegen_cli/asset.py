@@ -1,4 +1,7 @@
-"""What writers receive: a finished, format-neutral asset. Writers only serialise it.
+"""What writers receive: a finished, format-neutral asset (a tree, or a forest of instanced
+trees). Writers only serialise it: whatever they need beyond the stages' output (moving
+joints, animated bounds, the shared timeline USD keys on, phase-shifted and repeated clips)
+is filled in by prepare.py before any writer sees it.
 
 Everything is in generator space (metres, Z up, right-handed); each writer converts to its
 format's axes (glTF: Y up). Quaternions are (x, y, z, w), scipy's order.
@@ -62,6 +65,11 @@ class Clip:
     keys: list[np.ndarray] | None = None   # per joint: sorted int indices into times
     animated: np.ndarray | None = None     # bool (J,): joints that get a channel (None: all
                                            # joints whose rotation ever leaves rest)
+    timeline: tuple[np.ndarray, np.ndarray] | None = None
+                                           # prepared: (frames (U,), rotations (U, M, 4)) of the
+                                           # animated joints (the root if none) keyed together at
+                                           # the union of their kept keys, each playing its own
+                                           # track (formats with one time list per animation)
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,6 +79,9 @@ class Lod:
     clips: list[Clip] = field(default_factory=list)
     distance: float = 0.0                  # metres from which this LOD is used
     screen_coverage: float = 1.0           # MSFT_screencoverage hint (fraction of screen height)
+    bounds: tuple[np.ndarray, np.ndarray] | None = None
+                                           # prepared: (min, max) of the skinned geometry at rest
+                                           # and at every key of every clip
 
 
 @dataclass(frozen=True, eq=False)
@@ -79,6 +90,44 @@ class Asset:
     materials: list[Material]
     lods: list[Lod]                        # lods[0] is the full-detail tree
     extras: dict = field(default_factory=dict)  # provenance (species, seed, treegen version)
+
+
+@dataclass(frozen=True)
+class Instance:
+    """One placed tree of a forest: which prototype, where, which LOD, its time offset (s) and
+    the phase variant of its prototype's clip that plays closest to that offset."""
+
+    prototype: int
+    position: tuple[float, float, float]
+    rotation_deg: float                    # about +Z
+    scale: float
+    lod: int = 0
+    time_offset: float = 0.0
+    distance: float = 0.0                  # to the layout's camera, m
+    source: str = ""                       # JSON path of the layout entry that placed it
+    variant: int = 0
+
+
+@dataclass(eq=False)
+class Forest:
+    """Prototypes built once and placed many times."""
+
+    name: str
+    prototypes: list[Asset]
+    instances: list[Instance]
+    all_lods: bool = False                 # every instance carries every LOD (else its own)
+    phase_variants: int = 4
+    loop: float = 0.0                      # clip period, s (0: static)
+    timings: dict = field(default_factory=dict)
+    # prepared: per (prototype, LOD) used, the first clip started at each phase variant
+    variants: dict[tuple[int, int], list[Clip]] = field(default_factory=dict)
+    # prepared: each prototype with its clips played over two periods (room for per-instance
+    # time offsets in formats that offset a shared clip, USD)
+    looped: list[Asset] = field(default_factory=list)
+
+
+def is_prepared(asset: Asset) -> bool:
+    return all(lod.bounds is not None for lod in asset.lods)
 
 
 def lod_bounds(lod: Lod) -> tuple[np.ndarray, np.ndarray]:

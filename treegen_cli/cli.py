@@ -228,8 +228,8 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
     params = _load(species)
     rep = current_reporter()
     per_lod = 3 if wind is None else 5                  # generate, rig, mesh (, wind, lod)
-    timings = rep.timings(total=per_lod if options.lod is None else
-                          len(options.lod.distances) * per_lod + 1)   # (+ write)
+    timings = rep.timings(total=per_lod + 2 if options.lod is None else
+                          len(options.lod.distances) * per_lod + 2)   # (+ prepare, write)
     with rep.live():
         asset, tree = _in_file(species, build_asset, params, seed, options, timings)
         written = timings.run("write", export, asset, output)

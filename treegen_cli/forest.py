@@ -32,8 +32,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .asset import Asset, Clip, Lod, lod_bounds
+from .asset import Asset, Forest, Instance, Lod, lod_bounds
 from .limits import MAX_TREES
+from .prepare import prepare_forest
 from .errors import TreegenError, in_file as _in_file
 
 SCHEMA_NAME = "layout.schema.json"
@@ -381,32 +382,6 @@ def _scatter_placements(sc: dict, where: str, base: Path, defaults: Defaults,
 
 # ----------------------------------------------------------------------------- scene
 
-@dataclass(frozen=True)
-class Instance:
-    """One placed tree: which prototype, where, which LOD, and its time offset (seconds)."""
-
-    prototype: int
-    position: tuple[float, float, float]
-    rotation_deg: float
-    scale: float
-    lod: int = 0
-    time_offset: float = 0.0
-    distance: float = 0.0
-    source: str = ""
-
-
-@dataclass
-class Scene:
-    name: str
-    prototypes: list[Asset]
-    instances: list[Instance]
-    camera: Camera
-    all_lods: bool = False
-    phase_variants: int = 4
-    loop: float = 0.0                       # clip period, s (0: static)
-    timings: dict = field(default_factory=dict)
-
-
 def select_lod(distance: np.ndarray, lod_distances, scale: np.ndarray | float = 1.0) -> np.ndarray:
     """LOD index per instance: the last LOD whose `distance` ≤ the instance's effective
     distance (camera distance / scale: a tree twice as big looks like one twice as near)."""
@@ -511,7 +486,7 @@ def _rotz(deg: np.ndarray) -> np.ndarray:
 
 
 def build_scene(layout: Layout, all_lods: bool = False, error_px: float | None = None,
-                workers: int | None = None, progress: bool | None = None) -> Scene:
+                workers: int | None = None, progress: bool | None = None) -> Forest:
     """Prototypes (built once each) and instances with their LOD and time offset."""
     t0 = time.perf_counter()
     keys = sorted({(p.species, p.seed) for p in layout.placements}, key=lambda k: (str(k[0]), k[1]))
@@ -533,13 +508,17 @@ def build_scene(layout: Layout, all_lods: bool = False, error_px: float | None =
         lods[sel] = select_lod(dist[sel], [l.distance for l in asset.lods], scale[sel])
     animated = layout.wind.enabled
     offsets = time_offsets(pos, layout.wind) if animated else np.zeros(len(placements))
+    loop = layout.wind.duration if animated else 0.0
+    V = max(1, layout.defaults.phase_variants)
+    variant = np.round(offsets / loop * V).astype(int) % V if loop > 0 else np.zeros(len(placements), int)
     instances = [Instance(int(proto[i]), tuple(pos[i]), float(rot[i]), float(scale[i]), int(lods[i]),
-                          float(offsets[i]), float(dist[i]), placements[i].source)
+                          float(offsets[i]), float(dist[i]), placements[i].source, int(variant[i]))
                  for i in range(len(placements))]
-    return Scene(name=layout.name, prototypes=prototypes, instances=instances, camera=layout.camera,
-                 all_lods=all_lods, phase_variants=layout.defaults.phase_variants,
-                 loop=layout.wind.duration if animated else 0.0,
-                 timings={"prototypes_s": t1 - t0, "place_s": time.perf_counter() - t1})
+    forest = prepare_forest(Forest(name=layout.name, prototypes=prototypes, instances=instances,
+                                   all_lods=all_lods, phase_variants=layout.defaults.phase_variants,
+                                   loop=loop))
+    forest.timings.update(prototypes_s=t1 - t0, place_s=time.perf_counter() - t1)
+    return forest
 
 
 # ----------------------------------------------------------------------------- clips
@@ -555,7 +534,7 @@ def leaf_updates(lod: Lod) -> tuple[int, float]:
     return lod_leaf_updates(lod)
 
 
-def summary(scene: Scene, written: list[Path], seconds: float) -> dict:
+def summary(scene: Forest, written: list[Path], seconds: float) -> dict:
     """The paper's comparison for the whole scene: leaf-vertex updates per frame with the
     chosen LODs versus every leaf vertex of LOD0 every frame (no LOD)."""
     per = [[leaf_updates(lod) for lod in a.lods] for a in scene.prototypes]
@@ -590,7 +569,7 @@ def _check_suffix(path: Path) -> str:
     return suffix
 
 
-def write_scene(scene: Scene, path: str | os.PathLike) -> list[Path]:
+def write_scene(scene: Forest, path: str | os.PathLike) -> list[Path]:
     """Write the scene atomically; the suffix picks glTF (.glb/.gltf) or USD."""
     from .exchange import staged, written
 

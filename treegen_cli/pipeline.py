@@ -15,6 +15,7 @@ from .limits import LIMITS_DEFAULTS, Limits, check_keys, check_mesh
 from .lod import LOD_DEFAULTS, LodOptions, decimate, lod_stage_options, match_leaf_area, screen_coverage
 from .mesh import MESH_DEFAULTS, MeshOptions, build_mesh
 from .params import Params
+from .prepare import prepare
 from .rig import RIG_DEFAULTS, RigOptions, build_rig
 from .tree import Tree, tree_height
 from .wind import DEFAULTS as WIND_DEFAULTS, WindOptions, bake_wind
@@ -99,4 +100,4 @@ def build_asset(params: Params, seed: int = 0, options: MakeOptions = MakeOption
     asset = Asset(name=params.name, materials=[BARK, LEAF], lods=lods,
                   extras={"species": params.name, "seed": seed,
                           "generator": f"treegen {__version__}"})
-    return asset, tree
+    return timings.run("prepare", prepare, asset), tree

@@ -1,4 +1,4 @@
-"""Forest Scene → one glTF 2.0 file whose binary grows with prototypes, not with trees.
+"""Forest → one glTF 2.0 file whose binary grows with prototypes, not with trees.
 
 Shared, written once per (prototype, LOD): the mesh (all vertex data), the skin's inverse bind
 matrices accessor, and per phase variant the animation sampler data (input times and output
@@ -13,8 +13,8 @@ Per instance and LOD k:
             └── joints     the prototype's skeleton (local TRS)
 
 One animation "wind" drives every instance; phase variety comes from `phase_variants`
-copies of each clip, key arrays rotated (forest.phase_rotate), the instance taking the variant
-nearest its time offset. With `all_lods` every LOD of every instance is written and LOD0's
+copies of each clip, key arrays rotated (Forest.variants, prepared), each instance playing the
+variant the forest stage chose for its time offset. With `all_lods` every LOD of every instance is written and LOD0's
 node lists the others with MSFT_lod (lower LODs are reached only through it).
 """
 from __future__ import annotations
@@ -26,9 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..clip import moving_joints, phase_rotate
-from ..forest import Scene
-from .gltf import (_Buffer, _is_default, _primitive, inverse_bind_accessor,
+from ..asset import Forest
+from .gltf import (_Buffer, _is_default, _primitive, moving_joints, inverse_bind_accessor,
                    joint_fields, material_dict, rotation_samplers, set_msft_lod, to_y_up,
                    write_files)
 
@@ -37,7 +36,7 @@ from .gltf import (_Buffer, _is_default, _primitive, inverse_bind_accessor,
 class _Shared:
     """Lazily written per-(prototype, LOD[, variant]) data, so unused LODs cost nothing."""
 
-    def __init__(self, scene: Scene, buf: _Buffer):
+    def __init__(self, scene: Forest, buf: _Buffer):
         self.scene, self.buf = scene, buf
         self.materials: list[dict] = []
         self._mat: dict = {}
@@ -89,13 +88,10 @@ class _Shared:
         key = (p, k, v)
         if key in self._tracks:
             return self._tracks[key]
-        lod = self.scene.prototypes[p].lods[k]
         out: list[tuple[int, int]] = []
-        if lod.clips and len(lod.clips[0].times) > 1:
-            base = lod.clips[0]
-            joints = moving_joints(base, lod.skeleton)
-            n = len(base.times) - 1
-            clip = phase_rotate(base, round(v * n / self.scene.phase_variants))
+        if (p, k) in self.scene.variants:
+            clip = self.scene.variants[(p, k)][v]
+            joints = moving_joints(clip)
             for j, sampler in rotation_samplers(self.buf, clip, joints, self._inputs):
                 self.samplers.append(sampler)
                 out.append((j, len(self.samplers) - 1))
@@ -103,13 +99,13 @@ class _Shared:
         return out
 
 
-def build_forest(scene: Scene) -> tuple[dict, bytes]:
+def build_forest(scene: Forest) -> tuple[dict, bytes]:
     """Scene → (glTF JSON dict without buffer uri, binary buffer)."""
     gltf, buf = _build_forest(scene)
     return gltf, buf.blob()
 
 
-def _build_forest(scene: Scene) -> tuple[dict, _Buffer]:
+def _build_forest(scene: Forest) -> tuple[dict, _Buffer]:
     """Scene → (glTF JSON dict without buffer uri, the unjoined buffer)."""
     buf = _Buffer()
     sh = _Shared(scene, buf)
@@ -117,7 +113,6 @@ def _build_forest(scene: Scene) -> tuple[dict, _Buffer]:
     skins: list[dict] = []
     channels: list[dict] = []
     roots: list[int] = []
-    V = max(1, scene.phase_variants)
     width = len(str(max(len(scene.instances) - 1, 0)))
     for i, inst in enumerate(scene.instances):     # per tree: JSON records only, no vertex data
         asset = scene.prototypes[inst.prototype]
@@ -125,7 +120,6 @@ def _build_forest(scene: Scene) -> tuple[dict, _Buffer]:
         t = to_y_up(np.asarray(inst.position, np.float64))
         half = math.radians(inst.rotation_deg) / 2
         q = np.array([0.0, math.sin(half), 0.0, math.cos(half)])   # about glTF's up (+Y)
-        variant = int(round(inst.time_offset / scene.loop * V)) % V if scene.loop > 0 else 0
         lods = range(len(asset.lods)) if scene.all_lods else [inst.lod]
         lod_nodes = []
         for k in lods:
@@ -155,7 +149,7 @@ def _build_forest(scene: Scene) -> tuple[dict, _Buffer]:
                 nodes.append(n)
             skins.append({"name": f"{name}_lod{k}_skin", "joints": [int(x) for x in joint_nodes],
                           "inverseBindMatrices": sh.ibm(inst.prototype, k), "skeleton": place})
-            for j, sampler in sh.tracks(inst.prototype, k, variant):
+            for j, sampler in sh.tracks(inst.prototype, k, inst.variant):
                 channels.append({"sampler": sampler,
                                  "target": {"node": int(joint_nodes[j]), "path": "rotation"}})
             lod_nodes.append(mesh_node)
@@ -181,7 +175,7 @@ def _build_forest(scene: Scene) -> tuple[dict, _Buffer]:
     return gltf, buf
 
 
-def write_forest_gltf_files(scene: Scene, path: str | os.PathLike) -> None:
+def write_forest_gltf_files(scene: Forest, path: str | os.PathLike) -> None:
     """Write straight to `path` (.glb, or .gltf + `<stem>.bin`); forest.write_scene stages it."""
     path = Path(path)
     gltf, buf = _build_forest(scene)

@@ -1,4 +1,4 @@
-"""Forest Scene → one USD stage: each prototype written once, trees as instanceable references.
+"""Forest → one USD stage: each prototype written once, trees as instanceable references.
 
     /<Forest>                 Xform, kind=assembly, defaultPrim
         Prototypes            class prim (abstract: never drawn itself)
@@ -24,23 +24,18 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import TreegenError
-from ..clip import repeat_clip
-from ..forest import Scene
+from ..asset import Forest
 from .usd import (_identifier, _sample_rate, _snap, build_stage, check_suffix, new_stage,
                   write_stage)
 
 
-def _prototype_asset(asset, lods: list[int], loop: bool):
-    out = []
-    for k in lods:
-        lod = asset.lods[k]
-        if loop:
-            lod = replace(lod, clips=[repeat_clip(c, 2) for c in lod.clips])
-        out.append(lod)
-    return replace(asset, lods=out)
+def _prototype_asset(forest: Forest, p: int, lods: list[int], loop: bool):
+    """Prototype p with only `lods`; its clips over two periods (Forest.looped) when looping."""
+    asset = forest.looped[p] if loop else forest.prototypes[p]
+    return replace(asset, lods=[asset.lods[k] for k in lods])
 
 
-def build_forest_stage(scene: Scene):
+def build_forest_stage(scene: Forest):
     """The whole forest as an in-memory stage (one layer)."""
     from pxr import Gf, Kind, Sdf, Usd, UsdGeom
 
@@ -69,7 +64,7 @@ def build_forest_stage(scene: Scene):
     for p, k in sorted(wanted):       # per prototype: a few
         asset = scene.prototypes[p]
         lods = list(range(len(asset.lods))) if k < 0 else [k]
-        sub = build_stage(_prototype_asset(asset, lods, tcps is not None))
+        sub = build_stage(_prototype_asset(scene, p, lods, tcps is not None))
         src = sub.GetDefaultPrim().GetPath()
         name = _identifier(f"{asset.name}_s{asset.extras.get('seed', p)}" + ("" if k < 0 else f"_lod{k}"))
         while name in used:
@@ -112,7 +107,7 @@ def build_forest_stage(scene: Scene):
     return stage
 
 
-def write_forest_usd(scene: Scene, path) -> None:
+def write_forest_usd(scene: Forest, path) -> None:
     """Write the forest to exactly `path` (.usda text, .usdc crate, .usdz package)."""
     path = Path(path)
     check_suffix(path)                    # before the stage is built

@@ -39,7 +39,6 @@ import numpy as np
 
 from .. import __version__
 from ..asset import Asset, Clip, Primitive, Skeleton
-from ..clip import moving_joints
 from ..quat import continuous as _continuous
 
 # glTF enums
@@ -203,6 +202,13 @@ def _primitive(buf: _Buffer, p: Primitive, n_joints: int, material: int) -> dict
             "material": material, "mode": 4}
 
 
+def moving_joints(clip: Clip) -> np.ndarray:
+    """Joints that get a channel (prepared in Clip.animated)."""
+    if clip.animated is None:
+        raise ValueError(f"clip {clip.name!r} is not prepared (prepare.prepare before export)")
+    return np.flatnonzero(clip.animated)
+
+
 def rotation_samplers(buf: _Buffer, clip: Clip, joints: np.ndarray,
                       inputs: dict) -> list[tuple[int, dict]]:
     """[(joint, sampler)] for the rotation tracks of `joints`, each with only its kept keys
@@ -224,7 +230,7 @@ def rotation_samplers(buf: _Buffer, clip: Clip, joints: np.ndarray,
 
 
 def _animation(buf: _Buffer, clip: Clip, skeleton: Skeleton, joint_nodes: np.ndarray) -> dict | None:
-    joints = moving_joints(clip, skeleton)
+    joints = moving_joints(clip)
     if len(joints) == 0:
         return None
     samplers, channels = [], []

@@ -22,10 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from ..asset import Asset, Clip, Lod, Material, Primitive, Skeleton, lod_bounds
-from ..clip import moving_joints, union_timeline
 from ..errors import TreegenError
-from ..quat import continuous
-from ..skeleton import pose_world, trs
+from ..quat import continuous, to_matrix
 
 SUFFIXES = (".usda", ".usdc", ".usdz")
 USDZ_MTIME = 946684800  # 2000-01-01: fixed zip entry time for reproducible .usdz bytes
@@ -223,7 +221,9 @@ def _define_lod(stage, path, lod: Lod, asset: Asset, materials, tcps) -> None:
     from pxr import UsdSkel
 
     skel_root = UsdSkel.Root.Define(stage, path)
-    lo, hi = _animated_bounds(lod)
+    if lod.bounds is None:
+        raise ValueError(f"asset {asset.name!r}: not prepared (prepare.prepare before export)")
+    lo, hi = lod.bounds
     skel_root.CreateExtentAttr([_gf_vec3f(lo), _gf_vec3f(hi)])
     skel_path = path.AppendChild("Skeleton")
     joint_paths = _define_skeleton(stage, skel_path, lod.skeleton)
@@ -255,7 +255,7 @@ def _define_skeleton(stage, path, skel: Skeleton) -> list[str]:
     s.CreateJointNamesAttr(Vt.TokenArray(list(skel.names)))
     bind = np.ascontiguousarray(np.transpose(np.asarray(skel.bind_world, np.float64), (0, 2, 1)))
     s.CreateBindTransformsAttr(Vt.Matrix4dArray.FromNumpy(bind))
-    rest = trs(skel.rest_translation, skel.rest_rotation)
+    rest = _rest_matrices(skel)
     s.CreateRestTransformsAttr(Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(np.transpose(rest, (0, 2, 1)))))
     return joint_paths
 
@@ -265,10 +265,10 @@ def _define_animation(stage, path, clip: Clip, skel: Skeleton, joint_paths, tcps
     at rest (default value only).
 
     USD samples every joint of an animation at the same time codes, while Clip.keys keeps keys
-    per joint. We write the union of the kept keys (of the moving joints) and give each joint,
-    at a time code it did not keep, the value its own track plays there: slerp between its
-    neighbouring kept keys (LINEAR) or its previous kept key (STEP). USD interpolates quatf
-    samples by slerp, so LINEAR playback is reproduced exactly.
+    per joint: Clip.timeline (prepare.py, clip.union_timeline) holds the union of the kept keys
+    of the moving joints, each joint playing its own track there (slerp between its kept keys
+    for LINEAR, its previous kept key for STEP). USD interpolates quatf samples by slerp, so
+    LINEAR playback is reproduced exactly.
 
     STEP: USD's held interpolation is a per-stage runtime setting, not stored in files. We keep
     linear files and encode the hold by also writing, one frame before each change, the held
@@ -278,8 +278,11 @@ def _define_animation(stage, path, clip: Clip, skel: Skeleton, joint_paths, tcps
     """
     from pxr import UsdSkel, Vt
 
-    moving = _moving_joints(clip, skel)
-    frames, rot = union_timeline(clip, moving)
+    if clip.timeline is None or clip.animated is None:
+        raise ValueError(f"clip {clip.name!r} is not prepared (prepare.prepare before export)")
+    moving = np.flatnonzero(clip.animated)
+    moving = moving if moving.size else np.zeros(1, np.int64)     # the timeline's tracks
+    frames, rot = clip.timeline
     rot = continuous(rot)        # consecutive samples on one hemisphere: lerping importers are safe
     anim = UsdSkel.Animation.Define(stage, path)
     anim.CreateJointsAttr(Vt.TokenArray([joint_paths[j] for j in moving]))
@@ -367,13 +370,6 @@ def _define_material(stage, looks_path, m: Material):
 
 # --------------------------------------------------------------------------- numeric helpers
 
-def _moving_joints(clip: Clip, skel: Skeleton) -> np.ndarray:
-    """Joints that get animation tracks: the same rule as the glTF writer's channels (so both
-    formats animate the same joints); never empty (a still clip keeps the root)."""
-    moving = moving_joints(clip, skel)
-    return moving if moving.size else np.zeros(1, np.int64)
-
-
 def _joint_paths(skel: Skeleton) -> list[str]:
     """Path tokens from Skeleton.parent (parents come before children)."""
     from pxr import Sdf
@@ -388,56 +384,15 @@ def _joint_paths(skel: Skeleton) -> list[str]:
     return paths
 
 
-def _animated_bounds(lod: Lod) -> tuple[np.ndarray, np.ndarray]:
-    """A box holding the skinned geometry at rest and at every key of every clip.
-
-    Cheap (joints × keys, not vertices × keys): each joint's vertices, in its bind frame, fill
-    a local box that the joint carries rigidly; a linear blend of such points lies in the
-    union of the joints' posed boxes. Slerp between keys can bulge slightly past the keyed
-    poses: a 2% margin covers it.
-    """
-    lo, hi = lod_bounds(lod)
-    skel = lod.skeleton
-    J = len(skel.names)
-    clips = [c for c in lod.clips if len(c.times)]
-    if not clips or J == 0:
-        return lo, hi
-    bind = np.asarray(skel.bind_world, np.float64)
-    box_lo, box_hi = np.full((J, 3), np.inf), np.full((J, 3), -np.inf)
-    for prim in lod.primitives:   # per-joint local boxes: one pass per influence slot
-        pos = np.asarray(prim.positions, np.float64)
-        joints = np.asarray(prim.joints, np.int64)
-        weights = np.asarray(prim.weights)
-        for k in range(joints.shape[1] if joints.ndim == 2 else 0):
-            used = weights[:, k] > 0
-            if not used.any():
-                continue
-            jv = joints[used, k]
-            order = np.argsort(jv, kind="stable")
-            jv = jv[order]
-            local = np.einsum("nji,nj->ni", bind[jv, :3, :3], pos[used][order] - bind[jv, :3, 3])
-            starts = np.flatnonzero(np.r_[True, jv[1:] != jv[:-1]])   # Rᵀ(p − t) per joint run
-            js = jv[starts]
-            box_lo[js] = np.minimum(box_lo[js], np.minimum.reduceat(local, starts, axis=0))
-            box_hi[js] = np.maximum(box_hi[js], np.maximum.reduceat(local, starts, axis=0))
-    has = np.isfinite(box_lo[:, 0])
-    if not has.any():
-        return lo, hi
-    corner_sel = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)], bool)
-    corners = np.where(corner_sel[None], box_hi[has, None, :], box_lo[has, None, :])   # (Jh, 8, 3)
-    rest_q = np.asarray(skel.rest_rotation, np.float64)
-    for clip in clips:
-        K = len(clip.times)
-        q = np.broadcast_to(rest_q, (K, J, 4)).copy()
-        moving = _moving_joints(clip, skel)
-        q[:, moving] = np.asarray(clip.rotations, np.float64)[:, moving]
-        world = pose_world(skel, q)                    # forward kinematics by depth level
-        w_rot, w_pos = world[..., :3, :3], world[..., :3, 3]
-        posed = np.einsum("kjab,jcb->kjca", w_rot[:, has], corners) + w_pos[:, has, None, :]
-        lo = np.minimum(lo, posed.min(axis=(0, 1, 2)))
-        hi = np.maximum(hi, posed.max(axis=(0, 1, 2)))
-    margin = 0.02 * (hi - lo).max()
-    return lo - margin, hi + margin
+def _rest_matrices(skel: Skeleton) -> np.ndarray:
+    """(J, 4, 4) column-vector rest matrices from the local translations and rotations."""
+    t = np.asarray(skel.rest_translation, np.float64)
+    m = np.zeros((len(t), 4, 4))
+    if len(t):
+        m[:, :3, :3] = to_matrix(skel.rest_rotation)
+    m[:, :3, 3] = t
+    m[:, 3, 3] = 1.0
+    return m
 
 
 def _sample_rate(times: np.ndarray) -> float:
