@@ -8,12 +8,18 @@ Conventions (the glTF ones, so a writer embeds the arrays unchanged):
 * UV origin is the top-left of the image, u right, v down (glTF TEXCOORD_0; image row = v·H).
 * Colours passed in are LINEAR RGB (like glTF baseColorFactor / asset.Material.base_color); the
   colour images are sRGB-encoded, as glTF's baseColorTexture requires. A material using them
-  should set its base colour factor to white: the texture's mean is close to the colour given.
+  should set its base colour factor to white: the mean (in linear light) of the blade texels,
+  and of the whole bark albedo, is the colour given, so the tree's average colour is kept.
 * Leaf atlas alpha is straight (not premultiplied) coverage; transparent texels carry the colour
-  of the nearest opaque blade texel so bilinear/mip filtering does not bleed dark halos.
+  of the nearest solid blade texel so bilinear/mip filtering does not bleed dark halos.
 * Normal maps are tangent space, OpenGL/glTF convention: R = +X (u right), G = +Y (up in the
   image, i.e. −v), B = +Z out of the surface; byte = round((n + 1) / 2 · 255).
-* Every random choice comes from `np.random.default_rng(seed)`: same arguments, same bytes.
+* Every random choice comes from a numpy Generator seeded from `seed`: same arguments, same
+  pixels, and `png_bytes` turns the same pixels into the same bytes.
+
+Default sizes keep a tree's textures to a few hundred KB of PNG: a 512² leaf atlas (four
+240-texel leaves) and 256² bark (bark is noise-like and compresses poorly: 512² bark albedo +
+normal is ~600 KB, 256² ~190 KB; it tiles around and along every stem anyway).
 """
 from __future__ import annotations
 
@@ -32,13 +38,17 @@ PNG_COMPRESS_LEVEL = 6   # fixed: PNG bytes are a function of the pixels only
 
 # ---------------------------------------------------------------------------------- colour
 
+_SRGB_LUT = np.round(255.0 * np.where(
+    np.linspace(0.0, 1.0, 4096) <= 0.0031308, 12.92 * np.linspace(0.0, 1.0, 4096),
+    1.055 * np.power(np.linspace(0.0, 1.0, 4096), 1 / 2.4) - 0.055)).astype(np.uint8)
+
+
 def _to_srgb8(lin: np.ndarray) -> np.ndarray:
     """Linear 0..1 floats → sRGB-encoded uint8 through a 4096-entry table (fast, exact enough)."""
-    x = np.linspace(0.0, 1.0, 4096)
-    table = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
-    table = np.round(table * 255.0).astype(np.uint8)
-    idx = np.clip(lin, 0.0, 1.0) * 4095.0 + 0.5
-    return table[idx.astype(np.int32)]
+    idx = np.clip(lin, 0.0, 1.0).astype(np.float32)
+    idx *= np.float32(4095.0)
+    idx += np.float32(0.5)
+    return _SRGB_LUT.take(idx.astype(np.int32))
 
 
 def srgb8_to_linear(c: np.ndarray) -> np.ndarray:
@@ -340,7 +350,9 @@ def leaf_atlas(shape: int, color, size: int = 512, variants: int = 4, seed: int 
         lins.append(lin)
     # Scale so the mean blade colour over all variants is `color` exactly: a material that
     # swaps its colour factor for this texture keeps the tree's average colour.
-    mean = np.mean([lin[inside] for lin in lins], axis=(0, 1)) if inside.any() else base
+    weight = inside.ravel().astype(np.float32)
+    total = sum(lin.reshape(-1, 3).T @ weight for lin in lins)
+    mean = total / (weight.sum() * len(lins)) if inside.any() else base
     gain = (base / np.maximum(mean, 1e-6)).astype(np.float32)
     for k, lin in enumerate(lins):
         r, c = divmod(k, cols)
@@ -387,7 +399,8 @@ def _torus_noise(rng: np.random.Generator, n: int, sx: float, sy: float,
     cols[:, :ky + 1] = coef[:, :ky + 1]
     cols[:, n - ky:] = coef[:, ky + 1:]
     f = np.fft.irfft(np.fft.ifft(cols, axis=1), n=n, axis=2).astype(np.float32, copy=False)
-    f /= f.std(axis=(1, 2), keepdims=True) + np.float32(1e-12)
+    step = max(1, n // 128)                          # the std of a 128² subgrid is plenty
+    f /= f[:, ::step, ::step].std(axis=(1, 2), keepdims=True) + np.float32(1e-12)
     return f
 
 
@@ -443,7 +456,7 @@ def _worley_border(rng: np.random.Generator, n: int, gx: int, gy: int,
     return b / np.maximum(grad, np.float32(0.5 / n * min(gx, gy))), ident
 
 
-def bark_height(size: int = 512, seed: int = 0) -> np.ndarray:
+def bark_height(size: int = 256, seed: int = 0) -> np.ndarray:
     """Tileable bark height 0..1 (float32 size × size): long plates split by furrows.
 
     The plates are cells of a Voronoi diagram on the torus, stretched along v (the stem) and
@@ -470,7 +483,7 @@ def bark_height(size: int = 512, seed: int = 0) -> np.ndarray:
                                    0.03 * w[1, ::f, ::f])
     plate_h = rv.uniform(0.0, 1.0, 27).astype(np.float32)[ident]
     border = _upsample_periodic(border, f)
-    plate_h = _upsample_periodic(plate_h, f)
+    plate_h = plate_h.repeat(f, axis=0).repeat(f, axis=1)   # steps fall inside furrows
     border = border * np.float32(f / n)             # texels → tile units
     # Furrows open and close along their length; never under 2.5 texels of the Voronoi pass,
     # or they break up into beads where a thin furrow falls between its samples.
@@ -484,7 +497,7 @@ def bark_height(size: int = 512, seed: int = 0) -> np.ndarray:
     return h.astype(np.float32)
 
 
-def bark_textures(tint, size: int = 512, seed: int = 0, depth: float = 0.03):
+def bark_textures(tint, size: int = 256, seed: int = 0, depth: float = 0.03):
     """(albedo uint8 H×W×3 sRGB, normal uint8 H×W×3) for bark that tiles in u and v.
 
     `tint` is the bark's mean linear RGB. V runs along the stem (mesh.py's bark UVs), so the
