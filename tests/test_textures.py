@@ -114,6 +114,22 @@ def test_card_uvs_map_card_corners_to_rect_corners(atlases):
         np.testing.assert_allclose(got, [[u0, v1], [u1, v1], [u0, v0], [u1, v0]], atol=1e-7)
 
 
+def test_card_uvs_in_the_asset_convention_round_trip_through_the_gltf_flip(atlases):
+    """Primitive.uvs are bottom-left; exchange/gltf.py writes 1 − v. The texels sampled must be
+    the ones atlas.rects name in glTF UVs."""
+    at = atlases[1]
+    rng = np.random.default_rng(1)
+    uv = rng.uniform(0, 1, (200, 2)).astype(np.float32)
+    var = rng.integers(0, at.variants, 200)
+    gltf = T.card_uvs(uv, var, at)
+    asset = T.card_uvs(uv, var, at, origin="bottom-left")
+    flipped = np.float32(1.0) - asset[:, 1]                   # what gltf.py writes
+    np.testing.assert_allclose(flipped, gltf[:, 1], atol=1e-6)
+    np.testing.assert_array_equal(asset[:, 0], gltf[:, 0])
+    with pytest.raises(ValueError):
+        T.card_uvs(uv, var, at, origin="centre")
+
+
 def test_card_uvs_vectorised_over_mixed_variants(atlases):
     at = atlases[3]
     rng = np.random.default_rng(0)

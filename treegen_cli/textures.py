@@ -6,6 +6,8 @@ the alpha-tested blade on a card matches `Tree.leaf_area` (card area × fill_fac
 
 Conventions (the glTF ones, so a writer embeds the arrays unchanged):
 * UV origin is the top-left of the image, u right, v down (glTF TEXCOORD_0; image row = v·H).
+  treegen's own Primitive.uvs have the bottom-left origin (OpenGL/USD) and the glTF writer
+  flips them; `card_uvs(..., origin="bottom-left")` gives UVs in that convention.
 * Colours passed in are LINEAR RGB (like glTF baseColorFactor / asset.Material.base_color); the
   colour images are sRGB-encoded, as glTF's baseColorTexture requires. A material using them
   should set its base colour factor to white: the mean (in linear light) of the blade texels,
@@ -117,13 +119,22 @@ class LeafAtlas:
         return len(self.rects)
 
 
-def card_uvs(card_uv01: np.ndarray, variant: np.ndarray, atlas: LeafAtlas) -> np.ndarray:
-    """Map card UVs (u = x + 0.5, v = y, base at v = 0) into each vertex's variant cell."""
+def card_uvs(card_uv01: np.ndarray, variant: np.ndarray, atlas: LeafAtlas,
+             origin: str = "top-left") -> np.ndarray:
+    """Map card UVs (u = x + 0.5, v = y, base at v = 0) into each vertex's variant cell.
+
+    `origin="top-left"` gives glTF UVs (as `atlas.rects`). Asset Primitive.uvs use the
+    bottom-left origin (OpenGL/USD; exchange/gltf.py writes 1 − v): pass
+    `origin="bottom-left"` for those, and both writers then sample the same texels.
+    """
+    if origin not in ("top-left", "bottom-left"):
+        raise ValueError(f"origin must be 'top-left' or 'bottom-left', got {origin!r}")
     uv = np.asarray(card_uv01, dtype=np.float64)
     r = atlas.rects.astype(np.float64)[np.asarray(variant, dtype=np.int64)]
     out = np.empty(uv.shape, dtype=np.float32)
     out[:, 0] = r[:, 0] + uv[:, 0] * (r[:, 2] - r[:, 0])
-    out[:, 1] = r[:, 3] - uv[:, 1] * (r[:, 3] - r[:, 1])
+    v = r[:, 3] - uv[:, 1] * (r[:, 3] - r[:, 1])
+    out[:, 1] = v if origin == "top-left" else 1.0 - v
     return out
 
 
