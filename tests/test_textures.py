@@ -1,7 +1,12 @@
 """Generated leaf atlas and bark textures: coverage, layout, UVs, tiling, normals, PNG bytes."""
 from __future__ import annotations
 
+import hashlib
 import io
+import os
+import subprocess
+import sys
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -11,7 +16,6 @@ from treegen_cli import textures as T
 from treegen_cli.errors import TreegenError
 from treegen_cli.leafshapes import OUTLINES, fill_factor, outline
 from treegen_cli.params import default_params
-from dataclasses import replace
 
 GREEN = (0.16, 0.30, 0.06)
 BARK = (0.13, 0.09, 0.06)
@@ -80,8 +84,7 @@ def test_outline_centroid_maps_onto_the_blade(atlases, shape):
         assert u0 < uv[0] < u1 and v0 < uv[1] < v1
         x0, y0, x1, y1 = cell_pixels(at, k)
         a = at.rgba[y0:y1, x0:x1, 3].astype(np.float64)
-        if shape != 7:                                         # the star's centroid is a notch-free hub
-            assert at.rgba[int(uv[1] * h), int(uv[0] * w), 3] > 200
+        assert at.rgba[int(uv[1] * h), int(uv[0] * w), 3] > 200     # on the blade
         ys, xs = np.mgrid[y0:y1, x0:x1] + 0.5
         cu, cv = (a * xs).sum() / a.sum() / w, (a * ys).sum() / a.sum() / h
         assert cu == pytest.approx(uv[0], abs=1.5 / w)
@@ -151,6 +154,12 @@ def test_card_uvs_on_the_mesh_card_uvs():
     assert np.allclose(got[0], [at.rects[0, 0], at.rects[0, 3]])   # first CARD point: base left
 
 
+def rgb_key(px):
+    """One integer per texel colour, for set membership."""
+    px = px[..., :3].astype(np.int64)
+    return px[..., 0] << 16 | px[..., 1] << 8 | px[..., 2]
+
+
 def test_transparent_texels_carry_blade_colour(atlases):
     """Colour dilation: every alpha-0 texel repeats the colour of a solid texel of its own cell,
     so bilinear and mip filtering never pull in black or white."""
@@ -164,8 +173,7 @@ def test_transparent_texels_carry_blade_colour(atlases):
             solid = cell[..., 3] >= 128
             clear = cell[..., 3] == 0
             assert clear.any() or shape == 4
-            key = lambda px: px[..., 0].astype(np.int64) << 16 | px[..., 1].astype(np.int64) << 8 | px[..., 2]
-            assert np.isin(key(cell[clear][:, :3]), key(cell[solid][:, :3])).all()
+            assert np.isin(rgb_key(cell[clear]), rgb_key(cell[solid])).all()
     # and nothing dark anywhere: the padding round the card is leaf colour too
     lin = T.srgb8_to_linear(atlases[0].rgba[..., :3])
     assert lin.min() > 0.25 * min(GREEN)
@@ -361,3 +369,33 @@ def test_default_colours_are_valid_linear_rgb():
             assert len(c) == 3 and all(0.0 <= x <= 1.0 for x in c)
     for s in OUTLINES:
         assert s in T.DEFAULT_LEAF_COLOR
+
+
+def test_species_textures_bundle():
+    p = replace(default_params("weeping_willow"), leaf_shape=0, leaf_scale_x=0.2)
+    tex = T.species_textures(p, seed=1, leaf_size=128, bark_size=64, variants=2)
+    assert tex.leaf.variants == 2 and tex.leaf.rgba.shape == (128, 128, 4)
+    assert tex.bark_albedo.shape == tex.bark_normal.shape == (64, 64, 3)
+    pngs = tex.pngs()
+    assert set(pngs) == {"leaf", "bark", "bark_normal"}
+    assert pngs == T.species_textures(p, seed=1, leaf_size=128, bark_size=64, variants=2).pngs()
+    solid = tex.leaf.rgba[..., 3] >= 128
+    np.testing.assert_allclose(T.srgb8_to_linear(tex.leaf.rgba[..., :3][solid]).mean(axis=0),
+                               T.DEFAULT_LEAF_COLOR["weeping_willow"], rtol=0.04)
+
+
+def test_png_bytes_identical_in_a_fresh_interpreter():
+    """Same bytes from another process (other hash seed, fresh imports): nothing depends on
+    interpreter state."""
+    code = ("import hashlib\n"
+            "from treegen_cli import textures as T\n"
+            "from treegen_cli.params import default_params\n"
+            "t = T.species_textures(default_params('oak'), 3, 128, 64)\n"
+            "print(hashlib.sha256(b''.join(t.pngs().values())).hexdigest())\n")
+    env = dict(os.environ, PYTHONHASHSEED="12345")
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         check=True).stdout.strip()
+    here = T.species_textures(default_params("oak"), 3, 128, 64)
+    assert out == hashlib.sha256(b"".join(here.pngs().values())).hexdigest()

@@ -621,3 +621,29 @@ def species_colors(params) -> tuple[tuple[float, float, float], tuple[float, flo
     if bark is None:
         bark = DEFAULT_BARK_COLOR.get(name, DEFAULT_BARK_COLOR["default"])
     return tuple(float(c) for c in leaf), tuple(float(c) for c in bark)
+
+
+@dataclass(frozen=True, eq=False)
+class TreeTextures:
+    """A species' leaf atlas and bark maps, ready to embed (see `pngs`)."""
+
+    leaf: LeafAtlas
+    bark_albedo: np.ndarray     # uint8 (N, N, 3) sRGB
+    bark_normal: np.ndarray     # uint8 (N, N, 3) tangent space, OpenGL/glTF convention
+
+    def pngs(self) -> dict[str, bytes]:
+        """PNG bytes by role: "leaf" (RGBA), "bark" (RGB), "bark_normal" (RGB)."""
+        return {"leaf": png_bytes(self.leaf.rgba), "bark": png_bytes(self.bark_albedo),
+                "bark_normal": png_bytes(self.bark_normal)}
+
+
+def species_textures(params, seed: int = 0, leaf_size: int = 512, bark_size: int = 256,
+                     variants: int = 4) -> TreeTextures:
+    """Everything a writer needs for one species: its colours, its LeafShape outline and its
+    leaf width / length (LeafScaleX) so veins keep their angles on the stretched card."""
+    leaf_rgb, bark_rgb = species_colors(params)
+    aspect = float(getattr(params, "leaf_scale_x", 0.5))
+    atlas = leaf_atlas(int(getattr(params, "leaf_shape", 0)), leaf_rgb, leaf_size, variants,
+                       seed, aspect=aspect)
+    albedo, normal = bark_textures(bark_rgb, bark_size, seed)
+    return TreeTextures(atlas, albedo, normal)
