@@ -255,6 +255,16 @@ def test_bark_albedo_and_normal_tile_in_both_directions(seed):
         assert tiles(img, 0) and tiles(img, 1)
 
 
+@pytest.mark.parametrize("furrow", [0.0, 0.3])
+def test_smooth_bark_tiles_and_is_smoother(furrow):
+    for img in T.bark_textures(BARK, size=128, seed=0, furrow=furrow):
+        assert tiles(img, 0) and tiles(img, 1)
+    rough = np.abs(np.diff(T.bark_height(128, 0, 1.0), axis=1)).mean()
+    assert np.abs(np.diff(T.bark_height(128, 0, furrow), axis=1)).mean() < 0.8 * rough
+    with pytest.raises(ValueError):
+        T.bark_textures(BARK, furrow=1.5)
+
+
 def test_tiling_check_catches_a_texture_that_does_not_tile():
     """Control: a corner crop of a bigger bark is not periodic and the check says so."""
     albedo, normal = T.bark_textures(BARK, size=256, seed=0)

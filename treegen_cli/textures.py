@@ -467,16 +467,19 @@ def _worley_border(rng: np.random.Generator, n: int, gx: int, gy: int,
     return b / np.maximum(grad, np.float32(0.5 / n * min(gx, gy))), ident
 
 
-def bark_height(size: int = 256, seed: int = 0) -> np.ndarray:
+def bark_height(size: int = 256, seed: int = 0, furrow: float = 1.0) -> np.ndarray:
     """Tileable bark height 0..1 (float32 size × size): long plates split by furrows.
 
     The plates are cells of a Voronoi diagram on the torus, stretched along v (the stem) and
     bent by smooth periodic warps, so furrows meander, fork and rejoin as on oak, ash or
     cottonwood bark. Furrow width varies along each furrow; plates get their own height,
-    flat tops, shallow cross checks and fibres along the stem.
+    flat tops, shallow cross checks and fibres along the stem. `furrow` < 1 blends toward
+    smooth bark (aspen, young stems, grass culms): fibres and dark horizontal lenticels only.
     """
     if size < 16:
         raise ValueError("bark texture size must be at least 16")
+    if not 0.0 <= furrow <= 1.0:
+        raise ValueError(f"furrow must be in 0..1, got {furrow!r}")
     # One independent stream per ingredient: a field clamped at a small `n` (fewer
     # coefficients drawn) must not shift the others, so every size shows the same bark.
     rw, rr, rc, re, rv = (np.random.default_rng(s)
@@ -486,6 +489,11 @@ def bark_height(size: int = 256, seed: int = 0) -> np.ndarray:
     rough = _torus_noise(rr, n, 24.0, 8.0, 1)[0]     # ragged furrow edges, plate undulation
     c = _torus_noise(rc, n, 2.0, 14.0, 2)            # cross checks, and where they show
     e = _torus_noise(re, n, 70.0, 12.0, 1)[0]        # fibres along the stem
+    cross = (1.0 - _smoothstep(0.0, 0.10, np.abs(c[0]))) * _smoothstep(0.8, 1.6, c[1])
+    lenticel = (1.0 - _smoothstep(0.0, 0.22, np.abs(c[0]))) * _smoothstep(0.4, 1.4, c[1])
+    smooth = 0.85 + 0.05 * rough + 0.025 * e - 0.7 * lenticel
+    if furrow == 0.0:
+        return np.clip(smooth, 0.0, 1.0).astype(np.float32)
     # The Voronoi pass is the costly part: it runs at half resolution and is upsampled
     # (the border distance is continuous; plate ids only change inside furrows, unseen).
     f = 2 if n >= 512 and n % 2 == 0 else 1
@@ -501,23 +509,26 @@ def bark_height(size: int = 256, seed: int = 0) -> np.ndarray:
     width = np.maximum(0.012 + 0.008 * np.clip(w[1], -1.0, 1.5), np.float32(2.5 * f / n))
     wall = _smoothstep(0.0, 1.0, border / width)
     crown = _smoothstep(0.0, 1.0, border / (5.0 * width))
-    cross = (1.0 - _smoothstep(0.0, 0.10, np.abs(c[0]))) * _smoothstep(0.8, 1.6, c[1])
     h = wall * (0.50 + 0.22 * crown + 0.12 * plate_h + 0.06 * rough - 0.15 * cross) + 0.035 * e
     h -= h.min()
     h /= h.max() + 1e-12
+    if furrow < 1.0:
+        h = furrow * h + (1.0 - furrow) * np.clip(smooth, 0.0, 1.0)
     return h.astype(np.float32)
 
 
-def bark_textures(tint, size: int = 256, seed: int = 0, depth: float = 0.03):
+def bark_textures(tint, size: int = 256, seed: int = 0, depth: float = 0.03,
+                  furrow: float = 1.0):
     """(albedo uint8 H×W×3 sRGB, normal uint8 H×W×3) for bark that tiles in u and v.
 
     `tint` is the bark's mean linear RGB. V runs along the stem (mesh.py's bark UVs), so the
     fissures are vertical. `depth` is the furrow depth as a fraction of the tile width (the
     stem's circumference), so the normal map looks the same at any `size`. Normals come from
     periodic central differences, so the normal map tiles exactly as the height does.
+    `furrow` (0..1) goes from smooth bark with lenticels to deeply furrowed plates.
     """
     t = _check_color("tint", tint).astype(np.float32)
-    h = bark_height(size, seed)
+    h = bark_height(size, seed, furrow)
     rb, rf = (np.random.default_rng(s)
               for s in np.random.SeedSequence([int(seed), 0xC0105]).spawn(2))
     blot = _torus_noise(rb, size, 6.0, 3.0, 1)[0]
@@ -607,12 +618,33 @@ DEFAULT_BARK_COLOR: dict[str, tuple[float, float, float]] = {
     "weeping_willow": (0.14, 0.11, 0.08),
 }
 
+# How furrowed each species' bark is (bark_textures' `furrow`): 1 deep plates, 0 smooth.
+DEFAULT_BARK_FURROW: dict[str, float] = {
+    "default": 1.0,
+    "balsam_fir": 0.35,            # smooth with resin blisters until old
+    "desert_bush": 0.6,
+    "european_larch": 0.8,
+    "fan_palm": 0.2,
+    "lombardy_poplar": 0.8,
+    "palm": 0.2,
+    "quaking_aspen": 0.1,          # smooth, chalky, dark lenticels
+    "rush": 0.0,                   # green culms
+    "sassafras": 0.9,
+    "shave_grass": 0.0,
+    "tamarack": 0.7,
+    "weeping_willow": 0.9,
+}
+
+
+def _species_key(params) -> str:
+    return str(getattr(params, "name", "")).lower().replace(" ", "_").replace("-", "_")
+
 
 def species_colors(params) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
     """(leaf, bark) linear RGB for a species: its own LeafColor/BarkColor fields if Params ever
     grows them, else the table by species name, else by leaf shape, else the generic default.
     """
-    name = str(getattr(params, "name", "")).lower().replace(" ", "_").replace("-", "_")
+    name = _species_key(params)
     leaf = getattr(params, "leaf_color", None)
     bark = getattr(params, "bark_color", None)
     if leaf is None:
@@ -639,11 +671,13 @@ class TreeTextures:
 
 def species_textures(params, seed: int = 0, leaf_size: int = 512, bark_size: int = 256,
                      variants: int = 4) -> TreeTextures:
-    """Everything a writer needs for one species: its colours, its LeafShape outline and its
-    leaf width / length (LeafScaleX) so veins keep their angles on the stretched card."""
+    """Everything a writer needs for one species: its colours, its LeafShape outline, its
+    leaf width / length (LeafScaleX) so veins keep their angles on the stretched card, and
+    how furrowed its bark is."""
     leaf_rgb, bark_rgb = species_colors(params)
     aspect = float(getattr(params, "leaf_scale_x", 0.5))
     atlas = leaf_atlas(int(getattr(params, "leaf_shape", 0)), leaf_rgb, leaf_size, variants,
                        seed, aspect=aspect)
-    albedo, normal = bark_textures(bark_rgb, bark_size, seed)
+    furrow = DEFAULT_BARK_FURROW.get(_species_key(params), DEFAULT_BARK_FURROW["default"])
+    albedo, normal = bark_textures(bark_rgb, bark_size, seed, furrow=furrow)
     return TreeTextures(atlas, albedo, normal)
