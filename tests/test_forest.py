@@ -17,11 +17,11 @@ from treegen_cli.exchange.forest_gltf import build_forest
 from treegen_cli.exchange.gltf import read_accessor, read_gltf
 from treegen_cli.clip import phase_rotate, playback, repeat_clip
 from treegen_cli.asset import Forest, Instance
+from treegen_cli.exchange import export_forest as write_scene
 from treegen_cli.prepare import prepare_forest
 from treegen_cli.forest import (WindSpec, build_scene, inside_polygon, load_layout,
                                 parse_layout, polygon_area,
-                                run_forest, scatter_points, schema_text, select_lod, time_offsets,
-                                write_scene)
+                                run_forest, scatter_points, schema_text, select_lod, time_offsets)
 
 from synthetic import synthetic_asset
 
@@ -281,7 +281,7 @@ def test_gltf_forest_validator_clean(scene, tmp_path):
     _, sc = scene
     for all_lods in (False, True):
         path = tmp_path / f"f{int(all_lods)}.glb"
-        write_scene(replace(sc, all_lods=all_lods), path)
+        write_scene(prepare_forest(replace(sc, all_lods=all_lods)), path)
         try:
             report = validate_gltf(path)
         except ValidatorUnavailable as e:

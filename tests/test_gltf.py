@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 import dataclasses
 
 import numpy as np
@@ -16,8 +18,7 @@ from treegen_cli.errors import TreegenError
 from treegen_cli.exchange import WRITERS, export as _export, supported_suffixes
 from treegen_cli.prepare import prepare
 from treegen_cli.exchange.gltf import (UNSIGNED_BYTE, UNSIGNED_INT, UNSIGNED_SHORT,
-                                       quat_to_y_up, read_accessor, read_gltf, to_y_up,
-                                       write_gltf)
+                                       quat_to_y_up, read_accessor, read_gltf, to_y_up)
 from treegen_cli.exchange.validate import summary, validate_gltf
 
 def export(asset, path, **opts):
@@ -329,7 +330,7 @@ def test_step_and_explicit_animated(tmp_path):
                                animated=np.array([False, False, True]), keys=None)
     asset = dataclasses.replace(asset, lods=[dataclasses.replace(asset.lods[0], clips=[clip])])
     p = tmp_path / "step.glb"
-    write_gltf(prepare(asset), p)
+    _export(prepare(asset), p)
     _clean(p)
     gltf, _ = read_gltf(p)
     anim = gltf["animations"][0]
@@ -390,7 +391,7 @@ def test_registry_dispatches_usd_lazily(tmp_path, suffix):
 def test_validator_missing_is_a_clear_error(tmp_path, monkeypatch):
     from treegen_cli.exchange import validate
 
-    monkeypatch.setattr(validate, "TOOLS_DIR", tmp_path)
+    monkeypatch.setenv("TREEGEN_TOOLS", str(tmp_path))
     with pytest.raises(validate.ValidatorUnavailable, match="npm ci"):
         validate.validate_gltf(tmp_path / "x.glb")
     monkeypatch.undo()
@@ -398,3 +399,30 @@ def test_validator_missing_is_a_clear_error(tmp_path, monkeypatch):
     monkeypatch.delenv("TREEGEN_NODE", raising=False)
     with pytest.raises(validate.ValidatorUnavailable, match="Node.js"):
         validate.validate_gltf(tmp_path / "x.glb")
+
+
+def test_validator_found_from_another_working_folder(tmp_path, monkeypatch):
+    """The tools folder is looked up, not assumed at a fixed depth below the package."""
+    from treegen_cli.exchange import validate
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("TREEGEN_TOOLS", raising=False)
+    assert (validate.tools_dir() / "validate.mjs").is_file()
+    p = tmp_path / "x.glb"
+    export(synthetic_asset(1), p)
+    assert validate.validate_gltf("x.glb")["issues"]["numErrors"] == 0
+
+
+def test_a_killed_runs_staging_folder_is_swept_by_the_next_run(tmp_path):
+    """A staging folder whose writer process is gone is removed by the next write there; one
+    of a live process is left alone."""
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True).stdout.strip()
+    stale = tmp_path / f".tree.glb.{dead}.abcd1234.tmp"
+    stale.mkdir()
+    (stale / "tree.glb").write_bytes(b"half")
+    live = tmp_path / f".other.glb.{os.getpid()}.abcd1234.tmp"
+    live.mkdir()
+    export(synthetic_asset(1), tmp_path / "a.glb")
+    assert not stale.exists() and live.exists()
+    assert sorted(os.listdir(tmp_path)) == sorted(["a.glb", live.name])

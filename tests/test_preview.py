@@ -10,8 +10,10 @@ import pytest
 from treegen_cli.cli import main
 from treegen_cli.errors import TreegenError
 from treegen_cli.clip import sample_track
-from treegen_cli.preview import (PreviewOptions, camera_for, load_scene,
-                                 scene_from_asset, scene_from_gltf, scene_from_usd, sun_angles)
+from treegen_cli.drawable import from_asset as scene_from_asset
+from treegen_cli.exchange.read_gltf import read_drawable as scene_from_gltf
+from treegen_cli.exchange.read_usd import read_drawable as scene_from_usd
+from treegen_cli.preview import PreviewOptions, camera_for, load_scene, sun_angles
 from treegen_cli.render import Renderer, egl_available, skin_points
 from treegen_cli.species_list import describe, species_dir, species_files
 

@@ -195,7 +195,7 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
     """Grow SPECIES and write a skinned, wind-animated tree to OUTPUT."""
     from dataclasses import replace
 
-    from .exchange import WRITERS, export, supported_suffixes
+    from .exchange import check_suffix, export
     from .limits import Limits
     from .mesh import MESH_DEFAULTS
     from .pipeline import MakeOptions, build_asset
@@ -205,9 +205,7 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
     from .wind import WindOptions
 
     t0 = time.perf_counter()
-    if output.suffix.lower() not in WRITERS:
-        raise TreegenError(f"{output}: unknown output extension '{output.suffix or '(none)'}'; "
-                           f"supported: {', '.join(supported_suffixes())}")
+    check_suffix(output)
     if max_joints < 1:
         raise TreegenError(f"--max-joints {max_joints}: the joint budget must be at least 1")
     mesh = replace(MESH_DEFAULTS, leaf_geometry=leaf_geometry)

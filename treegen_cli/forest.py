@@ -6,7 +6,7 @@ instance gets the LOD its distance to the camera calls for, or all of them with 
 
     layout = load_layout("examples/forest_30m.json")      # validated; TreegenError names the
     scene = build_scene(layout)                           #   JSON path, e.g. instances[12].species
-    write_scene(scene, "forest.glb")                      # atomic (exchange.staged)
+    export_forest(scene, "forest.glb")                    # atomic (exchange)
 
 Validation is by hand, by a small interpreter of the subset of JSON Schema that
 schemas/layout.schema.json uses (type, properties, required, additionalProperties, items,
@@ -36,10 +36,10 @@ from .asset import Asset, Forest, Instance, Lod, lod_bounds
 from .limits import MAX_TREES
 from .prepare import prepare_forest
 from .errors import TreegenError, in_file as _in_file
+from .exchange import FOREST_WRITERS, check_suffix, export_forest
 
 SCHEMA_NAME = "layout.schema.json"
 HEX_PACKING = 2.0 / math.sqrt(3.0)    # most disks of diameter s per s² of area (hexagonal)
-SUFFIXES = (".glb", ".gltf", ".usda", ".usdc", ".usdz")
 
 
 # ----------------------------------------------------------------------------- schema
@@ -561,43 +561,17 @@ def summary(scene: Forest, written: list[Path], seconds: float) -> dict:
 
 # ----------------------------------------------------------------------------- writing
 
-def _check_suffix(path: Path) -> str:
-    suffix = path.suffix.lower()
-    if suffix not in SUFFIXES:
-        raise TreegenError(f"{path}: unknown output extension '{suffix or '(none)'}'; "
-                           f"supported: {', '.join(SUFFIXES)}")
-    return suffix
-
-
-def write_scene(scene: Forest, path: str | os.PathLike) -> list[Path]:
-    """Write the scene atomically; the suffix picks glTF (.glb/.gltf) or USD."""
-    from .exchange import staged, written
-
-    path = Path(path)
-    suffix = _check_suffix(path)
-    with staged(path) as tmp:
-        if suffix in (".glb", ".gltf"):
-            from .exchange.forest_gltf import write_forest_gltf_files
-            write_forest_gltf_files(scene, tmp)
-        else:
-            from .exchange.forest_usd import write_forest_usd
-            write_forest_usd(scene, tmp)
-        files = written(tmp, path)
-    return files
-
-
 def run_forest(layout_path, output, all_lods: bool = False, error_px: float | None = None,
                workers: int | None = None, progress: bool | None = None,
                max_trees: int = MAX_TREES) -> dict:
     """The whole command: validate (nothing written on error), build, write, summarise."""
     t0 = time.perf_counter()
-    output = Path(output)
-    _check_suffix(output)
+    output = check_suffix(output, FOREST_WRITERS)
     if error_px is not None and not (math.isfinite(error_px) and 0 <= error_px <= 100):
         raise TreegenError(f"--error-px {error_px}: allowed range 0..100 pixels")
     layout = load_layout(layout_path, max_trees)
     scene = build_scene(layout, all_lods, error_px, workers, progress)
     t1 = time.perf_counter()
-    written = write_scene(scene, output)
+    written = export_forest(scene, output)
     scene.timings["write_s"] = time.perf_counter() - t1
     return summary(scene, written, time.perf_counter() - t0)

@@ -8,16 +8,16 @@ What it draws, so a picture says something about the asset before an engine open
     hemisphere ambient; leaves are lit from both sides with some light through them,
   - 2×2 supersampling, box-filtered down on the CPU.
 
-World space here is Y up (glTF's), metres. Everything the renderer needs comes in a `Scene`;
-loading files and assets into one is preview.py's job.
+World space here is Y up (glTF's), metres. Everything the renderer needs comes in a
+`drawable.Drawable`; loading files and assets into one is drawable.py's and exchange's job.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
+from .drawable import Drawable, Part
 from .errors import TreegenError
 
 FOV_DEG = 30.0                      # vertical field of view of the preview camera
@@ -27,38 +27,6 @@ SKY_ZENITH = (0.23, 0.42, 0.78)     # linear RGB
 SKY_HORIZON = (0.72, 0.80, 0.90)
 GROUND = (0.085, 0.10, 0.045)
 SUN_COLOR = (2.6, 2.45, 2.2)        # linear, HDR (tone-mapped in the shader)
-
-
-@dataclass(frozen=True, eq=False)
-class Part:
-    """One skinned triangle list with one material (Y up)."""
-
-    name: str
-    positions: np.ndarray       # float32 (V, 3), rest pose
-    normals: np.ndarray         # float32 (V, 3)
-    indices: np.ndarray         # uint32 (T*3,)
-    joints: np.ndarray          # (V, 4) ints, into the scene's skinning matrices
-    weights: np.ndarray         # float32 (V, 4)
-    color: tuple[float, float, float]   # linear base colour
-    double_sided: bool = False  # leaves: lit from both faces, light passes through
-
-
-@dataclass(frozen=True, eq=False)
-class Scene:
-    """What to draw: parts plus a way to pose them. `skinning(t)` gives (T, J, 4, 4) matrices
-    (column-vector, Y up) for times t in seconds; None means the rest pose (identities)."""
-
-    parts: list[Part]
-    n_joints: int
-    duration: float = 0.0                                    # wind loop length, s (0: static)
-    skinning: Callable[[np.ndarray], np.ndarray] | None = None
-    label: str = ""
-
-    def pose(self, t: np.ndarray) -> np.ndarray:
-        t = np.atleast_1d(np.asarray(t, dtype=np.float64))
-        if self.skinning is None:
-            return np.broadcast_to(np.eye(4), (len(t), self.n_joints, 4, 4)).copy()
-        return self.skinning(t)
 
 
 def skin_points(points: np.ndarray, joints: np.ndarray, weights: np.ndarray,
@@ -341,9 +309,9 @@ class _GpuPart:
 
 
 class Renderer:
-    """Draws one Scene from one Camera, any number of poses; owns its GL context."""
+    """Draws one Drawable from one Camera, any number of poses; owns its GL context."""
 
-    def __init__(self, scene: Scene, width: int, height: int, supersample: int = SUPERSAMPLE):
+    def __init__(self, scene: Drawable, width: int, height: int, supersample: int = SUPERSAMPLE):
         if width < 8 or height < 8 or width > 8192 or height > 8192:
             raise TreegenError(f"--size {width}x{height}: each side must be in 8..8192 pixels")
         self.scene = scene

@@ -1,114 +1,136 @@
-"""Output formats: one table from file suffix to writer; `export` dispatches on the suffix.
+"""Every file treegen reads or writes passes through here: one table per direction and kind,
+keyed by suffix, and the only place a suffix is checked.
 
-A writer is `writer(asset, path, **opts)` that simply writes `path` (plus any sibling files,
-like a .gltf's .bin). `export` makes it atomic: the writer writes into a hidden staging folder
-inside the target folder, then every file it produced is moved into place with os.replace
-(siblings first, the main file last), so an interrupted run never leaves a half-written asset.
+    export(asset, "tree.glb")            # a prepared Asset   → .glb .gltf .usda .usdc .usdz .obj .ply
+    export_forest(forest, "forest.usdc") # a prepared Forest  → .glb .gltf .usda .usdc .usdz
+    save_still(pixels, "tree.png")       # an RGB image       → .png .jpg .jpeg;  save_loop → .gif
+    read_drawable("tree.usdz", lod=1)    # a written tree     → drawable.Drawable (preview, tests)
 
-To add a format, add one entry to WRITERS (import heavy modules lazily inside the function).
+Writing is atomic (staging.staged): a writer writes `path` (and any siblings, such as a
+.gltf's .bin) into a hidden staging folder, which is moved into place only when it succeeded.
+A writer is `writer(thing, path)` and only encodes; to add a format, add one table entry.
 """
 from __future__ import annotations
 
 import os
-import shutil
-import tempfile
-from contextlib import contextmanager
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Callable
 
 import numpy as np
 
-from ..asset import Asset
+from ..asset import Asset, Forest
 from ..errors import TreegenError
+from . import gltf, image, read_gltf
+from .forest_gltf import write_forest_gltf
+from .staging import staged, sweep, written  # noqa: F401  (re-exported)
 
 
-@contextmanager
-def staged(path: str | os.PathLike) -> Iterator[Path]:
-    """Yield a path named like `path` inside a fresh staging folder next to it; on success move
-    everything written there into place (main file last), on failure leave nothing behind."""
-    path = Path(path)
-    folder = path.parent
-    if path.is_dir():
-        raise TreegenError(f"{path}: is a folder; give an output file name such as tree.glb")
-    try:
-        tmpdir = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder))
-    except FileNotFoundError:
-        raise TreegenError(f"{path}: output folder '{folder}' does not exist") from None
-    except OSError as e:
-        raise TreegenError(f"{path}: cannot write into folder '{folder}' ({e.strerror})") from None
-    try:
-        yield tmpdir / path.name
-        produced = sorted(os.listdir(tmpdir), key=lambda n: (n == path.name, n))
-        if path.name not in produced:
-            raise RuntimeError(f"writer for {path.suffix} did not write {path.name}")
-        for name in produced:
-            os.replace(tmpdir / name, folder / name)
-    except OSError as e:
-        raise TreegenError(f"{path}: cannot write ({e.strerror or e})") from None
-    finally:
-        shutil.rmtree(tmpdir, ignore_errors=True)
+def _usd(asset: Asset, path: Path) -> None:
+    from .usd import write_usd   # lazy: pxr takes ~0.5 s to import; most runs write glTF
+    write_usd(asset, path)
 
 
-def _gltf(asset: Asset, path: Path, **opts) -> None:
-    from .gltf import write_gltf_files
-    write_gltf_files(asset, path, **opts)
+def _forest_usd(forest: Forest, path: Path) -> None:
+    from .forest_usd import write_forest_usd   # lazy: pxr (see _usd)
+    write_forest_usd(forest, path)
 
 
-def _usd(asset: Asset, path: Path, **opts) -> None:
-    from .usd import write_usd   # lazy: pxr is slow to import and usd.py is optional
-    write_usd(asset, path, **opts)
+def _static(asset: Asset, path: Path) -> None:
+    from .static import write_static   # lazy: trimesh is slow to import
+    write_static(asset, path)
 
 
-def write_static(asset: Asset, path: Path, lod: int = 0, **_opts) -> None:
-    """Rest-pose geometry of one LOD, no skin or animation, via trimesh (format from the
-    suffix). Converted to Y up like glTF, since OBJ consumers mostly assume Y up."""
-    import trimesh
-
-    from .gltf import to_y_up
-
-    prims = asset.lods[lod].primitives
-    counts = np.array([len(p.positions) for p in prims])
-    offsets = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    vertices = to_y_up(np.concatenate([np.asarray(p.positions, np.float64) for p in prims]))
-    normals = to_y_up(np.concatenate([np.asarray(p.normals, np.float64) for p in prims]))
-    faces = np.concatenate([np.asarray(p.indices, np.int64).reshape(-1, 3) + o
-                            for p, o in zip(prims, offsets)])
-    mesh = trimesh.Trimesh(vertices=vertices, faces=faces, vertex_normals=normals, process=False)
-    mesh.export(path)
+def _read_usd(path: Path, lod: int):
+    from .read_usd import read_drawable   # lazy: pxr (see _usd)
+    return read_drawable(path, lod)
 
 
-WRITERS: dict[str, Callable[..., None]] = {
-    ".glb": _gltf,
-    ".gltf": _gltf,
-    ".usda": _usd,
-    ".usdc": _usd,
-    ".usdz": _usd,
-    ".obj": write_static,
-    ".ply": write_static,
+WRITERS: dict[str, Callable[[Asset, Path], None]] = {
+    ".glb": gltf.write_gltf, ".gltf": gltf.write_gltf,
+    ".usda": _usd, ".usdc": _usd, ".usdz": _usd,
+    ".obj": _static, ".ply": _static,
 }
+FOREST_WRITERS: dict[str, Callable[[Forest, Path], None]] = {
+    ".glb": write_forest_gltf, ".gltf": write_forest_gltf,
+    ".usda": _forest_usd, ".usdc": _forest_usd, ".usdz": _forest_usd,
+}
+READERS: dict[str, Callable[[Path, int], object]] = {
+    ".glb": read_gltf.read_drawable, ".gltf": read_gltf.read_drawable,
+    ".usd": _read_usd, ".usda": _read_usd, ".usdc": _read_usd, ".usdz": _read_usd,
+}
+SPECIES = (".txt", ".xml")      # species files: read by params.py (text or Arbaro XML)
+STILLS = (".png", ".jpg", ".jpeg")
+LOOPS = (".gif",)
+STATIC = (".obj", ".ply")        # formats with no skin or animation
 
 
-def supported_suffixes() -> list[str]:
-    return sorted(WRITERS)
+def supported_suffixes(table: dict | tuple = WRITERS) -> list[str]:
+    return sorted(table)
 
 
-def export(asset: Asset, path: str | os.PathLike, **opts) -> list[Path]:
-    """Write `asset` in the format named by `path`'s suffix, atomically. Returns the files
-    written, main file first (a .gltf also writes its .bin)."""
+def check_suffix(path: str | os.PathLike, table: dict | tuple = WRITERS, kind: str = "output") -> Path:
+    """`path` as a Path, or the one-line error naming the extensions `table` supports."""
     path = Path(path)
     suffix = path.suffix.lower()
-    writer = WRITERS.get(suffix)
-    if writer is None:
-        raise TreegenError(f"{path}: unknown output extension '{suffix or '(none)'}'; "
-                           f"supported: {', '.join(supported_suffixes())}")
+    if suffix not in table:
+        raise TreegenError(f"{path}: unknown {kind} extension '{suffix or '(none)'}'; "
+                           f"supported: {', '.join(supported_suffixes(table))}")
+    return path
+
+
+def _write(writer: Callable[[Path], None], path: Path) -> list[Path]:
     with staged(path) as tmp:
-        writer(asset, tmp, **opts)
-        files = written(tmp, path)
-    return files
+        writer(tmp)
+        return written(tmp, path)
 
 
-def written(tmp: Path, path: Path) -> list[Path]:
-    """Where the files a writer put beside `tmp` (in its staging folder) land: `path`'s
-    folder, main file first (a .gltf also writes its .bin)."""
-    names = sorted(os.listdir(tmp.parent), key=lambda n: (n != path.name, n))
-    return [path.parent / n for n in names]
+def export(asset: Asset, path: str | os.PathLike) -> list[Path]:
+    """Write a prepared `asset` in the format `path`'s suffix names, atomically. Returns the
+    files written, main file first (a .gltf also writes its .bin)."""
+    path = check_suffix(path, WRITERS)
+    writer = WRITERS[path.suffix.lower()]
+    return _write(lambda tmp: writer(asset, tmp), path)
+
+
+def export_forest(forest: Forest, path: str | os.PathLike) -> list[Path]:
+    """Write a prepared forest, atomically; the suffix picks glTF or USD."""
+    path = check_suffix(path, FOREST_WRITERS)
+    writer = FOREST_WRITERS[path.suffix.lower()]
+    return _write(lambda tmp: writer(forest, tmp), path)
+
+
+def check_input(path: str | os.PathLike) -> Path:
+    """A species file or a written tree that exists, or the one-line error saying what is read."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in SPECIES and suffix not in READERS:
+        raise TreegenError(f"{path}: unknown input extension '{suffix or '(none)'}'; expected a "
+                           f"species file ({' '.join(SPECIES)}) or a written tree "
+                           f"({' '.join(supported_suffixes(READERS))})")
+    if not path.is_file():
+        raise TreegenError(f"{path}: no such file")
+    return path
+
+
+def is_species(path: Path) -> bool:
+    return path.suffix.lower() in SPECIES
+
+
+def read_drawable(path: str | os.PathLike, lod: int = 0):
+    """A written tree (glTF or UsdSkel) as a drawable.Drawable posed by the file's own skin."""
+    path = check_suffix(path, READERS, "input")
+    if not path.is_file():
+        raise TreegenError(f"{path}: no such file")
+    return READERS[path.suffix.lower()](path, lod)
+
+
+def save_still(pixels: np.ndarray, path: str | os.PathLike, colors: int = 0) -> Path:
+    path = check_suffix(path, STILLS, "image")
+    _write(lambda tmp: image.write_still(pixels, tmp, colors), path)
+    return path
+
+
+def save_loop(frames: list[np.ndarray], path: str | os.PathLike, fps: float) -> Path:
+    path = check_suffix(path, LOOPS, "animation")
+    _write(lambda tmp: image.write_loop(frames, tmp, fps), path)
+    return path

@@ -29,7 +29,7 @@ from .. import __version__
 from ..asset import Forest
 from .gltf import (_Buffer, _is_default, _primitive, moving_joints, inverse_bind_accessor,
                    joint_fields, material_dict, rotation_samplers, set_msft_lod, to_y_up,
-                   write_files)
+                   write_document)
 
 
 
@@ -175,8 +175,8 @@ def _build_forest(scene: Forest) -> tuple[dict, _Buffer]:
     return gltf, buf
 
 
-def write_forest_gltf_files(scene: Forest, path: str | os.PathLike) -> None:
-    """Write straight to `path` (.glb, or .gltf + `<stem>.bin`); forest.write_scene stages it."""
+def write_forest_gltf(scene: Forest, path: str | os.PathLike) -> None:
+    """Write straight to `path` (.glb, or .gltf + `<stem>.bin`); exchange.export_forest stages it."""
     path = Path(path)
     gltf, buf = _build_forest(scene)
-    write_files(gltf, buf, path, binary=path.suffix.lower() != ".gltf")
+    write_document(gltf, buf, path, binary=path.suffix.lower() != ".gltf")

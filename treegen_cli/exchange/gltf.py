@@ -39,6 +39,7 @@ import numpy as np
 
 from .. import __version__
 from ..asset import Asset, Clip, Primitive, Skeleton
+from ..axes import Z_UP_TO_Y_UP, matrix_to_y_up, quat_to_y_up, to_y_up  # noqa: F401  (re-exported)
 from ..quat import continuous as _continuous
 
 # glTF enums
@@ -47,29 +48,6 @@ ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
 _COMPONENT = {np.dtype(np.float32): FLOAT, np.dtype(np.uint8): UNSIGNED_BYTE,
               np.dtype(np.uint16): UNSIGNED_SHORT, np.dtype(np.uint32): UNSIGNED_INT}
 _TYPE = {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4", 16: "MAT4"}
-
-# generator (Z up) → glTF (Y up)
-Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
-
-
-def to_y_up(v: np.ndarray) -> np.ndarray:
-    """Vectors (..., 3): (x, y, z) → (x, z, −y)."""
-    v = np.asarray(v)
-    return np.stack([v[..., 0], v[..., 2], -v[..., 1]], axis=-1)
-
-
-def quat_to_y_up(q: np.ndarray) -> np.ndarray:
-    """Quaternions (..., 4) xyzw: C is a proper rotation, so the vector part maps like a vector."""
-    q = np.asarray(q, dtype=np.float64)
-    return np.concatenate([to_y_up(q[..., :3]), q[..., 3:]], axis=-1)
-
-
-def matrix_to_y_up(m: np.ndarray) -> np.ndarray:
-    """4×4 matrices (..., 4, 4): C·M·Cᵀ."""
-    c = np.eye(4)
-    c[:3, :3] = Z_UP_TO_Y_UP
-    return c @ np.asarray(m, dtype=np.float64) @ c.T
-
 
 def _unit(v: np.ndarray) -> np.ndarray:
     n = np.linalg.norm(v, axis=-1, keepdims=True)
@@ -385,17 +363,17 @@ def glb_bytes(gltf: dict, blob: bytes) -> bytes:
     return _glb_head(gltf, len(blob)) + blob
 
 
-def write_gltf_files(asset: Asset, path: str | os.PathLike, binary: bool | None = None) -> None:
+def write_gltf(asset: Asset, path: str | os.PathLike, binary: bool | None = None) -> None:
     """Write straight to `path` (and `<stem>.bin` beside a .gltf); not atomic on its own —
-    `write_gltf` and `exchange.export` stage it."""
+    `exchange.export` stages it."""
     path = Path(path)
     if binary is None:
         binary = path.suffix.lower() != ".gltf"
     gltf, buf = _build(asset)
-    write_files(gltf, buf, path, binary)
+    write_document(gltf, buf, path, binary)
 
 
-def write_files(gltf: dict, buf: _Buffer, path: Path, binary: bool) -> None:
+def write_document(gltf: dict, buf: _Buffer, path: Path, binary: bool) -> None:
     """A built glTF: .glb streamed (the buffer is never joined), or JSON + `<stem>.bin`."""
     blob_len = gltf["buffers"][0]["byteLength"]
     if binary:
@@ -409,15 +387,6 @@ def write_files(gltf: dict, buf: _Buffer, path: Path, binary: bool) -> None:
     with open(bin_path, "wb") as f:
         buf.write_to(f)
     path.write_bytes(dumps(gltf))
-
-
-def write_gltf(asset: Asset, path: str | os.PathLike, binary: bool | None = None) -> None:
-    """Asset → .glb (binary=None picks by suffix: binary unless .gltf), written atomically;
-    .gltf also writes `<stem>.bin` beside it."""
-    from . import staged
-
-    with staged(path) as tmp:
-        write_gltf_files(asset, tmp, binary)
 
 
 # ---- reading back (tests, `treegen preview`, cross-format checks) ----

@@ -31,11 +31,11 @@ USDZ_MTIME = 946684800  # 2000-01-01: fixed zip entry time for reproducible .usd
 
 # --------------------------------------------------------------------------- public API
 
-def write_usd(asset: Asset, path, **_opts) -> None:
+def write_usd(asset: Asset, path) -> None:
     """Write `asset` to exactly `path`; the suffix picks text, crate or a usdz package.
 
-    The caller (exchange registry) does temp-file + rename; a temp name with the right suffix
-    works for all three formats. Other writers' options (`_opts`) are accepted and ignored.
+    The caller (exchange.export) stages it; a temp name with the right suffix works for all
+    three formats.
     """
     check_suffix(path)                            # before the stage is built
     write_stage(build_stage(asset), path, _identifier(asset.name) + ".usdc")

@@ -11,8 +11,23 @@ import shutil
 import subprocess
 from pathlib import Path
 
-TOOLS_DIR = Path(__file__).resolve().parents[2] / "tools"
-SCRIPT = TOOLS_DIR / "validate.mjs"
+NEEDED = Path("node_modules") / "gltf-validator"
+
+
+def tools_dir() -> Path:
+    """The folder holding validate.mjs and node_modules/gltf-validator: $TREEGEN_TOOLS, else
+    the first `tools/` with the validator installed above this package or the working folder
+    (a source checkout, editable or not)."""
+    env = os.environ.get("TREEGEN_TOOLS")
+    if env:
+        return Path(env)
+    here = Path(__file__).resolve()
+    for base in [*here.parents, *Path.cwd().resolve().parents, Path.cwd().resolve()]:
+        if (base / "tools" / NEEDED).is_dir() and (base / "tools" / "validate.mjs").is_file():
+            return base / "tools"
+    raise ValidatorUnavailable(
+        "gltf-validator is not installed: run `make install` (npm ci in tools/) in a treegen "
+        "checkout, or set TREEGEN_TOOLS to a folder holding validate.mjs and node_modules/")
 
 
 class ValidatorUnavailable(RuntimeError):
@@ -30,12 +45,13 @@ def _node() -> str:
 def validate_gltf(path: str | os.PathLike, max_issues: int = 0) -> dict:
     """Validate a .glb/.gltf file; returns the validator's report (see report['issues']:
     numErrors, numWarnings, numInfos, numHints, messages). max_issues=0: unlimited."""
-    if not (TOOLS_DIR / "node_modules" / "gltf-validator").is_dir():
-        raise ValidatorUnavailable(
-            f"gltf-validator is not installed in {TOOLS_DIR}: run `cd tools && npm ci` "
-            "(or `make install`)")
-    proc = subprocess.run([_node(), str(SCRIPT), os.fspath(path), "--max-issues", str(max_issues)],
-                          capture_output=True, text=True, cwd=TOOLS_DIR)
+    tools = tools_dir()
+    if not (tools / NEEDED).is_dir():
+        raise ValidatorUnavailable(f"gltf-validator is not installed in {tools}: run "
+                                   "`cd tools && npm ci` (or `make install`)")
+    proc = subprocess.run([_node(), str(tools / "validate.mjs"), os.path.abspath(path),
+                           "--max-issues", str(max_issues)],
+                          capture_output=True, text=True, cwd=tools)
     if proc.returncode != 0:
         raise RuntimeError(f"glTF validator failed on {path}: {proc.stderr.strip()}")
     return json.loads(proc.stdout)

@@ -1,0 +1,80 @@
+"""Atomic writes: a writer writes into a hidden staging folder beside the target, then every file
+it produced is moved into place with os.replace (siblings first, the main file last), so an
+interrupted run never leaves a half-written asset. The folder is named after the target and the
+writing process (`.NAME.PID.XXXX.tmp`); a run into the same folder sweeps away the staging
+folders of runs that were killed (their process is gone).
+"""
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import tempfile
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Iterator
+
+from ..errors import TreegenError
+
+_STAGING = re.compile(r"^\..+\.(\d+)\.[^.]+\.tmp$")
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:        # someone else's live process
+        return True
+    return True
+
+
+def sweep(folder: Path) -> list[Path]:
+    """Remove staging folders left in `folder` by killed runs; returns what was removed."""
+    removed = []
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return removed
+    for e in entries:              # a folder's entries, not vertices
+        m = _STAGING.match(e.name)
+        if m and e.is_dir(follow_symlinks=False) and not _alive(int(m.group(1))):
+            shutil.rmtree(e.path, ignore_errors=True)
+            removed.append(Path(e.path))
+    return removed
+
+
+@contextmanager
+def staged(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield a path named like `path` inside a fresh staging folder next to it; on success move
+    everything written there into place (main file last), on failure leave nothing behind."""
+    path = Path(path)
+    folder = path.parent
+    if path.is_dir():
+        raise TreegenError(f"{path}: is a folder; give an output file name such as tree.glb")
+    try:
+        sweep(folder)
+        tmpdir = Path(tempfile.mkdtemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp",
+                                       dir=folder))
+    except FileNotFoundError:
+        raise TreegenError(f"{path}: output folder '{folder}' does not exist") from None
+    except OSError as e:
+        raise TreegenError(f"{path}: cannot write into folder '{folder}' ({e.strerror})") from None
+    try:
+        yield tmpdir / path.name
+        produced = sorted(os.listdir(tmpdir), key=lambda n: (n == path.name, n))
+        if path.name not in produced:
+            raise RuntimeError(f"writer for {path.suffix} did not write {path.name}")
+        for name in produced:
+            os.replace(tmpdir / name, folder / name)
+    except OSError as e:
+        raise TreegenError(f"{path}: cannot write ({e.strerror or e})") from None
+    finally:
+        shutil.rmtree(tmpdir, ignore_errors=True)
+
+
+def written(tmp: Path, path: Path) -> list[Path]:
+    """Where the files a writer put beside `tmp` (in its staging folder) land: `path`'s
+    folder, main file first (a .gltf also writes its .bin)."""
+    names = sorted(os.listdir(tmp.parent), key=lambda n: (n != path.name, n))
+    return [path.parent / n for n in names]
