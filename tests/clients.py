@@ -90,6 +90,14 @@ _GODOT_NOISE = (
 _godot_version = None
 
 
+def _godot_literal(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return json.dumps(v)
+    return repr(v)
+
+
 def godot_version() -> str:
     global _godot_version
     if _godot_version is None:
@@ -98,6 +106,13 @@ def godot_version() -> str:
         _, out, _, _ = _run([GODOT, "--version"], timeout=30)
         _godot_version = out.strip().splitlines()[-1] if out.strip() else "?"
     return _godot_version
+
+
+def _tail(text: str, n: int = 30) -> list[str]:
+    """The last n lines of Godot output that are not server-build noise (for failure reports)."""
+    keep = [ln for ln in text.splitlines() if ln.strip() and not any(p.search(ln) for p in _GODOT_NOISE)
+            and not ln.strip().startswith("At: core/os/memory.cpp")]
+    return keep[-n:]
 
 
 def _godot_messages(stderr: str, phase: str, noise: dict) -> list[dict]:
@@ -123,7 +138,8 @@ def _godot_messages(stderr: str, phase: str, noise: dict) -> list[dict]:
     return list(found.values())
 
 
-def godot_import(glb_path, timeout: float = 120, *, keep_project: str | None = None) -> dict:
+def godot_import(glb_path, timeout: float = 120, *, options: dict | None = None,
+                 keep_project: str | None = None) -> dict:
     """Import glb_path the way the Godot 3.2 editor does, then load and inspect the imported scene.
 
     Import: a fresh project with project.godot and the file as res://x.glb, then
@@ -131,8 +147,8 @@ def godot_import(glb_path, timeout: float = 120, *, keep_project: str | None = N
     before it quits). Inspect: `godot3-server --path PROJECT -s res://inspect.gd` loads res://x.glb,
     instances it inside the SceneTree and prints one JSON line (tools/godot/inspect.gd).
 
-    -> {"client": "godot", "version", "imported": bool, "reason": None | "timeout" | "no output"
-        | "exit N", "import_seconds", "import_exit": returncode or "timeout",
+    -> {"client": "godot", "version", "file", "imported": bool, "reason": None | "timeout" | ...,
+        "import_seconds", "import_exit": returncode or "timeout", "log_tail" (on failure),
         "errors": [{"phase": "import"|"inspect", "level", "message", "at", "count"}],
         "noise": {message: count} (server-build lines printed for any file),
         and when imported, what inspect.gd reports: "loaded", "load_ms", "inspect_seconds",
@@ -144,6 +160,8 @@ def godot_import(glb_path, timeout: float = 120, *, keep_project: str | None = N
         "animation_players": [{path, animations: [{name, length, tracks, tracks_resolved, loop,
             sample_times, bones_moved, max_local_change, max_global_change, loop_max_diff,
             loop_closes}]}]}
+    options: extra import options for x.glb.import's [params], e.g. {"skins/use_named_skins": False}
+    (values written as Godot literals: bool -> true/false, str quoted, numbers as is).
     keep_project: copy the project directory there afterwards (debugging).
     """
     version = godot_version()
@@ -158,7 +176,8 @@ def godot_import(glb_path, timeout: float = 120, *, keep_project: str | None = N
         proj.mkdir()
         (proj / "project.godot").write_text(_PROJECT)
         shutil.copyfile(glb_path, proj / "x.glb")
-        (proj / "x.glb.import").write_text(_IMPORT_PRESET)
+        (proj / "x.glb.import").write_text(_IMPORT_PRESET + "".join(
+            f"{k}={_godot_literal(v)}\n" for k, v in (options or {}).items()))
         shutil.copyfile(TOOLS / "godot" / "inspect.gd", proj / "inspect.gd")
         env = dict(os.environ, LANG="en_US.UTF-8", XDG_CONFIG_HOME=str(tmp / "config"),
                    XDG_DATA_HOME=str(tmp / "data"), XDG_CACHE_HOME=str(tmp / "cache"))
@@ -171,6 +190,7 @@ def godot_import(glb_path, timeout: float = 120, *, keep_project: str | None = N
         scn = list((proj / ".import").glob("x.glb-*.scn")) if (proj / ".import").is_dir() else []
         if not scn:
             result["reason"] = "timeout" if rc is None else f"no imported scene (exit {rc})"
+            result["log_tail"] = _tail(err)
         else:
             if rc is None:
                 result["reason"] = "imported, but the editor did not exit before the timeout"
@@ -181,6 +201,7 @@ def godot_import(glb_path, timeout: float = 120, *, keep_project: str | None = N
             line = next((ln for ln in out.splitlines() if ln.startswith("TREEGEN_JSON ")), None)
             if line is None:
                 result["reason"] = "inspect: timeout" if rc2 is None else f"inspect: no output (exit {rc2})"
+                result["log_tail"] = _tail(out + err2)
             else:
                 report = json.loads(line[len("TREEGEN_JSON "):])
                 result.update({k: v for k, v in report.items() if k != "scene"})
@@ -198,7 +219,7 @@ def godot_import(glb_path, timeout: float = 120, *, keep_project: str | None = N
 def _node_client(script: str, package: str, what: str, glb_path, extra, timeout) -> dict:
     if shutil.which(NODE) is None or not (TOOLS / "node_modules" / package / "package.json").is_file():
         raise ClientMissing(NPM_INSTALL.format(what=what))
-    glb_path = Path(glb_path)
+    glb_path = Path(glb_path).resolve()  # node runs in tools/
     if not glb_path.is_file():
         raise FileNotFoundError(glb_path)
     rc, out, err, secs = _run([NODE, str(TOOLS / script), *extra, str(glb_path)], cwd=TOOLS,
@@ -320,3 +341,34 @@ def sibling_layout(glb_in, glb_out, wrap: bool = True) -> int:
                 del nodes[i]["extras"]
     _write_glb(glb_out, gltf, rest)
     return moved
+
+
+def main(argv=None) -> int:
+    """python tests/clients.py FILE.glb [--client godot|three|babylon ...] [--siblings]: JSON per client."""
+    import argparse
+
+    ap = argparse.ArgumentParser(description=main.__doc__)
+    ap.add_argument("glb")
+    ap.add_argument("--client", action="append", choices=["godot", "three", "babylon"])
+    ap.add_argument("--timeout", type=float, default=120)
+    ap.add_argument("--siblings", action="store_true",
+                    help="import a sibling_layout() copy instead of the file itself")
+    args = ap.parse_args(argv)
+    glb = Path(args.glb)
+    with tempfile.TemporaryDirectory() as tmp:
+        if args.siblings:
+            fixed = Path(tmp) / "siblings.glb"
+            sibling_layout(glb, fixed)
+            glb = fixed
+        run = {"godot": godot_import, "three": three_load, "babylon": babylon_load}
+        for name in args.client or ["three", "babylon", "godot"]:
+            try:
+                report = run[name](glb, timeout=args.timeout)
+            except ClientMissing as exc:
+                report = {"client": name, "missing": str(exc)}
+            print(json.dumps(report))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

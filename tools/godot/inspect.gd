@@ -189,6 +189,7 @@ func _player_info(root, p, skeletons):
 				resolved += 1
 		ai["tracks_resolved"] = resolved
 		if a.length > 0:
+			a.loop = false  # so that seek(length) lands on the last key instead of wrapping to 0
 			p.play(name)
 			p.seek(0.0, true)
 			var p0 = _poses(skeletons)
@@ -205,5 +206,6 @@ func _player_info(root, p, skeletons):
 			ai["loop_max_diff"] = max(lp[1], lp[2])
 			ai["loop_closes"] = lp[1] <= EPS and lp[2] <= EPS
 			p.stop()
+			a.loop = ai["loop"]
 		info["animations"].append(ai)
 	return info
