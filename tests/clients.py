@@ -157,7 +157,7 @@ def godot_import(glb_path, timeout: float = 120, *, options: dict | None = None,
             has_normal, zero_normals, has_uv, uv_min, uv_max, has_bones, bone_index_max,
             material: {name, type, albedo_texture, normal_texture, albedo_color, transparent,
             alpha_scissor, alpha_scissor_threshold, cull_mode}}]}],
-        "animation_players": [{path, animations: [{name, length, tracks, tracks_resolved, loop,
+        "animation_players": [{path, animations: [{name, length, tracks, tracks_resolved, keys_max, loop,
             sample_times, bones_moved, max_local_change, max_global_change, loop_max_diff,
             loop_closes}]}]}
     options: extra import options for x.glb.import's [params], e.g. {"skins/use_named_skins": False}

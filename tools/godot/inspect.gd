@@ -182,12 +182,15 @@ func _player_info(root, p, skeletons):
 		var a = p.get_animation(name)
 		var ai = {"name": name, "length": a.length, "tracks": a.get_track_count(), "loop": a.loop}
 		var resolved = 0
+		var keys_max = 0
 		for t in range(a.get_track_count()):
+			keys_max = max(keys_max, a.track_get_key_count(t))
 			var np = a.track_get_path(t)
 			var base = NodePath(str(np).split(":")[0])
 			if p.get_node(p.root_node).has_node(base):
 				resolved += 1
 		ai["tracks_resolved"] = resolved
+		ai["keys_max"] = keys_max
 		if a.length > 0:
 			a.loop = false  # so that seek(length) lands on the last key instead of wrapping to 0
 			p.play(name)
