@@ -14,13 +14,25 @@ import numpy as np
 
 
 @dataclass(frozen=True)
+class Texture:
+    """An image a material samples, already encoded (PNG bytes, deterministic)."""
+
+    name: str                              # file stem when written beside a file: "leaf", "bark", "bark_normal"
+    png: bytes
+    wrap: str = "REPEAT"                   # "REPEAT" (bark: tiles) or "CLAMP" (leaf atlas cells)
+    srgb: bool = True                      # colour data (sRGB) or raw data (normal maps)
+
+
+@dataclass(frozen=True)
 class Material:
     name: str                              # "bark" / "leaf"
-    base_color: tuple[float, float, float, float]
+    base_color: tuple[float, float, float, float]   # linear RGBA; multiplies base_texture
     roughness: float = 0.9
     metallic: float = 0.0
     double_sided: bool = False
-    alpha_cutoff: float | None = None      # set when a leaf texture with alpha is expected
+    alpha_cutoff: float | None = None      # alpha-tested cut-out (MASK) below this alpha
+    base_texture: Texture | None = None    # sRGB colour (+ alpha for cut-outs)
+    normal_texture: Texture | None = None  # tangent space, OpenGL/glTF convention (+Y up)
 
 
 @dataclass(frozen=True, eq=False)
