@@ -204,7 +204,7 @@ def test_nearer_instances_get_finer_lods(scene):
     assert np.all(np.diff(lod[order]) >= 0)
     assert lod.min() < lod.max()                               # the layout spans LODs
     for i in sc.instances:
-        starts = [l.distance for l in sc.prototypes[i.prototype].lods]
+        starts = [lod.distance for lod in sc.prototypes[i.prototype].lods]
         assert starts[i.lod] <= i.distance / i.scale
 
 

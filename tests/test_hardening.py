@@ -72,7 +72,7 @@ SMALL = MakeOptions(
 
 def species(overrides: str):
     """BASE with `overrides` ('Key value' lines) replacing or adding keys."""
-    lines = dict(l.split(None, 1) for l in BASE.strip().splitlines())
+    lines = dict(line.split(None, 1) for line in BASE.strip().splitlines())
     for line in overrides.strip().splitlines():
         k, v = line.split(None, 1)
         lines[k] = v
@@ -349,10 +349,10 @@ def test_quiet_prints_nothing_on_success_and_errors_still_show(tmp_path):
 def test_verbose_reports_each_stage_on_stderr(tmp_path):
     proc = treegen("make", SPECIES / "quaking_aspen.txt", "-o", tmp_path / "a.glb", "-v", *FAST)
     assert proc.returncode == 0, proc.stderr
-    stages = [l.split()[0] for l in proc.stderr.splitlines()]
+    stages = [line.split()[0] for line in proc.stderr.splitlines()]
     assert stages == ["generate", "rig", "mesh", "wind", "prepare", "write", "counts"]
     assert "nodes" in proc.stderr.splitlines()[-1]
-    assert all(l.rstrip().endswith(" s") for l in proc.stderr.splitlines()[:-1])
+    assert all(line.rstrip().endswith(" s") for line in proc.stderr.splitlines()[:-1])
     assert "\x1b" not in proc.stderr and "\r" not in proc.stderr
     info = treegen("info", SPECIES / "quaking_aspen.txt", "--verbose")
     assert "generate" in info.stderr and "nodes" in info.stderr

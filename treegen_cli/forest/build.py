@@ -148,7 +148,7 @@ def build_scene(layout: Layout, all_lods: bool = False, error_px: float | None =
     lods = np.zeros(len(placements), int)
     for k, asset in enumerate(prototypes):     # per prototype (few), vectorised over instances
         sel = proto == k
-        lods[sel] = select_lod(dist[sel], [l.distance for l in asset.lods], scale[sel])
+        lods[sel] = select_lod(dist[sel], [lod.distance for lod in asset.lods], scale[sel])
     animated = layout.wind.enabled
     offsets = time_offsets(pos, layout.wind) if animated else np.zeros(len(placements))
     loop = layout.wind.duration if animated else 0.0

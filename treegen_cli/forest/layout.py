@@ -73,6 +73,10 @@ class Layout:
     params: dict = field(default_factory=dict)   # species file → its Params, parsed once
 
 
+def _xyz(v) -> tuple[float, float, float]:
+    return float(v[0]), float(v[1]), float(v[2])
+
+
 def load_layout(path: str | os.PathLike, max_trees: int = MAX_TREES) -> Layout:
     """Read, validate and expand a layout file (scatters become placements)."""
     path = Path(path)
@@ -117,7 +121,7 @@ def parse_layout(data, path: Path, max_trees: int = MAX_TREES) -> Layout:
     check_schema(data, schema, schema)
     base = path.parent
     cam = data["camera"]
-    camera = Camera(tuple(map(float, cam["position"])), tuple(map(float, cam["target"])),
+    camera = Camera(_xyz(cam["position"]), _xyz(cam["target"]),
                     float(cam.get("fov_deg", 60.0)), int(cam.get("width_px", 1920)))
     if np.allclose(camera.position, camera.target):
         raise TreegenError("camera.target: must differ from camera.position")
@@ -139,7 +143,7 @@ def parse_layout(data, path: Path, max_trees: int = MAX_TREES) -> Layout:
         pos = [float(x) for x in inst["position"]] + [0.0] * (3 - len(inst["position"]))
         placements.append(Placement(
             species=_species_file(base, inst["species"], f"{where}.species", checked),
-            seed=int(inst.get("seed", defaults.seed)), position=tuple(pos),
+            seed=int(inst.get("seed", defaults.seed)), position=_xyz(pos),
             rotation_deg=float(inst.get("rotation_deg", defaults.rotation_deg)),
             scale=float(inst.get("scale", defaults.scale)), source=where))
     for s, sc in enumerate(data.get("scatter", [])):
