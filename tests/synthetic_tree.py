@@ -14,7 +14,6 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
-import pytest
 from scipy.spatial.transform import Rotation
 
 from treegen_cli.params import Params
@@ -113,11 +112,9 @@ def trunk_only(lobes: int = 0, lobe_depth: float = 0.0, flare: float = 0.0) -> T
 
 
 def species_tree(name: str, seed: int = 0) -> Tree:
-    """A bundled species grown by the generator (skips while either is not there yet)."""
-    generate = pytest.importorskip("treegen_cli.generate").generate
+    """A bundled species grown by the generator."""
+    from treegen_cli.generate import generate
     from treegen_cli.params import load_params
 
     path = Path(__file__).resolve().parent.parent / "species" / f"{name}.txt"
-    if not path.exists():
-        pytest.skip(f"{path} not written yet")
     return generate(load_params(path), seed=seed)
