@@ -30,8 +30,9 @@ import numpy as np
 from ..errors import TreegenError
 from ..asset import Forest
 from ..axes import to_y_up
-from .usd import (TextureFiles, _identifier, _sample_rate, _snap, build_stage, check_suffix,
-                  new_stage, up_axis, write_stage)
+from .texture_files import TextureFiles
+from .usd import (_identifier, _sample_rate, _snap, build_stage, check_suffix, new_stage, up_axis,
+                  write_stage)
 
 
 def _prototype_asset(forest: Forest, p: int, lods: list[int], loop: bool):

@@ -11,9 +11,9 @@ Writers only serialise: everything here is a re-encoding of the Asset. Stage lay
             LOD0, LOD1, ...        SkelRoot: Skeleton, SkelAnimation(s), meshes
         (LOD0)                     with a single LOD the SkelRoot sits directly under /<Asset>
 
-Textures: a .usdz packages them (`textures/<name>.png`, after the root layer); a .usda/.usdc
-gets flat siblings `<stem>_<name>.png` beside it (one folder, names fixed by the output name,
-so staging moves them like a .gltf's .bin). Asset paths are "./..." relative to the layer.
+Textures (texture_files.py): a .usdz packages them (`textures/<name>.png`, after the root
+layer); a .usda/.usdc gets flat siblings `<stem>_<name>.png`, which staging moves into place
+like a .gltf's .bin. Asset paths are "./..." relative to the layer.
 
 Up axis: metres and right-handed either way. "Z" (the default of .usda/.usdc) writes generator
 space as it is; "Y" (the default of .usdz: AR Quick Look needs it) changes axes with
@@ -34,6 +34,7 @@ from ..asset import Asset, Clip, Lod, Material, Primitive, Skeleton, Texture, lo
 from ..axes import matrix_to_y_up, quat_to_y_up, to_y_up
 from ..errors import TreegenError
 from ..quat import continuous, to_matrix
+from .texture_files import TextureFiles
 
 SUFFIXES = (".usda", ".usdc", ".usdz")
 USDZ_MTIME = 946684800  # 2000-01-01: fixed zip entry time for reproducible .usdz bytes
@@ -65,33 +66,6 @@ def up_axis(requested: str | None, suffix: str) -> str:
     if up not in ("Y", "Z"):
         raise TreegenError(f"up axis {requested!r}: expected y or z")
     return up
-
-
-class TextureFiles:
-    """Names the PNG files of the textures a stage uses and collects their bytes.
-
-    In a .usdz they are packaged as `textures/<name>.png`; beside a .usda/.usdc they are
-    flat siblings `<stem>_<name>.png` (flat: staging moves files, and two trees written into
-    one folder keep apart by their stems). A texture used twice is written once; two
-    different textures with one name get `_1`, `_2`, ... in the order they are met."""
-
-    def __init__(self, path: Path):
-        self.packaged = Path(path).suffix.lower() == ".usdz"
-        self.stem = Path(path).stem
-        self.files: dict[str, bytes] = {}       # relative file name → PNG bytes
-        self._names: dict[Texture, str] = {}
-
-    def asset_path(self, texture: Texture, prefix: str = "") -> str:
-        """The layer-relative asset path of `texture` ("./textures/leaf.png", "./tree_leaf.png")."""
-        if texture not in self._names:
-            base = _identifier(prefix + texture.name)
-            base = f"textures/{base}" if self.packaged else f"{self.stem}_{base}"
-            name, k = base, 1
-            while name + ".png" in self.files:
-                name, k = f"{base}_{k}", k + 1
-            self.files[name + ".png"] = texture.png
-            self._names[texture] = name + ".png"
-        return "./" + self._names[texture]
 
 
 def check_suffix(path) -> str:
@@ -242,7 +216,8 @@ def build_stage(asset: Asset, up: str = "Z", textures: TextureFiles | None = Non
             "treegen": {str(k): str(v) for k, v in sorted(asset.extras.items())}}
 
     def texture_path(tex: Texture | None) -> str | None:
-        return None if tex is None or textures is None else textures.asset_path(tex, texture_prefix)
+        """Layer-relative ("./textures/leaf.png"), never a search path."""
+        return None if tex is None or textures is None else "./" + textures.name(tex, texture_prefix)
 
     materials = {m.name: _define_material(stage, root_path.AppendChild("Looks"), m, texture_path)
                  for m in asset.materials}
