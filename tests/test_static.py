@@ -122,3 +122,50 @@ def test_ply_rest_pose(tmp_path):
     assert len(mesh.vertices) == n
     np.testing.assert_allclose(mesh.vertices[:len(asset.lods[0].primitives[0].positions)],
                                to_y_up(asset.lods[0].primitives[0].positions), atol=1e-5)
+
+
+# --------------------------------------------------------------------------- command line
+
+import json  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+PALM = ROOT / "species" / "fan_palm.txt"
+
+
+def treegen(*args):
+    return subprocess.run([sys.executable, "-m", "treegen_cli", *map(str, args)],
+                          capture_output=True, text=True, cwd=ROOT)
+
+
+def test_cli_static_format_implies_no_wind(tmp_path):
+    """No clip or LOD work for a file that cannot hold them, and the summary says so."""
+    proc = treegen("make", PALM, "-o", tmp_path / "palm.obj")
+    assert proc.returncode == 0, proc.stderr
+    assert "static format: no wind or LODs" in proc.stdout
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["palm.mtl", "palm.obj"]
+    s = json.loads(treegen("make", PALM, "-o", tmp_path / "palm.ply", "--json").stdout)
+    assert s["keys"] == 0 and len(s["lods"]) == 1
+    assert "wind" not in s["stages_s"] and "lod" not in s["stages_s"]
+
+
+def test_cli_up_axis_z_for_gltf_is_a_user_error(tmp_path):
+    proc = treegen("make", PALM, "-o", tmp_path / "palm.glb", "--up-axis", "z")
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert [l for l in proc.stderr.splitlines() if l.strip()] == [
+        f"treegen: error: {tmp_path / 'palm.glb'}: glTF is always Y up; up axis z needs one of "
+        ".obj .ply .usda .usdc .usdz"]
+    assert not list(tmp_path.iterdir())
+
+
+def test_cli_up_axis_reaches_the_usd_writer(tmp_path):
+    pxr = pytest.importorskip("pxr")
+    from pxr import Usd, UsdGeom
+
+    for name, args, up in (("a.usdz", [], "Y"), ("b.usdz", ["--up-axis", "z"], "Z"),
+                           ("c.usdc", [], "Z"), ("d.usda", ["--up-axis", "y"], "Y")):
+        proc = treegen("make", PALM, "-o", tmp_path / name, "--duration", "1", "--fps", "5", *args)
+        assert proc.returncode == 0, proc.stderr
+        assert UsdGeom.GetStageUpAxis(Usd.Stage.Open(str(tmp_path / name))) == up, name
