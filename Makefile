@@ -7,6 +7,8 @@ install:
 	$(PYTHON) -m pip install --quiet -e ".[dev]"
 	-command -v pyenv >/dev/null 2>&1 && pyenv rehash
 	cd tools && npm ci --silent --no-audit --no-fund
+	@# usd-core 24.11's ComplianceChecker(arkit=True) for the .usdz AR check (gone from usd-core 26); its test skips without it
+	-$(PYTHON) tests/arkit_check.py --install
 	@# Godot 3.2 headless (tests/clients.py): only as root with apt-get, only when missing; its tests skip without it
 	@if command -v apt-get >/dev/null 2>&1 && [ "$$(id -u)" = 0 ] && ! command -v godot3-server >/dev/null 2>&1; then \
 		echo "apt-get install godot3-server"; \

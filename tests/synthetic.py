@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from treegen_cli.asset import Asset, Clip, Lod, Material, Primitive, Skeleton
+from treegen_cli.asset import Asset, Clip, Lod, Material, Primitive, Skeleton, Texture
 
 SEGMENT = 2.5          # metres between joints along the chain
 BEND_DEG = 15.0        # rest bend of every non-root joint about its local X
@@ -149,3 +149,27 @@ def synthetic_asset(lods: int = 1, with_clip: bool = True) -> Asset:
                        clips=clips, distance=dist, screen_coverage=cover))
     return Asset(name="synthetic", materials=list(MATERIALS), lods=out,
                  extras={"species": "synthetic", "seed": 0, "treegen": "test"})
+
+
+def synthetic_textures(size: int = 32) -> dict[str, Texture]:
+    """Small real PNGs by role, as the materials stage will attach them: "leaf" (RGBA atlas,
+    alpha cut-out, CLAMP), "bark" (sRGB albedo, REPEAT), "bark_normal" (raw, REPEAT)."""
+    from treegen_cli.textures import bark_textures, leaf_atlas, png_bytes
+
+    atlas = leaf_atlas(0, (0.1, 0.3, 0.05), size=size, variants=1)
+    albedo, normal = bark_textures((0.2, 0.15, 0.1), size=size)
+    return {"leaf": Texture("leaf", png_bytes(atlas.rgba), wrap="CLAMP"),
+            "bark": Texture("bark", png_bytes(albedo)),
+            "bark_normal": Texture("bark_normal", png_bytes(normal), srgb=False)}
+
+
+def textured_asset(lods: int = 1, with_clip: bool = True, size: int = 32) -> Asset:
+    """synthetic_asset with a leaf atlas on the leaf material and albedo + normal map on the
+    bark (the contract of asset.Material's texture fields)."""
+    from dataclasses import replace
+
+    tex = synthetic_textures(size)
+    bark, leaf = MATERIALS
+    materials = [replace(bark, base_texture=tex["bark"], normal_texture=tex["bark_normal"]),
+                 replace(leaf, base_texture=tex["leaf"])]
+    return replace(synthetic_asset(lods, with_clip), materials=materials)

@@ -12,6 +12,7 @@ import pxr  # noqa: E402,F401  (usd-core is a dependency: a missing pxr fails lo
 from pxr import Gf, Usd, UsdGeom, UsdLod, UsdShade, UsdSkel, Vt  # noqa: E402
 
 from synthetic import synthetic_asset  # noqa: E402
+from treegen_cli.axes import to_y_up  # noqa: E402
 from treegen_cli.errors import TreegenError  # noqa: E402
 from treegen_cli.exchange.usd import validate_usd, write_usd as _write_usd  # noqa: E402
 from treegen_cli.prepare import prepare  # noqa: E402
@@ -35,6 +36,13 @@ def written(tmp_path_factory):
             out[lods, fmt] = d / f"tree{lods}.{fmt}"
             write_usd(asset, out[lods, fmt])
     return out
+
+
+def stage_axes(stage, v):
+    """Generator-space (Z up) vectors as the stage stores them: a Y-up stage (a .usdz by
+    default) holds them through axes.to_y_up."""
+    v = np.asarray(v, np.float64)
+    return to_y_up(v) if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.y else v
 
 
 def lod_paths(stage, n_lods):
@@ -95,7 +103,8 @@ def test_validator_catches_a_broken_stage(tmp_path):
 @pytest.mark.parametrize("fmt", FORMATS)
 def test_stage_metadata(written, fmt):
     stage = Usd.Stage.Open(str(written[3, fmt]))
-    assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z
+    # .usdz defaults to Y up (AR Quick Look), .usda/.usdc keep generator space
+    assert UsdGeom.GetStageUpAxis(stage) == (UsdGeom.Tokens.y if fmt == "usdz" else UsdGeom.Tokens.z)
     assert UsdGeom.GetStageMetersPerUnit(stage) == 1.0
     assert stage.GetDefaultPrim().GetName() == "synthetic"
     clip = synthetic_asset().lods[0].clips[0]
@@ -139,7 +148,10 @@ def test_meshes_round_trip(written, fmt):
             np.testing.assert_array_equal(mesh.GetFaceVertexIndicesAttr().Get(), prim.indices)
             assert mesh.GetOrientationAttr().Get() == UsdGeom.Tokens.rightHanded
             assert mesh.GetNormalsInterpolation() == UsdGeom.Tokens.vertex
-            np.testing.assert_allclose(mesh.GetNormalsAttr().Get(), prim.normals, atol=1e-7)
+            np.testing.assert_allclose(mesh.GetNormalsAttr().Get(), stage_axes(stage, prim.normals),
+                                       atol=1e-7)
+            np.testing.assert_allclose(mesh.GetPointsAttr().Get(), stage_axes(stage, prim.positions),
+                                       atol=1e-6)
             st = UsdGeom.PrimvarsAPI(mesh).GetPrimvar("st")
             assert st.GetTypeName() == "texCoord2f[]"
             np.testing.assert_allclose(st.Get(), prim.uvs)
@@ -218,10 +230,10 @@ def test_animated_skinning_matches_numpy_lbs(written):
     for prim in lod.primitives:
         p = np.c_[prim.positions, np.ones(len(prim.positions))]
         moved = np.einsum("vk,vkij,vj->vi", prim.weights, skin[prim.joints], p)[:, :3]
-        pts = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(prim.positions))
+        pts = Vt.Vec3fArray(UsdGeom.Mesh(targets[prim.name].GetPrim()).GetPointsAttr().Get())
         assert targets[prim.name].ComputeSkinnedPoints(xforms, pts, Usd.TimeCode(frame))
         assert np.abs(moved - prim.positions).max() > 0.01          # it really moves
-        np.testing.assert_allclose(np.array(pts), moved, atol=1e-4)
+        np.testing.assert_allclose(np.array(pts), stage_axes(stage, moved), atol=1e-4)
 
 
 def test_step_clip_holds_between_kept_keys(tmp_path):
@@ -424,3 +436,293 @@ def test_skel_root_extent_holds_every_animated_frame(written):
                 target.ComputeSkinnedPoints(xforms, pts, Usd.TimeCode(code))
                 p = np.array(pts)
                 assert (p >= lo - 1e-5).all() and (p <= hi + 1e-5).all(), (path, code)
+
+
+# --------------------------------------------------------------------------- textures, AR, axes
+
+from synthetic import synthetic_textures, textured_asset  # noqa: E402
+import arkit_check  # noqa: E402
+
+ARKIT_PRIM_TYPES = {"", "Scope", "Xform", "Material", "Shader", "Mesh", "SkelRoot", "Skeleton",
+                    "SkelAnimation", "GeomSubset"}     # the subset of ARKit's list trees need
+
+
+@pytest.fixture(scope="module")
+def textured(tmp_path_factory):
+    """{(lods, fmt): path} for the textured synthetic asset, written through exchange.export
+    (staged, texture siblings moved with the main file)."""
+    from treegen_cli.exchange import export
+
+    d = tmp_path_factory.mktemp("usd_tex")
+    out = {}
+    for lods in (1, 3):
+        asset = prepare(textured_asset(lods=lods))
+        for fmt in FORMATS:
+            out[lods, fmt] = export(asset, d / f"tree{lods}.{fmt}")
+    return out
+
+
+def shader(stage, material, name):
+    return UsdShade.Shader(stage.GetPrimAtPath(
+        stage.GetDefaultPrim().GetPath().AppendPath(f"Looks/{material}/{name}")))
+
+
+def source(inp):
+    """(shader prim name, output name) an input is connected to."""
+    src, out, _ = inp.GetConnectedSource()
+    return src.GetPrim().GetName(), out
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+@pytest.mark.parametrize("lods", [1, 3])
+def test_textured_files_validate(textured, lods, fmt):
+    assert validate_usd(textured[lods, fmt][0]) == []
+
+
+@pytest.mark.parametrize("lods", [1, 3])
+def test_usdz_passes_arkit_compliance_checker(textured, lods):
+    """usd-core's ComplianceChecker(arkit=True) (from usd-core 24.11: see tests/arkit_check.py)
+    reports no error and no failed check: Y up, supported prim types, packaged textures,
+    normal map encoding, shader ids and connections."""
+    if not arkit_check.available():
+        pytest.skip("usd-core 24.11 ComplianceChecker not installed: python tests/arkit_check.py --install")
+    report = arkit_check.check(textured[lods, "usdz"][0])
+    assert report["errors"] == [] and report["failed"] == [], report
+
+
+def test_arkit_checker_is_not_vacuous(tmp_path):
+    """A Z-up .usdz with UsdLod prims fails the checker the way the issue reported."""
+    if not arkit_check.available():
+        pytest.skip("usd-core 24.11 ComplianceChecker not installed: python tests/arkit_check.py --install")
+    from treegen_cli.exchange.usd import build_stage, write_stage
+
+    path = tmp_path / "z.usdz"
+    stage = build_stage(prepare(synthetic_asset(lods=3)), "Z", None, lod_schemas=True)
+    write_stage(stage, path, "z.usdc")
+    failed = " ".join(arkit_check.check(path)["failed"])
+    assert "upAxis" in failed and "LODDistanceHeuristic" in failed
+
+
+@pytest.mark.parametrize("lods", [1, 3])
+def test_usdz_is_ar_ready_in_process(textured, lods):
+    """The AR Quick Look rules again with the project's own usd-core (runs without the side
+    install): Y up, metres, only ARKit prim types and no UsdLod schema, shader ids ARKit knows,
+    and every asset path resolves inside the package."""
+    from pxr import Ar
+
+    path = textured[lods, "usdz"][0]
+    stage = Usd.Stage.Open(str(path))
+    assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.y
+    assert UsdGeom.GetStageMetersPerUnit(stage) == 1.0
+    prims = list(Usd.PrimRange.Stage(stage, Usd.TraverseInstanceProxies(Usd.PrimAllPrimsPredicate)))
+    assert {p.GetTypeName() for p in prims} <= ARKIT_PRIM_TYPES
+    assert not any(p.HasAPI(UsdLod.RootAPI) for p in prims)
+    files = []
+    for p in prims:
+        if p.IsA(UsdShade.Shader):
+            sid = UsdShade.Shader(p).GetShaderId()
+            assert sid in ("UsdPreviewSurface", "UsdUVTexture") or sid.startswith("UsdPrimvarReader")
+            f = UsdShade.Shader(p).GetInput("file")
+            if f:
+                files.append(f.Get())
+    assert files and all(".usdz[" in a.resolvedPath for a in files)
+    assert all(Ar.GetResolver().Resolve(a.resolvedPath) for a in files)
+    if lods > 1:   # the variant set stays the portable LOD switch
+        lods_prim = stage.GetDefaultPrim().GetChild("LODs")
+        assert lods_prim.GetVariantSets().GetVariantSet("LOD").GetVariantNames() == [
+            f"LOD{k}" for k in range(lods)]
+
+
+def test_lod_schemas_only_outside_usdz(textured):
+    for fmt in FORMATS:
+        stage = Usd.Stage.Open(str(textured[3, fmt][0]))
+        lods_prim = stage.GetDefaultPrim().GetChild("LODs")
+        has = lods_prim.HasAPI(UsdLod.RootAPI)
+        heur = stage.GetDefaultPrim().GetChild("LODHeuristic")
+        assert has == bool(heur) == (fmt != "usdz"), fmt
+
+
+def test_textures_inside_the_usdz(textured):
+    """Root layer first (AR Quick Look reads the first entry), then textures/<name>.png with
+    the Asset's bytes; no file beside the package."""
+    from pxr import Sdf
+
+    tex = synthetic_textures()
+    for lods in (1, 3):
+        files = textured[lods, "usdz"]
+        assert [f.name for f in files] == [f"tree{lods}.usdz"]
+        z = Sdf.ZipFile.Open(str(files[0]))
+        assert z.GetFileNames() == ["synthetic.usdc", "textures/bark.png",
+                                    "textures/bark_normal.png", "textures/leaf.png"]
+        for name, t in tex.items():
+            info = z.GetFileInfo(f"textures/{name}.png")
+            assert info.size == len(t.png) and info.compressionMethod == 0
+            assert info.dataOffset % 64 == 0
+
+
+@pytest.mark.parametrize("fmt", ["usda", "usdc"])
+def test_textures_beside_usda_usdc(textured, fmt):
+    """Flat siblings <stem>_<name>.png in the same folder, referenced "./<stem>_<name>.png"."""
+    tex = synthetic_textures()
+    files = textured[1, fmt]
+    assert [f.name for f in files] == [f"tree1.{fmt}", "tree1_bark.png", "tree1_bark_normal.png",
+                                       "tree1_leaf.png"]
+    for name, t in tex.items():
+        assert (files[0].parent / f"tree1_{name}.png").read_bytes() == t.png
+    stage = Usd.Stage.Open(str(files[0]))
+    f = shader(stage, "leaf", "baseTexture").GetInput("file").Get()
+    assert f.path == "./tree1_leaf.png" and f.resolvedPath == str(files[0].parent / "tree1_leaf.png")
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_leaf_material_cuts_out_by_opacity_threshold(textured, fmt):
+    stage = Usd.Stage.Open(str(textured[1, fmt][0]))
+    surf = shader(stage, "leaf", "PreviewSurface")
+    cutoff = textured_asset().materials[1].alpha_cutoff
+    assert surf.GetInput("opacityThreshold").Get() == pytest.approx(cutoff)
+    assert source(surf.GetInput("opacity")) == ("baseTexture", "a")
+    assert source(surf.GetInput("diffuseColor")) == ("baseTexture", "rgb")
+    tex = shader(stage, "leaf", "baseTexture")
+    assert tex.GetShaderId() == "UsdUVTexture"
+    assert tex.GetInput("sourceColorSpace").Get() == "sRGB"
+    assert tex.GetInput("wrapS").Get() == tex.GetInput("wrapT").Get() == "clamp"
+    assert source(tex.GetInput("st")) == ("stReader", "result")
+    np.testing.assert_allclose(tex.GetInput("scale").Get(), textured_asset().materials[1].base_color)
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_bark_normal_map_is_raw_and_scaled_to_minus_one_one(textured, fmt):
+    stage = Usd.Stage.Open(str(textured[1, fmt][0]))
+    surf = shader(stage, "bark", "PreviewSurface")
+    assert source(surf.GetInput("normal")) == ("normalTexture", "rgb")
+    assert not surf.GetInput("opacityThreshold")                 # bark is opaque
+    assert not surf.GetInput("opacity").HasConnectedSource()
+    n = shader(stage, "bark", "normalTexture")
+    assert tuple(n.GetInput("scale").Get()) == (2, 2, 2, 1)
+    assert tuple(n.GetInput("bias").Get()) == (-1, -1, -1, 0)
+    assert n.GetInput("sourceColorSpace").Get() == "raw"
+    assert n.GetInput("wrapS").Get() == n.GetInput("wrapT").Get() == "repeat"
+    assert shader(stage, "bark", "baseTexture").GetInput("sourceColorSpace").Get() == "sRGB"
+
+
+def test_untextured_materials_write_no_files(tmp_path):
+    from treegen_cli.exchange import export
+
+    files = export(prepare(synthetic_asset()), tmp_path / "plain.usdc")
+    assert [f.name for f in files] == ["plain.usdc"]
+    stage = Usd.Stage.Open(str(files[0]))
+    assert not [p for p in stage.Traverse() if p.GetName().endswith("Texture")]
+
+
+def test_texture_names_are_unique_and_shared_once(tmp_path):
+    """Two different textures named alike get _1; one texture used twice is written once."""
+    from dataclasses import replace
+
+    from treegen_cli.exchange import export
+
+    asset = textured_asset()
+    bark, leaf = asset.materials
+    other = replace(leaf.base_texture, png=bark.base_texture.png, name="bark")
+    asset = replace(asset, materials=[bark, replace(leaf, base_texture=other,
+                                                    normal_texture=bark.normal_texture)])
+    files = export(prepare(asset), tmp_path / "t.usda")
+    assert [f.name for f in files] == ["t.usda", "t_bark.png", "t_bark_1.png", "t_bark_normal.png"]
+    assert validate_usd(files[0]) == []
+
+
+def skinned_points(stage, path, code):
+    """{mesh name: skinned points at time code `code`} of the SkelRoot at `path`."""
+    sq, binding = skel_query(stage, path)
+    xforms = sq.ComputeSkinningTransforms(Usd.TimeCode(code))
+    out = {}
+    for t in binding.GetSkinningTargets():
+        pts = Vt.Vec3fArray(UsdGeom.Mesh(t.GetPrim()).GetPointsAttr().Get())
+        assert t.ComputeSkinnedPoints(xforms, pts, Usd.TimeCode(code))
+        out[t.GetPrim().GetName()] = np.array(pts, np.float64)
+    return out
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_up_axis_y_stands_the_same_tree_up_along_y(tmp_path, fmt):
+    """up_axis "y" and "z" write the same tree in metres: Y-up skinned points (rest and
+    animated) are the Z-up ones through axes.to_y_up, so the height runs along +Y."""
+    import dataclasses as dc
+
+    asset = synthetic_asset(lods=3)
+    stages = {}
+    for up in ("y", "z"):
+        path = tmp_path / f"{up}.{fmt}"
+        write_usd(dc.replace(asset, up_axis=up), path)
+        assert validate_usd(path) == []
+        stages[up] = Usd.Stage.Open(str(path))
+        assert UsdGeom.GetStageUpAxis(stages[up]) == up.upper()
+        assert UsdGeom.GetStageMetersPerUnit(stages[up]) == 1.0
+    y, z = stages["y"], stages["z"]
+    for path in lod_paths(z, 3):
+        for code in (0.0, 3.0, 4.5):
+            py, pz = skinned_points(y, path, code), skinned_points(z, path, code)
+            for name in pz:
+                np.testing.assert_allclose(py[name], to_y_up(pz[name]), atol=1e-4)
+        rest = skinned_points(y, path, 0.0)["bark"]
+        assert rest[:, 1].max() > 4.0 and abs(rest[:, 1].min()) < 0.01   # trunk base at 0, up +Y
+        lo, hi = np.array(UsdSkel.Root(y.GetPrimAtPath(path)).GetExtentAttr().Get())
+        zlo, zhi = np.array(UsdSkel.Root(z.GetPrimAtPath(path)).GetExtentAttr().Get())
+        np.testing.assert_allclose(hi - lo, (zhi - zlo)[[0, 2, 1]], atol=1e-6)
+    heur = UsdLod.DistanceHeuristic(y.GetPrimAtPath(y.GetDefaultPrim().GetPath().AppendChild("LODHeuristic")))
+    if fmt != "usdz":
+        zheur = UsdLod.DistanceHeuristic(z.GetPrimAtPath(z.GetDefaultPrim().GetPath().AppendChild("LODHeuristic")))
+        np.testing.assert_allclose(heur.GetCenterAttr().Get(), to_y_up(np.array(zheur.GetCenterAttr().Get())),
+                                   atol=1e-6)
+
+
+def test_read_drawable_stands_a_y_up_usdz_upright(textured):
+    """The preview's reader (Y-up world) sees the same tree from a Y-up .usdz as from a Z-up
+    .usdc."""
+    from treegen_cli.exchange import read_drawable
+
+    a = read_drawable(textured[1, "usdz"][0])
+    b = read_drawable(textured[1, "usdc"][0])
+    for pa, pb in zip(a.parts, b.parts):
+        np.testing.assert_allclose(pa.positions, pb.positions, atol=1e-5)
+
+
+def test_bad_up_axis_is_a_user_error(tmp_path):
+    import dataclasses as dc
+
+    with pytest.raises(TreegenError, match="up axis"):
+        write_usd(dc.replace(synthetic_asset(), up_axis="x"), tmp_path / "t.usdc")
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_textured_forest_validates(tmp_path, fmt):
+    """A forest of textured prototypes: textures named per prototype, written once; a .usdz
+    forest is Y up (instances translated by to_y_up(position), turned about +Y) and AR-clean."""
+    from treegen_cli.asset import Forest, Instance
+    from treegen_cli.exchange import export_forest
+    from treegen_cli.prepare import prepare_forest
+
+    proto = textured_asset(lods=3)
+    inst = [Instance(0, (3.0, -4.0, 0.5), 30.0, 1.0, lod=k % 3, time_offset=0.1 * k) for k in range(4)]
+    forest = prepare_forest(Forest("grove", [proto], inst, loop=2.0))
+    files = export_forest(forest, tmp_path / f"grove.{fmt}")
+    assert validate_usd(files[0]) == []
+    names = [f.name for f in files]
+    if fmt == "usdz":
+        from pxr import Sdf
+        assert names == ["grove.usdz"]
+        assert Sdf.ZipFile.Open(str(files[0])).GetFileNames() == [
+            "grove.usdc", "textures/synthetic_s0_bark.png", "textures/synthetic_s0_bark_normal.png",
+            "textures/synthetic_s0_leaf.png"]
+        if arkit_check.available():
+            report = arkit_check.check(files[0])
+            assert report["errors"] == [] and report["failed"] == [], report
+    else:
+        assert names == [f"grove.{fmt}", "grove_synthetic_s0_bark.png",
+                         "grove_synthetic_s0_bark_normal.png", "grove_synthetic_s0_leaf.png"]
+    stage = Usd.Stage.Open(str(files[0]))
+    tree = stage.GetPrimAtPath("/grove/Trees/tree0")
+    np.testing.assert_allclose(tree.GetAttribute("xformOp:translate").Get(),
+                               stage_axes(stage, [3.0, -4.0, 0.5]))
+    up = "Y" if fmt == "usdz" else "Z"
+    assert tree.GetAttribute(f"xformOp:rotate{up}").Get() == 30.0

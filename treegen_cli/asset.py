@@ -102,6 +102,9 @@ class Asset:
     materials: list[Material]
     lods: list[Lod]                        # lods[0] is the full-detail tree
     extras: dict = field(default_factory=dict)  # provenance (species, seed, treegen version)
+    up_axis: str | None = None             # "y" / "z": the file's up axis where the format has
+                                           # a choice (USD, OBJ); None: the format's default
+                                           # (Y for .usdz and .obj, Z for .usda/.usdc)
 
 
 @dataclass(frozen=True)

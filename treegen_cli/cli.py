@@ -180,6 +180,9 @@ def _int_list(text: str | None, name: str) -> tuple[int, ...] | None:
               help="Clip length in seconds (the wind loops over it).")
 @click.option("--fps", type=float, default=30.0, show_default=True, help="Keys per second.")
 @click.option("--no-wind", is_flag=True, help="Write no animation (rest pose only).")
+@click.option("--up-axis", type=click.Choice(["y", "z"]), default=None,
+              help="Up axis of USD, OBJ and PLY files, metres either way [default: y for .usdz "
+                   ".obj .ply, z for .usda .usdc]; glTF is always Y up.")
 @_lod_options
 @click.option("--no-lod", is_flag=True, help="Write one LOD with the dense clip.")
 @click.option("--lod-files", is_flag=True,
@@ -193,12 +196,13 @@ def _int_list(text: str | None, name: str) -> tuple[int, ...] | None:
 @click.option("--json", "as_json", is_flag=True,
               help="Print a machine-readable summary (files, bytes, counts, seconds per stage).")
 def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels, sides,
-         leaf_geometry, wind_speed, wind_dir, gust, turbulence, duration, fps, no_wind, lod_distances, fov, width,
-         error_px, error_form, interpolation, no_lod, lod_files, max_vertices, max_keys, as_json):
+         leaf_geometry, wind_speed, wind_dir, gust, turbulence, duration, fps, no_wind, up_axis,
+         lod_distances, fov, width, error_px, error_form, interpolation, no_lod, lod_files,
+         max_vertices, max_keys, as_json):
     """Grow SPECIES and write a skinned, wind-animated tree to OUTPUT."""
     from dataclasses import replace
 
-    from .exchange import check_suffix, export, export_parts
+    from .exchange import STATIC, check_suffix, check_up_axis, export, export_parts
     from .prepare import split_lods
     from .limits import Limits
     from .mesh import MESH_DEFAULTS
@@ -210,6 +214,8 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
 
     t0 = time.perf_counter()
     check_suffix(output)
+    check_up_axis(output, up_axis)
+    static = output.suffix.lower() in STATIC     # no skin or clip: skip the wind and LOD work
     if max_joints < 1:
         raise TreegenError(f"--max-joints {max_joints}: the joint budget must be at least 1")
     mesh = replace(MESH_DEFAULTS, leaf_geometry=leaf_geometry)
@@ -218,13 +224,13 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
         if min(side_list) < 3 or max(side_list) > 64:
             raise TreegenError(f"--sides '{sides}': each value must be in [3, 64]")
         mesh = replace(mesh, sides=side_list)
-    wind = None if no_wind else WindOptions(speed=wind_speed, direction_deg=wind_dir, gust=gust,
+    wind = None if no_wind or static else WindOptions(speed=wind_speed, direction_deg=wind_dir, gust=gust,
                                             turbulence=turbulence, duration=duration, fps=fps)
     options = MakeOptions(
         generate=GenerateOptions(max_stems=max_stems, max_leaves=max_leaves),
         rig=RigOptions(max_joints=max_joints, joint_levels=_int_list(joint_levels, "--joint-levels")),
         mesh=mesh, wind=wind,
-        lod=None if no_lod else _lod_from(lod_distances, fov, width, error_px, error_form,
+        lod=None if no_lod or static else _lod_from(lod_distances, fov, width, error_px, error_form,
                                           interpolation),
         limits=Limits(max_vertices=max_vertices, max_keys=max_keys))
     params = _load(species)
@@ -234,6 +240,7 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
                           len(options.lod.distances) * per_lod + 2)   # (+ prepare, write)
     with rep.live():
         asset, tree = _in_file(species, build_asset, params, seed, options, timings)
+        asset = replace(asset, up_axis=up_axis)
         written = timings.run("write", export_parts, split_lods(asset), output) if lod_files \
             else timings.run("write", export, asset, output)
     per_level = tree_stats(tree)["stems_per_level"]
@@ -244,6 +251,8 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
         click.echo(json.dumps(s, indent=2))
         return
     click.echo(f"wrote {', '.join(s['files'])}  ({s['bytes'] / 1e6:.2f} MB)")
+    if static:
+        click.echo("  static format: no wind or LODs")
     click.echo(f"  {s['stems']:,} stems, {s['leaves']:,} leaves; {s['vertices']:,} vertices, "
                f"{s['triangles']:,} triangles; {s['joints']} joints; {s['keys']} keys")
     if len(s["lods"]) > 1:

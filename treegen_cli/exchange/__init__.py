@@ -63,6 +63,7 @@ SPECIES = (".txt", ".xml")      # species files: read by params.py (text or Arba
 STILLS = (".png", ".jpg", ".jpeg")
 LOOPS = (".gif",)
 STATIC = (".obj", ".ply")        # formats with no skin or animation
+FIXED_UP_AXIS = {".glb": "y", ".gltf": "y"}   # glTF is Y up by spec; the rest take Asset.up_axis
 
 
 def supported_suffixes(table: dict | tuple = WRITERS) -> list[str]:
@@ -79,6 +80,18 @@ def check_suffix(path: str | os.PathLike, table: dict | tuple = WRITERS, kind: s
     return path
 
 
+def check_up_axis(path: str | os.PathLike, up: str | None) -> None:
+    """The one-line error for an up axis the format cannot carry (None: the format's default)."""
+    if up is None:
+        return
+    if str(up).lower() not in ("y", "z"):
+        raise TreegenError(f"up axis '{up}': expected y or z")
+    fixed = FIXED_UP_AXIS.get(Path(path).suffix.lower())
+    if fixed and str(up).lower() != fixed:
+        others = " ".join(s for s in supported_suffixes() if s not in FIXED_UP_AXIS)
+        raise TreegenError(f"{path}: glTF is always Y up; up axis {up} needs one of {others}")
+
+
 def _write(writer: Callable[[Path], None], path: Path) -> list[Path]:
     with staged(path) as tmp:
         writer(tmp)
@@ -89,6 +102,7 @@ def export(asset: Asset, path: str | os.PathLike) -> list[Path]:
     """Write a prepared `asset` in the format `path`'s suffix names, atomically. Returns the
     files written, main file first (a .gltf also writes its .bin)."""
     path = check_suffix(path, WRITERS)
+    check_up_axis(path, asset.up_axis)
     writer = WRITERS[path.suffix.lower()]
     return _write(lambda tmp: writer(asset, tmp), path)
 

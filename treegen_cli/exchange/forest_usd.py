@@ -15,6 +15,10 @@ distinct instancing prototypes bounded (≤ frames per loop per prototype).
 
 With `all_lods` a prototype keeps all its LODs (LODRootAPI + the "LOD" variant set from
 exchange.usd); otherwise one prototype prim per (prototype, LOD) actually used.
+
+Textures and axes as exchange.usd: a .usdz packages the textures and is Y up (instances then
+translate by the converted position and turn about +Y), a .usda/.usdc keeps Z up with the
+textures beside it; texture names carry their prototype's name (`<stem>_<prototype>_leaf.png`).
 """
 from __future__ import annotations
 
@@ -25,7 +29,9 @@ import numpy as np
 
 from ..errors import TreegenError
 from ..asset import Forest
-from .usd import (_identifier, _sample_rate, _snap, build_stage, check_suffix, new_stage,
+from ..axes import to_y_up
+from .texture_files import TextureFiles
+from .usd import (_identifier, _sample_rate, _snap, build_stage, check_suffix, new_stage, up_axis,
                   write_stage)
 
 
@@ -35,13 +41,15 @@ def _prototype_asset(forest: Forest, p: int, lods: list[int], loop: bool):
     return replace(asset, lods=[asset.lods[k] for k in lods])
 
 
-def build_forest_stage(scene: Forest):
-    """The whole forest as an in-memory stage (one layer)."""
+def build_forest_stage(scene: Forest, up: str = "Z", textures: TextureFiles | None = None,
+                       lod_schemas: bool = True):
+    """The whole forest as an in-memory stage (one layer); `up`, `textures` and `lod_schemas`
+    as exchange.usd.build_stage."""
     from pxr import Gf, Kind, Sdf, Usd, UsdGeom
 
     stage, root_path = new_stage(
         scene.name, "treegen: forest of instanced, skinned Weber-Penn trees (UsdSkel)",
-        Kind.Tokens.assembly)
+        Kind.Tokens.assembly, up)
     layer = stage.GetRootLayer()
     protos_path = root_path.AppendChild("Prototypes")
     stage.CreateClassPrim(protos_path)
@@ -64,9 +72,11 @@ def build_forest_stage(scene: Forest):
     for p, k in sorted(wanted):       # per prototype: a few
         asset = scene.prototypes[p]
         lods = list(range(len(asset.lods))) if k < 0 else [k]
-        sub = build_stage(_prototype_asset(scene, p, lods, tcps is not None))
+        proto = _identifier(f"{asset.name}_s{asset.extras.get('seed', p)}")
+        sub = build_stage(_prototype_asset(scene, p, lods, tcps is not None), up, textures,
+                          lod_schemas, texture_prefix=proto + "_")
         src = sub.GetDefaultPrim().GetPath()
-        name = _identifier(f"{asset.name}_s{asset.extras.get('seed', p)}" + ("" if k < 0 else f"_lod{k}"))
+        name = _identifier(proto + ("" if k < 0 else f"_lod{k}"))
         while name in used:
             name += "_"
         used.add(name)
@@ -92,9 +102,11 @@ def build_forest_stage(scene: Forest):
                                 Sdf.LayerOffset(-offset, 1.0))
             spec.referenceList.Prepend(ref)
             ops = []
+            position = to_y_up(np.asarray(inst.position, np.float64)) if up == "Y" else inst.position
             for op_name, type_name, value in (
-                    ("xformOp:translate", Sdf.ValueTypeNames.Double3, Gf.Vec3d(*inst.position)),
-                    ("xformOp:rotateZ", Sdf.ValueTypeNames.Float, float(inst.rotation_deg)),
+                    ("xformOp:translate", Sdf.ValueTypeNames.Double3,
+                     Gf.Vec3d(*(float(c) for c in position))),
+                    (f"xformOp:rotate{up}", Sdf.ValueTypeNames.Float, float(inst.rotation_deg)),
                     ("xformOp:scale", Sdf.ValueTypeNames.Float3, Gf.Vec3f(*([inst.scale] * 3)))):
                 attr = Sdf.AttributeSpec(spec, op_name, type_name)
                 attr.default = value
@@ -110,6 +122,8 @@ def build_forest_stage(scene: Forest):
 def write_forest_usd(scene: Forest, path) -> None:
     """Write the forest to exactly `path` (.usda text, .usdc crate, .usdz package)."""
     path = Path(path)
-    check_suffix(path)                    # before the stage is built
-    stage = build_forest_stage(scene)     # keep the stage alive: it owns the layer
-    write_stage(stage, path, path.stem + ".usdc")
+    suffix = check_suffix(path)           # before the stage is built
+    textures = TextureFiles(path)
+    # keep the stage alive: it owns the layer
+    stage = build_forest_stage(scene, up_axis(None, suffix), textures, suffix != ".usdz")
+    write_stage(stage, path, path.stem + ".usdc", textures.files)

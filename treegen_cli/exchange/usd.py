@@ -3,14 +3,23 @@
 Writers only serialise: everything here is a re-encoding of the Asset. Stage layout:
 
     /<Asset>                       Xform, kind=component, defaultPrim
-        Looks/bark, Looks/leaf     UsdPreviewSurface materials (+ an st primvar reader)
-        LODHeuristic               LODDistanceHeuristic (only with >1 LOD)
-        LODs                       Xform with LODRootAPI and variant set "LOD" (only with >1 LOD)
+        Looks/bark, Looks/leaf     UsdPreviewSurface materials (+ an st primvar reader and a
+                                   UsdUVTexture per Material texture: base colour, normal map)
+        LODHeuristic               LODDistanceHeuristic (only with >1 LOD, not in a .usdz)
+        LODs                       Xform with the variant set "LOD" (only with >1 LOD) and
+                                   LODRootAPI (not in a .usdz: AR Quick Look rejects UsdLod)
             LOD0, LOD1, ...        SkelRoot: Skeleton, SkelAnimation(s), meshes
         (LOD0)                     with a single LOD the SkelRoot sits directly under /<Asset>
 
-Generator space is Z up, metres, right-handed: upAxis "Z", metersPerUnit 1, no conversion.
-USD matrices are row-vector (p' = p·M): every matrix here is the transpose of the Asset's.
+Textures (texture_files.py): a .usdz packages them (`textures/<name>.png`, after the root
+layer); a .usda/.usdc gets flat siblings `<stem>_<name>.png`, which staging moves into place
+like a .gltf's .bin. Asset paths are "./..." relative to the layer.
+
+Up axis: metres and right-handed either way. "Z" (the default of .usda/.usdc) writes generator
+space as it is; "Y" (the default of .usdz: AR Quick Look needs it) changes axes with
+axes.Z_UP_TO_Y_UP in every point, normal, matrix, quaternion and box, so the stage is natively
+Y up with no hidden root transform. USD matrices are row-vector (p' = p·M): every matrix here
+is the transpose of the Asset's.
 """
 from __future__ import annotations
 
@@ -21,9 +30,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..asset import Asset, Clip, Lod, Material, Primitive, Skeleton, lod_bounds
+from ..asset import Asset, Clip, Lod, Material, Primitive, Skeleton, Texture, lod_bounds
+from ..axes import matrix_to_y_up, quat_to_y_up, to_y_up
 from ..errors import TreegenError
 from ..quat import continuous, to_matrix
+from .texture_files import TextureFiles
 
 SUFFIXES = (".usda", ".usdc", ".usdz")
 USDZ_MTIME = 946684800  # 2000-01-01: fixed zip entry time for reproducible .usdz bytes
@@ -32,13 +43,29 @@ USDZ_MTIME = 946684800  # 2000-01-01: fixed zip entry time for reproducible .usd
 # --------------------------------------------------------------------------- public API
 
 def write_usd(asset: Asset, path) -> None:
-    """Write `asset` to exactly `path`; the suffix picks text, crate or a usdz package.
+    """Write `asset` to exactly `path` (plus its texture files); the suffix picks text, crate
+    or a usdz package.
 
     The caller (exchange.export) stages it; a temp name with the right suffix works for all
     three formats.
     """
-    check_suffix(path)                            # before the stage is built
-    write_stage(build_stage(asset), path, _identifier(asset.name) + ".usdc")
+    path = Path(path)
+    suffix = check_suffix(path)                   # before the stage is built
+    up = up_axis(asset.up_axis, suffix)
+    textures = TextureFiles(path)
+    stage = build_stage(asset, up, textures, lod_schemas=suffix != ".usdz")
+    write_stage(stage, path, _identifier(asset.name) + ".usdc", textures.files)
+
+
+def up_axis(requested: str | None, suffix: str) -> str:
+    """"Y" or "Z": the requested axis, else Y for a .usdz (AR Quick Look accepts only Y up)
+    and Z (generator space, no conversion) for .usda/.usdc."""
+    if requested is None:
+        return "Y" if suffix == ".usdz" else "Z"
+    up = str(requested).upper()
+    if up not in ("Y", "Z"):
+        raise TreegenError(f"up axis {requested!r}: expected y or z")
+    return up
 
 
 def check_suffix(path) -> str:
@@ -49,27 +76,41 @@ def check_suffix(path) -> str:
     return suffix
 
 
-def write_stage(stage, path, inner_name: str) -> None:
+def write_stage(stage, path, inner_name: str, files: dict[str, bytes] | None = None) -> None:
     """Write a stage's root layer to exactly `path`: .usda text, .usdc crate, or a .usdz
-    package whose single entry `inner_name` is the crate (no external files to collect)."""
+    package whose first entry `inner_name` is the crate (the root layer must come first).
+
+    files: relative name → bytes of the files the layer refers to (textures): written beside
+    `path`, or packaged after the layer in name order."""
     from pxr import Sdf
 
     path = Path(path)
     suffix = check_suffix(path)
     layer = stage.GetRootLayer()
+    files = files or {}
     if suffix in (".usda", ".usdc"):
         if not layer.Export(str(path), args={"format": suffix[1:]}):
             raise TreegenError(f"{path}: could not write the USD layer")
+        for name, data in sorted(files.items()):
+            (path.parent / name).write_bytes(data)
         return
     tmpdir = tempfile.mkdtemp(prefix="treegen-usdz-", dir=path.parent if path.parent.exists() else None)
     try:
         inner = os.path.join(tmpdir, inner_name)
         if not layer.Export(inner, args={"format": "usdc"}):
             raise TreegenError(f"{path}: could not write the USD layer")
-        # the zip entry carries the file's mtime: pin it so the same stage gives the same bytes
-        os.utime(inner, (USDZ_MTIME, USDZ_MTIME))
+        entries = [(inner, inner_name)]
+        for name, data in sorted(files.items()):
+            local = os.path.join(tmpdir, "files", name)
+            os.makedirs(os.path.dirname(local), exist_ok=True)
+            with open(local, "wb") as f:
+                f.write(data)
+            entries.append((local, name))
         writer = Sdf.ZipFileWriter.CreateNew(str(path))
-        writer.AddFile(inner, inner_name)
+        for local, name in entries:
+            # a zip entry carries the file's mtime: pin it so the same stage gives the same bytes
+            os.utime(local, (USDZ_MTIME, USDZ_MTIME))
+            writer.AddFile(local, name)
         if not writer.Save():
             raise TreegenError(f"{path}: could not write the usdz package")
     finally:
@@ -115,14 +156,14 @@ def validate_usd(path, all_variants: bool = True) -> list[str]:
 
 # --------------------------------------------------------------------------- stage building
 
-def new_stage(name: str, documentation: str, kind):
-    """An in-memory stage in generator space (Z up, metres) whose default prim is an Xform
-    named after `name` with model kind `kind`; returns (stage, root path)."""
+def new_stage(name: str, documentation: str, kind, up: str = "Z"):
+    """An in-memory stage (metres, up axis `up`) whose default prim is an Xform named after
+    `name` with model kind `kind`; returns (stage, root path)."""
     from pxr import Sdf, Usd, UsdGeom
 
     stage = Usd.Stage.CreateInMemory()
     stage.GetRootLayer().documentation = documentation
-    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y if up == "Y" else UsdGeom.Tokens.z)
     UsdGeom.SetStageMetersPerUnit(stage, 1.0)
     root_path = Sdf.Path("/" + _identifier(name))
     root = UsdGeom.Xform.Define(stage, root_path).GetPrim()
@@ -131,27 +172,62 @@ def new_stage(name: str, documentation: str, kind):
     return stage, root_path
 
 
-def build_stage(asset: Asset):
-    """The whole asset as an in-memory stage (one anonymous layer)."""
+class Axes:
+    """Generator space (Z up) → the stage's axes: identity for "Z" (values pass through
+    untouched, so Z-up files keep their bytes), axes.Z_UP_TO_Y_UP for "Y"."""
+
+    def __init__(self, up: str = "Z"):
+        self.up = up
+        self.y = up == "Y"
+
+    def points(self, v: np.ndarray) -> np.ndarray:
+        return to_y_up(v) if self.y else v
+
+    def matrices(self, m: np.ndarray) -> np.ndarray:
+        return matrix_to_y_up(m) if self.y else m
+
+    def quats(self, q: np.ndarray) -> np.ndarray:
+        return quat_to_y_up(q) if self.y else q
+
+    def box(self, lo, hi) -> tuple[np.ndarray, np.ndarray]:
+        """An axis-aligned box stays one: C permutes axes and flips signs."""
+        if not self.y:
+            return lo, hi
+        a, b = to_y_up(np.asarray(lo, np.float64)), to_y_up(np.asarray(hi, np.float64))
+        return np.minimum(a, b), np.maximum(a, b)
+
+
+def build_stage(asset: Asset, up: str = "Z", textures: TextureFiles | None = None,
+                lod_schemas: bool = True, texture_prefix: str = ""):
+    """The whole asset as an in-memory stage (one anonymous layer).
+
+    textures: names the material textures' files (None: the materials are written without
+    textures); lod_schemas: author UsdLod's LODRootAPI and heuristic (not in a .usdz);
+    texture_prefix: prepended to texture names (forest prototypes)."""
     from pxr import Kind
 
     if not asset.lods:
         raise TreegenError(f"asset {asset.name!r}: no LODs to write")
+    axes = Axes(up)
     stage, root_path = new_stage(asset.name, "treegen: skinned Weber-Penn tree (UsdSkel)",
-                                 Kind.Tokens.component)
+                                 Kind.Tokens.component, up)
     if asset.extras:
         stage.GetRootLayer().customLayerData = {
             "treegen": {str(k): str(v) for k, v in sorted(asset.extras.items())}}
 
-    materials = {m.name: _define_material(stage, root_path.AppendChild("Looks"), m)
+    def texture_path(tex: Texture | None) -> str | None:
+        """Layer-relative ("./textures/leaf.png"), never a search path."""
+        return None if tex is None or textures is None else "./" + textures.name(tex, texture_prefix)
+
+    materials = {m.name: _define_material(stage, root_path.AppendChild("Looks"), m, texture_path)
                  for m in asset.materials}
 
     tcps = _stage_timing(stage, asset)
 
     if len(asset.lods) == 1:
-        _define_lod(stage, root_path.AppendChild("LOD0"), asset.lods[0], asset, materials, tcps)
+        _define_lod(stage, root_path.AppendChild("LOD0"), asset.lods[0], asset, materials, tcps, axes)
     else:
-        _define_lod_root(stage, root_path, asset, materials, tcps)
+        _define_lod_root(stage, root_path, asset, materials, tcps, axes, lod_schemas)
     return stage
 
 
@@ -169,8 +245,10 @@ def _stage_timing(stage, asset: Asset) -> float | None:
     return tcps
 
 
-def _define_lod_root(stage, root_path, asset: Asset, materials, tcps) -> None:
+def _define_lod_root(stage, root_path, asset: Asset, materials, tcps, axes: Axes,
+                     lod_schemas: bool = True) -> None:
     """LODs as children of an LODRootAPI prim, plus a "LOD" variant set on that same prim.
+    Without `lod_schemas` (a .usdz) only the variant set: the portable switch.
 
     Both views share one copy of the data: the LOD items are authored once, locally; each
     variant only toggles `visibility` (LODk: every other item invisible). The default selection
@@ -188,18 +266,19 @@ def _define_lod_root(stage, root_path, asset: Asset, materials, tcps) -> None:
     names = [f"LOD{k}" for k in range(len(asset.lods))]
     bounds = []
     for name, lod in zip(names, asset.lods):
-        _define_lod(stage, lods_path.AppendChild(name), lod, asset, materials, tcps)
+        _define_lod(stage, lods_path.AppendChild(name), lod, asset, materials, tcps, axes)
         bounds.append(lod_bounds(lod))
 
-    lod_root = UsdLod.RootAPI.Apply(lods_prim)
-    lod_root.CreateLodDefaultIndexAttr(0)
-    lod_root.CreateLodHeuristicsRel().SetTargets([heur_path])
-    heur = UsdLod.DistanceHeuristic.Define(stage, heur_path)
-    heur.CreateLodDomainAttr(UsdLod.Tokens.imaging)
-    lo, hi = bounds[0]
-    heur.CreateCenterAttr(_gf_vec3f(0.5 * (lo + hi)))   # LOD root space = tree space
-    # thresholds: LOD k (k ≥ 1) is used from Lod.distance on
-    heur.CreateThresholdsAttr(Vt.FloatArray([float(lod.distance) for lod in asset.lods[1:]]))
+    if lod_schemas:
+        lod_root = UsdLod.RootAPI.Apply(lods_prim)
+        lod_root.CreateLodDefaultIndexAttr(0)
+        lod_root.CreateLodHeuristicsRel().SetTargets([heur_path])
+        heur = UsdLod.DistanceHeuristic.Define(stage, heur_path)
+        heur.CreateLodDomainAttr(UsdLod.Tokens.imaging)
+        lo, hi = axes.box(*bounds[0])
+        heur.CreateCenterAttr(_gf_vec3f(0.5 * (lo + hi)))   # LOD root space = tree space
+        # thresholds: LOD k (k ≥ 1) is used from Lod.distance on
+        heur.CreateThresholdsAttr(Vt.FloatArray([float(lod.distance) for lod in asset.lods[1:]]))
 
     vset = lods_prim.GetVariantSets().AddVariantSet("LOD")
     for k, name in enumerate(names):
@@ -216,24 +295,24 @@ def _define_lod_root(stage, root_path, asset: Asset, materials, tcps) -> None:
     lods_prim.SetChildrenReorder(names)
 
 
-def _define_lod(stage, path, lod: Lod, asset: Asset, materials, tcps) -> None:
+def _define_lod(stage, path, lod: Lod, asset: Asset, materials, tcps, axes: Axes) -> None:
     """One SkelRoot: Skeleton, its SkelAnimation(s), and the skinned meshes."""
     from pxr import UsdSkel
 
     skel_root = UsdSkel.Root.Define(stage, path)
     if lod.bounds is None:
         raise ValueError(f"asset {asset.name!r}: not prepared (prepare.prepare before export)")
-    lo, hi = lod.bounds
+    lo, hi = axes.box(*lod.bounds)
     skel_root.CreateExtentAttr([_gf_vec3f(lo), _gf_vec3f(hi)])
     skel_path = path.AppendChild("Skeleton")
-    joint_paths = _define_skeleton(stage, skel_path, lod.skeleton)
+    joint_paths = _define_skeleton(stage, skel_path, lod.skeleton, axes)
 
     anim_paths = []
     used = {"Skeleton"}
     for clip in lod.clips:
         name = _unique(_identifier(clip.name), used)
         anim_paths.append(path.AppendChild(name))
-        _define_animation(stage, anim_paths[-1], clip, lod.skeleton, joint_paths, tcps)
+        _define_animation(stage, anim_paths[-1], clip, lod.skeleton, joint_paths, tcps, axes)
     if anim_paths:
         binding = UsdSkel.BindingAPI.Apply(stage.GetPrimAtPath(skel_path))
         binding.CreateAnimationSourceRel().SetTargets([anim_paths[0]])
@@ -242,10 +321,10 @@ def _define_lod(stage, path, lod: Lod, asset: Asset, materials, tcps) -> None:
         name = _unique(_identifier(prim.name), used)
         mat = next((m for m in asset.materials if m.name == prim.material), None)
         _define_mesh(stage, path.AppendChild(name), prim, skel_path,
-                     materials.get(prim.material), mat, len(lod.skeleton.names))
+                     materials.get(prim.material), mat, len(lod.skeleton.names), axes)
 
 
-def _define_skeleton(stage, path, skel: Skeleton) -> list[str]:
+def _define_skeleton(stage, path, skel: Skeleton, axes: Axes) -> list[str]:
     """Joints as path tokens "j0", "j0/j1", ...; bind = world, rest = local (row-vector)."""
     from pxr import UsdSkel, Vt
 
@@ -253,14 +332,16 @@ def _define_skeleton(stage, path, skel: Skeleton) -> list[str]:
     s = UsdSkel.Skeleton.Define(stage, path)
     s.CreateJointsAttr(Vt.TokenArray(joint_paths))
     s.CreateJointNamesAttr(Vt.TokenArray(list(skel.names)))
-    bind = np.ascontiguousarray(np.transpose(np.asarray(skel.bind_world, np.float64), (0, 2, 1)))
+    bind = axes.matrices(np.asarray(skel.bind_world, np.float64))
+    bind = np.ascontiguousarray(np.transpose(bind, (0, 2, 1)))
     s.CreateBindTransformsAttr(Vt.Matrix4dArray.FromNumpy(bind))
-    rest = _rest_matrices(skel)
+    rest = axes.matrices(_rest_matrices(skel))
     s.CreateRestTransformsAttr(Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(np.transpose(rest, (0, 2, 1)))))
     return joint_paths
 
 
-def _define_animation(stage, path, clip: Clip, skel: Skeleton, joint_paths, tcps) -> None:
+def _define_animation(stage, path, clip: Clip, skel: Skeleton, joint_paths, tcps,
+                      axes: Axes) -> None:
     """SkelAnimation for the joints that move: rotations time-sampled, translations and scales
     at rest (default value only).
 
@@ -283,11 +364,11 @@ def _define_animation(stage, path, clip: Clip, skel: Skeleton, joint_paths, tcps
     moving = np.flatnonzero(clip.animated)
     moving = moving if moving.size else np.zeros(1, np.int64)     # the timeline's tracks
     frames, rot = clip.timeline
-    rot = continuous(rot)        # consecutive samples on one hemisphere: lerping importers are safe
+    rot = continuous(axes.quats(rot))   # consecutive samples on one hemisphere: lerping importers are safe
     anim = UsdSkel.Animation.Define(stage, path)
     anim.CreateJointsAttr(Vt.TokenArray([joint_paths[j] for j in moving]))
     anim.CreateTranslationsAttr(Vt.Vec3fArray.FromNumpy(
-        np.ascontiguousarray(skel.rest_translation[moving], np.float32)))
+        np.ascontiguousarray(axes.points(skel.rest_translation[moving]), np.float32)))
     anim.CreateScalesAttr(Vt.Vec3hArray.FromNumpy(np.ones((len(moving), 3), np.float16)))
     rot_attr = anim.CreateRotationsAttr()
     codes = _snap(np.asarray(clip.times, np.float64)[frames] * (tcps or 1.0))
@@ -298,11 +379,11 @@ def _define_animation(stage, path, clip: Clip, skel: Skeleton, joint_paths, tcps
 
 
 def _define_mesh(stage, path, prim: Primitive, skel_path, material, mat: Material | None,
-                 n_joints: int) -> None:
+                 n_joints: int, axes: Axes) -> None:
     """Triangle mesh with vertex normals, st, skinning primvars and a material binding."""
     from pxr import Gf, Sdf, UsdGeom, UsdShade, UsdSkel, Vt
 
-    pos = np.ascontiguousarray(prim.positions, np.float32)
+    pos = np.ascontiguousarray(axes.points(prim.positions), np.float32)
     idx = np.asarray(prim.indices, np.int64)
     if idx.size % 3 or (idx.size and (idx.min() < 0 or idx.max() >= len(pos))):
         raise TreegenError(f"primitive {prim.name!r}: indices are not a valid triangle list")
@@ -316,7 +397,8 @@ def _define_mesh(stage, path, prim: Primitive, skel_path, material, mat: Materia
     mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(pos))
     mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(idx.size // 3, 3, np.int32)))
     mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(idx.astype(np.int32)))
-    mesh.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(prim.normals, np.float32)))
+    mesh.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(
+        np.ascontiguousarray(axes.points(prim.normals), np.float32)))
     mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
     if len(pos):
         mesh.CreateExtentAttr([Gf.Vec3f(*map(float, pos.min(0))), Gf.Vec3f(*map(float, pos.max(0)))])
@@ -338,9 +420,15 @@ def _define_mesh(stage, path, prim: Primitive, skel_path, material, mat: Materia
         UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(material)
 
 
-def _define_material(stage, looks_path, m: Material):
-    """UsdPreviewSurface with constant inputs; an st primvar reader, wired to the material's
-    frame:stPrimvarName interface input, is the slot a UsdUVTexture can plug into later."""
+def _define_material(stage, looks_path, m: Material, texture_path=lambda tex: None):
+    """UsdPreviewSurface; an st primvar reader wired to the material's frame:stPrimvarName
+    interface input; a UsdUVTexture for each texture `texture_path` names a file for.
+
+    Base texture: its rgb (times base_color, via the texture's scale, as glTF's factor) feeds
+    diffuseColor; with an alpha_cutoff its alpha feeds opacity, cut at opacityThreshold.
+    Normal texture: raw colour space, scale (2,2,2,1) and bias (-1,-1,-1,0) map 8-bit [0, 1]
+    to the [-1, 1] tangent-space normal UsdPreviewSurface expects (OpenGL convention, +Y up,
+    as the Asset's)."""
     from pxr import Gf, Sdf, UsdGeom, UsdShade
 
     if not stage.GetPrimAtPath(looks_path):
@@ -364,8 +452,43 @@ def _define_material(stage, looks_path, m: Material):
     reader = UsdShade.Shader.Define(stage, mpath.AppendChild("stReader"))
     reader.CreateIdAttr("UsdPrimvarReader_float2")
     reader.CreateInput("varname", Sdf.ValueTypeNames.String).ConnectToSource(st_name)
-    reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
+    st = reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
+
+    base = texture_path(m.base_texture)
+    if base is not None:
+        tex = _define_texture(stage, mpath.AppendChild("baseTexture"), base, m.base_texture, st,
+                              scale=(r, g, b, a))
+        surf.GetInput("diffuseColor").ConnectToSource(tex.ConnectableAPI(), "rgb")
+        if m.alpha_cutoff is not None:
+            surf.GetInput("opacity").ConnectToSource(tex.ConnectableAPI(), "a")
+    normal = texture_path(m.normal_texture)
+    if normal is not None:
+        tex = _define_texture(stage, mpath.AppendChild("normalTexture"), normal, m.normal_texture,
+                              st, scale=(2.0, 2.0, 2.0, 1.0), bias=(-1.0, -1.0, -1.0, 0.0))
+        surf.CreateInput("normal", Sdf.ValueTypeNames.Normal3f).ConnectToSource(
+            tex.ConnectableAPI(), "rgb")
     return material
+
+
+def _define_texture(stage, path, file: str, texture: Texture, st, scale, bias=None):
+    """A UsdUVTexture reading `file` at the st reader's output; outputs rgb and a."""
+    from pxr import Gf, Sdf, UsdShade
+
+    wrap = "clamp" if texture.wrap.upper().startswith("CLAMP") else "repeat"
+    tex = UsdShade.Shader.Define(stage, path)
+    tex.CreateIdAttr("UsdUVTexture")
+    tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(Sdf.AssetPath(file))
+    tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(st)
+    tex.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set(wrap)
+    tex.CreateInput("wrapT", Sdf.ValueTypeNames.Token).Set(wrap)
+    tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set(
+        "sRGB" if texture.srgb else "raw")
+    tex.CreateInput("scale", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*map(float, scale)))
+    if bias is not None:
+        tex.CreateInput("bias", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*map(float, bias)))
+    tex.CreateOutput("rgb", Sdf.ValueTypeNames.Float3)
+    tex.CreateOutput("a", Sdf.ValueTypeNames.Float)
+    return tex
 
 
 # --------------------------------------------------------------------------- numeric helpers

@@ -1,0 +1,47 @@
+"""Where the textures of a written file go, one rule for every format that keeps them as
+separate files (USD, OBJ):
+
+- inside a package (.usdz): `textures/<name>.png`;
+- beside the main file: flat siblings `<stem>_<name>.png` (flat, because staging moves the
+  files a writer produced into place; two trees written into one folder keep apart by stem).
+
+Names come from Texture.name (made file- and identifier-safe); a texture used twice is written
+once; two different textures with one name get `_1`, `_2`, ... in the order they are met, so
+names depend only on the asset and the output name.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from ..asset import Texture
+
+
+def safe_name(name: str) -> str:
+    """Letters, digits and `_` only, not starting with a digit (also a valid USD identifier)."""
+    out = re.sub(r"[^A-Za-z0-9_]", "_", name) or "texture"
+    return "_" + out if out[0].isdigit() else out
+
+
+class TextureFiles:
+    """Names the PNG files of the textures a file uses and collects their bytes (`files`:
+    relative name → PNG bytes, for the writer to write or package)."""
+
+    def __init__(self, path, packaged: bool | None = None):
+        path = Path(path)
+        self.packaged = path.suffix.lower() == ".usdz" if packaged is None else packaged
+        self.stem = path.stem
+        self.files: dict[str, bytes] = {}
+        self._names: dict[Texture, str] = {}
+
+    def name(self, texture: Texture, prefix: str = "") -> str:
+        """The file's name relative to the main file ("textures/leaf.png", "tree_leaf.png")."""
+        if texture not in self._names:
+            base = safe_name(prefix + texture.name)
+            base = f"textures/{base}" if self.packaged else f"{self.stem}_{base}"
+            name, k = base, 1
+            while name + ".png" in self.files:
+                name, k = f"{base}_{k}", k + 1
+            self.files[name + ".png"] = texture.png
+            self._names[texture] = name + ".png"
+        return self._names[texture]
