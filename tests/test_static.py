@@ -76,12 +76,12 @@ def test_obj_plain_parse_groups_and_indices(obj):
     asset = textured_asset()
     prims = asset.lods[0].primitives
     n = sum(len(p.positions) for p in prims)
-    assert sum(l.startswith("v ") for l in lines) == n
-    assert sum(l.startswith("vt ") for l in lines) == n
-    assert sum(l.startswith("vn ") for l in lines) == n
-    assert [l for l in lines if l.startswith(("g ", "usemtl "))] == [
+    assert sum(ln.startswith("v ") for ln in lines) == n
+    assert sum(ln.startswith("vt ") for ln in lines) == n
+    assert sum(ln.startswith("vn ") for ln in lines) == n
+    assert [ln for ln in lines if ln.startswith(("g ", "usemtl "))] == [
         "g bark", "usemtl bark", "g leaves", "usemtl leaf"]
-    faces = [l for l in lines if l.startswith("f ")]
+    faces = [ln for ln in lines if ln.startswith("f ")]
     assert len(faces) == sum(len(p.indices) // 3 for p in prims)
     idx = np.array([[int(c.split("/")[0]) for c in f.split()[1:]] for f in faces])
     assert idx.min() == 1 and idx.max() == n
@@ -92,8 +92,8 @@ def test_up_axis_z_keeps_generator_space_and_metres(tmp_path):
     export(prepare(dataclasses.replace(asset, up_axis="z")), tmp_path / "z.obj")
     export(prepare(asset), tmp_path / "y.obj")
     def verts(p):
-        return np.array([[float(v) for v in l.split()[1:]] for l in p.read_text().splitlines()
-                         if l.startswith("v ")])
+        return np.array([[float(v) for v in ln.split()[1:]] for ln in p.read_text().splitlines()
+                         if ln.startswith("v ")])
     vz, vy = verts(tmp_path / "z.obj"), verts(tmp_path / "y.obj")
     np.testing.assert_allclose(vy, to_y_up(vz), atol=1e-6)
     assert vz[:, 2].max() > 4.0 and vy[:, 1].max() > 4.0        # the same height, up either way
@@ -154,14 +154,13 @@ def test_cli_static_format_implies_no_wind(tmp_path):
 def test_cli_up_axis_z_for_gltf_is_a_user_error(tmp_path):
     proc = treegen("make", PALM, "-o", tmp_path / "palm.glb", "--up-axis", "z")
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
-    assert [l for l in proc.stderr.splitlines() if l.strip()] == [
+    assert [ln for ln in proc.stderr.splitlines() if ln.strip()] == [
         f"treegen: error: {tmp_path / 'palm.glb'}: glTF is always Y up; up axis z needs one of "
         ".obj .ply .usda .usdc .usdz"]
     assert not list(tmp_path.iterdir())
 
 
 def test_cli_up_axis_reaches_the_usd_writer(tmp_path):
-    pxr = pytest.importorskip("pxr")
     from pxr import Usd, UsdGeom
 
     for name, args, up in (("a.usdz", [], "Y"), ("b.usdz", ["--up-axis", "z"], "Z"),
