@@ -146,6 +146,13 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name) -> Resolved:
     v["sides"] = _number_list("sides", v["sides"], int, label)
     v["lod_distances"] = _number_list("lod_distances", v["lod_distances"], float, label)
 
+    d = v["lod_distances"]
+    if not v["no_lod"]:
+        if not d or any(not math.isfinite(x) or x < 0 for x in d) or list(d) != sorted(d):
+            raise TreegenError(f"{label('lod_distances')} {_text(d) or '(none)'}: "
+                               "give one or more ascending distances in metres, each >= 0")
+        if len(set(d)) != len(d):
+            raise TreegenError(f"{label('lod_distances')} {_text(d)}: distances repeat")
     if v["max_joints"] < 1:
         raise TreegenError(f"{label('max_joints')} {v['max_joints']}: the joint budget must be at least 1")
     mesh = replace(MESH_DEFAULTS, leaf_geometry=v["leaf_geometry"])
