@@ -221,8 +221,10 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
 
 
 from .cli_forest import forest  # noqa: E402  (its body lives in cli_forest.py)
+from .cli_batch import batch  # noqa: E402  (its body lives in cli_batch.py)
 
 cli.add_command(forest)
+cli.add_command(batch)
 
 from .preview import preview_command  # noqa: E402  (body in preview.py)
 from .species_list import species_command  # noqa: E402  (body in species_list.py)

@@ -1,0 +1,73 @@
+"""Where many builds run: a Dask cluster, embedded or remote, behind one context manager.
+
+    with dask_client(scheduler=None, workers=2) as (client, where):
+        futures = [client.submit(fn, *args) for ...]
+
+No scheduler (and no DASK_SCHEDULER_ADDRESS): an embedded LocalCluster with one single-threaded
+worker process per core (the pipeline is numpy-bound and holds the GIL between calls, so
+processes, not threads). With an address: the same jobs go to an existing cluster, whose
+workers must see the same file system paths (outputs are written by the workers).
+Closing the block closes the client and, if embedded, the cluster and its processes.
+"""
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+
+from .errors import TreegenError
+
+SCHEDULER_ENV = "DASK_SCHEDULER_ADDRESS"
+
+
+def scheduler_address(scheduler: str | None) -> str | None:
+    """--scheduler, else $DASK_SCHEDULER_ADDRESS, else None (embedded cluster)."""
+    return scheduler or os.environ.get(SCHEDULER_ENV) or None
+
+
+def default_workers() -> int:
+    return os.cpu_count() or 1
+
+
+@contextlib.contextmanager
+def dask_client(scheduler: str | None = None, workers: int | None = None):
+    """Yield (client, description); the cluster is closed on exit, even on Ctrl-C."""
+    from distributed import Client, LocalCluster
+
+    address = scheduler_address(scheduler)
+    if address:
+        try:
+            client = Client(address, timeout="10s", set_as_default=False)
+        except (OSError, TimeoutError, ValueError) as e:
+            raise TreegenError(f"--scheduler {address}: cannot connect to a Dask scheduler "
+                               f"({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}); "
+                               "start one with `dask scheduler`") from None
+        try:
+            n = len(client.scheduler_info(n_workers=-1)["workers"])
+        except TypeError:                         # older distributed: no n_workers argument
+            n = len(client.scheduler_info()["workers"])
+        try:
+            yield client, f"{n} worker(s) at {address}"
+        finally:
+            client.close()
+        return
+    n = workers or default_workers()
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                           dashboard_address=None, silence_logs=logging.CRITICAL)
+    try:
+        client = Client(cluster, set_as_default=False)
+        try:
+            yield client, f"{n} local worker(s)"
+        finally:
+            client.close()
+    finally:
+        cluster.close()
+
+
+def worker_name() -> str:
+    """The Dask worker running this task (its address), or 'local' outside one."""
+    try:
+        from distributed import get_worker
+        return str(get_worker().address)
+    except (ImportError, ValueError):
+        return "local"
