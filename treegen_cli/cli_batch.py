@@ -132,8 +132,15 @@ def _run(cat, plan, out_dir, workers, scheduler, as_json) -> None:
                 bar.update(bar.task_ids[0], stats=f"done {counts['built']}  failed "
                            f"{counts['failed']}  skipped {counts['skipped']}")
 
-        totals = run_jobs(cat, plan, out_dir, scheduler=scheduler, workers=workers,
-                          on_event=on_event)
+        try:
+            totals = run_jobs(cat, plan, out_dir, scheduler=scheduler, workers=workers,
+                              on_event=on_event)
+        except KeyboardInterrupt:
+            # run_jobs has closed the cluster, removed staging folders and written the manifest
+            click.echo(f"treegen: interrupted: {counts['built']} built, {counts['failed']} "
+                       f"failed, {len(plan.build) - counts['built'] - counts['failed']} not "
+                       f"done; rerun the same command to finish", err=True)
+            sys.exit(130)
     manifest = Path(out_dir) / "manifest.json"
     if as_json:
         click.echo(json.dumps({"event": "done", **totals, "manifest": str(manifest)}))
