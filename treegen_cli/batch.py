@@ -375,9 +375,10 @@ def build_task(params, species: str, resolved, outputs: list[str]) -> list[dict]
     """On a worker: grow one tree and write it once per output (each atomically). Returns
     each file's `make --json` summary plus the worker's name."""
     from . import api
-    from .executor import worker_name
+    from .executor import tune_worker_malloc, worker_name
     from .pipeline import Timings
 
+    tune_worker_malloc()
     t0 = time.perf_counter()
     timings = Timings()
     asset, tree = api.build(params, species, resolved, timings)
