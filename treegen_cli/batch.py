@@ -355,8 +355,8 @@ def estimate(cat: Catalogue, plan: Plan) -> dict[str, tuple[float, float, str]]:
         lods = 1 if r.options.lod is None else len(r.options.lod.distances)
         frames = 0 if r.options.wind is None else r.options.wind.duration * r.options.wind.fps + 1
         verts = (leaves * 4 + stems * 60) * (1.0 if lods == 1 else 1.9)
-        size = verts * 44 + r.options.rig.max_joints * frames * 16 * min(lods, 2)
-        secs = 0.05 + verts * 1.6e-6 + (lods > 1) * 0.2 + frames * 1e-3
+        size = verts * 27 + r.options.rig.max_joints * frames * 16 * min(lods, 2)
+        secs = 0.03 + verts * 0.9e-6 + (lods > 1) * 0.1 + frames * 5e-4
         out[job.output] = (size, secs, "model")
     return out
 
