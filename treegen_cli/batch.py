@@ -453,73 +453,83 @@ def run_jobs(cat: Catalogue, plan: Plan, out_dir: str | os.PathLike, *, schedule
     """Build `plan.build` on Dask, stream each result to `on_event(kind, job, row)` (kind:
     built, failed, skipped, start), write the manifest, and return the totals. Failures do not
     stop the others; Ctrl-C cancels what is queued, closes the cluster and keeps what finished."""
+    import contextlib
+
     from distributed import as_completed
 
     from .executor import dask_client
 
     out_dir = Path(out_dir)
     on_event = on_event or (lambda *a: None)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    for job in cat.jobs:
-        (out_dir / job.output).parent.mkdir(parents=True, exist_ok=True)
-    clean_staging(out_dir, plan.build)
     rows: dict[str, dict] = {}
-    for job in plan.skip:
-        rows[job.output] = {**plan.previous[job.output], **_row(job, out_dir, cat, None, "skipped")}
-        on_event("skipped", job, rows[job.output])
     tasks: dict[str, list[Job]] = {}
     for job in plan.build:
         tasks.setdefault(job.task, []).append(job)
     t0 = time.perf_counter()
     where = ""
     journal = None
+    started = False
+    # Connect first: a cluster that cannot serve us is refused before anything is written.
+    cluster = dask_client(scheduler, workers) if tasks else contextlib.nullcontext((None, ""))
     try:
-        if tasks:
-            journal = open(out_dir / JOURNAL, "a", encoding="utf-8")
-            with dask_client(scheduler, workers) as (client, where):
+        with cluster as (client, where):
+            started = True
+            out_dir.mkdir(parents=True, exist_ok=True)
+            for job in cat.jobs:
+                (out_dir / job.output).parent.mkdir(parents=True, exist_ok=True)
+            clean_staging(out_dir, plan.build)
+            for job in plan.skip:
+                rows[job.output] = {**plan.previous[job.output],
+                                    **_row(job, out_dir, cat, None, "skipped")}
+                on_event("skipped", job, rows[job.output])
+            if tasks:
+                journal = open(out_dir / JOURNAL, "a", encoding="utf-8")
                 on_event("start", None, {"where": where, "tasks": len(tasks)})
-                run = f"{os.getpid():x}{time.time_ns() & 0xFFFFFF:x}"
-                est = estimate(cat, plan)
-                futures = {}
-                for task, jobs in tasks.items():
-                    j0 = jobs[0]
-                    fut = client.submit(build_task, cat.params[j0.species], j0.species_text,
-                                        cat.resolved[task], [str(out_dir / j.output) for j in jobs],
-                                        key=f"treegen-{j0.species.stem}-{task}-{run}",
-                                        priority=int(sum(est[j.output][1] for j in jobs) * 1000))
-                    futures[fut] = jobs
-                for fut in as_completed(list(futures), loop=client.loop):
-                    jobs = futures.pop(fut)
-                    try:
-                        results = fut.result()
-                    except TreegenError as e:
-                        results, reason = None, str(e)
-                    except Exception as e:             # worker crash, KilledWorker, bug
-                        results, reason = None, f"{type(e).__name__}: {e}"
-                    for k, job in enumerate(jobs):
-                        if results is None:
-                            row = _row(job, out_dir, cat, None, "failed", reason)
-                        else:
-                            row = _row(job, out_dir, cat, results[k], "built")
-                            journal.write(json.dumps(row) + "\n")
-                            journal.flush()
-                        rows[job.output] = row
-                        on_event(row["status"], job, row)
-                    fut.release()
+                _build_all(cat, plan, out_dir, tasks, client, journal, rows, on_event, as_completed)
     finally:
+        # after the cluster is closed, so no worker can start a staging folder behind us
         if journal is not None:
             journal.close()
-        clean_staging(out_dir, plan.build)
-        ordered = []
-        for job in cat.jobs:
-            row = rows.get(job.output) or _row(job, out_dir, cat, None, "pending")
-            ordered.append(row)
-        totals = {"jobs": len(cat.jobs),
-                  "built": sum(r["status"] == "built" for r in ordered),
-                  "skipped": sum(r["status"] == "skipped" for r in ordered),
-                  "failed": sum(r["status"] == "failed" for r in ordered),
-                  "pending": sum(r["status"] == "pending" for r in ordered),
-                  "tasks": len(tasks), "seconds": round(time.perf_counter() - t0, 3),
-                  "cluster": where}
-        write_manifest(out_dir, cat, ordered, totals)
+        if started:
+            clean_staging(out_dir, plan.build)
+            ordered = [rows.get(job.output) or _row(job, out_dir, cat, None, "pending")
+                       for job in cat.jobs]
+            totals = {"jobs": len(cat.jobs),
+                      **{k: sum(r["status"] == k for r in ordered)
+                         for k in ("built", "skipped", "failed", "pending")},
+                      "tasks": len(tasks), "seconds": round(time.perf_counter() - t0, 3),
+                      "cluster": where}
+            write_manifest(out_dir, cat, ordered, totals)
     return totals
+
+
+def _build_all(cat, plan, out_dir, tasks, client, journal, rows, on_event, as_completed) -> None:
+    """Submit one Dask task per tree (longest first) and record results as they arrive."""
+    run = f"{os.getpid():x}{time.time_ns() & 0xFFFFFF:x}"
+    est = estimate(cat, plan)
+    futures = {}
+    for task, jobs in tasks.items():
+        j0 = jobs[0]
+        fut = client.submit(build_task, cat.params[j0.species], j0.species_text,
+                            cat.resolved[task], [str(out_dir / j.output) for j in jobs],
+                            key=f"treegen-{j0.species.stem}-{task}-{run}",
+                            priority=int(sum(est[j.output][1] for j in jobs) * 1000))
+        futures[fut] = jobs
+    for fut in as_completed(list(futures), loop=client.loop):
+        jobs = futures.pop(fut)
+        try:
+            results = fut.result()
+        except TreegenError as e:
+            results, reason = None, str(e)
+        except Exception as e:             # worker crash, KilledWorker, a bug
+            results, reason = None, f"{type(e).__name__}: {e}"
+        for k, job in enumerate(jobs):
+            if results is None:
+                row = _row(job, out_dir, cat, None, "failed", reason)
+            else:
+                row = _row(job, out_dir, cat, results[k], "built")
+                journal.write(json.dumps(row) + "\n")
+                journal.flush()
+            rows[job.output] = row
+            on_event(row["status"], job, row)
+        fut.release()

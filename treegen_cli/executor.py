@@ -47,10 +47,7 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
                                f"({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}); "
                                "start one with `dask scheduler`") from None
         try:
-            n = len(client.scheduler_info(n_workers=-1)["workers"])
-        except TypeError:                         # older distributed: no n_workers argument
-            n = len(client.scheduler_info()["workers"])
-        try:
+            n = check_workers(client, address)
             yield client, f"{n} worker(s) at {address}"
         finally:
             client.close()
@@ -74,6 +71,36 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
             client.close()
     finally:
         cluster.close()
+
+
+def treegen_version() -> str:
+    """Run on each worker by check_workers (by reference: it fails where treegen_cli is
+    not importable, which is the point)."""
+    from . import __version__
+    return __version__
+
+
+def check_workers(client, address: str, wait_s: float = 30.0) -> int:
+    """Refuse a cluster whose workers cannot run our jobs, before any is sent: no worker
+    (after `wait_s`), a worker without treegen_cli, or one with another treegen version
+    (whose bytes could differ from `treegen make` here). Returns the number of workers."""
+    from . import __version__
+
+    try:
+        client.wait_for_workers(1, timeout=wait_s)
+    except TimeoutError:
+        raise TreegenError(f"--scheduler {address}: no worker joined within {wait_s:g} s; start "
+                           f"some with `dask worker {address}`") from None
+    found = client.run(treegen_version, on_error="return")
+    for worker, v in sorted(found.items()):
+        if isinstance(v, BaseException):
+            raise TreegenError(f"--scheduler {address}: worker {worker} cannot run treegen "
+                               f"({type(v).__name__}: {v}); install treegen {__version__} "
+                               "on every worker") from None
+        if v != __version__:
+            raise TreegenError(f"--scheduler {address}: worker {worker} has treegen {v}, this "
+                               f"is {__version__}; install the same version on every worker")
+    return len(found)
 
 
 def worker_name() -> str:
