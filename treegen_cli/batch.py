@@ -21,6 +21,7 @@ and the journal folded into it.
 from __future__ import annotations
 
 import csv
+import glob
 import hashlib
 import io
 import itertools
@@ -142,8 +143,7 @@ def name_value(value) -> str:
     return str(value)
 
 
-def render_name(template: str, fields: dict, grid: tuple, fmt: str, explicit: bool,
-                where: str) -> str:
+def render_name(template: str, fields: dict, grid: tuple, fmt: str, where: str) -> str:
     """The output path under DIR. Grid keys the template does not mention are appended
     before the extension (`_wind_speed-8`), so two grid points never share a file."""
     from string import Formatter
@@ -225,7 +225,6 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
                 raise TreegenError(f"{fwhere}[{k}]: unknown format {json.dumps(f)}; allowed: {', '.join(FORMATS)}")
         template, _ = pick("name", data.get("name"))
         twhere = f"{where}.name" if "name" in entry else "name"
-        explicit = template is not None
         template = template or DEFAULT_NAME
         options, sources = {}, {}
         for scope, src in ((defaults, "defaults"), (entry, where)):
@@ -262,8 +261,7 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
                 fields = {**{k: name_value(v) for k, v in values.items()},
                           "species": sp.stem, "seed": str(seed), "entry": str(i)}
                 for fmt in formats:
-                    name = render_name(template, {**fields, "ext": fmt}, point, fmt, explicit,
-                                       twhere)
+                    name = render_name(template, {**fields, "ext": fmt}, point, fmt, twhere)
                     other = outputs.get(name.casefold())
                     if other is not None:
                         raise TreegenError(
@@ -439,13 +437,8 @@ def clean_staging(out_dir: Path, jobs: list[Job]) -> None:
     """Remove staging folders (exchange.staged) a killed worker left for our outputs."""
     for job in jobs:
         p = out_dir / job.output
-        for tmp in p.parent.glob(f".{glob_escape(p.name)}.*.tmp"):
+        for tmp in p.parent.glob(f".{glob.escape(p.name)}.*.tmp"):
             shutil.rmtree(tmp, ignore_errors=True)
-
-
-def glob_escape(name: str) -> str:
-    import glob
-    return glob.escape(name)
 
 
 def run_jobs(cat: Catalogue, plan: Plan, out_dir: str | os.PathLike, *, scheduler=None,

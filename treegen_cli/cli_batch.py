@@ -93,6 +93,9 @@ def _dry_run(cat, plan, workers, scheduler, as_json) -> None:
         b, s, _ = est[j.output]
         click.echo(f"{j.index:>4}  {j.source:<12}{j.seed:>6}  {j.fmt:<7}{j.output:<{width}}  "
                    f"{'build' if j.output in todo else 'skip':<7}{b / 1e6:>8.1f}{s:>8.2f}")
+    if not plan.build:
+        click.echo(f"{len(cat.jobs)} jobs, all up to date: nothing to build")
+        return
     wall = f", ~{work / n:.0f} s on {n} worker(s)" if n else ""
     click.echo(f"{len(cat.jobs)} jobs: {len(plan.build)} to build ({len(per_task)} trees), "
                f"{len(plan.skip)} up to date; about {size / 1e6:.0f} MB and {work:.0f} s of "
