@@ -362,3 +362,18 @@ def test_api_make_validates_like_the_cli(tmp_path):
     s = api.make(ROOT / "tests" / "fixtures" / "pair_small.txt", tmp_path / "p.glb", seed=2,
                  lod_distances=[0, 30], **{k: v for k, v in CLIP.items() if k != "lod_distances"})
     assert s["file"] == str(tmp_path / "p.glb") and s["seed"] == 2 and len(s["lods"]) == 2
+
+
+def test_staging_sweep_leaves_other_hosts_folders_alone(tmp_path):
+    """On a folder shared by several machines a process id means nothing on another host: a
+    dead writer's staging folder is swept only by its own host."""
+    from treegen_cli.exchange import staging
+
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True).stdout.strip()
+    mine = tmp_path / f".a.glb.{dead}@{staging._HOST}.abcd1234.tmp"
+    other = tmp_path / f".b.glb.{dead}@some-other-host.abcd1234.tmp"
+    for d in (mine, other):
+        d.mkdir()
+    assert staging.sweep(tmp_path) == [mine]
+    assert other.exists()

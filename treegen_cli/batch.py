@@ -21,14 +21,12 @@ and the journal folded into it.
 from __future__ import annotations
 
 import csv
-import glob
 import hashlib
 import io
 import itertools
 import json
 import os
 import re
-import shutil
 import time
 from dataclasses import dataclass, field
 from importlib import resources
@@ -434,11 +432,12 @@ def write_manifest(out_dir: Path, cat: Catalogue, rows: list[dict], totals: dict
 
 
 def clean_staging(out_dir: Path, jobs: list[Job]) -> None:
-    """Remove staging folders (exchange.staged) a killed worker left for our outputs."""
-    for job in jobs:
-        p = out_dir / job.output
-        for tmp in p.parent.glob(f".{glob.escape(p.name)}.*.tmp"):
-            shutil.rmtree(tmp, ignore_errors=True)
+    """Sweep the staging folders (exchange.staging) that killed workers of this host left in
+    our output folders; those of live writers, or of other hosts on a shared folder, stay."""
+    from .exchange import sweep
+
+    for folder in sorted({(out_dir / job.output).parent for job in jobs}):
+        sweep(folder)
 
 
 def run_jobs(cat: Catalogue, plan: Plan, out_dir: str | os.PathLike, *, scheduler=None,
