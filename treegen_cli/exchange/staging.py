@@ -31,7 +31,13 @@ def _alive(pid: int) -> bool:
         return False
     except PermissionError:        # someone else's live process
         return True
-    return True
+    # A killed process whose parent died too stays a zombie until init reaps it (late, or
+    # never in some containers); os.kill succeeds on it, but it will never write again.
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            return f.read().rsplit(b")", 1)[1].split()[0] not in (b"Z", b"X")
+    except (OSError, IndexError):  # no /proc (macOS): trust os.kill
+        return True
 
 
 def sweep(folder: Path) -> list[Path]:
