@@ -465,10 +465,13 @@ def run_jobs(cat: Catalogue, plan: Plan, out_dir: str | os.PathLike, *, schedule
     cluster = dask_client(scheduler, workers) if tasks else contextlib.nullcontext((None, ""))
     try:
         with cluster as (client, where):
+            try:
+                for folder in sorted({(out_dir / job.output).parent for job in cat.jobs}):
+                    folder.mkdir(parents=True, exist_ok=True)
+            except OSError as e:
+                raise TreegenError(f"-o {out_dir}: cannot create folder '{e.filename}' "
+                                   f"({e.strerror})") from None
             started = True
-            out_dir.mkdir(parents=True, exist_ok=True)
-            for job in cat.jobs:
-                (out_dir / job.output).parent.mkdir(parents=True, exist_ok=True)
             clean_staging(out_dir, plan.build)
             for job in plan.skip:
                 rows[job.output] = {**plan.previous[job.output],

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -47,6 +48,9 @@ def batch(catalogue, out_dir, workers, scheduler, force, dry_run, schema, as_jso
         raise TreegenError("batch: give an output folder with -o, e.g. -o assets")
     if out_dir.exists() and not out_dir.is_dir():
         raise TreegenError(f"-o {out_dir}: is a file; give a folder")
+    base = next(p for p in (out_dir.absolute(), *out_dir.absolute().parents) if p.exists())
+    if not base.is_dir() or not os.access(base, os.W_OK | os.X_OK):
+        raise TreegenError(f"-o {out_dir}: cannot write into '{base}'")
     if workers is not None and workers < 1:
         raise TreegenError(f"--workers {workers}: must be at least 1")
     from .executor import scheduler_address
