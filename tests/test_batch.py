@@ -223,6 +223,31 @@ def test_a_failing_entry_is_reported_by_its_json_path_and_the_rest_complete(
     assert not (out / "weeping_willow_1.glb").exists()
 
 
+def test_a_cluster_whose_worker_lacks_this_treegen_is_refused_before_anything_is_written(
+        scheduler_run, workspace, cluster, tmp_path):
+    fake = tmp_path / "fake"
+    (fake / "treegen_cli").mkdir(parents=True)
+    (fake / "treegen_cli" / "__init__.py").write_text('__version__ = "0.0.0"\n')
+    worker = subprocess.Popen(["dask", "worker", cluster["address"], "--nthreads", "1",
+                               "--name", "stale", "--host", "127.0.0.1", "--no-dashboard"],
+                              env={**ENV, "PYTHONPATH": str(fake)}, stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        from distributed import Client
+
+        with Client(cluster["address"], timeout="30s") as client:
+            client.wait_for_workers(2, timeout=60)         # w1 and the stale one (w2 was killed)
+        out = workspace / "refused"
+        proc = treegen("batch", workspace / "catalogue.json", "-o", out, "--force",
+                       "--scheduler", cluster["address"])
+        assert proc.returncode == 2, proc.stderr
+        assert "cannot run treegen" in proc.stderr and "install treegen" in proc.stderr
+        assert len(proc.stderr.strip().splitlines()) == 1 and not out.exists()
+    finally:
+        os.killpg(worker.pid, signal.SIGKILL)
+        worker.wait()
+
+
 # ----------------------------------------------------------------------------- embedded cluster
 
 def test_embedded_local_cluster_builds_the_same_bytes_and_resumes(workspace, serial):
