@@ -213,7 +213,7 @@ def test_a_failing_entry_is_reported_by_its_json_path_and_the_rest_complete(
     cat.write_text(json.dumps(failing))
     proc = treegen("batch", cat, "-o", out, "--scheduler", cluster["address"], "--force", "--json")
     assert proc.returncode == 1, proc.stderr
-    err = [l for l in proc.stderr.splitlines() if l.strip()]
+    err = [line for line in proc.stderr.splitlines() if line.strip()]
     assert len(err) == 1 and "entries[3]" in err[0] and "seed 1" in err[0] and "--max-leaves" in err[0], err
     done = events(proc.stdout)[-1]
     assert done["built"] == 12 and done["failed"] == 1, done
@@ -255,7 +255,7 @@ def test_embedded_local_cluster_builds_the_same_bytes_and_resumes(workspace, ser
     proc = treegen("batch", workspace / "catalogue.json", "-o", out, "--workers", "2", "-v")
     assert proc.returncode == 0, proc.stderr
     assert "built 12, skipped 0, failed 0 of 12" in proc.stdout and "2 local worker(s)" in proc.stdout
-    assert sum(l.lstrip().startswith("built ") for l in proc.stderr.splitlines()) == 12
+    assert sum(line.lstrip().startswith("built ") for line in proc.stderr.splitlines()) == 12
     assert_outputs(out, serial)
     (out / "rush_6.glb").unlink()                         # a lost file is rebuilt, alone
     proc = treegen("batch", workspace / "catalogue.json", "-o", out, "--workers", "1", "--json")
@@ -320,7 +320,7 @@ def test_catalogue_errors_name_the_json_path_exit_2_and_write_nothing(workspace,
     out = workspace / "never"
     proc = treegen("batch", cat, "-o", out)
     assert proc.returncode == 2, proc.stderr
-    lines = [l for l in proc.stderr.splitlines() if l.strip()]
+    lines = [line for line in proc.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
     assert lines[0].startswith(f"treegen: error: {cat}: ")
     for n in needles:

@@ -402,8 +402,8 @@ def _row(job: Job, out_dir: Path, cat: Catalogue, summary: dict | None, status: 
         lods = summary["lods"]
         row |= {"files": [Path(f).relative_to(out_dir).as_posix() for f in summary["files"]],
                 "bytes": summary["bytes"],
-                "triangles": [l["triangles"] for l in lods], "joints": [l["joints"] for l in lods],
-                "keys": [l["joint_keys"] for l in lods], "lod_distances_m": [l["distance_m"] for l in lods],
+                "triangles": [r["triangles"] for r in lods], "joints": [r["joints"] for r in lods],
+                "keys": [r["joint_keys"] for r in lods], "lod_distances_m": [r["distance_m"] for r in lods],
                 "seconds": summary["seconds"], "worker": summary.get("worker", "")}
     if error is not None:
         row["error"] = error
