@@ -139,18 +139,6 @@ def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> lis
     return [lod_table_row(lod, lod_options) for lod in asset.lods]
 
 
-def _int_list(text: str | None, name: str) -> tuple[int, ...] | None:
-    if text is None:
-        return None
-    try:
-        values = tuple(int(v) for v in text.split(",") if v.strip() != "")
-    except ValueError:
-        raise TreegenError(f"{name} '{text}': expected comma-separated whole numbers, e.g. 0,1,2") from None
-    if not values:
-        raise TreegenError(f"{name} '{text}': give at least one value")
-    return values
-
-
 @cli.command()
 @click.argument("species", type=SPECIES)
 @click.option("-o", "--output", type=click.Path(path_type=Path), required=True,
@@ -200,53 +188,34 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
          lod_distances, fov, width, error_px, error_form, interpolation, no_lod, lod_files,
          max_vertices, max_keys, as_json):
     """Grow SPECIES and write a skinned, wind-animated tree to OUTPUT."""
-    from dataclasses import replace
-
-    from .exchange import STATIC, check_suffix, check_up_axis, export, export_parts
-    from .prepare import split_lods
-    from .limits import Limits
-    from .mesh import MESH_DEFAULTS
-    from .pipeline import MakeOptions, build_asset
+    from .api import build, check_output, resolve, write
+    from .exchange import STATIC
     from .progress import current_reporter
-    from .rig import RigOptions
     from .tree import tree_stats
-    from .wind import WindOptions
 
     t0 = time.perf_counter()
-    check_suffix(output)
-    check_up_axis(output, up_axis)
-    static = output.suffix.lower() in STATIC     # no skin or clip: skip the wind and LOD work
-    if max_joints < 1:
-        raise TreegenError(f"--max-joints {max_joints}: the joint budget must be at least 1")
-    mesh = replace(MESH_DEFAULTS, leaf_geometry=leaf_geometry)
-    side_list = _int_list(sides, "--sides")
-    if side_list is not None:
-        if min(side_list) < 3 or max(side_list) > 64:
-            raise TreegenError(f"--sides '{sides}': each value must be in [3, 64]")
-        mesh = replace(mesh, sides=side_list)
-    wind = None if no_wind or static else WindOptions(speed=wind_speed, direction_deg=wind_dir, gust=gust,
-                                            turbulence=turbulence, duration=duration, fps=fps)
-    options = MakeOptions(
-        generate=GenerateOptions(max_stems=max_stems, max_leaves=max_leaves),
-        rig=RigOptions(max_joints=max_joints, joint_levels=_int_list(joint_levels, "--joint-levels")),
-        mesh=mesh, wind=wind,
-        lod=None if no_lod or static else _lod_from(lod_distances, fov, width, error_px, error_form,
-                                          interpolation),
-        limits=Limits(max_vertices=max_vertices, max_keys=max_keys))
+    check_output(output, up_axis)
+    job = resolve(dict(seed=seed, max_stems=max_stems, max_leaves=max_leaves,
+                       max_joints=max_joints, joint_levels=joint_levels, sides=sides,
+                       leaf_geometry=leaf_geometry, wind_speed=wind_speed, wind_dir=wind_dir,
+                       gust=gust, turbulence=turbulence, duration=duration, fps=fps,
+                       no_wind=no_wind, lod_distances=lod_distances, fov=fov, width=width,
+                       error_px=error_px, error_form=error_form, interpolation=interpolation,
+                       no_lod=no_lod, lod_files=lod_files, up_axis=up_axis,
+                       max_vertices=max_vertices, max_keys=max_keys), output=output)
+    options = job.options
+    static = output.suffix.lower() in STATIC
     params = _load(species)
     rep = current_reporter()
-    per_lod = 3 if wind is None else 5                  # generate, rig, mesh (, wind, lod)
+    per_lod = 3 if options.wind is None else 5          # generate, rig, mesh (, wind, lod)
     timings = rep.timings(total=per_lod + 2 if options.lod is None else
                           len(options.lod.distances) * per_lod + 2)   # (+ prepare, write)
     with rep.live():
-        asset, tree = _in_file(species, build_asset, params, seed, options, timings)
-        asset = replace(asset, up_axis=up_axis)
-        written = timings.run("write", export_parts, split_lods(asset), output) if lod_files \
-            else timings.run("write", export, asset, output)
+        asset, tree = build(params, species, job, timings)
+        s = write(asset, tree, output, timings, t0, job)
     per_level = tree_stats(tree)["stems_per_level"]
     rep.detail(f"  counts    stems per level {per_level}, {tree.n_nodes:,} nodes, "
                f"{tree.n_leaves:,} leaves, {len(asset.lods)} LOD(s)")
-    s = make_summary(asset, tree, written, timings.stages, time.perf_counter() - t0)
     if as_json:
         click.echo(json.dumps(s, indent=2))
         return
@@ -264,37 +233,16 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
 
 
 from .cli_forest import forest  # noqa: E402  (its body lives in cli_forest.py)
+from .cli_batch import batch  # noqa: E402  (its body lives in cli_batch.py)
 
 cli.add_command(forest)
+cli.add_command(batch)
 
 from .preview import preview_command  # noqa: E402  (body in preview.py)
 from .species_list import species_command  # noqa: E402  (body in species_list.py)
 
 cli.add_command(preview_command)
 cli.add_command(species_command)
-
-
-def make_summary(asset, tree, written, stages: dict, seconds: float) -> dict:
-    """`treegen make --json`: what was written and how big, per LOD, and seconds per stage."""
-    def lod_row(lod):
-        clip = lod.clips[0] if lod.clips else None
-        keys = 0 if clip is None else len(clip.times)
-        joint_keys = 0 if clip is None else (
-            sum(len(k) for k in clip.keys) if clip.keys is not None else keys * len(lod.skeleton.names))
-        return {"distance_m": lod.distance,
-                "vertices": sum(len(p.positions) for p in lod.primitives),
-                "triangles": sum(len(p.indices) // 3 for p in lod.primitives),
-                "joints": len(lod.skeleton.names), "keys": keys, "joint_keys": joint_keys,
-                "decimated": clip is not None and clip.keys is not None}
-
-    lods = [lod_row(lod) for lod in asset.lods]
-    return {"file": str(written[0]), "files": [str(p) for p in written],
-            "bytes": sum(p.stat().st_size for p in written),
-            "species": asset.name, "seed": tree.seed, "stems": tree.n_stems,
-            "leaves": tree.n_leaves, **{k: lods[0][k] for k in ("vertices", "triangles", "joints",
-                                                               "keys", "joint_keys")},
-            "lods": lods, "seconds": round(seconds, 4),
-            "stages_s": {k: round(v, 4) for k, v in stages.items()}}
 
 
 def main(argv: list[str] | None = None) -> None:

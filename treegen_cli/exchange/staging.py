@@ -1,14 +1,15 @@
 """Atomic writes: a writer writes into a hidden staging folder beside the target, then every file
 it produced is moved into place with os.replace (siblings first, the main file last), so an
 interrupted run never leaves a half-written asset. The folder is named after the target and the
-writing process (`.NAME.PID.XXXX.tmp`); a run into the same folder sweeps away the staging
-folders of runs that were killed (their process is gone).
+writing process and its host (`.NAME.PID@HOST.XXXX.tmp`); a run into the same folder sweeps away
+the staging folders of runs on this host that were killed (their process is gone).
 """
 from __future__ import annotations
 
 import os
 import re
 import shutil
+import socket
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
@@ -16,7 +17,11 @@ from typing import Iterator
 
 from ..errors import TreegenError
 
-_STAGING = re.compile(r"^\..+\.(\d+)\.[^.]+\.tmp$")
+_STAGING = re.compile(r"^\..+\.(\d+)(?:@([A-Za-z0-9-]+))?\.[^.]+\.tmp$")
+# The writer's host is part of the name: on a shared folder (treegen batch on a Dask cluster of
+# several machines) a process id is only meaningful on its own host, so a run sweeps only the
+# folders of its own host's dead processes (names without a host are taken as local).
+_HOST = re.sub(r"[^A-Za-z0-9-]", "-", socket.gethostname()) or "host"
 
 
 def _alive(pid: int) -> bool:
@@ -26,7 +31,13 @@ def _alive(pid: int) -> bool:
         return False
     except PermissionError:        # someone else's live process
         return True
-    return True
+    # A killed process whose parent died too stays a zombie until init reaps it (late, or
+    # never in some containers); os.kill succeeds on it, but it will never write again.
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            return f.read().rsplit(b")", 1)[1].split()[0] not in (b"Z", b"X")
+    except (OSError, IndexError):  # no /proc (macOS): trust os.kill
+        return True
 
 
 def sweep(folder: Path) -> list[Path]:
@@ -38,7 +49,8 @@ def sweep(folder: Path) -> list[Path]:
         return removed
     for e in entries:              # a folder's entries, not vertices
         m = _STAGING.match(e.name)
-        if m and e.is_dir(follow_symlinks=False) and not _alive(int(m.group(1))):
+        if m and m.group(2) in (None, _HOST) and e.is_dir(follow_symlinks=False) \
+                and not _alive(int(m.group(1))):
             shutil.rmtree(e.path, ignore_errors=True)
             removed.append(Path(e.path))
     return removed
@@ -54,7 +66,7 @@ def staged(path: str | os.PathLike) -> Iterator[Path]:
         raise TreegenError(f"{path}: is a folder; give an output file name such as tree.glb")
     try:
         sweep(folder)
-        tmpdir = Path(tempfile.mkdtemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp",
+        tmpdir = Path(tempfile.mkdtemp(prefix=f".{path.name}.{os.getpid()}@{_HOST}.", suffix=".tmp",
                                        dir=folder))
     except FileNotFoundError:
         raise TreegenError(f"{path}: output folder '{folder}' does not exist") from None

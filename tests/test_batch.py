@@ -1,0 +1,406 @@
+"""`treegen batch` as a studio meets it: a real Dask scheduler and two workers started with the
+`dask` CLI as separate processes on 127.0.0.1, a 12-job catalogue, a worker killed mid-run,
+reruns that skip, a changed option that rebuilds only its jobs, a failing entry reported by its
+JSON path; the embedded LocalCluster the same way; catalogue errors exit 2 writing nothing.
+Every output must be byte-identical to a serial `treegen make` of the same job."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(
+    [str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])}
+ENV.pop("DASK_SCHEDULER_ADDRESS", None)
+CLIP = {"duration": 1, "fps": 10, "lod_distances": [0, 30]}
+
+# 12 jobs, 10 trees: aspen 2 seeds × (glb, usdc); a small pair 2 seeds × a 2-value grid; rush 4 seeds
+CATALOGUE = {
+    "defaults": CLIP,
+    "entries": [
+        {"species": "species/quaking_aspen.txt", "seeds": "1-2", "formats": ["glb", "usdc"]},
+        {"species": "species/pair_small.txt", "seeds": [3, 4], "grid": {"wind_speed": [2, 8]}},
+        {"species": "species/rush.txt", "seeds": "5-8"},
+    ],
+}
+OUTPUTS = ["quaking_aspen_1.glb", "quaking_aspen_1.usdc", "quaking_aspen_2.glb",
+           "quaking_aspen_2.usdc", "pair_small_3_wind_speed-2.glb", "pair_small_4_wind_speed-2.glb",
+           "pair_small_3_wind_speed-8.glb", "pair_small_4_wind_speed-8.glb", "rush_5.glb",
+           "rush_6.glb", "rush_7.glb", "rush_8.glb"]
+
+
+def treegen(*args, env=None, cwd=None):
+    return subprocess.run([sys.executable, "-m", "treegen_cli", *map(str, args)],
+                          capture_output=True, text=True, env=env or ENV, cwd=cwd or ROOT)
+
+
+def events(stdout: str) -> list[dict]:
+    return [json.loads(line) for line in stdout.splitlines() if line.startswith("{")]
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def workspace(tmp_path_factory) -> Path:
+    """A catalogue folder with its own species files (paths are relative to the catalogue)."""
+    root = tmp_path_factory.mktemp("batch")
+    (root / "species").mkdir()
+    for src in (ROOT / "species" / "quaking_aspen.txt", ROOT / "species" / "rush.txt",
+                ROOT / "species" / "weeping_willow.txt", ROOT / "tests" / "fixtures" / "pair_small.txt"):
+        shutil.copy(src, root / "species" / src.name)
+    (root / "catalogue.json").write_text(json.dumps(CATALOGUE, indent=1))
+    return root
+
+
+@pytest.fixture(scope="module")
+def serial(workspace) -> Path:
+    """Every job of CATALOGUE made one by one with api.make (the path `treegen make` takes)."""
+    from treegen_cli import api
+
+    out = workspace / "serial"
+    out.mkdir()
+    sp = workspace / "species"
+    for seed in (1, 2):
+        for ext in ("glb", "usdc"):
+            api.make(sp / "quaking_aspen.txt", out / f"quaking_aspen_{seed}.{ext}", seed=seed, **CLIP)
+    for wind in (2, 8):
+        for seed in (3, 4):
+            api.make(sp / "pair_small.txt", out / f"pair_small_{seed}_wind_speed-{wind}.glb",
+                     seed=seed, wind_speed=wind, **CLIP)
+    for seed in (5, 6, 7, 8):
+        api.make(sp / "rush.txt", out / f"rush_{seed}.glb", seed=seed, **CLIP)
+    return out
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """`dask scheduler` and two `dask worker`s, each its own process group (so a worker and
+    its nanny can be killed together), importing this checkout's treegen_cli."""
+    port = free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    common = dict(env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                  start_new_session=True)
+    procs = [subprocess.Popen(["dask", "scheduler", "--host", "127.0.0.1", "--port", str(port),
+                               "--no-dashboard"], **common)]
+    for name in ("w1", "w2"):
+        procs.append(subprocess.Popen(["dask", "worker", address, "--nthreads", "1",
+                                       "--nworkers", "1", "--name", name, "--host", "127.0.0.1",
+                                       "--no-dashboard"], **common))
+    from distributed import Client
+
+    try:
+        with Client(address, timeout="30s") as client:
+            client.wait_for_workers(2, timeout=60)
+        yield {"address": address, "workers": {"w1": procs[1], "w2": procs[2]}}
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+
+
+def assert_outputs(out: Path, serial: Path) -> None:
+    for name in OUTPUTS:
+        assert (out / name).read_bytes() == (serial / name).read_bytes(), name
+    leftovers = [p.name for p in out.iterdir() if p.name.startswith(".")]
+    assert leftovers == [], leftovers
+
+
+# ----------------------------------------------------------------------------- on a Dask cluster
+
+@pytest.fixture(scope="module")
+def scheduler_run(workspace, cluster):
+    """The first run through --scheduler; worker w2 is SIGKILLed after the first job is in."""
+    out = workspace / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "treegen_cli", "batch",
+                             workspace / "catalogue.json", "-o", out, "--scheduler",
+                             cluster["address"], "--json"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=ENV, cwd=workspace)
+    lines = []
+    killed_after = None
+    for line in proc.stdout:
+        lines.append(line)
+        if killed_after is None and '"event": "built"' in line:
+            w2 = cluster["workers"]["w2"]
+            os.killpg(w2.pid, signal.SIGKILL)
+            w2.wait()
+            killed_after = len(lines)
+    proc.wait(timeout=120)
+    return {"out": out, "rc": proc.returncode, "stderr": proc.stderr.read(),
+            "events": events("".join(lines)), "killed_after": killed_after}
+
+
+def test_cluster_builds_every_job_byte_identical_despite_a_killed_worker(scheduler_run, serial):
+    from treegen_cli.exchange.validate import validate_gltf
+
+    run, out = scheduler_run, scheduler_run["out"]
+    assert run["rc"] == 0, run["stderr"]
+    assert run["killed_after"] is not None and run["killed_after"] < 12   # killed mid-run
+    done = run["events"][-1]
+    assert done["event"] == "done" and done["built"] == 12 and done["failed"] == 0, done
+    assert_outputs(out, serial)
+    for name in OUTPUTS:
+        if name.endswith(".glb"):
+            issues = validate_gltf((out / name).resolve())["issues"]
+            assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, name
+    manifest = json.loads((out / "manifest.json").read_text())
+    rows = {r["path"]: r for r in manifest["assets"]}
+    assert sorted(rows) == sorted(OUTPUTS)
+    r = rows["pair_small_4_wind_speed-8.glb"]
+    assert r["entry"] == "entries[1]" and r["seed"] == 4 and r["grid"] == {"wind_speed": 8}
+    assert r["bytes"] == (out / r["path"]).stat().st_size and r["status"] == "built"
+    assert len(r["triangles"]) == len(r["joints"]) == len(r["keys"]) == 2
+    assert r["worker"].startswith("tcp://127.0.0.1:") and r["seconds"] > 0
+    assert len({r["worker"] for r in rows.values()}) >= 1
+    csv_lines = (out / "manifest.csv").read_text().splitlines()
+    assert csv_lines[0].startswith("entry,species,seed,format,path,options_hash") and len(csv_lines) == 13
+
+
+def test_a_serial_treegen_make_writes_the_same_bytes(scheduler_run, workspace, tmp_path):
+    proc = treegen("make", workspace / "species" / "quaking_aspen.txt", "-o", tmp_path / "a.usdc",
+                   "--seed", "2", "--duration", "1", "--fps", "10", "--lod-distances", "0,30", "-q")
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "a.usdc").read_bytes() == (scheduler_run["out"] / "quaking_aspen_2.usdc").read_bytes()
+
+
+def test_rerun_skips_every_job(scheduler_run, workspace, cluster):
+    out = scheduler_run["out"]
+    before = {n: (out / n).stat().st_mtime_ns for n in OUTPUTS}
+    proc = treegen("batch", workspace / "catalogue.json", "-o", out, "--json",
+                   env={**ENV, "DASK_SCHEDULER_ADDRESS": cluster["address"]})
+    assert proc.returncode == 0, proc.stderr
+    done = events(proc.stdout)[-1]
+    assert done["skipped"] == 12 and done["built"] == 0, done
+    assert {n: (out / n).stat().st_mtime_ns for n in OUTPUTS} == before
+
+
+def test_a_changed_option_rebuilds_only_its_jobs(scheduler_run, workspace, cluster, tmp_path):
+    out = scheduler_run["out"]
+    changed = json.loads(json.dumps(CATALOGUE))
+    changed["entries"][1]["grid"]["wind_speed"] = [2, 9]
+    cat = workspace / "changed.json"
+    cat.write_text(json.dumps(changed))
+    proc = treegen("batch", cat, "-o", out, "--scheduler", cluster["address"], "--json")
+    assert proc.returncode == 0, proc.stderr
+    built = sorted(e["path"] for e in events(proc.stdout) if e["event"] == "built")
+    assert built == ["pair_small_3_wind_speed-9.glb", "pair_small_4_wind_speed-9.glb"]
+    assert events(proc.stdout)[-1]["skipped"] == 10
+    from treegen_cli import api
+
+    api.make(workspace / "species" / "pair_small.txt", tmp_path / "p.glb", seed=3, wind_speed=9, **CLIP)
+    assert (tmp_path / "p.glb").read_bytes() == (out / "pair_small_3_wind_speed-9.glb").read_bytes()
+
+
+def test_a_failing_entry_is_reported_by_its_json_path_and_the_rest_complete(
+        scheduler_run, workspace, cluster):
+    out = scheduler_run["out"]
+    failing = json.loads(json.dumps(CATALOGUE))
+    failing["entries"].append({"species": "species/weeping_willow.txt", "seeds": [1],
+                               "max_leaves": 1000})
+    cat = workspace / "failing.json"
+    cat.write_text(json.dumps(failing))
+    proc = treegen("batch", cat, "-o", out, "--scheduler", cluster["address"], "--force", "--json")
+    assert proc.returncode == 1, proc.stderr
+    err = [line for line in proc.stderr.splitlines() if line.strip()]
+    assert len(err) == 1 and "entries[3]" in err[0] and "seed 1" in err[0] and "--max-leaves" in err[0], err
+    done = events(proc.stdout)[-1]
+    assert done["built"] == 12 and done["failed"] == 1, done
+    rows = {r["path"]: r for r in json.loads((out / "manifest.json").read_text())["assets"]}
+    assert rows["weeping_willow_1.glb"]["status"] == "failed"
+    assert "1,000" in rows["weeping_willow_1.glb"]["error"]
+    assert not (out / "weeping_willow_1.glb").exists()
+
+
+def test_a_cluster_whose_worker_lacks_this_treegen_is_refused_before_anything_is_written(
+        scheduler_run, workspace, cluster, tmp_path):
+    fake = tmp_path / "fake"
+    (fake / "treegen_cli").mkdir(parents=True)
+    (fake / "treegen_cli" / "__init__.py").write_text('__version__ = "0.0.0"\n')
+    worker = subprocess.Popen(["dask", "worker", cluster["address"], "--nthreads", "1",
+                               "--name", "stale", "--host", "127.0.0.1", "--no-dashboard"],
+                              env={**ENV, "PYTHONPATH": str(fake)}, stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        from distributed import Client
+
+        with Client(cluster["address"], timeout="30s") as client:
+            client.wait_for_workers(2, timeout=60)         # w1 and the stale one (w2 was killed)
+        out = workspace / "refused"
+        proc = treegen("batch", workspace / "catalogue.json", "-o", out, "--force",
+                       "--scheduler", cluster["address"])
+        assert proc.returncode == 2, proc.stderr
+        # refused either because the stale package cannot run a job or by its version
+        assert ("cannot run treegen" in proc.stderr and "install treegen" in proc.stderr) or \
+            ("has treegen 0.0.0" in proc.stderr and "install the same version" in proc.stderr)
+        assert len(proc.stderr.strip().splitlines()) == 1 and not out.exists()
+    finally:
+        os.killpg(worker.pid, signal.SIGKILL)
+        worker.wait()
+
+
+# ----------------------------------------------------------------------------- embedded cluster
+
+def test_embedded_local_cluster_builds_the_same_bytes_and_resumes(workspace, serial):
+    out = workspace / "local"
+    proc = treegen("batch", workspace / "catalogue.json", "-o", out, "--workers", "2", "-v")
+    assert proc.returncode == 0, proc.stderr
+    assert "built 12, skipped 0, failed 0 of 12" in proc.stdout and "2 local worker(s)" in proc.stdout
+    assert sum(line.lstrip().startswith("built ") for line in proc.stderr.splitlines()) == 12
+    assert_outputs(out, serial)
+    (out / "rush_6.glb").unlink()                         # a lost file is rebuilt, alone
+    proc = treegen("batch", workspace / "catalogue.json", "-o", out, "--workers", "1", "--json")
+    assert proc.returncode == 0, proc.stderr
+    assert [e["path"] for e in events(proc.stdout) if e["event"] == "built"] == ["rush_6.glb"]
+    assert_outputs(out, serial)
+
+
+def test_ctrl_c_closes_the_cluster_and_leaves_no_partial_files(workspace):
+    out = workspace / "interrupted"
+    proc = subprocess.Popen([sys.executable, "-m", "treegen_cli", "batch",
+                             workspace / "catalogue.json", "-o", out, "--workers", "1", "--json"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV,
+                            start_new_session=True)
+    for line in proc.stdout:
+        if '"event": "built"' in line:
+            break
+    os.killpg(proc.pid, signal.SIGINT)        # the terminal sends Ctrl-C to the whole group
+    proc.wait(timeout=60)
+    err = proc.stderr.read()
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "treegen: interrupted:" in err and "rerun" in err, err
+    manifest = json.loads((out / "manifest.json").read_text())
+    built = {r["path"]: r for r in manifest["assets"] if r["status"] == "built"}
+    assert 1 <= len(built) < 12
+    on_disk = sorted(p.name for p in out.iterdir() if p.name not in ("manifest.json", "manifest.csv"))
+    assert on_disk == sorted(built) or set(built) <= set(on_disk)
+    for p in out.iterdir():
+        assert not p.name.startswith("."), p.name          # no staging folders, no journal
+        if p.name in built:
+            assert p.stat().st_size == built[p.name]["bytes"]
+
+
+# ----------------------------------------------------------------------------- catalogue checks
+
+@pytest.mark.parametrize("change, needles", [
+    ({"entries": [{"species": "species/nope.txt"}]}, ["entries[0].species", "nope.txt"]),
+    ({"entries": [{"species": "species/rush.txt", "grid": {"wind_speed": [2, 200]}}]},
+     ["entries[0].grid.wind_speed[1]", "200", "[0, 100]"]),
+    ({"entries": [{"species": "species/rush.txt", "seeds": "9-3"}]}, ["entries[0].seeds", "9-3"]),
+    ({"entries": [{"species": "species/rush.txt", "wind_sped": 3}]},
+     ["entries[0].wind_sped", "unknown key", "wind_speed"]),
+    ({"defaults": {"max_joints": 0}, "entries": [{"species": "species/rush.txt"}]},
+     ["defaults.max_joints", "[1, 65535]"]),
+    ({"defaults": {"lod_distances": "30,10"}, "entries": [{"species": "species/rush.txt"}]},
+     ["defaults.lod_distances", "ascending"]),
+    ({"entries": [{"species": "species/rush.txt", "formats": ["fbx"]}]},
+     ["entries[0].formats[0]", "fbx", "glb"]),
+    ({"entries": [{"species": "species/rush.txt", "sides": [2]}]}, ["entries[0].sides", "[3, 64]"]),
+    ({"entries": [{"species": "species/rush.txt", "name": "{species}.{ext}", "seeds": [1, 2]}]},
+     ["entries[0]", "rush.glb", "also written by entries[0] (seed 1)"]),
+    ({"entries": [{"species": "species/rush.txt"}, {"species": "species/rush.txt"}]},
+     ["entries[1]", "rush_0.glb", "entries[0]"]),
+    ({"entries": [{"species": "species/rush.txt", "name": "../{species}_{seed}.{ext}"}]},
+     ["entries[0].name", "inside the output folder"]),
+    ({"entries": [{"species": "species/rush.txt", "wind_speed": 3, "grid": {"wind_speed": [1]}}]},
+     ["entries[0].grid.wind_speed", "also set as entries[0].wind_speed"]),
+])
+def test_catalogue_errors_name_the_json_path_exit_2_and_write_nothing(workspace, change, needles):
+    cat = workspace / "bad.json"
+    cat.write_text(json.dumps(change))
+    out = workspace / "never"
+    proc = treegen("batch", cat, "-o", out)
+    assert proc.returncode == 2, proc.stderr
+    lines = [line for line in proc.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert lines[0].startswith(f"treegen: error: {cat}: ")
+    for n in needles:
+        assert n in lines[0], lines[0]
+    assert not out.exists()
+
+
+def test_seeds_grid_and_names_expand_as_documented(workspace):
+    from treegen_cli.batch import parse_catalogue
+
+    data = {"name": "{species}/{seed}.{ext}", "defaults": {"seeds": "1-2,7"},
+            "entries": [{"species": "species/rush.txt", "grid": {"fps": [10, 12.5]}},
+                        {"species": "species/pair_small.txt", "seeds": [4],
+                         "name": "pair_w{wind_speed}_{seed}.{ext}", "formats": ["usda", "glb"],
+                         "grid": {"wind_speed": [3], "lod_distances": [[0, 15, 60]]}}]}
+    cat = parse_catalogue(data, workspace / "x.json")
+    assert [j.output for j in cat.jobs] == [
+        "rush/1_fps-10.glb", "rush/2_fps-10.glb", "rush/7_fps-10.glb",
+        "rush/1_fps-12.5.glb", "rush/2_fps-12.5.glb", "rush/7_fps-12.5.glb",
+        "pair_w3_4_lod_distances-0,15,60.usda", "pair_w3_4_lod_distances-0,15,60.glb"]
+    assert cat.jobs[-1].task == cat.jobs[-2].task and cat.jobs[-1].key != cat.jobs[-2].key
+    assert len(cat.params) == 2                              # each species parsed once
+
+
+def test_dry_run_prints_the_table_and_an_estimate_and_writes_nothing(workspace):
+    out = workspace / "dry"
+    proc = treegen("batch", workspace / "catalogue.json", "-o", out, "--dry-run", "--workers", "2")
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    assert len(lines) == 14 and "est MB" in lines[0] and "rush_8.glb" in lines[12]
+    assert "12 jobs: 12 to build (10 trees)" in lines[-1] and "on 2 worker(s)" in lines[-1]
+    assert not out.exists()
+    plan = json.loads(treegen("batch", workspace / "catalogue.json", "-o", out, "--dry-run",
+                              "--json").stdout)
+    assert plan["build"] == 12 and plan["estimated_bytes"] > 0 and not out.exists()
+
+
+def test_schema_and_defaults_agree_with_make():
+    from treegen_cli import api
+    from treegen_cli.cli import make
+
+    schema = json.loads(treegen("batch", "--schema").stdout)
+    entry = schema["$defs"]["entry"]["properties"]
+    assert set(api.DEFAULTS) - {"seed"} <= set(entry)
+    assert set(schema["properties"]["defaults"]["properties"]) == set(api.DEFAULTS) - {"seed"} | {"seeds", "formats"}
+    click_defaults = {p.name: p.default for p in make.params if p.name in api.DEFAULTS}
+    assert click_defaults == api.DEFAULTS
+    for k, v in api.DEFAULTS.items():
+        if "default" in schema["$defs"].get(k, {}):
+            assert schema["$defs"][k]["default"] == v, k
+
+
+def test_api_make_validates_like_the_cli(tmp_path):
+    from treegen_cli import api
+    from treegen_cli.errors import TreegenError
+
+    with pytest.raises(TreegenError, match=r"^--max-joints 0: the joint budget must be at least 1$"):
+        api.make(ROOT / "species" / "rush.txt", tmp_path / "r.glb", max_joints=0)
+    with pytest.raises(TreegenError, match="unknown make option 'wind'"):
+        api.make(ROOT / "species" / "rush.txt", tmp_path / "r.glb", wind=3)
+    with pytest.raises(TreegenError, match=r"--lod-distances 'a,b': expected comma-separated metres"):
+        api.make(ROOT / "species" / "rush.txt", tmp_path / "r.glb", lod_distances="a,b")
+    assert not list(tmp_path.iterdir())
+    s = api.make(ROOT / "tests" / "fixtures" / "pair_small.txt", tmp_path / "p.glb", seed=2,
+                 lod_distances=[0, 30], **{k: v for k, v in CLIP.items() if k != "lod_distances"})
+    assert s["file"] == str(tmp_path / "p.glb") and s["seed"] == 2 and len(s["lods"]) == 2
+
+
+def test_staging_sweep_leaves_other_hosts_folders_alone(tmp_path):
+    """On a folder shared by several machines a process id means nothing on another host: a
+    dead writer's staging folder is swept only by its own host."""
+    from treegen_cli.exchange import staging
+
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True).stdout.strip()
+    mine = tmp_path / f".a.glb.{dead}@{staging._HOST}.abcd1234.tmp"
+    other = tmp_path / f".b.glb.{dead}@some-other-host.abcd1234.tmp"
+    for d in (mine, other):
+        d.mkdir()
+    assert staging.sweep(tmp_path) == [mine]
+    assert other.exists()

@@ -1,0 +1,251 @@
+"""treegen as a library: `make(species, output, **options)` is `treegen make` without a shell.
+
+    from treegen_cli import api
+    summary = api.make("species/quaking_aspen.txt", "aspen.glb", seed=3, wind_speed=6,
+                       lod_distances=[0, 15, 60])
+    summary["triangles"], summary["lods"][1]["joint_keys"]
+
+Options go by their CLI names with underscores (`--wind-speed` → `wind_speed`); list options
+(`lod_distances`, `sides`, `joint_levels`) take a list or the CLI's "0,10,30" text. The CLI's
+`make`, this function and `treegen batch` all turn options into stage options through
+`resolve()`, so they share defaults, validation and error messages, and one set of options
+always writes the same bytes whichever door it came in by.
+"""
+from __future__ import annotations
+
+import math
+import os
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Callable
+
+from .errors import TreegenError, in_file
+from .generate import GenerateOptions
+
+# Every `make` option (CLI name with underscores) and its default. cli.py's click options carry
+# the same defaults (tests/test_batch.py checks they agree).
+DEFAULTS: dict[str, object] = {
+    "seed": 0,
+    "max_stems": GenerateOptions.max_stems,
+    "max_leaves": GenerateOptions.max_leaves,
+    "max_joints": 256,
+    "joint_levels": None,
+    "sides": None,
+    "leaf_geometry": "card",
+    "wind_speed": 4.0,
+    "wind_dir": 0.0,
+    "gust": 0.35,
+    "turbulence": 0.3,
+    "duration": 4.0,
+    "fps": 30.0,
+    "no_wind": False,
+    "lod_distances": "0,10,30,130",
+    "fov": 60.0,
+    "width": 1920,
+    "error_px": 1.0,
+    "error_form": "exact",
+    "interpolation": "linear",
+    "no_lod": False,
+    "lod_files": False,
+    "up_axis": None,
+    "max_vertices": 20_000_000,
+    "max_keys": 5_000_000,
+}
+INTS = ("seed", "max_stems", "max_leaves", "max_joints", "width", "max_vertices", "max_keys")
+FLOATS = ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "fov", "error_px")
+FLAGS = ("no_wind", "no_lod", "lod_files")
+CHOICES = {"leaf_geometry": ("card", "shape"), "error_form": ("exact", "paper"),
+           "interpolation": ("linear", "step"), "up_axis": (None, "y", "z")}
+LISTS = ("joint_levels", "sides", "lod_distances")
+
+
+def cli_name(key: str) -> str:
+    """How the CLI spells an option in messages: `wind_speed` → `--wind-speed`."""
+    return "--" + key.replace("_", "-")
+
+
+@dataclass(frozen=True)
+class Resolved:
+    """One validated set of make options: the seed, the stage options, and the canonical
+    option values (defaults filled in, lists as numbers) that identify the output."""
+
+    seed: int
+    options: object            # pipeline.MakeOptions
+    values: dict
+
+
+def _text(value) -> str:
+    if isinstance(value, (list, tuple)):
+        return ",".join(f"{v:g}" if isinstance(v, float) else str(v) for v in value)
+    return str(value)
+
+
+def _number_list(key: str, value, kind: type, label: Callable[[str], str]) -> tuple | None:
+    """A list option from a list/tuple of numbers or from the CLI's comma-separated text."""
+    if value is None:
+        return None
+    if isinstance(value, str):
+        try:
+            values = tuple(kind(v) for v in value.split(",") if v.strip() != "")
+        except ValueError:
+            example = "0,10,30,130" if kind is float else "0,1,2"
+            what = "metres" if kind is float else "whole numbers"
+            raise TreegenError(f"{label(key)} '{value}': expected comma-separated {what}, "
+                               f"e.g. {example}") from None
+    elif isinstance(value, (list, tuple)) and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool)
+            and (kind is float or float(v).is_integer()) for v in value):
+        values = tuple(kind(v) for v in value)
+    else:
+        raise TreegenError(f"{label(key)} {value!r}: expected a list of "
+                           f"{'numbers' if kind is float else 'whole numbers'} or text like "
+                           f"{'0,10,30' if kind is float else '0,1,2'}")
+    if not values and kind is int:
+        raise TreegenError(f"{label(key)} '{_text(value)}': give at least one value")
+    return values
+
+
+def _scalar(key: str, value, label: Callable[[str], str]):
+    """Type-check one scalar option (click did this for the CLI; the API and catalogues need it)."""
+    if key in FLAGS:
+        if not isinstance(value, bool):
+            raise TreegenError(f"{label(key)} {value!r}: expected true or false")
+        return value
+    if key in INTS:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise TreegenError(f"{label(key)} {value!r}: expected a whole number")
+        return value
+    if key in FLOATS:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                or not math.isfinite(value):
+            raise TreegenError(f"{label(key)} {value!r}: expected a finite number")
+        return float(value)
+    if key in CHOICES:
+        if value not in CHOICES[key]:
+            raise TreegenError(f"{label(key)} {value!r}: use one of {', '.join(str(c).lower() for c in CHOICES[key])}")
+        return value
+    return value
+
+
+def resolve(options: dict, label: Callable[[str], str] = cli_name,
+            output: str | os.PathLike | None = None) -> Resolved:
+    """Validate `make` options (missing ones take DEFAULTS) and build the stage options.
+    For a static `output` format (.obj .ply) no wind or LODs are built: it cannot hold them.
+
+    `label(key)` names an option in messages: `--max-joints` for the CLI and the API, a JSON
+    path for a catalogue entry. Every refusal is a TreegenError naming the option and range."""
+    from .limits import Limits
+    from .lod import LodOptions
+    from .mesh import MESH_DEFAULTS
+    from .pipeline import MakeOptions
+    from .rig import RigOptions
+    from .wind import WindOptions
+    from .exchange import STATIC
+
+    unknown = sorted(set(options) - set(DEFAULTS))
+    if unknown:
+        raise TreegenError(f"unknown make option '{unknown[0]}'; allowed: {', '.join(DEFAULTS)}")
+    v = {k: _scalar(k, options.get(k, d), label) for k, d in DEFAULTS.items()}
+    v["joint_levels"] = _number_list("joint_levels", v["joint_levels"], int, label)
+    v["sides"] = _number_list("sides", v["sides"], int, label)
+    v["lod_distances"] = _number_list("lod_distances", v["lod_distances"], float, label)
+
+    d = v["lod_distances"]
+    if not v["no_lod"]:
+        if not d or any(not math.isfinite(x) or x < 0 for x in d) or list(d) != sorted(d):
+            raise TreegenError(f"{label('lod_distances')} {_text(d) or '(none)'}: "
+                               "give one or more ascending distances in metres, each >= 0")
+        if len(set(d)) != len(d):
+            raise TreegenError(f"{label('lod_distances')} {_text(d)}: distances repeat")
+    if v["max_joints"] < 1:
+        raise TreegenError(f"{label('max_joints')} {v['max_joints']}: the joint budget must be at least 1")
+    mesh = replace(MESH_DEFAULTS, leaf_geometry=v["leaf_geometry"])
+    if v["sides"] is not None:
+        if min(v["sides"]) < 3 or max(v["sides"]) > 64:
+            raise TreegenError(f"{label('sides')} '{_text(options.get('sides'))}': "
+                               "each value must be in [3, 64]")
+        mesh = replace(mesh, sides=v["sides"])
+    static = output is not None and Path(output).suffix.lower() in STATIC
+    wind = None if v["no_wind"] or static else WindOptions(
+        speed=v["wind_speed"], direction_deg=v["wind_dir"], gust=v["gust"],
+        turbulence=v["turbulence"], duration=v["duration"], fps=v["fps"])
+    lod = None if v["no_lod"] or static else LodOptions(
+        distances=v["lod_distances"], fov_deg=v["fov"], width=v["width"], error_px=v["error_px"],
+        error_form=v["error_form"], interpolation=v["interpolation"].upper())
+    make_options = MakeOptions(
+        generate=GenerateOptions(max_stems=v["max_stems"], max_leaves=v["max_leaves"]),
+        rig=RigOptions(max_joints=v["max_joints"], joint_levels=v["joint_levels"]),
+        mesh=mesh, wind=wind, lod=lod,
+        limits=Limits(max_vertices=v["max_vertices"], max_keys=v["max_keys"]))
+    values = {k: list(x) if isinstance(x, tuple) else x for k, x in v.items()}
+    return Resolved(seed=v["seed"], options=make_options, values=values)
+
+
+def check_output(output: str | os.PathLike, up_axis: str | None = None) -> Path:
+    """Refuse an output name whose suffix no writer handles, or an up axis its format cannot
+    carry (before any work is done)."""
+    from .exchange import check_suffix, check_up_axis
+
+    path = check_suffix(output)
+    check_up_axis(path, up_axis)
+    return path
+
+
+def build(params, species, job: Resolved, timings=None):
+    """Grow, rig, mesh and animate one tree; user errors are reported against `species`."""
+    from .pipeline import Timings, build_asset
+
+    return in_file(species, build_asset, params, job.seed, job.options,
+                   timings if timings is not None else Timings())
+
+
+def write(asset, tree, output, timings, t0: float, job: Resolved | None = None) -> dict:
+    """Export `asset` atomically to `output` (as per-LOD files with lod_files) and return the
+    `make --json` summary."""
+    from .exchange import export, export_parts
+    from .prepare import split_lods
+
+    values = job.values if job is not None else DEFAULTS
+    asset = replace(asset, up_axis=values["up_axis"])
+    written = timings.run("write", export_parts, split_lods(asset), output) if values["lod_files"] \
+        else timings.run("write", export, asset, output)
+    return make_summary(asset, tree, written, timings.stages, time.perf_counter() - t0)
+
+
+def make(species: str | os.PathLike, output: str | os.PathLike, **options) -> dict:
+    """Grow `species` and write it to `output` (format from the suffix), as `treegen make`
+    does with the same options; returns what `treegen make --json` prints."""
+    from .params import load_params
+    from .pipeline import Timings
+
+    t0 = time.perf_counter()
+    output = check_output(output, options.get("up_axis"))
+    job = resolve(options, output=output)
+    params = load_params(species)
+    timings = Timings()
+    asset, tree = build(params, species, job, timings)
+    return write(asset, tree, output, timings, t0, job)
+
+
+def make_summary(asset, tree, written, stages: dict, seconds: float) -> dict:
+    """`treegen make --json`: what was written and how big, per LOD, and seconds per stage."""
+    def lod_row(lod):
+        clip = lod.clips[0] if lod.clips else None
+        keys = 0 if clip is None else len(clip.times)
+        joint_keys = 0 if clip is None else (
+            sum(len(k) for k in clip.keys) if clip.keys is not None else keys * len(lod.skeleton.names))
+        return {"distance_m": lod.distance,
+                "vertices": sum(len(p.positions) for p in lod.primitives),
+                "triangles": sum(len(p.indices) // 3 for p in lod.primitives),
+                "joints": len(lod.skeleton.names), "keys": keys, "joint_keys": joint_keys,
+                "decimated": clip is not None and clip.keys is not None}
+
+    lods = [lod_row(lod) for lod in asset.lods]
+    return {"file": str(written[0]), "files": [str(p) for p in written],
+            "bytes": sum(p.stat().st_size for p in written),
+            "species": asset.name, "seed": tree.seed, "stems": tree.n_stems,
+            "leaves": tree.n_leaves, **{k: lods[0][k] for k in ("vertices", "triangles", "joints",
+                                                               "keys", "joint_keys")},
+            "lods": lods, "seconds": round(seconds, 4),
+            "stages_s": {k: round(v, 4) for k, v in stages.items()}}

@@ -1,0 +1,177 @@
+"""`treegen batch CATALOGUE -o DIR`: the command body (cli.py only registers it).
+
+Output policy: one stdout line at the end (or, with --json, one JSON line per finished job
+and a closing {"event": "done", ...} line, for machines that want results as they stream);
+every failed job is one stderr line naming its entry's JSON path, seed and reason; a progress
+bar (done / failed / skipped, ETA) on a terminal; -v adds one stderr line per finished job.
+"""
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import sys
+from pathlib import Path
+
+import click
+
+from .errors import TreegenError
+
+
+@click.command()
+@click.argument("catalogue", type=click.Path(dir_okay=False, path_type=Path), required=False)
+@click.option("-o", "--output", "out_dir", type=click.Path(path_type=Path), metavar="DIR",
+              help="Output folder (created if missing); assets, manifest.json and manifest.csv go here.")
+@click.option("--workers", type=int, default=None,
+              help="Worker processes of the embedded Dask cluster [default: one per core].")
+@click.option("--scheduler", default=None, metavar="tcp://HOST:8786",
+              help="Run the jobs on this Dask scheduler's workers instead [default: "
+                   "$DASK_SCHEDULER_ADDRESS, else an embedded cluster]. Workers must see DIR "
+                   "at the same path.")
+@click.option("--force", is_flag=True, help="Rebuild every job, even those already up to date.")
+@click.option("--dry-run", is_flag=True,
+              help="Print the job table and a size/time estimate; build and write nothing.")
+@click.option("--schema", is_flag=True, help="Print the catalogue's JSON Schema and exit.")
+@click.option("--json", "as_json", is_flag=True,
+              help="One JSON line per finished job, then a summary line.")
+def batch(catalogue, out_dir, workers, scheduler, force, dry_run, schema, as_json):
+    """Build every asset CATALOGUE (JSON; see --schema) lists — species × seeds × grid ×
+    formats — in parallel on Dask, into DIR with a manifest. Reruns skip what is up to date."""
+    from .batch import load_catalogue, plan_jobs, schema_text
+
+    if schema:
+        click.echo(schema_text().rstrip())
+        return
+    if catalogue is None:
+        raise TreegenError("batch: give a CATALOGUE file (or --schema)")
+    if out_dir is None:
+        raise TreegenError("batch: give an output folder with -o, e.g. -o assets")
+    if out_dir.exists() and not out_dir.is_dir():
+        raise TreegenError(f"-o {out_dir}: is a file; give a folder")
+    base = next(p for p in (out_dir.absolute(), *out_dir.absolute().parents) if p.exists())
+    if not base.is_dir() or not os.access(base, os.W_OK | os.X_OK):
+        raise TreegenError(f"-o {out_dir}: cannot write into '{base}'")
+    if workers is not None and workers < 1:
+        raise TreegenError(f"--workers {workers}: must be at least 1")
+    from .executor import scheduler_address
+
+    if workers is not None and scheduler_address(scheduler):
+        raise TreegenError(f"--workers {workers}: only for the embedded cluster; a --scheduler "
+                           "(or DASK_SCHEDULER_ADDRESS) cluster has its own workers")
+    cat = load_catalogue(catalogue)
+    plan = plan_jobs(cat, out_dir, force)
+    if dry_run:
+        _dry_run(cat, plan, workers, scheduler, as_json)
+        return
+    _run(cat, plan, out_dir, workers, scheduler, as_json)
+
+
+def _dry_run(cat, plan, workers, scheduler, as_json) -> None:
+    from .batch import estimate
+    from .executor import default_workers, scheduler_address
+
+    est = estimate(cat, plan)
+    todo = {j.output for j in plan.build}
+    per_task: dict[str, float] = {}
+    for j in plan.build:
+        per_task[j.task] = max(per_task.get(j.task, 0.0), est[j.output][1])
+    size = sum(est[j.output][0] for j in plan.build)
+    work = sum(per_task.values())
+    n = None if scheduler_address(scheduler) else (workers or default_workers())
+    how = sorted({est[j.output][2] for j in plan.build}) or ["-"]
+    if as_json:
+        click.echo(json.dumps({
+            "jobs": [{"entry": j.source, "species": j.species_text, "seed": j.seed,
+                      "format": j.fmt, "grid": dict(j.grid), "path": j.output,
+                      "options_hash": j.key, "action": "build" if j.output in todo else "skip",
+                      "estimated_bytes": round(est[j.output][0]),
+                      "estimated_seconds": round(est[j.output][1], 3)} for j in cat.jobs],
+            "build": len(plan.build), "skip": len(plan.skip), "trees": len(per_task),
+            "estimated_bytes": round(size), "estimated_work_seconds": round(work, 2),
+            "workers": n, "estimate": "+".join(how)}, indent=1))
+        return
+    width = max([len(j.output) for j in cat.jobs] + [6])
+    click.echo(f"{'#':>4}  {'entry':<12}{'seed':>6}  {'format':<7}{'output':<{width}}  "
+               f"{'action':<7}{'est MB':>8}{'est s':>8}")
+    for j in cat.jobs:
+        b, s, _ = est[j.output]
+        click.echo(f"{j.index:>4}  {j.source:<12}{j.seed:>6}  {j.fmt:<7}{j.output:<{width}}  "
+                   f"{'build' if j.output in todo else 'skip':<7}{b / 1e6:>8.1f}{s:>8.2f}")
+    if not plan.build:
+        click.echo(f"{len(cat.jobs)} jobs, all up to date: nothing to build")
+        return
+    wall = f", ~{work / n:.0f} s on {n} worker(s)" if n else ""
+    click.echo(f"{len(cat.jobs)} jobs: {len(plan.build)} to build ({len(per_task)} trees), "
+               f"{len(plan.skip)} up to date; about {size / 1e6:.0f} MB and {work:.0f} s of "
+               f"work{wall} ({' + '.join(how)} estimate)")
+
+
+def _run(cat, plan, out_dir, workers, scheduler, as_json) -> None:
+    from .batch import run_jobs
+    from .progress import current_reporter
+
+    rep = current_reporter()
+    counts = {"built": 0, "failed": 0, "skipped": 0}
+    with _progress(rep, len(plan.build)) as bar:
+        def say(message: str) -> None:
+            if bar is not None:
+                bar.console.print(message, markup=False, highlight=False)
+            else:
+                click.echo(message, err=True)
+
+        def on_event(kind, job, row):
+            if kind == "start":
+                if rep.verbose:
+                    say(f"  cluster   {row['where']}; {row['tasks']} tree(s) to build")
+                return
+            counts[kind] += 1
+            if as_json:
+                click.echo(json.dumps({"event": kind, **row}))
+            if kind == "failed":
+                say(f"treegen: failed: {job.source} seed {job.seed} ({job.output}): {row['error']}")
+            elif rep.verbose and not rep.quiet:
+                extra = (f"{row.get('bytes', 0) / 1e6:7.2f} MB {row.get('seconds', 0):7.2f} s  "
+                         f"{row.get('worker', '')}" if kind == "built" else "up to date")
+                say(f"  {kind:<8}{job.output}  {extra}")
+            if bar is not None and kind != "skipped":
+                bar.advance(bar.task_ids[0])
+            if bar is not None:
+                bar.update(bar.task_ids[0], stats=f"done {counts['built']}  failed "
+                           f"{counts['failed']}  skipped {counts['skipped']}")
+
+        try:
+            totals = run_jobs(cat, plan, out_dir, scheduler=scheduler, workers=workers,
+                              on_event=on_event)
+        except KeyboardInterrupt:
+            # run_jobs has closed the cluster, removed staging folders and written the manifest
+            click.echo(f"treegen: interrupted: {counts['built']} built, {counts['failed']} "
+                       f"failed, {len(plan.build) - counts['built'] - counts['failed']} not "
+                       f"done; rerun the same command to finish", err=True)
+            sys.exit(130)
+    manifest = Path(out_dir) / "manifest.json"
+    if as_json:
+        click.echo(json.dumps({"event": "done", **totals, "manifest": str(manifest)}))
+    else:
+        where = f" on {totals['cluster']}" if totals["cluster"] else ""
+        click.echo(f"built {totals['built']}, skipped {totals['skipped']}, failed "
+                   f"{totals['failed']} of {totals['jobs']} assets in {totals['seconds']:.1f} s"
+                   f"{where}; manifest: {manifest}")
+    if totals["failed"]:
+        sys.exit(1)             # some jobs failed (each reported above); the rest are built
+
+
+@contextlib.contextmanager
+def _progress(rep, total: int):
+    """A rich bar with done/failed/skipped and the ETA, on a terminal only; else None."""
+    if not rep.show_progress or total == 0:
+        yield None
+        return
+    from rich.console import Console
+    from rich.progress import (BarColumn, MofNCompleteColumn, Progress, SpinnerColumn,
+                               TextColumn, TimeElapsedColumn, TimeRemainingColumn)
+
+    with Progress(SpinnerColumn(), TextColumn("batch"), BarColumn(), MofNCompleteColumn(),
+                  TextColumn("{task.fields[stats]}"), TimeElapsedColumn(), TextColumn("ETA"),
+                  TimeRemainingColumn(), console=Console(file=sys.stderr), transient=True) as prog:
+        prog.add_task("batch", total=total, stats="starting the cluster")
+        yield prog
