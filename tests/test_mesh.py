@@ -262,3 +262,67 @@ def test_species_mesh_is_bound_and_keeps_every_stem(species):
     assert (len(bark.positions), len(bark.indices) // 3) == (V, T)
     area = 0.5 * np.linalg.norm(triangle_normals(prims["leaves"]), axis=1).sum()
     np.testing.assert_allclose(area, np.prod(tree.leaf_size, axis=1).sum(), rtol=1e-3)
+
+
+# ------------------------------------------------------------------------------ texture UVs
+
+def atlas_cells(variants=4):
+    """A real atlas layout (glTF rects, top-left origin), as the materials stage hands it over."""
+    from treegen_cli.textures import leaf_atlas
+    rects = leaf_atlas(0, (0.16, 0.30, 0.06), size=128, variants=variants).rects
+    return tuple(tuple(float(x) for x in r) for r in rects)
+
+
+@pytest.mark.parametrize("geometry", ["card", "shape"])
+def test_leaf_uvs_fill_their_seeded_atlas_cell(geometry):
+    """Every leaf's points land in one cell of the atlas (in the asset's bottom-left UVs), the
+    card's corners on the cell's corners; all cells get used, about equally."""
+    tree = species_tree("quaking_aspen", seed=1)
+    cells = atlas_cells(4)
+    _, prims = mesh(tree, budget=32, leaf_geometry=geometry, leaf_cells=cells)
+    leaves = prims["leaves"]
+    o = CARD if geometry == "card" else OUTLINES[0]
+    P = len(o.points)
+    uv = leaves.uvs.astype(np.float64).reshape(-1, P, 2)
+    r = np.asarray(cells)
+    # Bottom-left cell bounds: u0..u1, 1 − v1..1 − v0.
+    lo = np.column_stack([r[:, 0], 1 - r[:, 3]])
+    hi = np.column_stack([r[:, 2], 1 - r[:, 1]])
+    inside = np.all((uv[:, None] >= lo[None, :, None] - 1e-6)
+                    & (uv[:, None] <= hi[None, :, None] + 1e-6), axis=(2, 3))   # (L, cells)
+    assert np.all(inside.sum(axis=1) == 1)                    # one cell per leaf, disjoint
+    variant = inside.argmax(axis=1)
+    # Card u = x + .5, v = y (base at the cell's bottom edge): affine into the leaf's cell.
+    want = lo[variant][:, None] + o.uvs[None] * (hi - lo)[variant][:, None]
+    np.testing.assert_allclose(uv, want, atol=1e-6)
+    counts = np.bincount(variant, minlength=4)
+    assert counts.min() > 0.2 * tree.n_leaves
+
+
+def test_leaf_variants_are_seeded_by_the_tree():
+    from treegen_cli.mesh import leaf_variants
+    a, b = species_tree("quaking_aspen", seed=1), species_tree("quaking_aspen", seed=2)
+    cells = atlas_cells(4)
+    u1 = mesh(a, budget=32, leaf_cells=cells)[1]["leaves"].uvs
+    np.testing.assert_array_equal(u1, mesh(a, budget=32, leaf_cells=cells)[1]["leaves"].uvs)
+    v1, v2 = leaf_variants(a, 4), leaf_variants(b, 4)
+    assert not np.array_equal(v1[:1000], v2[:1000])
+    assert np.all(leaf_variants(a, 1) == 0)
+    # Neighbouring leaves rarely share a variant more than chance says (not a run of one).
+    assert np.mean(v1[1:] == v1[:-1]) < 0.35
+
+
+def test_single_cell_maps_the_card_to_the_whole_image():
+    """A custom leaf texture is one cell: the card's corners are the image's corners."""
+    tree = synthetic_tree()
+    _, prims = mesh(tree, leaf_cells=((0.0, 0.0, 1.0, 1.0),))
+    uv = prims["leaves"].uvs.reshape(-1, 4, 2)
+    np.testing.assert_array_equal(uv, np.broadcast_to(CARD.uvs, uv.shape))
+
+
+def test_bad_leaf_cells_are_refused():
+    tree = synthetic_tree()
+    with pytest.raises(ValueError, match="leaf_cells"):
+        mesh(tree, leaf_cells=())
+    with pytest.raises(ValueError, match="leaf_cells"):
+        mesh(tree, leaf_cells=((0.0, 0.0, 1.0),))

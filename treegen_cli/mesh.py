@@ -11,6 +11,11 @@ alpha cuts it back to the blade. Bark vertex layout: the
 ring vertices stem by stem (base to tip), then one apex vertex per stem in stem order, so no
 stem, however thin, is ever dropped.
 
+UVs (origin bottom-left, as every Primitive's):
+* Leaves: each leaf draws one cell of the leaf atlas (`MeshOptions.leaf_cells`, the layout the
+  materials stage made the texture with), chosen by a generator seeded from the tree seed, and
+  the card (or outline) fills that cell as textures.card_uvs maps it.
+
     prims = build_mesh(tree, rig, MeshOptions(sides=(24, 10, 6, 4)))
 
 Everything is ragged-array arithmetic over all stems at once (np.repeat / cumsum): no Python loop
@@ -19,6 +24,7 @@ over stems, rings, leaves or vertices (only over the few trunk stems for their f
 from __future__ import annotations
 
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -27,6 +33,9 @@ from .asset import Primitive
 from .errors import TreegenError
 from .leafshapes import OUTLINES, outline
 from .shapes import flare_factor, taper_radius
+from .textures import card_uvs
+
+FULL_CARD_CELL = ((0.0, 0.0, 1.0, 1.0),)   # one cell, the whole image: the card fills it
 
 
 @dataclass(frozen=True)
@@ -45,6 +54,10 @@ class MeshOptions:
     leaves: bool = True           # emit the "leaves" primitive
     leaf_geometry: str = "card"   # "card": a textured quad per leaf; "shape": the LeafShape
                                   # outline as geometry (see leafshapes.py)
+    leaf_cells: tuple[tuple[float, float, float, float], ...] = FULL_CARD_CELL
+                                  # leaf atlas layout: per variant its card rectangle
+                                  # (u0, v0, u1, v1) in glTF UVs (top-left origin), as
+                                  # textures.LeafAtlas.rects; materials.Materials gives it
 
 
 MESH_DEFAULTS = MeshOptions()
@@ -106,6 +119,9 @@ def _check(options: MeshOptions) -> None:
     if options.leaf_geometry not in LEAF_GEOMETRIES:
         raise TreegenError(f"--leaf-geometry '{options.leaf_geometry}': expected one of "
                            f"{', '.join(LEAF_GEOMETRIES)}")
+    cells = np.asarray(options.leaf_cells, dtype=np.float64)
+    if cells.ndim != 2 or cells.shape[1] != 4 or not len(cells) or not np.all(np.isfinite(cells)):
+        raise ValueError(f"leaf_cells must be (u0, v0, u1, v1) rectangles, got {options.leaf_cells!r}")
 
 
 def _ring_params(tree, options: MeshOptions):
@@ -137,6 +153,14 @@ def _ring_params(tree, options: MeshOptions):
         keep[1:] = (stem[1:] != stem[:-1]) | (u[1:] - u[:-1] > 1e-4)
         stem, u = stem[keep], u[keep]
     return stem, u
+
+
+def leaf_variants(tree, n_cells: int) -> np.ndarray:
+    """Atlas cell per leaf (L,), seeded from the tree seed: the same tree, the same leaves."""
+    if n_cells <= 1:
+        return np.zeros(tree.n_leaves, dtype=np.int64)
+    rng = np.random.default_rng([int(tree.seed), 0x1EAF, 0xA71A5])
+    return rng.integers(0, n_cells, tree.n_leaves)
 
 
 def _bark(tree, rig, options: MeshOptions) -> Primitive:
@@ -285,7 +309,19 @@ def _faces_flat(o) -> bool:
     return True
 
 
-def _leaves(tree, rig, geometry: str = "card") -> Primitive:
+def _leaf_uvs(tree, o, cells) -> np.ndarray:
+    """(L·P, 2) bottom-left UVs: each leaf's outline points in its seeded atlas cell. card_uvs
+    maps the P points into each of the few cells once; leaves then index that small table."""
+    K, P = len(cells), len(o.points)
+    table = card_uvs(np.tile(o.uvs, (K, 1)), np.repeat(np.arange(K), P),
+                     SimpleNamespace(rects=np.asarray(cells, dtype=np.float32)),  # reads .rects
+                     origin="bottom-left")
+    pick = leaf_variants(tree, K)[:, None] * P + np.arange(P)[None, :]
+    return table[pick.ravel()]
+
+
+def _leaves(tree, rig, geometry: str = "card",
+            cells: tuple = FULL_CARD_CELL) -> Primitive:
     """Stamp a card (or the LeafShape outline) on every leaf frame (float32 broadcasts)."""
     o = outline(tree.params.leaf_shape)          # validates the code even for cards
     if geometry == "card":
@@ -326,7 +362,7 @@ def _leaves(tree, rig, geometry: str = "card") -> Primitive:
     return Primitive(
         name="leaves", material="leaf",
         positions=pos.reshape(-1, 3), normals=nrm,
-        uvs=np.tile(o.uvs.astype(np.float32), (L, 1)),
+        uvs=_leaf_uvs(tree, o, cells),
         indices=idx.ravel(), joints=joints, weights=weights,
         flat_normals=_faces_flat(o),     # frames are rotations: flat stays flat
     )
@@ -337,5 +373,5 @@ def build_mesh(tree, rig, options: MeshOptions = MESH_DEFAULTS) -> list[Primitiv
     _check(options)
     prims = [_bark(tree, rig, options)]
     if options.leaves and tree.n_leaves:
-        prims.append(_leaves(tree, rig, options.leaf_geometry))
+        prims.append(_leaves(tree, rig, options.leaf_geometry, options.leaf_cells))
     return prims
