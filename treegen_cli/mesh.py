@@ -15,6 +15,16 @@ UVs (origin bottom-left, as every Primitive's):
 * Leaves: each leaf draws one cell of the leaf atlas (`MeshOptions.leaf_cells`, the layout the
   materials stage made the texture with), chosen by a generator seeded from the tree seed, and
   the card (or outline) fills that cell as textures.card_uvs maps it.
+* Bark: u runs once around every stem (0 → 1 over the sides, seam column duplicated); v runs
+  along it in metres of bark divided by the tile height, the stem's own base circumference, so
+  texels are square at every stem's base (twigs get finer bark than the trunk, as real ones
+  have). A stem longer than BARK_MAX_TILES circumferences (thin whips: most of the willow's
+  twigs) gets taller tiles instead, span / BARK_MAX_TILES, so no stem needs more. Each stem
+  starts at its own seeded (u, v) offset in [0, 1) so neighbouring stems' bark does not line
+  up, and is then shifted by a whole number of tiles (invisible: the texture repeats) to centre
+  its v range on 0. Hence v is continuous and increasing along every stem with no wraps, and
+  |v| ≤ BARK_MAX_TILES / 2 + 1, |u| < 2: engines that store UVs as half floats keep at least
+  1/64 of a tile of precision (a 256² texture: 4 texels) even at the ends of the longest stems.
 
     prims = build_mesh(tree, rig, MeshOptions(sides=(24, 10, 6, 4)))
 
@@ -36,6 +46,7 @@ from .shapes import flare_factor, taper_radius
 from .textures import card_uvs
 
 FULL_CARD_CELL = ((0.0, 0.0, 1.0, 1.0),)   # one cell, the whole image: the card fills it
+BARK_MAX_TILES = 64.0                      # most texture tiles along one stem (see UVs above)
 
 
 @dataclass(frozen=True)
@@ -155,6 +166,14 @@ def _ring_params(tree, options: MeshOptions):
     return stem, u
 
 
+def bark_offsets(tree) -> np.ndarray:
+    """(S, 2) seeded (u, v) bark offsets in [0, 1), one pair per stem, so neighbouring stems'
+    bark does not line up. Stems are ordered level by level, so a LOD that regrows the tree
+    with fewer levels keeps its stems' offsets (the same stream, a prefix of it)."""
+    rng = np.random.default_rng([int(tree.seed), 0xBA4C, 0x0FF5])
+    return rng.random((tree.n_stems, 2))
+
+
 def leaf_variants(tree, n_cells: int) -> np.ndarray:
     """Atlas cell per leaf (L,), seeded from the tree seed: the same tree, the same leaves."""
     if n_cells <= 1:
@@ -220,6 +239,16 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
     trunk = level[rs] == 0
     R = rs.size
 
+    # --- bark UVs per stem: tile height, seeded offsets, centring shift (module docstring) ---
+    cap = np.where(pointed, 0.0, options.cap_height * tree.node_radius[tip])
+    z_base = tree.node_z[start]
+    span = tree.node_z[tip] + cap - z_base                  # metres of bark, cap included
+    tile = np.maximum(2.0 * np.pi * np.maximum(tree.stem_radius, 1e-6),
+                      span / BARK_MAX_TILES)
+    off_u, off_v = bark_offsets(tree).T
+    v_shift = off_v - np.round(0.5 * (span / tile + off_v))
+    v_ring = (z - z_base[rs]) / tile[rs] + v_shift[rs]
+
     lobed = p.lobes > 0 and p.lobe_depth != 0
     sides = stem_sides(tree, options)
     sd = sides[rs]
@@ -231,7 +260,6 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
     pos_r = np.empty((Vr, 3), dtype=np.float32)
     nrm_r = np.empty((Vr, 3), dtype=np.float32)
     uv_r = np.empty((Vr, 2), dtype=np.float32)
-    vscale = 1.0 / (2.0 * np.pi * np.maximum(tree.stem_radius, 1e-6))   # square-ish texels
     for n in np.unique(sd):
         g = np.flatnonzero(sd == n)
         col = np.arange(n + 1)
@@ -254,8 +282,8 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
             - (lf * lf * slope[g][:, None])[:, :, None] * fr[:, None, :, 2]
         nr /= np.linalg.norm(nr, axis=2, keepdims=True)
         nrm_r[dest] = nr.reshape(-1, 3)
-        uv_r[dest, 0] = np.tile(col / n, len(g))
-        uv_r[dest, 1] = np.repeat(z[g] * vscale[rs[g]], n + 1)
+        uv_r[dest, 0] = (col[None, :] / n + off_u[rs[g]][:, None]).ravel()
+        uv_r[dest, 1] = np.repeat(v_ring[g], n + 1)
     rv = np.repeat(np.arange(R), nv)
 
     ring_J = np.concatenate([rig.node_joints[a], rig.node_joints[b]], axis=1)
@@ -265,9 +293,8 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
 
     # --- apex per stem (tip point, or a low cone over a blunt tip) ---
     axis = F[tip][:, :, 2]
-    cap = np.where(pointed, 0.0, options.cap_height * tree.node_radius[tip])
     pos_a = tree.node_pos[tip] + cap[:, None] * axis
-    uv_a = np.column_stack([np.full(S, 0.5), (tree.node_z[tip] + cap) * vscale])
+    uv_a = np.column_stack([0.5 + off_u, span / tile + v_shift])
     apex_J, apex_W = merge_influences(rig.node_joints[tip], rig.node_weights[tip])
 
     # --- triangles: quads between consecutive rings of a stem, then a fan to the apex ---
