@@ -149,6 +149,16 @@ def _grid(variants: int, size: int):
     return cols, rows, cw, ch, pad
 
 
+def atlas_rects(variants: int, size: int) -> np.ndarray:
+    """The card rectangles (LeafAtlas.rects) of a `variants`-leaf atlas of side `size`, without
+    drawing it: a mesh can be UV-mapped while the pixels are still being made."""
+    cols, _rows, cw, ch, pad = _grid(variants, size)
+    r, c = np.divmod(np.arange(variants), cols)
+    x0, y0 = c * cw + pad, r * ch + pad
+    return (np.stack([x0, y0, x0 + cw - 2 * pad, y0 + ch - 2 * pad], axis=1)
+            / size).astype(np.float32)
+
+
 def _coverage(shape: int, bw: int, bh: int):
     """Anti-aliased blade coverage over a bh × bw card, tip at row 0.
 
@@ -339,7 +349,7 @@ def leaf_atlas(shape: int, color, size: int = 512, variants: int = 4, seed: int 
     vein_col = np.array([1.35, 1.30, 0.85], dtype=np.float32)        # pale yellow-green
 
     rgba = np.zeros((size, size, 4), dtype=np.uint8)
-    rects = np.zeros((variants, 4), dtype=np.float32)
+    rects = atlas_rects(variants, size)
     alpha8 = np.round(alpha * 255.0).astype(np.uint8)
     lins = []
     for k in range(variants):
@@ -372,8 +382,6 @@ def leaf_atlas(shape: int, color, size: int = 512, variants: int = 4, seed: int 
         # Solid texels are their own nearest; the rest take the nearest solid texel's colour.
         rgba[y0:y0 + ch, x0:x0 + cw, :3] = blade.take(nearest, axis=0).reshape(ch, cw, 3)
         rgba[y0 + pad:y0 + pad + bh, x0 + pad:x0 + pad + bw, 3] = alpha8
-        rects[k] = ((x0 + pad) / size, (y0 + pad) / size,
-                    (x0 + pad + bw) / size, (y0 + pad + bh) / size)
     # Unused cells and texels outside every cell (size not a multiple of the grid) get leaf
     # colour too, alpha 0, so nothing dark bleeds in at small mip levels.
     for k in range(variants, rows * cols):
