@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import dataclasses
 import io
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -11,13 +13,17 @@ import pytest
 from PIL import Image
 
 from treegen_cli.errors import TreegenError
-from treegen_cli.materials import ALPHA_CUTOFF, LEAF_VARIANTS, MaterialOptions, build_materials
+from treegen_cli.materials import (ALPHA_CUTOFF, LEAF_VARIANTS, MATERIAL_DEFAULTS, MaterialOptions,
+                                   build_materials)
 from treegen_cli.mesh import FULL_CARD_CELL
-from treegen_cli.params import load_params
+from treegen_cli.params import load_params, parse_params_text
+from treegen_cli.pipeline import MakeOptions, build_asset
 from treegen_cli.textures import atlas_rects, species_colors, srgb8_to_linear
 
 ROOT = Path(__file__).resolve().parent.parent
 SPECIES = ROOT / "species"
+PALM = SPECIES / "fan_palm.txt"          # 28 stems, 2,160 leaves: quick to grow
+QUICK = MakeOptions(wind=None, lod=None)
 
 
 def species(name):
@@ -154,3 +160,92 @@ def test_bad_custom_textures_name_the_flag_and_the_file(aspen, tmp_path):
             assert msg.startswith(f"{flag} {path}: ") and why in msg and "\n" not in msg
         with pytest.raises(TreegenError, match=f"{flag} .*cannot be combined with --no-textures"):
             build_materials(aspen, MaterialOptions(textures=False, **{field: good}))
+
+
+# ------------------------------------------------------------------------------ pipeline
+
+def leaf_prim(asset, lod=0):
+    return next(p for p in asset.lods[lod].primitives if p.name == "leaves")
+
+
+def test_pipeline_maps_leaves_into_the_atlas_and_uses_the_materials():
+    params = load_params(PALM)
+    asset, tree = build_asset(params, 0, QUICK)
+    assert [m.name for m in asset.materials] == ["bark", "leaf"]
+    assert asset.materials[1].base_texture is not None
+    cells = np.asarray(atlas_rects(LEAF_VARIANTS, 512), dtype=np.float64)
+    uv = leaf_prim(asset).uvs.astype(np.float64).reshape(tree.n_leaves, -1, 2)
+    lo = np.column_stack([cells[:, 0], 1 - cells[:, 3]])   # bottom-left cell bounds
+    hi = np.column_stack([cells[:, 2], 1 - cells[:, 1]])
+    inside = np.all((uv[:, None] >= lo[None, :, None] - 1e-6)
+                    & (uv[:, None] <= hi[None, :, None] + 1e-6), axis=(2, 3))
+    assert np.all(inside.sum(axis=1) == 1)
+    assert len(np.unique(inside.argmax(axis=1))) == LEAF_VARIANTS
+    # Same seed, same file; the textures do not depend on the tree seed (shared by a forest).
+    again, _ = build_asset(params, 0, QUICK)
+    np.testing.assert_array_equal(leaf_prim(again).uvs, leaf_prim(asset).uvs)
+    other, _ = build_asset(params, 5, QUICK)
+    assert other.materials[1].base_texture == asset.materials[1].base_texture
+
+
+def test_pipeline_without_textures_or_with_a_custom_leaf_maps_whole_cards(tmp_path):
+    params = load_params(PALM)
+    plain, tree = build_asset(params, 0, dataclasses.replace(
+        QUICK, materials=MaterialOptions(textures=False)))
+    assert all(m.base_texture is None for m in plain.materials)
+    custom, _ = build_asset(params, 0, dataclasses.replace(
+        QUICK, materials=MaterialOptions(leaf_texture=write_png(tmp_path / "l.png"))))
+    for asset in (plain, custom):
+        uv = leaf_prim(asset).uvs.reshape(tree.n_leaves, -1, 2)
+        assert uv.min() == 0.0 and uv.max() == 1.0
+        np.testing.assert_array_equal(uv, np.broadcast_to(uv[:1], uv.shape))
+
+
+def test_species_file_leaf_colour_reaches_the_colour_only_material():
+    text = PALM.read_text() + "\nLeafColor ff0000\n"
+    params = parse_params_text(text, "red_palm.txt")
+    m = build_materials(params, MaterialOptions(textures=False)).materials
+    assert m[1].base_color == (1.0, 0.0, 0.0, 1.0)
+
+
+# ------------------------------------------------------------------------------ CLI
+
+def treegen(*args):
+    return subprocess.run([sys.executable, "-m", "treegen_cli", *map(str, args)],
+                          capture_output=True, text=True, cwd=ROOT)
+
+
+def test_cli_texture_flags(tmp_path):
+    out = tmp_path / "palm.glb"
+    fast = ["--no-wind", "--no-lod"]
+    proc = treegen("make", PALM, "-o", out, *fast, "--texture-size", "64",
+                   "--leaf-texture", write_png(tmp_path / "leaf.png"))
+    assert proc.returncode == 0, proc.stderr
+    assert out.stat().st_size > 0
+    proc = treegen("make", PALM, "-o", tmp_path / "plain.glb", *fast, "--no-textures")
+    assert proc.returncode == 0, proc.stderr
+    help_text = treegen("make", "--help").stdout
+    for flag in ("--texture-size", "--leaf-texture", "--bark-texture", "--no-textures"):
+        assert flag in help_text
+
+
+@pytest.mark.parametrize("args, needles", [
+    (["--leaf-texture", "nope.png"], ["--leaf-texture nope.png", "no such file"]),
+    (["--bark-texture", "species/fan_palm.txt"], ["--bark-texture species/fan_palm.txt",
+                                                  "not a PNG"]),
+    (["--texture-size", "300"], ["--texture-size 300", "power of two in [64, 2048]"]),
+])
+def test_cli_bad_texture_flags_exit_2_and_write_nothing(tmp_path, args, needles):
+    out = tmp_path / "x.glb"
+    proc = treegen("make", PALM, "-o", out, "--no-wind", "--no-lod", *args)
+    assert proc.returncode == 2, proc.stderr
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
+    for n in needles:
+        assert n in lines[0], lines[0]
+    assert not out.exists() and not list(tmp_path.iterdir())
+
+
+def test_defaults_are_documented_beside_the_options():
+    assert MATERIAL_DEFAULTS == MaterialOptions()
+    assert MATERIAL_DEFAULTS.textures and MATERIAL_DEFAULTS.texture_size == 512

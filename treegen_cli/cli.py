@@ -169,6 +169,15 @@ def _int_list(text: str | None, name: str) -> tuple[int, ...] | None:
               show_default=True,
               help="card: one textured quad per leaf (the leaf outline belongs in the texture's "
                    "alpha); shape: the species' LeafShape outline as geometry.")
+@click.option("--texture-size", type=int, default=512, show_default=True,
+              help="Leaf atlas side in texels, a power of two in [64, 2048]; bark maps are half.")
+@click.option("--leaf-texture", type=click.Path(path_type=Path), default=None, metavar="FILE.png",
+              help="Your own leaf image (PNG, alpha = cut-out), embedded as is; each card maps "
+                   "to the whole image [default: generated from the species].")
+@click.option("--bark-texture", type=click.Path(path_type=Path), default=None, metavar="FILE.png",
+              help="Your own tileable bark image (PNG), embedded as is, wrapping once around "
+                   "every stem [default: generated albedo + normal map].")
+@click.option("--no-textures", is_flag=True, help="Colour-only materials (species colours).")
 @click.option("--wind-speed", type=float, default=4.0, show_default=True, help="Mean wind speed, m/s.")
 @click.option("--wind-dir", type=float, default=0.0, show_default=True,
               help="Direction the wind blows towards, degrees (0 = +X, 90 = +Y in Z-up terms).")
@@ -190,13 +199,14 @@ def _int_list(text: str | None, name: str) -> tuple[int, ...] | None:
 @click.option("--json", "as_json", is_flag=True,
               help="Print a machine-readable summary (files, bytes, counts, seconds per stage).")
 def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels, sides,
-         leaf_geometry, wind_speed, wind_dir, gust, turbulence, duration, fps, no_wind, lod_distances, fov, width,
+         leaf_geometry, texture_size, leaf_texture, bark_texture, no_textures, wind_speed, wind_dir, gust, turbulence, duration, fps, no_wind, lod_distances, fov, width,
          error_px, error_form, interpolation, no_lod, max_vertices, max_keys, as_json):
     """Grow SPECIES and write a skinned, wind-animated tree to OUTPUT."""
     from dataclasses import replace
 
     from .exchange import check_suffix, export
     from .limits import Limits
+    from .materials import MaterialOptions
     from .mesh import MESH_DEFAULTS
     from .pipeline import MakeOptions, build_asset
     from .progress import current_reporter
@@ -222,12 +232,14 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
         mesh=mesh, wind=wind,
         lod=None if no_lod else _lod_from(lod_distances, fov, width, error_px, error_form,
                                           interpolation),
-        limits=Limits(max_vertices=max_vertices, max_keys=max_keys))
+        limits=Limits(max_vertices=max_vertices, max_keys=max_keys),
+        materials=MaterialOptions(textures=not no_textures, texture_size=texture_size,
+                                  leaf_texture=leaf_texture, bark_texture=bark_texture))
     params = _load(species)
     rep = current_reporter()
     per_lod = 3 if wind is None else 5                  # generate, rig, mesh (, wind, lod)
-    timings = rep.timings(total=per_lod + 2 if options.lod is None else
-                          len(options.lod.distances) * per_lod + 2)   # (+ prepare, write)
+    timings = rep.timings(total=per_lod + 3 if options.lod is None else
+                          len(options.lod.distances) * per_lod + 3)   # (+ materials, prepare, write)
     with rep.live():
         asset, tree = _in_file(species, build_asset, params, seed, options, timings)
         written = timings.run("write", export, asset, output)
