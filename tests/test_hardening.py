@@ -350,7 +350,8 @@ def test_verbose_reports_each_stage_on_stderr(tmp_path):
     proc = treegen("make", SPECIES / "quaking_aspen.txt", "-o", tmp_path / "a.glb", "-v", *FAST)
     assert proc.returncode == 0, proc.stderr
     stages = [l.split()[0] for l in proc.stderr.splitlines()]
-    assert stages == ["generate", "rig", "mesh", "wind", "prepare", "write", "counts"]
+    assert stages == ["materials", "generate", "rig", "mesh", "wind", "textures", "prepare", "write",
+                      "counts"]
     assert "nodes" in proc.stderr.splitlines()[-1]
     assert all(l.rstrip().endswith(" s") for l in proc.stderr.splitlines()[:-1])
     assert "\x1b" not in proc.stderr and "\r" not in proc.stderr
