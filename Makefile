@@ -1,7 +1,7 @@
 # treegen — install, test, benchmark.
 PYTHON ?= python3
 
-.PHONY: install test bench clean gallery
+.PHONY: install test lint bench clean gallery
 
 install:
 	$(PYTHON) -m pip install --quiet -e ".[dev]"
@@ -16,8 +16,13 @@ install:
 		rm -f $$log; \
 	fi
 
-test:
+test: lint
 	$(PYTHON) -m pytest
+
+# ruff's lint rules and a type check of the public stage and exchange modules (pyproject.toml)
+lint:
+	$(PYTHON) -m ruff check treegen_cli tests bench
+	$(PYTHON) -m mypy
 
 bench:
 	$(PYTHON) bench/generate_bench.py

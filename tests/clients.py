@@ -1,6 +1,7 @@
 """Real glTF clients nobody on the project wrote: what they see when they import our GLBs.
 
     godot_import(path, timeout=120) -> dict   Godot 3.2 editor import (headless server build) + inspect.gd
+    godot_import_many(paths) -> {path: dict}  the same for many files in one project (one import run)
     three_load(path, timeout=120) -> dict     three.js GLTFLoader + AnimationMixer in Node (tools/three_check.mjs)
     babylon_load(path, timeout=120, container=False) -> dict
                                               Babylon.js NullEngine + glTF loader (tools/babylon_check.mjs)
@@ -211,6 +212,62 @@ def godot_import(glb_path, timeout: float = 120, *, options: dict | None = None,
         if keep_project:
             shutil.copytree(proj, keep_project, dirs_exist_ok=True)
     return result
+
+
+def godot_import_many(glb_paths, timeout: float = 600, *, inspect_timeout: float = 120) -> dict:
+    """Import many GLBs in one Godot project (one editor run: Godot's start-up is paid once),
+    then inspect each: {path: report} with the same keys as godot_import's, where
+    "import_seconds" is the whole batch's import time."""
+    version = godot_version()
+    paths = [Path(p) for p in glb_paths]
+    results: dict = {}
+    with tempfile.TemporaryDirectory(prefix="treegen_godot_") as tmp:
+        tmp = Path(tmp)
+        proj = tmp / "project"
+        proj.mkdir()
+        (proj / "project.godot").write_text(_PROJECT)
+        names = {}
+        for i, p in enumerate(paths):
+            name = f"f{i:03d}_{p.stem}.glb"
+            names[p] = name
+            shutil.copyfile(p, proj / name)
+            (proj / f"{name}.import").write_text(_IMPORT_PRESET)
+        shutil.copyfile(TOOLS / "godot" / "inspect.gd", proj / "inspect.gd")
+        env = dict(os.environ, LANG="en_US.UTF-8", XDG_CONFIG_HOME=str(tmp / "config"),
+                   XDG_DATA_HOME=str(tmp / "data"), XDG_CACHE_HOME=str(tmp / "cache"))
+        rc, _, err, secs = _run([GODOT, "--path", str(proj), "--editor", "--quit"], env=env,
+                                timeout=timeout)
+        import_noise: dict = {}
+        import_errors = _godot_messages(err, "import", import_noise)
+        for p in paths:
+            name = names[p]
+            r: dict = {"client": "godot", "version": version, "file": str(p), "imported": False,
+                       "reason": None, "import_seconds": round(secs, 2),
+                       "import_exit": "timeout" if rc is None else rc,
+                       "errors": [e for e in import_errors if name in e["message"] or
+                                  p.stem in e["message"]], "noise": {}}
+            imp = proj / ".import"
+            if not (imp.is_dir() and list(imp.glob(f"{name}-*.scn"))):
+                r["reason"] = "timeout" if rc is None else f"no imported scene (exit {rc})"
+                r["log_tail"] = _tail(err)
+                results[str(p)] = r
+                continue
+            rc2, out, err2, secs2 = _run([GODOT, "--path", str(proj), "-s", "res://inspect.gd",
+                                          f"--scene=res://{name}"], env=env, timeout=inspect_timeout)
+            r["inspect_seconds"] = round(secs2, 2)
+            r["errors"] += _godot_messages(err2, "inspect", r["noise"])
+            line = next((ln for ln in out.splitlines() if ln.startswith("TREEGEN_JSON ")), None)
+            if line is None:
+                r["reason"] = "inspect: timeout" if rc2 is None else f"inspect: no output (exit {rc2})"
+                r["log_tail"] = _tail(out + err2)
+            else:
+                report = json.loads(line[len("TREEGEN_JSON "):])
+                r.update({k: v for k, v in report.items() if k != "scene"})
+                r["imported"] = bool(report.get("loaded"))
+                if not r["imported"]:
+                    r["reason"] = report.get("reason", "not loaded")
+            results[str(p)] = r
+    return results
 
 
 # ---------------------------------------------------------------------------------------------

@@ -14,7 +14,6 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
-import pytest
 from scipy.spatial.transform import Rotation
 
 from treegen_cli.params import Params
@@ -35,7 +34,7 @@ def synthetic_tree(leaf_shape: int = 0, lobes: int = 0, lobe_depth: float = 0.0,
                    flare: float = 0.0) -> Tree:
     params = dataclasses.replace(Params(), name="synthetic", levels=3, leaf_shape=leaf_shape,
                                  lobes=lobes, lobe_depth=lobe_depth, flare=flare)
-    I = np.eye(3)
+    eye = np.eye(3)
     rx30 = Rotation.from_euler("x", 30, degrees=True).as_matrix()
     ry60 = Rotation.from_euler("y", 60, degrees=True).as_matrix()
     b1 = Rotation.from_euler("zy", [180, 60], degrees=True).as_matrix()
@@ -43,7 +42,7 @@ def synthetic_tree(leaf_shape: int = 0, lobes: int = 0, lobe_depth: float = 0.0,
     c = Rotation.from_euler("zy", [90, 45], degrees=True).as_matrix()
 
     stems = []  # (level, parent, parent_node, offset, length, radius, clone, nodes)
-    trunk = _stem([0, 0, 0], [I] * 5, 2.0, 0.0, [0.4, 0.3, 0.2, 0.1, 0.0])
+    trunk = _stem([0, 0, 0], [eye] * 5, 2.0, 0.0, [0.4, 0.3, 0.2, 0.1, 0.0])
     stems.append((0, -1, -1, 0.0, 8.0, 0.4, False, trunk))
     clone = _stem(trunk[0][2], [rx30] * 3, 2.0, 4.0, [0.2, 0.1, 0.05])
     stems.append((0, 0, 2, 4.0, 8.0, 0.4, True, clone))
@@ -113,11 +112,9 @@ def trunk_only(lobes: int = 0, lobe_depth: float = 0.0, flare: float = 0.0) -> T
 
 
 def species_tree(name: str, seed: int = 0) -> Tree:
-    """A bundled species grown by the generator (skips while either is not there yet)."""
-    generate = pytest.importorskip("treegen_cli.generate").generate
+    """A bundled species grown by the generator."""
+    from treegen_cli.generate import generate
     from treegen_cli.params import load_params
 
     path = Path(__file__).resolve().parent.parent / "species" / f"{name}.txt"
-    if not path.exists():
-        pytest.skip(f"{path} not written yet")
     return generate(load_params(path), seed=seed)

@@ -204,7 +204,7 @@ def test_nearer_instances_get_finer_lods(scene):
     assert np.all(np.diff(lod[order]) >= 0)
     assert lod.min() < lod.max()                               # the layout spans LODs
     for i in sc.instances:
-        starts = [l.distance for l in sc.prototypes[i.prototype].lods]
+        starts = [lod.distance for lod in sc.prototypes[i.prototype].lods]
         assert starts[i.lod] <= i.distance / i.scale
 
 
@@ -244,9 +244,16 @@ def test_instances_and_placement_match_the_layout(scene, tmp_path):
     gltf, blob = read_gltf(path)
     nodes = gltf["nodes"]
     roots = gltf["scenes"][0]["nodes"]
-    assert len(roots) == len(layout.placements)
-    for root, p in zip(roots, layout.placements):
-        place = nodes[nodes[root]["children"][0]]
+    # per tree, its skinned mesh and its placed rig side by side at the root
+    meshes = [r for r in roots if "mesh" in nodes[r]]
+    places = [r for r in roots if "mesh" not in nodes[r]]
+    assert len(meshes) == len(places) == len(layout.placements)
+    assert all("children" not in nodes[m] for m in meshes)
+    for m, pl in zip(meshes, places):
+        assert nodes[pl]["name"] == nodes[m]["name"] + "_place"
+        assert gltf["skins"][nodes[m]["skin"]]["skeleton"] == nodes[pl]["children"][0]
+    for root, p in zip(places, layout.placements):
+        place = nodes[root]
         x, y, z = p.position
         assert np.allclose(place.get("translation", [0, 0, 0]), [x, z, -y], atol=1e-6)   # Y up
         q = place.get("rotation", [0, 0, 0, 1])
@@ -289,7 +296,8 @@ def test_gltf_forest_validator_clean(scene, tmp_path):
         assert report["issues"]["numErrors"] == 0 and report["issues"]["numWarnings"] == 0, summary(report)
         gltf, _ = read_gltf(path)
         if all_lods:
-            lod_ids = [gltf["nodes"][r]["extensions"]["MSFT_lod"]["ids"] for r in gltf["scenes"][0]["nodes"]]
+            lod_ids = [gltf["nodes"][r]["extensions"]["MSFT_lod"]["ids"] for r in gltf["scenes"][0]["nodes"]
+                       if "mesh" in gltf["nodes"][r]]
             assert all(len(ids) == len(sc.prototypes[0].lods) - 1 for ids in lod_ids)
             assert gltf["extensionsUsed"] == ["MSFT_lod"]
 

@@ -275,7 +275,7 @@ def test_radii_positive_and_non_increasing(species_tree):
     p, t = species_tree
     assert np.all(t.node_radius > 0) and np.all(t.stem_radius > 0)
     same_stem = t.node_stem[1:] == t.node_stem[:-1]
-    taper_ok = np.array([p.level[min(l, 9)].taper <= 2.0 for l in t.stem_level[t.node_stem[1:]]])
+    taper_ok = np.array([p.level[min(lv, 9)].taper <= 2.0 for lv in t.stem_level[t.node_stem[1:]]])
     d = np.diff(t.node_radius)[same_stem & taper_ok]
     assert np.all(d <= 1e-12)
 

@@ -273,23 +273,31 @@ def test_posed_mesh_matches_generator_space(written):
     assert np.abs(got - rest).max() > 0.05   # the key really moves the tree
 
 
-def test_msft_lod(written):
+def test_msft_lod_and_node_layout(written):
+    """LOD0's mesh node and one rig node per LOD are the scene roots; a skinned mesh node
+    never parents a joint (Godot 3 hangs on that); lower LODs' meshes only through MSFT_lod."""
     asset, p = written[3, ".glb"]
     gltf, _ = read_gltf(p)
+    nodes = gltf["nodes"]
     roots = gltf["scenes"][0]["nodes"]
-    assert len(roots) == 1
-    top = gltf["nodes"][roots[0]]
+    meshes = [r for r in roots if "mesh" in nodes[r]]
+    rigs = [r for r in roots if "mesh" not in nodes[r]]
+    assert len(meshes) == 1 and len(rigs) == len(asset.lods)
+    top = nodes[meshes[0]]
     ids = top["extensions"]["MSFT_lod"]["ids"]
     assert len(ids) == 2 and not set(ids) & set(roots)
-    assert [gltf["nodes"][i]["mesh"] for i in ids] == [1, 2]
-    assert [gltf["nodes"][i]["skin"] for i in ids] == [1, 2]
+    assert [nodes[i]["mesh"] for i in ids] == [1, 2]
+    assert [nodes[i]["skin"] for i in ids] == [1, 2]
+    assert [nodes[i]["name"] for i in [meshes[0], *ids]] == [f"synthetic_LOD{k}" for k in range(3)]
     cover = top["extras"]["MSFT_screencoverage"]
     assert cover == [lod.screen_coverage for lod in asset.lods]
     assert all(a > b for a, b in zip(cover, cover[1:]))
+    for k, i in enumerate([meshes[0], *ids]):
+        assert nodes[i]["extras"]["treegen_lod"]["index"] == k
+        assert nodes[i]["extras"]["treegen_lod"]["distance_m"] == asset.lods[k].distance
+        assert "children" not in nodes[i]
+        assert nodes[rigs[k]]["children"] == [gltf["skins"][k]["skeleton"]]
     assert gltf["extensionsUsed"] == ["MSFT_lod"] and "extensionsRequired" not in gltf
-    # each LOD node carries its own skeleton as children
-    for k, i in enumerate([roots[0], *ids]):
-        assert gltf["nodes"][i]["children"] == [gltf["skins"][k]["skeleton"]]
     single, _ = read_gltf(written[1, ".glb"][1])
     assert "extensionsUsed" not in single and "extensions" not in single["nodes"][0]
 

@@ -68,7 +68,7 @@ def test_blended_weights_are_ushort_summing_exactly(tmp_path):
     np.testing.assert_array_equal(joints[q > 0], j[q > 0])
 
 
-def test_rigid_weights_are_exact_bytes_and_card_uvs_exact_shorts(tmp_path):
+def test_rigid_weights_are_exact_bytes_and_uvs_are_float(tmp_path):
     asset = synthetic_asset(1, with_clip=False)
     p = tmp_path / "r.glb"
     export(asset, p)
@@ -80,9 +80,9 @@ def test_rigid_weights_are_exact_bytes_and_card_uvs_exact_shorts(tmp_path):
     assert acc[la["WEIGHTS_0"]]["componentType"] == UNSIGNED_BYTE
     q = _raw(gltf, blob, la["WEIGHTS_0"])
     np.testing.assert_array_equal(q, (src.weights * 255).astype(np.uint8))
-    # leaf-card UVs (0s and 1s) as normalized shorts, exact; bark v runs past 1: stays float
-    assert acc[la["TEXCOORD_0"]]["componentType"] == UNSIGNED_SHORT
-    assert acc[la["TEXCOORD_0"]]["normalized"] is True
+    # float UVs everywhere: Godot 3.2 reads normalized integer UVs as 0..65535
+    assert acc[la["TEXCOORD_0"]]["componentType"] == FLOAT
+    assert "normalized" not in acc[la["TEXCOORD_0"]]
     uv = read_accessor(gltf, blob, la["TEXCOORD_0"])
     np.testing.assert_array_equal(uv[:, 0], src.uvs[:, 0])
     np.testing.assert_array_equal(uv[:, 1], 1.0 - src.uvs[:, 1])
@@ -113,30 +113,28 @@ def test_real_mesh_is_validator_clean(tmp_path, geometry):
     assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, summary(report)
     gltf, blob = read_gltf(p)
     leaves = gltf["meshes"][0]["primitives"][1]["attributes"]
-    uv_type = gltf["accessors"][leaves["TEXCOORD_0"]]["componentType"]
-    assert uv_type == (UNSIGNED_SHORT if geometry == "card" else FLOAT)
+    assert gltf["accessors"][leaves["TEXCOORD_0"]]["componentType"] == FLOAT
     pos = read_accessor(gltf, blob, leaves["POSITION"])
     assert len(pos) == tree.n_leaves * (4 if geometry == "card" else 8)
 
 
-def test_flat_leaf_cards_leave_normals_to_the_client(tmp_path):
-    """Cards flagged flat_normals get no NORMAL: the flat normals a client must compute from
-    the positions (counter-clockwise faces) are the mesh's own leaf normals."""
+def test_leaves_always_carry_their_normals(tmp_path):
+    """NORMAL is written for flat leaf cards too (Godot computes no normals, Babylon warns and
+    regenerates them), and the written normals are the cards' own face normals."""
     tree = synthetic_tree(leaf_shape=6)                  # folded palm outline: two planes
     rig = build_rig(tree, RigOptions(max_joints=5))
     for geometry in ("card", "shape"):
         bark, leaves = build_mesh(tree, rig, MeshOptions(leaf_geometry=geometry))
-        assert leaves.flat_normals and not bark.flat_normals
         p = tmp_path / f"{geometry}.glb"
         export(Asset("t", list(MATERIALS), [Lod([bark, leaves], rig.skeleton)]), p)
         gltf, blob = read_gltf(p)
         bark_a, leaf_a = (q["attributes"] for q in gltf["meshes"][0]["primitives"])
-        assert "NORMAL" in bark_a and "NORMAL" not in leaf_a
+        assert "NORMAL" in bark_a and "NORMAL" in leaf_a
         pos = read_accessor(gltf, blob, leaf_a["POSITION"]).astype(np.float64)
+        nrm = read_accessor(gltf, blob, leaf_a["NORMAL"]).astype(np.float64)
         tri = read_accessor(gltf, blob, gltf["meshes"][0]["primitives"][1]["indices"])
         t = pos[tri.reshape(-1, 3)]
         face = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
         face /= np.linalg.norm(face, axis=1, keepdims=True)
-        y_up = np.stack([leaves.normals[:, 0], leaves.normals[:, 2], -leaves.normals[:, 1]], -1)
-        own = y_up[leaves.indices.reshape(-1, 3)]                  # (T, 3 corners, 3)
+        own = nrm[tri.reshape(-1, 3)]                             # (T, 3 corners, 3)
         np.testing.assert_allclose(np.broadcast_to(face[:, None], own.shape), own, atol=1e-4)

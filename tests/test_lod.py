@@ -65,7 +65,7 @@ def test_every_lod_within_error_bound(species):
     assert len(asset.lods) == len(DISTANCES)
     for k, lod in enumerate(asset.lods):
         (clip,) = lod.clips
-        assert clip.name == f"wind_lod{k}"
+        assert clip.name == ("wind_loop" if k == 0 else f"wind_lod{k}_loop")
         assert lod.distance == DISTANCES[k]
         if lod.distance == 0.0:
             assert clip.keys is None                          # d → 0: the dense clip
@@ -202,7 +202,8 @@ def test_written_lods_validate(tmp_path):
     raw = glb.read_bytes()
     n = int.from_bytes(raw[12:16], "little")
     doc = json.loads(raw[20:20 + n])
-    assert [a["name"] for a in doc["animations"]] == [f"wind_lod{k}" for k in range(len(DISTANCES))]
+    assert [a["name"] for a in doc["animations"]] == \
+        ["wind_loop"] + [f"wind_lod{k}_loop" for k in range(1, len(DISTANCES))]
     assert "MSFT_lod" in doc["extensionsUsed"] and "MSFT_lod" not in doc.get("extensionsRequired", [])
     try:
         report = validate_gltf(glb)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-pxr = pytest.importorskip("pxr")
+import pxr  # noqa: E402,F401  (usd-core is a dependency: a missing pxr fails loudly)
 from pxr import Gf, Usd, UsdGeom, UsdLod, UsdShade, UsdSkel, Vt  # noqa: E402
 
 from synthetic import synthetic_asset  # noqa: E402

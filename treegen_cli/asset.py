@@ -70,7 +70,7 @@ class Clip:
     """Baked joint rotations. `keys[j]` selects which of `times` joint j keeps (LOD schedule);
     None keeps every key. Translations and scales stay at rest."""
 
-    name: str                              # "wind", "wind_lod1", ...
+    name: str                              # "wind_loop", "wind_lod1_loop", ...
     times: np.ndarray                      # float64 (K,), seconds, starts at 0
     rotations: np.ndarray                  # float64 (K, J, 4), local quaternions xyzw
     interpolation: str = "LINEAR"          # "LINEAR" or "STEP"

@@ -191,6 +191,9 @@ def _int_list(text: str | None, name: str) -> tuple[int, ...] | None:
 @click.option("--no-wind", is_flag=True, help="Write no animation (rest pose only).")
 @_lod_options
 @click.option("--no-lod", is_flag=True, help="Write one LOD with the dense clip.")
+@click.option("--lod-files", is_flag=True,
+              help="Write each LOD as its own complete file, NAME_LOD0.glb, NAME_LOD1.glb, … "
+                   "(for engines that ignore MSFT_lod: Godot, Unity LODGroup, Unreal).")
 @click.option("--max-vertices", type=int, default=20_000_000, show_default=True,
               help="Refuse meshes with more vertices than this per LOD (counted from the grown "
                    "tree before the mesh is built).")
@@ -199,12 +202,14 @@ def _int_list(text: str | None, name: str) -> tuple[int, ...] | None:
 @click.option("--json", "as_json", is_flag=True,
               help="Print a machine-readable summary (files, bytes, counts, seconds per stage).")
 def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels, sides,
-         leaf_geometry, texture_size, leaf_texture, bark_texture, no_textures, wind_speed, wind_dir, gust, turbulence, duration, fps, no_wind, lod_distances, fov, width,
-         error_px, error_form, interpolation, no_lod, max_vertices, max_keys, as_json):
+         leaf_geometry, texture_size, leaf_texture, bark_texture, no_textures, wind_speed,
+         wind_dir, gust, turbulence, duration, fps, no_wind, lod_distances, fov, width,
+         error_px, error_form, interpolation, no_lod, lod_files, max_vertices, max_keys, as_json):
     """Grow SPECIES and write a skinned, wind-animated tree to OUTPUT."""
     from dataclasses import replace
 
-    from .exchange import check_suffix, export
+    from .exchange import check_suffix, export, export_parts
+    from .prepare import split_lods
     from .limits import Limits
     from .materials import MaterialOptions
     from .mesh import MESH_DEFAULTS
@@ -242,7 +247,8 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
                           len(options.lod.distances) * per_lod + 3)   # (+ materials, prepare, write)
     with rep.live():
         asset, tree = _in_file(species, build_asset, params, seed, options, timings)
-        written = timings.run("write", export, asset, output)
+        written = timings.run("write", export_parts, split_lods(asset), output) if lod_files \
+            else timings.run("write", export, asset, output)
     per_level = tree_stats(tree)["stems_per_level"]
     rep.detail(f"  counts    stems per level {per_level}, {tree.n_nodes:,} nodes, "
                f"{tree.n_leaves:,} leaves, {len(asset.lods)} LOD(s)")

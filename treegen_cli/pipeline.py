@@ -47,6 +47,13 @@ class Timings:
         return out
 
 
+def clip_name(lod: int) -> str:
+    """Engines loop a clip when its name says so (Godot 3 and 4: a "_loop" suffix), so the wind
+    is "wind_loop" (LOD0, or a file with one LOD); lower LODs in one MSFT_lod file get
+    "wind_lod<k>_loop"."""
+    return "wind_loop" if lod == 0 else f"wind_lod{lod}_loop"
+
+
 def build_lod(tree: Tree, options: MakeOptions, seed: int, timings: Timings) -> Lod:
     """Rig, skin and animate one grown tree."""
     check_mesh(tree, options.mesh, options.limits)
@@ -56,7 +63,8 @@ def build_lod(tree: Tree, options: MakeOptions, seed: int, timings: Timings) -> 
     primitives = timings.run("mesh", build_mesh, tree, rig, options.mesh)
     clips = []
     if options.wind is not None:
-        clips.append(timings.run("wind", bake_wind, tree, rig, options.wind, seed))
+        clip = timings.run("wind", bake_wind, tree, rig, options.wind, seed)
+        clips.append(replace(clip, name=clip_name(0)))
     return Lod(primitives=primitives, skeleton=rig.skeleton, clips=clips)
 
 
@@ -64,7 +72,7 @@ def build_lods(params: Params, tree: Tree, options: MakeOptions, seed: int,
                timings: Timings) -> list[Lod]:
     """One coarser tree per LOD distance (lod.lod_stage_options), each with its own rig, mesh,
     dense wind (same wind options and seed, so the motion matches) and a clip decimated for its
-    distance ("wind_lod0", ...). LOD0 reuses `tree`; lower LODs regrow it from the same seed."""
+    distance (clip_name(k)). LOD0 reuses `tree`; lower LODs regrow it from the same seed."""
     lo = options.lod
     area = float(tree.leaf_area.sum())
     height = tree_height(tree)
@@ -78,7 +86,7 @@ def build_lods(params: Params, tree: Tree, options: MakeOptions, seed: int,
             t = match_leaf_area(t, area)
         lod = build_lod(t, replace(options, rig=rig, mesh=mesh), seed, timings)
         clips = [timings.run("lod", decimate, lod.skeleton, lod.primitives, c, distance, lo,
-                             f"wind_lod{k}")[0] for c in lod.clips]
+                             clip_name(k))[0] for c in lod.clips]
         # MSFT_screencoverage: LOD k is shown while the tree covers more than the coverage at
         # which LOD k+1 takes over; the last LOD is never culled.
         coverage = screen_coverage(height, lo.distances[k + 1], lo) if k + 1 < len(lo.distances) else 0.0

@@ -109,3 +109,19 @@ def prepare_forest(forest: Forest) -> Forest:
             looped.append(prepare(replace(a, lods=[
                 replace(lod, clips=[repeat_clip(c, 2) for c in lod.clips]) for lod in a.lods])))
     return replace(forest, prototypes=protos, variants=variants, looped=looped)
+
+
+def split_lods(asset: Asset) -> list[Asset]:
+    """One complete asset per LOD (its own skeleton, mesh and clip, named as a single-LOD file's:
+    "wind_loop"), for engines that take per-LOD files (Unity LODGroup `_LOD0…`, Unreal, Godot
+    with visibility ranges). `extras` record the LOD's index, count, distance and coverage.
+
+    Result: a 4-LOD asset → 4 assets of one LOD each, extras lod_index 0..3."""
+    out = []
+    for k, lod in enumerate(asset.lods):
+        clips = [replace(c, name="wind_loop") for c in lod.clips[:1]] + list(lod.clips[1:])
+        out.append(replace(asset, lods=[replace(lod, clips=clips)],
+                           extras=asset.extras | {"lod_index": k, "lod_count": len(asset.lods),
+                                                  "lod_distance_m": float(lod.distance),
+                                                  "lod_screen_coverage": float(lod.screen_coverage)}))
+    return out

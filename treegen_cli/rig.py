@@ -99,6 +99,20 @@ def _select(tree, options: RigOptions) -> np.ndarray:
     return include[s] & (p < chain[s]) & (p % stride[s] == 0) & ~(clone[s] & (p == 0))
 
 
+def joint_names(tree, joint_node: np.ndarray, joint_stem: np.ndarray) -> list[str]:
+    """Names that say what a joint is and stay the same for every instance of a tree: "trunk_K"
+    (or "trunkS_K" with several trunks) and "bS_K" for branch stem S, K the node along the stem.
+
+    Result: a single trunk with joints on nodes 0 and 3 and one on branch 12's node 2 →
+    ["trunk_0", "trunk_3", "b12_2"]."""
+    k = joint_node - tree.stem_node_start[joint_stem]
+    level = tree.stem_level[joint_stem]
+    trunks = np.flatnonzero(tree.stem_level == 0)
+    single = len(trunks) <= 1
+    return [(f"trunk_{kk}" if single else f"trunk{ss}_{kk}") if lv == 0 else f"b{ss}_{kk}"
+            for ss, kk, lv in zip(joint_stem.tolist(), k.tolist(), level.tolist())]   # ≤ 256
+
+
 def build_rig(tree, options: RigOptions = RIG_DEFAULTS) -> Rig:
     """Joints on stem nodes under `options.max_joints`, with node and leaf skin bindings."""
     if not 1 <= options.max_joints <= _MAX_JOINTS:
@@ -161,7 +175,7 @@ def build_rig(tree, options: RigOptions = RIG_DEFAULTS) -> Rig:
     world[:, :3, :3] = R
     world[:, :3, 3] = t
     world[:, 3, 3] = 1.0
-    skeleton = Skeleton(names=[f"j{j}" for j in range(J)], parent=parent,
+    skeleton = Skeleton(names=joint_names(tree, joint_node, js), parent=parent,
                         rest_translation=local_t,
                         rest_rotation=Rotation.from_matrix(local_R).as_quat(),
                         bind_world=world)

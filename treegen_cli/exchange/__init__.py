@@ -2,6 +2,7 @@
 keyed by suffix, and the only place a suffix is checked.
 
     export(asset, "tree.glb")            # a prepared Asset   → .glb .gltf .usda .usdc .usdz .obj .ply
+    export_parts(split_lods(asset), "tree.glb")   # → tree_LOD0.glb, tree_LOD1.glb, …
     export_forest(forest, "forest.usdc") # a prepared Forest  → .glb .gltf .usda .usdc .usdz
     save_still(pixels, "tree.png")       # an RGB image       → .png .jpg .jpeg;  save_loop → .gif
     read_drawable("tree.usdz", lod=1)    # a written tree     → drawable.Drawable (preview, tests)
@@ -90,6 +91,27 @@ def export(asset: Asset, path: str | os.PathLike) -> list[Path]:
     path = check_suffix(path, WRITERS)
     writer = WRITERS[path.suffix.lower()]
     return _write(lambda tmp: writer(asset, tmp), path)
+
+
+def lod_file_paths(path: str | os.PathLike, count: int) -> list[Path]:
+    """NAME_LOD0.ext … for `path` = NAME.ext: the names Unity's LODGroup and Unreal's per-LOD
+    import look for."""
+    path = Path(path)
+    return [path.with_name(f"{path.stem}_LOD{k}{path.suffix}") for k in range(count)]
+
+
+def export_parts(parts: list[Asset], path: str | os.PathLike) -> list[Path]:
+    """Each asset of `parts` to its own file (lod_file_paths), all or nothing: every part is
+    staged in one folder and moved into place only when all were written."""
+    path = check_suffix(path, WRITERS)
+    writer = WRITERS[path.suffix.lower()]
+    targets = lod_file_paths(path, len(parts))
+
+    def write_all(tmp: Path) -> None:
+        for part, target in zip(parts, targets):   # a handful of LODs
+            writer(part, tmp.parent / target.name)
+
+    return _write(write_all, targets[0])
 
 
 def export_forest(forest: Forest, path: str | os.PathLike) -> list[Path]:

@@ -6,16 +6,19 @@ rotations). Per instance (JSON only): its own joint node hierarchy and its own s
 (a node has one parent, so joints cannot be shared), and one channel per animated joint
 pointing at the shared sampler of its variant.
 
-Per instance and LOD k:
+Per instance and LOD k, two scene roots side by side (a skinned mesh must not parent its own
+joints: Godot 3 hangs on that, and the validator wants skinned meshes at the root):
 
-    "<tree>_lod<k>"        mesh + skin, no transform, a scene root (the validator wants
-      └── "<tree>_place"   skinned mesh nodes at the root); instance TRS (Y up)
-            └── joints     the prototype's skeleton (local TRS)
+    "<tree>_LOD<k>"          mesh + skin, no transform
+    "<tree>_LOD<k>_place"    instance TRS (Y up)
+        └── joints           the prototype's skeleton (local TRS), named as in the prototype,
+                             so importers that merge identical skins (Godot) find every bone
 
-One animation "wind" drives every instance; phase variety comes from `phase_variants`
-copies of each clip, key arrays rotated (Forest.variants, prepared), each instance playing the
-variant the forest stage chose for its time offset. With `all_lods` every LOD of every instance is written and LOD0's
-node lists the others with MSFT_lod (lower LODs are reached only through it).
+One animation "wind_loop" drives every instance (engines that loop clips by name do); phase
+variety comes from `phase_variants` copies of each clip, key arrays rotated (Forest.variants,
+prepared), each instance playing the variant the forest stage chose for its time offset. With
+`all_lods` every LOD of every instance is written and LOD0's node lists the others with
+MSFT_lod (lower LODs' meshes are reached only through it).
 """
 from __future__ import annotations
 
@@ -27,7 +30,7 @@ import numpy as np
 
 from .. import __version__
 from ..asset import Forest
-from .gltf import (_Buffer, _is_default, _primitive, moving_joints, inverse_bind_accessor,
+from .gltf import (Textures, _Buffer, _is_default, _primitive, lod_extras, moving_joints, inverse_bind_accessor,
                    joint_fields, material_dict, rotation_samplers, set_msft_lod, to_y_up,
                    write_document)
 
@@ -38,6 +41,7 @@ class _Shared:
 
     def __init__(self, scene: Forest, buf: _Buffer):
         self.scene, self.buf = scene, buf
+        self.textures = Textures(buf)
         self.materials: list[dict] = []
         self._mat: dict = {}
         self.meshes: list[dict] = []
@@ -51,7 +55,7 @@ class _Shared:
     def material(self, m) -> int:
         if m not in self._mat:
             self._mat[m] = len(self.materials)
-            self.materials.append(material_dict(m))
+            self.materials.append(material_dict(m, self.textures))
         return self._mat[m]
 
     def mesh(self, p: int, k: int) -> int:
@@ -62,7 +66,7 @@ class _Shared:
             J = len(lod.skeleton.names)
             prims = [_primitive(self.buf, q, J, self.material(mats[q.material])) for q in lod.primitives]
             self._mesh[(p, k)] = len(self.meshes)
-            self.meshes.append({"name": f"{asset.name}_s{asset.extras.get('seed', p)}_lod{k}",
+            self.meshes.append({"name": f"{asset.name}_s{asset.extras.get('seed', p)}_LOD{k}",
                                 "primitives": prims})
         return self._mesh[(p, k)]
 
@@ -113,6 +117,7 @@ def _build_forest(scene: Forest) -> tuple[dict, _Buffer]:
     skins: list[dict] = []
     channels: list[dict] = []
     roots: list[int] = []
+    places: list[int] = []
     width = len(str(max(len(scene.instances) - 1, 0)))
     for i, inst in enumerate(scene.instances):     # per tree: JSON records only, no vertex data
         asset = scene.prototypes[inst.prototype]
@@ -130,29 +135,33 @@ def _build_forest(scene: Forest) -> tuple[dict, _Buffer]:
             joint_nodes = place + 1 + np.arange(J)
             parent = np.asarray(sk.parent)
             jroots = np.flatnonzero(parent < 0)
-            place_node = {"name": f"{name}_lod{k}_place", "children": [int(x) for x in joint_nodes[jroots]]}
+            place_node = {"name": f"{name}_LOD{k}_place", "children": [int(x) for x in joint_nodes[jroots]]}
             if not _is_default(t, [0, 0, 0]):
                 place_node["translation"] = [float(x) for x in t]
             if inst.rotation_deg % 360 != 0:
                 place_node["rotation"] = [float(x) for x in q]
             if inst.scale != 1.0:
                 place_node["scale"] = [float(inst.scale)] * 3
-            nodes.append({"name": f"{name}_lod{k}", "mesh": sh.mesh(inst.prototype, k),
-                          "skin": len(skins), "children": [place]})
+            nodes.append({"name": f"{name}_LOD{k}", "mesh": sh.mesh(inst.prototype, k),
+                          "skin": len(skins), "extras": lod_extras(asset, k)})
             nodes.append(place_node)
             fields, kids = sh.joints(inst.prototype, k)
             first = int(joint_nodes[0]) if J else 0
             for j in range(J):      # one JSON node per joint, fields shared with the prototype
-                n = {"name": f"{name}_lod{k}_{sk.names[j]}", **fields[j]}
-                if kids[j]:
+                n = {"name": sk.names[j], **fields[j]}     # same names in every instance:
+                if kids[j]:                                # importers merge identical skins
                     n["children"] = [first + c for c in kids[j]]
                 nodes.append(n)
-            skins.append({"name": f"{name}_lod{k}_skin", "joints": [int(x) for x in joint_nodes],
-                          "inverseBindMatrices": sh.ibm(inst.prototype, k), "skeleton": place})
+            skin = {"name": f"{name}_LOD{k}_skin", "joints": [int(x) for x in joint_nodes],
+                    "inverseBindMatrices": sh.ibm(inst.prototype, k)}
+            if len(jroots) == 1:
+                skin["skeleton"] = int(joint_nodes[jroots[0]])
+            skins.append(skin)
             for j, sampler in sh.tracks(inst.prototype, k, inst.variant):
                 channels.append({"sampler": sampler,
                                  "target": {"node": int(joint_nodes[j]), "path": "rotation"}})
             lod_nodes.append(mesh_node)
+            places.append(place)
         if len(lod_nodes) > 1:
             set_msft_lod(nodes[lod_nodes[0]], lod_nodes[1:], asset.lods)
         roots.append(lod_nodes[0])
@@ -162,11 +171,12 @@ def _build_forest(scene: Forest) -> tuple[dict, _Buffer]:
                   "extras": {"forest": scene.name, "instances": len(scene.instances),
                              "prototypes": [dict(a.extras) for a in scene.prototypes]}},
         "scene": 0,
-        "scenes": [{"name": scene.name, "nodes": roots}],
+        "scenes": [{"name": scene.name, "nodes": roots + places}],
         "nodes": nodes, "meshes": sh.meshes, "skins": skins, "materials": sh.materials,
     }
+    sh.textures.fields(gltf)
     if channels:
-        gltf["animations"] = [{"name": "wind", "samplers": sh.samplers, "channels": channels}]
+        gltf["animations"] = [{"name": "wind_loop", "samplers": sh.samplers, "channels": channels}]
     if any("extensions" in n for n in nodes):
         gltf["extensionsUsed"] = ["MSFT_lod"]
     gltf["accessors"] = buf.accessors

@@ -47,7 +47,7 @@ def build_forest_stage(scene: Forest):
     stage.CreateClassPrim(protos_path)
 
     tcps = None
-    clips = [c for a in scene.prototypes for l in a.lods for c in l.clips if len(c.times) > 1]
+    clips = [c for a in scene.prototypes for lod in a.lods for c in lod.clips if len(c.times) > 1]
     if clips and scene.loop > 0:
         tcps = _sample_rate(clips[0].times)
         stage.SetTimeCodesPerSecond(tcps)

@@ -6,26 +6,28 @@ the JSON is built from plain dicts and dumped with sorted keys, so the same Asse
 the same bytes. Vertex data stays float32 end to end (the Y-up swap is an exact shuffle).
 WEIGHTS_0 is normalized UNSIGNED_BYTE for rigid primitives (leaves: exact) and normalized
 UNSIGNED_SHORT for blended ones (bark), each row summing exactly to 255 / 65535 — a quarter /
-half of float32's bytes; JOINTS_0 is UNSIGNED_BYTE up to 256 joints; TEXCOORD_0 made only
-of 0s and 1s (leaf cards) is normalized UNSIGNED_SHORT (exact). NORMAL is left out of
-primitives whose normals are their faces' flat normals (Primitive.flat_normals: planar leaf
-cards), as the spec has clients compute flat normals then — a third of a card's bytes. All core
-glTF 2.0, no extension.
+half of float32's bytes; JOINTS_0 is UNSIGNED_BYTE up to 256 joints. NORMAL and float TEXCOORD_0 are always written:
+Godot reads neither normalized integer UVs nor computes missing normals. Textures are PNGs in
+the buffer. All core glTF 2.0 (MSFT_lod only as an optional extension).
 
 Axes: the generator is Z up, glTF is Y up (right-handed), so every vector goes through
 C: (x, y, z) → (x, z, −y); quaternion vector parts likewise; matrices become C·M·Cᵀ.
 
-Node layout, per LOD k (LOD0 first):
+Node layout: the skinned mesh node of LOD0 and each LOD's rig node (holding that skeleton's
+root joint; `skin.skeleton` = the joint) are scene roots, side by side. A mesh node that
+parents its own joints hangs Godot 3's importer; a tree node wrapping mesh and joints draws
+glTF-Validator's NODE_SKINNED_MESH_NON_ROOT warning; side by side at the root every client
+takes them. One rig node per LOD keeps skeletons apart in importers that merge sibling roots
+(Godot 3 would make one 444-bone skeleton of four).
 
-    mesh node "<name>_lod<k>"  (mesh + skin, no transform, a root node)
-      └── joint nodes of LOD k's skeleton (local TRS), rooted at the trunk-base joint
+    "<name>_LOD0"           mesh + skin, no transform, MSFT_lod → "<name>_LOD1", …
+    "<name>_LOD0_rig"       identity
+        └── trunk_0 …       LOD0's skeleton (local TRS), joints named by what they are
+    "<name>_LOD1_rig"       LOD1's skeleton, …
 
-The skeleton hangs under its own mesh node so one node is the whole LOD: MSFT_lod swaps whole
-nodes, and a lower LOD's node (not in the scene, reached only through LOD0's MSFT_lod ids) thus
-brings its skeleton with it. The skinned mesh node itself stays a root with an identity
-transform, which is what the validator asks (NODE_SKINNED_MESH_NON_ROOT / _LOCAL_TRANSFORMS).
-Only LOD0's node is in the scene: clients without MSFT_lod see just the full-detail tree; the
-validator merely notes the lower LODs as UNUSED_OBJECT infos.
+Lower LODs' mesh nodes are reached only through LOD0's MSFT_lod ids, so clients without
+MSFT_lod draw just the full-detail tree; their skeletons stay in the scene so every clip finds
+its joints. Each LOD node's extras carry its index, distance and screen coverage.
 """
 from __future__ import annotations
 
@@ -38,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..asset import Asset, Clip, Primitive, Skeleton
+from ..asset import Asset, Clip, Material, Primitive, Skeleton, Texture
 from ..axes import Z_UP_TO_Y_UP, matrix_to_y_up, quat_to_y_up, to_y_up  # noqa: F401  (re-exported)
 from ..quat import continuous as _continuous
 
@@ -153,29 +155,25 @@ def _y_up32(v: np.ndarray) -> np.ndarray:
 
 
 def _primitive(buf: _Buffer, p: Primitive, n_joints: int, material: int) -> dict:
-    V = len(p.positions)
     pos = _y_up32(p.positions)
-    # Asset UVs have their origin bottom-left (OpenGL/USD); glTF's is top-left
+    # Asset UVs have their origin bottom-left (OpenGL/USD); glTF's is top-left. Always float:
+    # Godot 3.2 ignores `normalized` on integer UVs, and every client reads float32.
     uv = np.array(p.uvs, dtype=np.float32)
     np.subtract(np.float32(1.0), uv[:, 1], out=uv[:, 1])
-    flat = uv.reshape(-1)
-    uv_corners = bool(np.all((flat == 0) | (flat == 1)))     # leaf cards: exact as integers
-    if uv_corners:
-        uv = uv.astype(np.uint16) * np.uint16(65535)
     joints, weights = _weights(p.joints, p.weights)
     joints = joints.astype(np.uint8 if n_joints <= 256 else np.uint16, copy=False)
+    V = len(p.positions)
     indices = np.asarray(p.indices).astype(np.uint16 if V < 65535 else np.uint32, copy=False)
-    attrs = {"POSITION": buf.accessor(pos, ARRAY_BUFFER, bounds=True)}
-    if not p.flat_normals:       # flat cards: clients compute exactly these normals themselves
-        nrm = _y_up32(p.normals)
-        length = np.sqrt(np.einsum("ij,ij->i", nrm, nrm))
-        nrm /= np.where(length > 0, length, np.float32(1.0))[:, None]
-        attrs["NORMAL"] = buf.accessor(nrm, ARRAY_BUFFER)
-    attrs |= {
-        "TEXCOORD_0": buf.accessor(uv, ARRAY_BUFFER, normalized=uv_corners),
-        "JOINTS_0": buf.accessor(joints, ARRAY_BUFFER),
-        "WEIGHTS_0": buf.accessor(weights, ARRAY_BUFFER, normalized=True),
-    }
+    # NORMAL always: Godot does not compute missing normals and Babylon/three.js regenerate
+    # them with a warning or flat shading
+    nrm = _y_up32(p.normals)
+    length = np.sqrt(np.einsum("ij,ij->i", nrm, nrm))
+    nrm /= np.where(length > 0, length, np.float32(1.0))[:, None]
+    attrs = {"POSITION": buf.accessor(pos, ARRAY_BUFFER, bounds=True),
+             "NORMAL": buf.accessor(nrm, ARRAY_BUFFER),
+             "TEXCOORD_0": buf.accessor(uv, ARRAY_BUFFER),
+             "JOINTS_0": buf.accessor(joints, ARRAY_BUFFER),
+             "WEIGHTS_0": buf.accessor(weights, ARRAY_BUFFER, normalized=True)}
     return {"attributes": attrs, "indices": buf.accessor(indices, ELEMENT_ARRAY_BUFFER),
             "material": material, "mode": 4}
 
@@ -244,7 +242,8 @@ def inverse_bind_accessor(buf: _Buffer, skeleton: Skeleton) -> int:
 def set_msft_lod(node: dict, lower: list[int], lods: list) -> None:
     """Make `node` the LOD0 of an MSFT_lod chain: lower LOD node ids and screen coverages."""
     node["extensions"] = {"MSFT_lod": {"ids": lower}}
-    node["extras"] = {"MSFT_screencoverage": [float(lod.screen_coverage) for lod in lods]}
+    node["extras"] = node.get("extras", {}) | {
+        "MSFT_screencoverage": [float(lod.screen_coverage) for lod in lods]}
 
 
 def _is_default(v: np.ndarray, default) -> bool:
@@ -257,12 +256,49 @@ def build(asset: Asset) -> tuple[dict, bytes]:
     return gltf, buf.blob()
 
 
-def material_dict(m) -> dict:
-    """A Material as a glTF metallic-roughness material (MASK when a leaf cutout is expected)."""
-    d = {"name": m.name,
-         "pbrMetallicRoughness": {"baseColorFactor": [float(c) for c in m.base_color],
-                                  "metallicFactor": float(m.metallic),
-                                  "roughnessFactor": float(m.roughness)}}
+REPEAT, CLAMP_TO_EDGE, LINEAR, LINEAR_MIPMAP_LINEAR = 10497, 33071, 9729, 9987
+_WRAP = {"REPEAT": REPEAT, "CLAMP": CLAMP_TO_EDGE}
+
+
+class Textures:
+    """Images (PNG bytes in the buffer), samplers (one per wrap mode) and textures, each
+    written once however many materials use them."""
+
+    def __init__(self, buf: _Buffer):
+        self.buf = buf
+        self.images: list[dict] = []
+        self.samplers: list[dict] = []
+        self.textures: list[dict] = []
+        self._tex: dict = {}
+        self._sampler: dict = {}
+
+    def index(self, t: Texture) -> int:
+        if t not in self._tex:
+            if t.wrap not in self._sampler:
+                self._sampler[t.wrap] = len(self.samplers)
+                self.samplers.append({"magFilter": LINEAR, "minFilter": LINEAR_MIPMAP_LINEAR,
+                                      "wrapS": _WRAP[t.wrap], "wrapT": _WRAP[t.wrap]})
+            view = self.buf.view(np.frombuffer(t.png, dtype=np.uint8), None)
+            self.images.append({"name": t.name, "bufferView": view, "mimeType": "image/png"})
+            self._tex[t] = len(self.textures)
+            self.textures.append({"sampler": self._sampler[t.wrap], "source": len(self.images) - 1})
+        return self._tex[t]
+
+    def fields(self, gltf: dict) -> None:
+        if self.textures:
+            gltf |= {"images": self.images, "samplers": self.samplers, "textures": self.textures}
+
+
+def material_dict(m: Material, textures: Textures) -> dict:
+    """A Material as a glTF metallic-roughness material: base colour (and texture), normal map,
+    MASK with its cutoff for alpha-tested leaves, double-sided leaves."""
+    pbr: dict = {"baseColorFactor": [float(c) for c in m.base_color],
+                 "metallicFactor": float(m.metallic), "roughnessFactor": float(m.roughness)}
+    d: dict = {"name": m.name, "pbrMetallicRoughness": pbr}
+    if m.base_texture is not None:
+        pbr["baseColorTexture"] = {"index": textures.index(m.base_texture)}
+    if m.normal_texture is not None:
+        d["normalTexture"] = {"index": textures.index(m.normal_texture)}
     if m.double_sided:
         d["doubleSided"] = True
     if m.alpha_cutoff is not None:
@@ -274,27 +310,31 @@ def material_dict(m) -> dict:
 def _build(asset: Asset) -> tuple[dict, _Buffer]:
     """Asset → (glTF JSON dict without buffer uri, the unjoined buffer)."""
     buf = _Buffer()
+    textures = Textures(buf)
     mat_index = {m.name: i for i, m in enumerate(asset.materials)}
-    materials = [material_dict(m) for m in asset.materials]
+    materials = [material_dict(m, textures) for m in asset.materials]
 
     nodes: list[dict] = []
-    meshes, skins, animations, lod_nodes = [], [], [], []
+    meshes, skins, animations, lod_nodes, rig_nodes = [], [], [], [], []
     for k, lod in enumerate(asset.lods):
         sk = lod.skeleton
         J = len(sk.names)
         mesh_node = len(nodes)
-        joint_nodes = mesh_node + 1 + np.arange(J)
+        rig_node = mesh_node + 1
+        joint_nodes = rig_node + 1 + np.arange(J)
         lod_nodes.append(mesh_node)
-        nodes.append({})    # filled below, once children are known
+        nodes.append({})    # filled below
         parent = np.asarray(sk.parent)
+        roots = np.flatnonzero(parent < 0)
+        rig_nodes.append(rig_node)
+        nodes.append({"name": f"{asset.name}_LOD{asset.extras.get('lod_index', k)}_rig", "children": [int(x) for x in joint_nodes[roots]]})
         for j, fields in enumerate(joint_fields(sk)):
             n = {"name": sk.names[j], **fields}
             kids = np.flatnonzero(parent == j)
             if len(kids):
                 n["children"] = [int(x) for x in joint_nodes[kids]]
             nodes.append(n)
-        roots = np.flatnonzero(parent < 0)
-        skin = {"name": f"{asset.name}_lod{k}_skin",
+        skin = {"name": f"{asset.name}_LOD{asset.extras.get('lod_index', k)}_skin",
                 "joints": [int(x) for x in joint_nodes],
                 "inverseBindMatrices": inverse_bind_accessor(buf, sk)}
         if len(roots) == 1:
@@ -304,10 +344,10 @@ def _build(asset: Asset) -> tuple[dict, _Buffer]:
         if missing:
             raise ValueError(f"primitives use materials {sorted(missing)} not in asset.materials")
         prims = [_primitive(buf, p, J, mat_index[p.material]) for p in lod.primitives]
-        meshes.append({"name": f"{asset.name}_lod{k}", "primitives": prims})
-        nodes[mesh_node] = {"name": f"{asset.name}_lod{k}", "mesh": len(meshes) - 1,
-                            "skin": len(skins) - 1,
-                            "children": [int(x) for x in joint_nodes[roots]]}
+        name = f"{asset.name}_LOD{asset.extras.get('lod_index', k)}"
+        meshes.append({"name": name, "primitives": prims})
+        nodes[mesh_node] = {"name": name, "mesh": len(meshes) - 1, "skin": len(skins) - 1,
+                            "extras": lod_extras(asset, k)}
         for clip in lod.clips:
             anim = _animation(buf, clip, sk, joint_nodes)
             if anim is not None:
@@ -316,9 +356,13 @@ def _build(asset: Asset) -> tuple[dict, _Buffer]:
     gltf: dict = {
         "asset": {"version": "2.0", "generator": f"treegen {__version__}"},
         "scene": 0,
-        "scenes": [{"name": asset.name, "nodes": [lod_nodes[0]]}],
+        # the skinned mesh and each skeleton's rig node are scene roots, side by side (see the
+        # module docstring); a lower LOD's mesh is reached only through MSFT_lod, its skeleton
+        # is in the scene so its clip always finds its joints
+        "scenes": [{"name": asset.name, "nodes": [lod_nodes[0], *rig_nodes]}],
         "nodes": nodes, "meshes": meshes, "skins": skins, "materials": materials,
     }
+    textures.fields(gltf)
     if asset.extras:
         gltf["asset"]["extras"] = asset.extras
     if animations:
@@ -330,6 +374,17 @@ def _build(asset: Asset) -> tuple[dict, _Buffer]:
     gltf["bufferViews"] = buf.views
     gltf["buffers"] = [{"byteLength": buf.size + len(buf.padding())}]
     return gltf, buf
+
+
+def lod_extras(asset: Asset, k: int) -> dict:
+    """What an engine needs to switch LODs itself (Godot 4 visibility ranges, Unity LODGroup):
+    this LOD's index, the distance from which it is used and the screen coverage below which
+    the next one takes over."""
+    lod = asset.lods[k]
+    return {"treegen_lod": {"index": int(asset.extras.get("lod_index", k)),
+                            "count": int(asset.extras.get("lod_count", len(asset.lods))),
+                            "distance_m": float(lod.distance),
+                            "screen_coverage": float(lod.screen_coverage)}}
 
 
 def _json_default(o):

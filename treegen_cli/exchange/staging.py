@@ -31,7 +31,7 @@ def _alive(pid: int) -> bool:
 
 def sweep(folder: Path) -> list[Path]:
     """Remove staging folders left in `folder` by killed runs; returns what was removed."""
-    removed = []
+    removed: list[Path] = []
     try:
         entries = list(os.scandir(folder))
     except OSError:

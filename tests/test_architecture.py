@@ -1,0 +1,104 @@
+"""The package's shape: data flows one way. No import cycles between treegen_cli modules (at
+module level or inside functions), and writers import nothing from the stages but the Asset
+types and small helpers."""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+PKG = Path(__file__).resolve().parents[1] / "treegen_cli"
+
+
+def module_name(path: Path) -> str:
+    rel = path.relative_to(PKG.parent).with_suffix("")
+    parts = list(rel.parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def imports(path: Path) -> set[str]:
+    """treegen_cli modules `path` imports, anywhere in the file (relative imports resolved)."""
+    me = module_name(path)
+    package = me if path.name == "__init__.py" else me.rpartition(".")[0]
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[:len(base) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            names = [target] + [f"{target}.{a.name}" for a in node.names]
+        elif isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        else:
+            continue
+        out |= {n for n in names if n.startswith("treegen_cli")}
+    return out
+
+
+def graph() -> dict[str, set[str]]:
+    files = {module_name(p): p for p in PKG.rglob("*.py")}
+    g = {}
+    for name, path in files.items():
+        # "from . import x" names a module when x is one; otherwise the package itself
+        g[name] = {t for t in imports(path) if t in files and t != name}
+    return g
+
+
+def cycles(g: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan)."""
+    index, low, stack, on, out, counter = {}, {}, [], set(), [], [0]
+
+    def visit(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on.add(v)
+        for w in sorted(g[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(g):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_cycle_finder_finds_a_cycle():
+    assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+def test_no_import_cycles():
+    assert cycles(graph()) == []
+
+
+WRITERS = ["exchange.gltf", "exchange.usd", "exchange.forest_gltf", "exchange.forest_usd",
+           "exchange.static", "exchange.image"]
+# what a writer may use: the Asset types, errors, the version, axis and quaternion helpers,
+# and its sibling encoders
+ALLOWED = {"treegen_cli", "treegen_cli.asset", "treegen_cli.errors", "treegen_cli.axes",
+           "treegen_cli.quat"}
+
+
+def test_writers_import_only_asset_types_and_helpers():
+    g = graph()
+    for w in WRITERS:
+        name = f"treegen_cli.{w}"
+        bad = {t for t in g[name] if t not in ALLOWED and not t.startswith("treegen_cli.exchange")}
+        assert not bad, f"{name} imports stages {sorted(bad)}"

@@ -1,0 +1,213 @@
+"""Layout → Forest: each distinct (species, seed) built once (a prototype, in a process pool),
+placed many times, each instance with the LOD its camera distance calls for and the phase
+variant nearest its time offset; then prepared for the writers.
+
+Phase variety: an instance's time offset is the travel time of the shared wind field's gusts
+from the upwind edge (x·dir / speed: trees downwind sway later, as in a frozen, advected field)
+plus a seeded jitter of `phase_jitter` × the loop, wrapped to the loop.
+"""
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+from rich.console import Console
+from rich.progress import Progress
+
+from ..asset import Asset, Forest, Instance, Lod, lod_bounds
+from ..errors import TreegenError, in_file as _in_file
+from ..exchange import FOREST_WRITERS, check_suffix, export_forest
+from ..limits import MAX_TREES
+from ..lod import LOD_DEFAULTS, leaf_updates as lod_leaf_updates
+from ..params import load_params
+from ..pipeline import MakeOptions, build_asset
+from ..prepare import prepare_forest
+from ..rig import RigOptions
+from ..wind import WindOptions
+from .layout import Layout, WindSpec, load_layout
+
+
+def select_lod(distance: np.ndarray, lod_distances, scale: np.ndarray | float = 1.0) -> np.ndarray:
+    """LOD index per instance: the last LOD whose `distance` ≤ the instance's effective
+    distance (camera distance / scale: a tree twice as big looks like one twice as near)."""
+    d = np.asarray(distance, float) / np.asarray(scale, float)
+    starts = np.asarray(lod_distances, float)
+    return np.clip(np.searchsorted(starts, d, side="right") - 1, 0, len(starts) - 1)
+
+
+def time_offsets(positions: np.ndarray, wind: WindSpec, seed: int = 0) -> np.ndarray:
+    """Seconds in [0, duration): gust travel time downwind + seeded jitter, wrapped."""
+    positions = np.asarray(positions, float).reshape(-1, 3)
+    phi = math.radians(wind.direction_deg)
+    along = positions[:, :2] @ np.array([math.cos(phi), math.sin(phi)])
+    rng = np.random.default_rng([wind.seed, seed, 0x0FF5E7])
+    jitter = rng.random(len(positions)) * wind.phase_jitter * wind.duration
+    travel = (along - along.min(initial=0.0)) / wind.speed if wind.speed > 0 else \
+        rng.random(len(positions)) * wind.duration
+    return np.mod(travel + jitter, wind.duration)
+
+
+def make_options(layout: Layout, error_px: float | None = None):
+    """MakeOptions for every prototype: the layout's joint budget, the shared-field wind, and
+    LOD schedules for the layout's camera (fov, width) and error bound."""
+
+    w = layout.wind
+    wind = WindOptions(speed=w.speed, direction_deg=w.direction_deg, gust=w.gust,
+                       turbulence=w.turbulence, duration=w.duration, fps=w.fps,
+                       field_seed=w.seed) if w.enabled else None
+    cam = layout.camera
+    lod = replace(LOD_DEFAULTS, fov_deg=cam.fov_deg, width=cam.width_px,
+                  error_px=layout.defaults.error_px if error_px is None else error_px,
+                  distances=layout.defaults.lod_distances or LOD_DEFAULTS.distances)
+    return MakeOptions(rig=RigOptions(max_joints=layout.defaults.max_joints), wind=wind, lod=lod)
+
+
+def _build_one(params, seed: int, options) -> Asset:
+    """Worker: grow, rig, skin, bake (and decimate) one prototype."""
+    asset, _tree = build_asset(params, seed, options)
+    return asset
+
+
+def build_prototypes(keys: list[tuple[Path, int]], options, workers: int | None = None,
+                     progress: bool | None = None, parsed: dict | None = None) -> list[Asset]:
+    """Each (species file, seed) built once, in a process pool on all cores (workers=1: in
+    this process). A rich progress bar on an interactive stderr only. `parsed`: species
+    already read (the layout's), so no file is parsed twice."""
+
+    params = dict(parsed or {})
+    for path, _seed in keys:
+        if path not in params:
+            params[path] = load_params(path)
+    workers = workers or os.cpu_count() or 1
+    workers = max(1, min(workers, len(keys)))
+    if progress is None:
+        progress = sys.stderr.isatty()
+    out: list[Asset | None] = [None] * len(keys)
+    bar = None
+    if progress:
+        bar = Progress(console=Console(stderr=True), transient=True)
+        bar.start()
+        task = bar.add_task("prototypes", total=len(keys))
+    try:
+        if workers == 1:
+            for i, (path, seed) in enumerate(keys):
+                out[i] = _in_file(path, _build_one, params[path], seed, options)
+                if bar:
+                    bar.advance(task)
+        else:
+            with ProcessPoolExecutor(max_workers=workers) as pool:
+                futures = {pool.submit(_build_one, params[p], s, options): i
+                           for i, (p, s) in enumerate(keys)}
+                for fut in as_completed(futures):
+                    i = futures[fut]
+                    out[i] = _in_file(keys[i][0], fut.result)
+                    if bar:
+                        bar.advance(task)
+    finally:
+        if bar:
+            bar.stop()
+    return out  # type: ignore[return-value]
+
+
+def _crown_center(asset: Asset) -> np.ndarray:
+    lo, hi = lod_bounds(asset.lods[0])
+    return 0.5 * (lo + hi)
+
+
+def _rotz(deg: np.ndarray) -> np.ndarray:
+    a = np.radians(np.asarray(deg, float))
+    c, s = np.cos(a), np.sin(a)
+    m = np.zeros(a.shape + (3, 3))
+    m[..., 0, 0], m[..., 0, 1], m[..., 1, 0], m[..., 1, 1], m[..., 2, 2] = c, -s, s, c, 1.0
+    return m
+
+
+def build_scene(layout: Layout, all_lods: bool = False, error_px: float | None = None,
+                workers: int | None = None, progress: bool | None = None) -> Forest:
+    """Prototypes (built once each) and instances with their LOD and time offset."""
+    t0 = time.perf_counter()
+    keys = sorted({(p.species, p.seed) for p in layout.placements}, key=lambda k: (str(k[0]), k[1]))
+    index = {k: i for i, k in enumerate(keys)}
+    options = make_options(layout, error_px)
+    prototypes = build_prototypes(keys, options, workers, progress, layout.params)
+    t1 = time.perf_counter()
+    placements = layout.placements
+    proto = np.array([index[(p.species, p.seed)] for p in placements], int)
+    pos = np.array([p.position for p in placements], float).reshape(-1, 3)
+    scale = np.array([p.scale for p in placements], float)
+    rot = np.array([p.rotation_deg for p in placements], float)
+    centers = np.array([_crown_center(a) for a in prototypes]).reshape(-1, 3)
+    world_center = pos + scale[:, None] * np.einsum("nij,nj->ni", _rotz(rot), centers[proto])
+    dist = np.linalg.norm(world_center - np.asarray(layout.camera.position), axis=1)
+    lods = np.zeros(len(placements), int)
+    for k, asset in enumerate(prototypes):     # per prototype (few), vectorised over instances
+        sel = proto == k
+        lods[sel] = select_lod(dist[sel], [lod.distance for lod in asset.lods], scale[sel])
+    animated = layout.wind.enabled
+    offsets = time_offsets(pos, layout.wind) if animated else np.zeros(len(placements))
+    loop = layout.wind.duration if animated else 0.0
+    V = max(1, layout.defaults.phase_variants)
+    variant = np.round(offsets / loop * V).astype(int) % V if loop > 0 else np.zeros(len(placements), int)
+    instances = [Instance(int(proto[i]), tuple(pos[i]), float(rot[i]), float(scale[i]), int(lods[i]),
+                          float(offsets[i]), float(dist[i]), placements[i].source, int(variant[i]))
+                 for i in range(len(placements))]
+    forest = prepare_forest(Forest(name=layout.name, prototypes=prototypes, instances=instances,
+                                   all_lods=all_lods, phase_variants=layout.defaults.phase_variants,
+                                   loop=loop))
+    forest.timings.update(prototypes_s=t1 - t0, place_s=time.perf_counter() - t1)
+    return forest
+
+
+def leaf_updates(lod: Lod) -> tuple[int, float]:
+    """(leaf vertices, leaf-vertex updates per frame on average) of one LOD, counted like
+    `treegen info --lod`. A joint's schedule already follows its world-space movement (parents'
+    motion included), which is the paper's per-branch accumulate-and-reset rule."""
+
+    return lod_leaf_updates(lod)
+
+
+def summary(scene: Forest, written: list[Path], seconds: float) -> dict:
+    """The paper's comparison for the whole scene: leaf-vertex updates per frame with the
+    chosen LODs versus every leaf vertex of LOD0 every frame (no LOD)."""
+    per = [[leaf_updates(lod) for lod in a.lods] for a in scene.prototypes]
+    per_lod: dict[int, int] = {}
+    with_lod = without = 0.0
+    for inst in scene.instances:
+        per_lod[inst.lod] = per_lod.get(inst.lod, 0) + 1
+        with_lod += per[inst.prototype][inst.lod][1]
+        without += per[inst.prototype][0][0] if scene.loop > 0 else 0.0
+    return {
+        "scene": scene.name,
+        "prototypes": len(scene.prototypes),
+        "instances": len(scene.instances),
+        "instances_per_lod": {f"lod{k}": v for k, v in sorted(per_lod.items())},
+        "all_lods": scene.all_lods,
+        "files": [str(p) for p in written],
+        "bytes": int(sum(p.stat().st_size for p in written)),
+        "seconds": round(seconds, 3),
+        "leaf_vertex_updates_per_frame": round(with_lod),
+        "leaf_vertex_updates_per_frame_without_lod": round(without),
+        **{k: round(v, 3) for k, v in scene.timings.items()},
+    }
+
+
+def run_forest(layout_path, output, all_lods: bool = False, error_px: float | None = None,
+               workers: int | None = None, progress: bool | None = None,
+               max_trees: int = MAX_TREES) -> dict:
+    """The whole command: validate (nothing written on error), build, write, summarise."""
+    t0 = time.perf_counter()
+    output = check_suffix(output, FOREST_WRITERS)
+    if error_px is not None and not (math.isfinite(error_px) and 0 <= error_px <= 100):
+        raise TreegenError(f"--error-px {error_px}: allowed range 0..100 pixels")
+    layout = load_layout(layout_path, max_trees)
+    scene = build_scene(layout, all_lods, error_px, workers, progress)
+    t1 = time.perf_counter()
+    written = export_forest(scene, output)
+    scene.timings["write_s"] = time.perf_counter() - t1
+    return summary(scene, written, time.perf_counter() - t0)

@@ -1,0 +1,205 @@
+"""Layout file → validated, expanded placements (scatters become trees). Nothing is built here;
+every error names the JSON path, and species files are parsed once, here, so a bad one is
+reported at the path that names it before anything is grown or written.
+"""
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import TreegenError
+from ..limits import MAX_TREES
+from ..params import load_params
+from .scatter import polygon_area, scatter_points
+from .schema import show_value, check_schema, layout_schema
+
+
+@dataclass(frozen=True)
+class Camera:
+    position: tuple[float, float, float]
+    target: tuple[float, float, float]
+    fov_deg: float = 60.0
+    width_px: int = 1920
+
+
+@dataclass(frozen=True)
+class WindSpec:
+    speed: float = 4.0
+    direction_deg: float = 0.0
+    gust: float = 0.35
+    turbulence: float = 0.3
+    duration: float = 4.0
+    fps: float = 30.0
+    seed: int = 0
+    phase_jitter: float = 0.25
+    enabled: bool = True
+
+
+@dataclass(frozen=True)
+class Defaults:
+    seed: int = 0
+    scale: float = 1.0
+    rotation_deg: float = 0.0
+    max_joints: int = 48
+    lod_distances: tuple[float, ...] | None = None
+    error_px: float = 1.0
+    phase_variants: int = 4
+
+
+@dataclass(frozen=True)
+class Placement:
+    """One tree of the layout, before prototypes exist. `source` is its JSON path."""
+
+    species: Path                 # resolved species file
+    seed: int
+    position: tuple[float, float, float]
+    rotation_deg: float
+    scale: float
+    source: str
+
+
+@dataclass(frozen=True)
+class Layout:
+    name: str
+    path: Path
+    camera: Camera
+    wind: WindSpec
+    defaults: Defaults
+    placements: list[Placement]
+    params: dict = field(default_factory=dict)   # species file → its Params, parsed once
+
+
+def _xyz(v) -> tuple[float, float, float]:
+    return float(v[0]), float(v[1]), float(v[2])
+
+
+def load_layout(path: str | os.PathLike, max_trees: int = MAX_TREES) -> Layout:
+    """Read, validate and expand a layout file (scatters become placements)."""
+    path = Path(path)
+    try:
+        text = path.read_text("utf-8")
+    except FileNotFoundError:
+        raise TreegenError(f"{path}: no such layout file") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise TreegenError(f"{path}: cannot read the layout ({e})") from None
+    try:
+        data = json.loads(text, parse_constant=lambda c: float("nan"))
+    except json.JSONDecodeError as e:
+        raise TreegenError(f"{path}: line {e.lineno} column {e.colno}: invalid JSON ({e.msg})") from None
+    try:
+        return parse_layout(data, path, max_trees)
+    except TreegenError as e:
+        raise TreegenError(f"{path}: {e}") from None
+
+
+def _species_file(base: Path, value: str, where: str, checked: dict) -> Path:
+    """The resolved species file; parsed once per layout so a bad file is reported at the
+    JSON path that names it (before anything is built or written)."""
+
+    try:
+        p = (base / value).resolve()
+        ok = p.is_file()
+    except (OSError, ValueError):
+        ok = False
+    if not ok:
+        raise TreegenError(f"{where}: species file '{show_value(value)[1:-1]}' not found")
+    if p not in checked:
+        try:
+            checked[p] = load_params(p)
+        except TreegenError as e:
+            raise TreegenError(f"{where}: {e}") from None
+    return p
+
+
+def parse_layout(data, path: Path, max_trees: int = MAX_TREES) -> Layout:
+    """Validate decoded JSON `data` of the layout at `path`; messages start with the JSON path."""
+    schema = layout_schema()
+    check_schema(data, schema, schema)
+    base = path.parent
+    cam = data["camera"]
+    camera = Camera(_xyz(cam["position"]), _xyz(cam["target"]),
+                    float(cam.get("fov_deg", 60.0)), int(cam.get("width_px", 1920)))
+    if np.allclose(camera.position, camera.target):
+        raise TreegenError("camera.target: must differ from camera.position")
+    wind = WindSpec(**data.get("wind", {}))
+    d = dict(data.get("defaults", {}))
+    if "lod_distances" in d:
+        ld = d["lod_distances"]
+        if any(b <= a for a, b in zip(ld, ld[1:])):
+            raise TreegenError(f"defaults.lod_distances: must increase strictly, got {ld}")
+        d["lod_distances"] = tuple(float(x) for x in ld)
+    defaults = Defaults(**d)
+    if not data.get("instances") and not data.get("scatter"):
+        raise TreegenError("instances: the layout places no trees (give 'instances' or 'scatter')")
+
+    placements: list[Placement] = []
+    checked: dict = {}
+    for i, inst in enumerate(data.get("instances", [])):
+        where = f"instances[{i}]"
+        pos = [float(x) for x in inst["position"]] + [0.0] * (3 - len(inst["position"]))
+        placements.append(Placement(
+            species=_species_file(base, inst["species"], f"{where}.species", checked),
+            seed=int(inst.get("seed", defaults.seed)), position=_xyz(pos),
+            rotation_deg=float(inst.get("rotation_deg", defaults.rotation_deg)),
+            scale=float(inst.get("scale", defaults.scale)), source=where))
+    for s, sc in enumerate(data.get("scatter", [])):
+        placements.extend(_scatter_placements(sc, f"scatter[{s}]", base, defaults, checked,
+                                              max_trees - len(placements)))
+        if len(placements) > max_trees:
+            raise TreegenError(f"scatter[{s}]: the layout places {len(placements):,} trees, over "
+                               f"the limit of {max_trees:,}; raise it with --max-trees N")
+    if len(placements) > max_trees:
+        raise TreegenError(f"instances: the layout places {len(placements):,} trees, over the "
+                           f"limit of {max_trees:,}; raise it with --max-trees N")
+    return Layout(name=str(data.get("name") or path.stem), path=path, camera=camera, wind=wind,
+                  defaults=defaults, placements=placements, params=checked)
+
+
+def _scatter_placements(sc: dict, where: str, base: Path, defaults: Defaults,
+                        checked: dict, max_trees: int = MAX_TREES) -> list[Placement]:
+    if ("rectangle" in sc) == ("polygon" in sc):
+        raise TreegenError(f"{where}: give exactly one of 'rectangle' or 'polygon'")
+    if ("count" in sc) == ("density" in sc):
+        raise TreegenError(f"{where}: give exactly one of 'count' or 'density'")
+    if "rectangle" in sc:
+        lo, hi = np.array(sc["rectangle"]["min"], float), np.array(sc["rectangle"]["max"], float)
+        if np.any(hi <= lo):
+            raise TreegenError(f"{where}.rectangle.max: must exceed min in x and y, got {sc['rectangle']}")
+        region, is_poly = np.array([lo, [hi[0], lo[1]], hi, [lo[0], hi[1]]]), False
+        area = float(np.prod(hi - lo))
+    else:
+        region, is_poly = np.array(sc["polygon"], float), True
+        area = polygon_area(region)
+        if area <= 0:
+            raise TreegenError(f"{where}.polygon: has zero area")
+    for key in ("scale", "rotation_deg"):
+        if key in sc and sc[key][1] < sc[key][0]:
+            raise TreegenError(f"{where}.{key}: [low, high] with low <= high, got {sc[key]}")
+    if "scale" in sc and sc["scale"][0] <= 0:
+        raise TreegenError(f"{where}.scale: scales must be > 0, got {sc['scale']}")
+    files = [_species_file(base, s["file"], f"{where}.species[{i}].file", checked)
+             for i, s in enumerate(sc["species"])]
+    weights = np.array([float(s.get("weight", 1.0)) for s in sc["species"]])
+    count = int(sc["count"]) if "count" in sc else sc["density"] * area
+    if count > max_trees:
+        raise TreegenError(f"{where}: {count:,.0f} trees (density × area), over the limit of "
+                           f"{max(max_trees, 0):,}; raise it with --max-trees N")
+    count = int(round(count))
+    seed = int(sc.get("seed", defaults.seed))
+    rng = np.random.default_rng([seed, 0x5CA77E4])
+    pts = scatter_points(region, is_poly, count, float(sc.get("min_spacing", 0.0)), rng, where)
+    kind = rng.choice(len(files), size=count, p=weights / weights.sum())
+    variant = rng.integers(0, int(sc.get("variants", 3)), size=count)
+    s_lo, s_hi = (float(x) + 0.0 for x in sc.get("scale", [defaults.scale, defaults.scale]))
+    r_lo, r_hi = (float(x) + 0.0 for x in sc.get("rotation_deg", [0.0, 360.0]))   # -0.0 → 0.0
+    scale = rng.uniform(s_lo, s_hi, size=count)
+    rot = rng.uniform(r_lo, r_hi, size=count)
+    z = float(sc.get("z", 0.0))
+    return [Placement(species=files[kind[i]], seed=seed + int(variant[i]),
+                      position=(float(pts[i, 0]), float(pts[i, 1]), z),
+                      rotation_deg=float(rot[i]), scale=float(scale[i]), source=f"{where}#{i}")
+            for i in range(count)]   # one small record per tree (not per leaf)

@@ -1,0 +1,94 @@
+"""The layout file's JSON Schema (package data) and a small interpreter of the subset it uses
+(type, properties, required, additionalProperties, items, min/maxItems, minimum/maximum,
+exclusive bounds, minLength, $ref), so the published schema and the checks cannot drift apart.
+Every message starts with the JSON path of the offending value.
+"""
+from __future__ import annotations
+
+import json
+import math
+from importlib import resources
+
+from ..errors import TreegenError
+
+SCHEMA_NAME = "layout.schema.json"
+
+
+def schema_text() -> str:
+    """The published JSON Schema of layout files (package data)."""
+    return resources.files("treegen_cli").joinpath("schemas", SCHEMA_NAME).read_text("utf-8")
+
+
+def layout_schema() -> dict:
+    return json.loads(schema_text())
+
+
+_TYPES = {
+    "object": lambda v: isinstance(v, dict),
+    "array": lambda v: isinstance(v, list),
+    "string": lambda v: isinstance(v, str),
+    "boolean": lambda v: isinstance(v, bool),
+    "integer": lambda v: isinstance(v, int) and not isinstance(v, bool),
+    "number": lambda v: isinstance(v, (int, float)) and not isinstance(v, bool) and _finite(v),
+}
+
+
+def _finite(v) -> bool:
+    try:
+        return math.isfinite(float(v))
+    except OverflowError:          # an integer too large for a float
+        return False
+
+
+def show_value(value) -> str:
+    text = json.dumps(value) if not isinstance(value, (dict, list)) else type(value).__name__
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _join(path: str, key) -> str:
+    if isinstance(key, int):
+        return f"{path}[{key}]"
+    return f"{path}.{key}" if path else str(key)
+
+
+def check_schema(value, schema: dict, root: dict, path: str = "") -> None:
+    """Raise TreegenError '<json path>: <reason>' at the first place `value` breaks `schema`."""
+    if "$ref" in schema:
+        name = schema["$ref"].rsplit("/", 1)[-1]
+        schema = {**root["$defs"][name], **{k: v for k, v in schema.items() if k != "$ref"}}
+    where = path or "(top level)"
+    kind = schema.get("type")
+    if kind and not _TYPES[kind](value):
+        shown = show_value(value)
+        article = "an" if kind[0] in "aeiou" else "a"
+        extra = " (finite)" if kind == "number" else ""
+        raise TreegenError(f"{where}: expected {article} {kind}{extra}, got {shown}")
+    if kind == "number" or kind == "integer":
+        lo, hi = schema.get("minimum"), schema.get("maximum")
+        xlo, xhi = schema.get("exclusiveMinimum"), schema.get("exclusiveMaximum")
+        if (lo is not None and value < lo) or (hi is not None and value > hi) \
+                or (xlo is not None and value <= xlo) or (xhi is not None and value >= xhi):
+            left = f"[{lo:g}" if lo is not None else (f"({xlo:g}" if xlo is not None else "(-inf")
+            right = f"{hi:g}]" if hi is not None else (f"{xhi:g})" if xhi is not None else "inf)")
+            raise TreegenError(f"{where}: {show_value(value)} is out of range; allowed {left}, {right}")
+    if kind == "string" and len(value) < schema.get("minLength", 0):
+        raise TreegenError(f"{where}: must not be empty")
+    if kind == "array":
+        n_min, n_max = schema.get("minItems"), schema.get("maxItems")
+        if (n_min is not None and len(value) < n_min) or (n_max is not None and len(value) > n_max):
+            want = (f"{n_min}" if n_min == n_max else
+                    f"{n_min or 0}..{n_max if n_max is not None else 'any'}")
+            raise TreegenError(f"{where}: expected {want} items, got {len(value)}")
+        if "items" in schema:
+            for i, item in enumerate(value):
+                check_schema(item, schema["items"], root, _join(path, i))
+    if kind == "object":
+        props = schema.get("properties", {})
+        for key in schema.get("required", []):
+            if key not in value:
+                raise TreegenError(f"{_join(path, key)}: required")
+        for key, item in value.items():
+            if key in props:
+                check_schema(item, props[key], root, _join(path, key))
+            elif schema.get("additionalProperties", True) is False:
+                raise TreegenError(f"{_join(path, key)}: unknown key; allowed: {', '.join(sorted(props))}")
