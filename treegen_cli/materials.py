@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import io
 import zlib
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from functools import lru_cache
@@ -47,6 +48,7 @@ BARK_ROUGHNESS = 0.92
 LEAF_ROUGHNESS = 0.7
 WHITE = (1.0, 1.0, 1.0, 1.0)
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+Cells = tuple[tuple[float, float, float, float], ...]   # (u0, v0, u1, v1) per leaf variant
 
 
 @dataclass(frozen=True)
@@ -70,8 +72,8 @@ class Materials:
     The layout needs no pixels (textures.atlas_rects), so the mesh never waits.
     """
 
-    def __init__(self, leaf_cells: tuple, make):
-        self.leaf_cells: tuple[tuple[float, float, float, float], ...] = leaf_cells
+    def __init__(self, leaf_cells: Cells, make: Callable[[], list[Material]]):
+        self.leaf_cells = leaf_cells
         self._future: Future = _run_in_thread(make)
 
     @property
@@ -80,7 +82,7 @@ class Materials:
         return self._future.result()
 
 
-def _run_in_thread(fn) -> Future:
+def _run_in_thread(fn: Callable[[], list[Material]]) -> Future:
     """fn() on a thread of its own (one per call: safe after a fork, e.g. forest workers)."""
     pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="treegen-textures")
     try:
@@ -161,27 +163,25 @@ def build_materials(params: Params, options: MaterialOptions = MATERIAL_DEFAULTS
     leaf_png = read_png(options.leaf_texture, "--leaf-texture") if options.leaf_texture else None
     bark_png = read_png(options.bark_texture, "--bark-texture") if options.bark_texture else None
     leafy = has_leaves(params)
-    if leaf_png is not None:
-        cells = FULL_CARD_CELL                 # the artist's image is one leaf: the whole card
-    elif leafy:
-        cells = tuple(tuple(float(x) for x in r)
-                      for r in atlas_rects(LEAF_VARIANTS, options.texture_size))
-    else:
-        cells = FULL_CARD_CELL                 # leafless species: no atlas to embed for nothing
+    cells: Cells = FULL_CARD_CELL       # an artist's image is one leaf; leafless: no atlas
+    if leaf_png is None and leafy:
+        cells = tuple((float(u0), float(v0), float(u1), float(v1))
+                      for u0, v0, u1, v1 in atlas_rects(LEAF_VARIANTS, options.texture_size))
 
     def make() -> list[Material]:
-        generated = None
-        if bark_png is None or (leaf_png is None and leafy):
-            generated = _generated_pngs(params, options.texture_size)
+        png = leaf_png
         if bark_png is not None:
             bark = Material("bark", base_color=WHITE, roughness=BARK_ROUGHNESS,
                             base_texture=Texture("bark", bark_png, wrap="REPEAT"))
-        else:
-            bark = Material("bark", base_color=WHITE, roughness=BARK_ROUGHNESS,
-                            base_texture=Texture("bark", generated[1], wrap="REPEAT"),
-                            normal_texture=Texture("bark_normal", generated[2], wrap="REPEAT",
-                                                   srgb=False))
-        png = leaf_png if leaf_png is not None else generated[0] if leafy else None
+        if bark_png is None or (leaf_png is None and leafy):
+            atlas, albedo, normal = _generated_pngs(params, options.texture_size)
+            if bark_png is None:
+                bark = Material("bark", base_color=WHITE, roughness=BARK_ROUGHNESS,
+                                base_texture=Texture("bark", albedo, wrap="REPEAT"),
+                                normal_texture=Texture("bark_normal", normal, wrap="REPEAT",
+                                                       srgb=False))
+            if leaf_png is None and leafy:
+                png = atlas
         if png is None:
             return [bark, colour_leaf]
         return [bark, Material("leaf", base_color=WHITE, roughness=LEAF_ROUGHNESS,
