@@ -392,3 +392,29 @@ def test_bark_v_grows_along_every_stem_within_half_float_range(species):
     np.testing.assert_allclose(uv[v0, 0], want[:, 0], atol=1e-6)
     assert len(np.unique(want)) == want.size and want.min() >= 0 and want.max() < 1
     assert np.mean(np.abs(np.diff(want[:, 1])) < 0.01) < 0.05
+
+
+@pytest.mark.parametrize("lobes,depth", [(0, 0.0), (5, 0.1)])
+def test_bark_tangents_follow_u_and_their_bitangent_follows_v(lobes, depth):
+    """glTF TANGENT for the bark normal map: unit, orthogonal to the normal, along +u; w·(n × t)
+    points up the stem, where v grows. Checked against each triangle's own UV gradient."""
+    tree = trunk_only(lobes=lobes, lobe_depth=depth, flare=0.5)
+    bark = build_mesh(tree, build_rig(tree))[0]
+    t = bark.tangents.astype(np.float64)
+    n = bark.normals.astype(np.float64)
+    assert t.shape == (len(bark.positions), 4) and np.all(np.abs(t[:, 3]) == 1)
+    np.testing.assert_allclose(np.linalg.norm(t[:, :3], axis=1), 1.0, atol=1e-5)
+    assert np.abs(np.einsum("ij,ij->i", t[:, :3], n)).max() < 1e-5
+    # Per triangle: dP/du and dP/dv from positions and UVs.
+    tri = bark.indices.reshape(-1, 3)
+    P, UV = bark.positions.astype(np.float64)[tri], bark.uvs.astype(np.float64)[tri]
+    e1, e2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
+    d1, d2 = UV[:, 1] - UV[:, 0], UV[:, 2] - UV[:, 0]
+    det = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+    ok = np.abs(det) > 1e-9                                   # not the apex fans' slivers
+    dPdu = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) / det[:, None]
+    dPdv = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) / det[:, None]
+    tv, nv = t[tri[:, 0]], n[tri[:, 0]]
+    bv = np.cross(nv, tv[:, :3]) * tv[:, 3:4]
+    assert np.all(np.einsum("ij,ij->i", tv[ok, :3], dPdu[ok]) > 0)
+    assert np.all(np.einsum("ij,ij->i", bv[ok], dPdv[ok]) > 0)

@@ -260,6 +260,7 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
     pos_r = np.empty((Vr, 3), dtype=np.float32)
     nrm_r = np.empty((Vr, 3), dtype=np.float32)
     uv_r = np.empty((Vr, 2), dtype=np.float32)
+    tan_r = np.empty((Vr, 3), dtype=np.float32)
     for n in np.unique(sd):
         g = np.flatnonzero(sd == n)
         col = np.arange(n + 1)
@@ -282,6 +283,10 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
             - (lf * lf * slope[g][:, None])[:, :, None] * fr[:, None, :, 2]
         nr /= np.linalg.norm(nr, axis=2, keepdims=True)
         nrm_r[dest] = nr.reshape(-1, 3)
+        # Tangent (for the bark normal map): +u runs with θ, made orthogonal to the normal.
+        tg = tangent - np.einsum("rck,rck->rc", tangent, nr)[:, :, None] * nr
+        tg /= np.linalg.norm(tg, axis=2, keepdims=True)
+        tan_r[dest] = tg.reshape(-1, 3)
         uv_r[dest, 0] = (col[None, :] / n + off_u[rs[g]][:, None]).ravel()
         uv_r[dest, 1] = np.repeat(v_ring[g], n + 1)
     rv = np.repeat(np.arange(R), nv)
@@ -312,10 +317,16 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
     l0 = v0[last_ring[fs]] + fj
     fans = np.stack([l0, l0 + 1, Vr + fs], axis=1)
 
+    # Tangents: w = +1, as cross(normal, +u around the stem) points up the stem (+v); the
+    # apex takes its frame's x axis (its normal is the stem axis).
+    tangents = np.ones((Vr + S, 4), dtype=np.float32)
+    tangents[:Vr, :3] = tan_r
+    tangents[Vr:, :3] = F[tip][:, :, 0]
     return Primitive(
         name="bark", material="bark",
         positions=np.concatenate([pos_r, pos_a]).astype(np.float32),
         normals=np.concatenate([nrm_r, axis]).astype(np.float32),
+        tangents=tangents,
         uvs=np.concatenate([uv_r, uv_a]).astype(np.float32),
         indices=np.concatenate([quads, fans]).astype(np.uint32).ravel(),
         joints=np.concatenate([ring_J[rv], apex_J]),
