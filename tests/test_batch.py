@@ -169,10 +169,13 @@ def test_cluster_builds_every_job_byte_identical_despite_a_killed_worker(schedul
 
 
 def test_a_serial_treegen_make_writes_the_same_bytes(scheduler_run, workspace, tmp_path):
-    proc = treegen("make", workspace / "species" / "quaking_aspen.txt", "-o", tmp_path / "a.usdc",
-                   "--seed", "2", "--duration", "1", "--fps", "10", "--lod-distances", "0,30", "-q")
+    # same file name: a .usdc names its sibling textures after itself
+    proc = treegen("make", workspace / "species" / "quaking_aspen.txt", "-o",
+                   tmp_path / "quaking_aspen_2.usdc", "--seed", "2", "--duration", "1", "--fps", "10",
+                   "--lod-distances", "0,30", "-q")
     assert proc.returncode == 0, proc.stderr
-    assert (tmp_path / "a.usdc").read_bytes() == (scheduler_run["out"] / "quaking_aspen_2.usdc").read_bytes()
+    for p in tmp_path.iterdir():
+        assert p.read_bytes() == (scheduler_run["out"] / p.name).read_bytes(), p.name
 
 
 def test_rerun_skips_every_job(scheduler_run, workspace, cluster):
@@ -287,8 +290,11 @@ def test_ctrl_c_closes_the_cluster_and_leaves_no_partial_files(workspace):
     assert on_disk == sorted(built) or set(built) <= set(on_disk)
     for p in out.iterdir():
         assert not p.name.startswith("."), p.name          # no staging folders, no journal
-        if p.name in built:
-            assert p.stat().st_size == built[p.name]["bytes"]
+        if p.name in built:                              # the file and its sibling textures
+            mine = [q for q in out.iterdir() if q.name == p.name or (
+                p.suffix in (".usda", ".usdc", ".obj") and q.suffix == ".png"
+                and q.name.startswith(p.stem + "_"))]
+            assert sum(q.stat().st_size for q in mine) == built[p.name]["bytes"]
 
 
 # ----------------------------------------------------------------------------- catalogue checks

@@ -64,10 +64,15 @@ def test_make_writes_a_valid_glb_and_the_same_bytes_twice(tmp_path):
 
 
 def test_make_usdc_twice_is_byte_identical(tmp_path):
-    a, b = tmp_path / "a.usdc", tmp_path / "b.usdc"
+    """Same name in two folders (a .usdc names its sibling texture files after itself)."""
+    a, b = tmp_path / "1" / "t.usdc", tmp_path / "2" / "t.usdc"
     for out in (a, b):
+        out.parent.mkdir()
         assert treegen("make", ASPEN, "-o", out, "--duration", "1", "--fps", "10").returncode == 0
     assert a.read_bytes() == b.read_bytes()
+    assert sorted(p.name for p in a.parent.iterdir()) == sorted(p.name for p in b.parent.iterdir())
+    for p in a.parent.iterdir():
+        assert p.read_bytes() == (b.parent / p.name).read_bytes(), p.name
 
 
 def test_make_refuses_bad_requests_and_writes_nothing(tmp_path):

@@ -138,3 +138,13 @@ def test_leaves_always_carry_their_normals(tmp_path):
         face /= np.linalg.norm(face, axis=1, keepdims=True)
         own = nrm[tri.reshape(-1, 3)]                             # (T, 3 corners, 3)
         np.testing.assert_allclose(np.broadcast_to(face[:, None], own.shape), own, atol=1e-4)
+
+
+def test_y_up_shuffle_of_a_strided_view_is_exact():
+    """The writer's Y-up shuffle on a column slice (tangents' xyz) gives the same rows as on a
+    contiguous copy (numpy 2.4 mis-reads strided input to negative(out=))."""
+    from treegen_cli.exchange.gltf import _y_up32
+
+    t = np.arange(40, dtype=np.float32).reshape(10, 4)
+    np.testing.assert_array_equal(_y_up32(t[:, :3]), _y_up32(t[:, :3].copy()))
+    np.testing.assert_array_equal(_y_up32(t[:, :3])[:, 2], -t[:, 1])

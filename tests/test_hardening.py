@@ -268,8 +268,9 @@ def test_a_run_killed_mid_write_leaves_the_previous_file_intact(tmp_path, suffix
     left = _kill_mid_write(SPECIES / "black_tupelo.txt", out)
     assert out.read_bytes() == before                      # byte-identical, not half-written
     # Only the hidden staging folder of the killed run may remain, never a visible partial file.
-    assert [n for n in left if not n.startswith(".")] == [out.name]
-    assert all(n.startswith(f".{out.name}.") and n.endswith(".tmp") for n in left if n != out.name)
+    assert [n for n in left if not n.startswith(".") and not n.endswith(".png")] == [out.name]
+    assert all(n.startswith(f".{out.name}.") and n.endswith(".tmp") for n in left
+               if n != out.name and not n.endswith(".png"))
     # A later run is not disturbed by the leftover and replaces the file.
     proc = treegen("make", SPECIES / "shave_grass.txt", "-o", out, "--no-lod", "--duration", "0.5")
     assert proc.returncode == 0, proc.stderr
@@ -350,7 +351,8 @@ def test_verbose_reports_each_stage_on_stderr(tmp_path):
     proc = treegen("make", SPECIES / "quaking_aspen.txt", "-o", tmp_path / "a.glb", "-v", *FAST)
     assert proc.returncode == 0, proc.stderr
     stages = [line.split()[0] for line in proc.stderr.splitlines()]
-    assert stages == ["generate", "rig", "mesh", "wind", "prepare", "write", "counts"]
+    assert stages == ["materials", "generate", "rig", "mesh", "wind", "textures", "prepare", "write",
+                      "counts"]
     assert "nodes" in proc.stderr.splitlines()[-1]
     assert all(line.rstrip().endswith(" s") for line in proc.stderr.splitlines()[:-1])
     assert "\x1b" not in proc.stderr and "\r" not in proc.stderr

@@ -9,7 +9,7 @@ from synthetic_tree import species_tree, synthetic_tree, trunk_only
 from test_rig import compose
 from treegen_cli.errors import TreegenError
 from treegen_cli.leafshapes import OUTLINES, fill_factor
-from treegen_cli.mesh import CARD, MeshOptions, build_mesh, merge_influences
+from treegen_cli.mesh import CARD, MeshOptions, bark_offsets, build_mesh, merge_influences
 from treegen_cli.rig import RigOptions, build_rig
 
 
@@ -132,13 +132,17 @@ def test_trunk_normals_point_outward_and_v_runs_up(lobes, depth):
     # Lobed radius r·(1 + LobeDepth·sin(Lobes·θ)) around the axis.
     z0 = np.abs(p[:, 2] - 2.0) < 1e-6                            # the ring at trunk node 1
     r = np.hypot(p[z0, 0], p[z0, 1]) / 0.3
-    theta = 2 * np.pi * uv[z0, 0]
+    off_u, off_v = bark_offsets(tree)[0]
+    theta = 2 * np.pi * (uv[z0, 0] - off_u)
     np.testing.assert_allclose(r, 1 + depth * np.sin(lobes * theta), atol=1e-5)
-    # u wraps 0..1 with a seam column; v grows with height (metres / (2π·base radius)).
-    assert uv[:, 0].min() == 0.0 and uv[ring, 0].max() == 1.0
+    # u wraps once around (seam column duplicated) from the stem's offset; v grows with height
+    # (metres / (2π·base radius)) from its offset, shifted by whole tiles to centre on 0.
+    np.testing.assert_allclose([uv[ring, 0].min(), uv[ring, 0].max()], [off_u, off_u + 1], atol=1e-6)
     order = np.argsort(p[:, 2], kind="stable")
     assert np.all(np.diff(uv[order, 1]) >= -1e-6)
-    np.testing.assert_allclose(uv[ring, 1], p[ring, 2] / (2 * np.pi * 0.4), atol=1e-5)
+    v = p[ring, 2] / (2 * np.pi * 0.4) + off_v
+    shift = uv[ring, 1] - v
+    np.testing.assert_allclose(shift, np.round(shift[0]), atol=1e-5)
 
 
 @pytest.mark.parametrize("budget", [1, 2, 5, 9, 256])
@@ -262,3 +266,155 @@ def test_species_mesh_is_bound_and_keeps_every_stem(species):
     assert (len(bark.positions), len(bark.indices) // 3) == (V, T)
     area = 0.5 * np.linalg.norm(triangle_normals(prims["leaves"]), axis=1).sum()
     np.testing.assert_allclose(area, np.prod(tree.leaf_size, axis=1).sum(), rtol=1e-3)
+
+
+# ------------------------------------------------------------------------------ texture UVs
+
+def atlas_cells(variants=4):
+    """A real atlas layout (glTF rects, top-left origin), as the materials stage hands it over."""
+    from treegen_cli.textures import leaf_atlas
+    rects = leaf_atlas(0, (0.16, 0.30, 0.06), size=128, variants=variants).rects
+    return tuple(tuple(float(x) for x in r) for r in rects)
+
+
+@pytest.mark.parametrize("geometry", ["card", "shape"])
+def test_leaf_uvs_fill_their_seeded_atlas_cell(geometry):
+    """Every leaf's points land in one cell of the atlas (in the asset's bottom-left UVs), the
+    card's corners on the cell's corners; all cells get used, about equally."""
+    tree = species_tree("quaking_aspen", seed=1)
+    cells = atlas_cells(4)
+    _, prims = mesh(tree, budget=32, leaf_geometry=geometry, leaf_cells=cells)
+    leaves = prims["leaves"]
+    o = CARD if geometry == "card" else OUTLINES[0]
+    P = len(o.points)
+    uv = leaves.uvs.astype(np.float64).reshape(-1, P, 2)
+    r = np.asarray(cells)
+    # Bottom-left cell bounds: u0..u1, 1 − v1..1 − v0.
+    lo = np.column_stack([r[:, 0], 1 - r[:, 3]])
+    hi = np.column_stack([r[:, 2], 1 - r[:, 1]])
+    inside = np.all((uv[:, None] >= lo[None, :, None] - 1e-6)
+                    & (uv[:, None] <= hi[None, :, None] + 1e-6), axis=(2, 3))   # (L, cells)
+    assert np.all(inside.sum(axis=1) == 1)                    # one cell per leaf, disjoint
+    variant = inside.argmax(axis=1)
+    # Card u = x + .5, v = y (base at the cell's bottom edge): affine into the leaf's cell.
+    want = lo[variant][:, None] + o.uvs[None] * (hi - lo)[variant][:, None]
+    np.testing.assert_allclose(uv, want, atol=1e-6)
+    counts = np.bincount(variant, minlength=4)
+    assert counts.min() > 0.2 * tree.n_leaves
+
+
+def test_leaf_variants_are_seeded_by_the_tree():
+    from treegen_cli.mesh import leaf_variants
+    a, b = species_tree("quaking_aspen", seed=1), species_tree("quaking_aspen", seed=2)
+    cells = atlas_cells(4)
+    u1 = mesh(a, budget=32, leaf_cells=cells)[1]["leaves"].uvs
+    np.testing.assert_array_equal(u1, mesh(a, budget=32, leaf_cells=cells)[1]["leaves"].uvs)
+    v1, v2 = leaf_variants(a, 4), leaf_variants(b, 4)
+    assert not np.array_equal(v1[:1000], v2[:1000])
+    assert np.all(leaf_variants(a, 1) == 0)
+    # Neighbouring leaves rarely share a variant more than chance says (not a run of one).
+    assert np.mean(v1[1:] == v1[:-1]) < 0.35
+
+
+def test_single_cell_maps_the_card_to_the_whole_image():
+    """A custom leaf texture is one cell: the card's corners are the image's corners."""
+    tree = synthetic_tree()
+    _, prims = mesh(tree, leaf_cells=((0.0, 0.0, 1.0, 1.0),))
+    uv = prims["leaves"].uvs.reshape(-1, 4, 2)
+    np.testing.assert_array_equal(uv, np.broadcast_to(CARD.uvs, uv.shape))
+
+
+def test_bad_leaf_cells_are_refused():
+    tree = synthetic_tree()
+    with pytest.raises(ValueError, match="leaf_cells"):
+        mesh(tree, leaf_cells=())
+    with pytest.raises(ValueError, match="leaf_cells"):
+        mesh(tree, leaf_cells=((0.0, 0.0, 1.0),))
+
+
+def bark_layout(tree, bark, sides=(16, 8, 6, 4, 3), m=(2, 1)):
+    """Per stem: its vertex ranges in the bark primitive (ring vertices, then one apex per stem
+    at the end), from the counting formulas that test_counts_follow_the_formulas checks."""
+    lobed = tree.params.lobes > 0 and tree.params.lobe_depth != 0
+    sides = (max(sides[0], 4 * tree.params.lobes) if lobed else sides[0],) + tuple(sides[1:])
+    lev = np.minimum(tree.stem_level, len(sides) - 1)
+    n = np.where(tree.stem_radius < 0.002, 3, np.asarray(sides)[lev])
+    mm = np.asarray(m)[np.minimum(tree.stem_level, len(m) - 1)]
+    rings = (tree.stem_node_count - 1) * mm + 1
+    trunks = np.flatnonzero((tree.stem_level == 0) & ~tree.stem_clone)
+    rings[trunks] += 4 if tree.params.flare > 0 else 0
+    tips = tree.stem_node_start + tree.stem_node_count - 1
+    rings -= tree.node_radius[tips] < np.maximum(1e-4, 0.02 * tree.stem_radius)
+    verts = rings * (n + 1)
+    assert verts.sum() + tree.n_stems == len(bark.positions)
+    return rings, n, np.cumsum(verts) - verts
+
+
+@pytest.mark.parametrize("species", ["quaking_aspen", "black_tupelo", "ca_black_oak", "palm"])
+def test_bark_v_grows_along_every_stem_within_half_float_range(species):
+    """v continuous and increasing ring by ring up to the apex (no wraps), u once around from
+    the stem's offset, |uv| small enough for half floats (also after glTF's 1 − v), and the
+    stems' offsets all different."""
+    from treegen_cli.mesh import BARK_MAX_TILES
+    tree = species_tree(species, seed=0)
+    _, prims = mesh(tree, budget=64, leaves=False)
+    bark = prims["bark"]
+    uv = bark.uvs.astype(np.float64)
+    assert np.abs(uv).max() <= 64 and np.abs(1 - uv[:, 1]).max() <= 64
+    assert np.abs(uv[:, 1]).max() <= BARK_MAX_TILES / 2 + 1 and uv[:, 0].min() >= 0
+    rings, n, v0 = bark_layout(tree, bark)
+    S = tree.n_stems
+    # Per ring: the v of its first vertex, the same across the ring; u from off to off + 1.
+    ring_stem = np.repeat(np.arange(S), rings)
+    k = np.arange(ring_stem.size) - np.repeat(np.cumsum(rings) - rings, rings)
+    first = v0[ring_stem] + k * (n[ring_stem] + 1)
+    last = first + n[ring_stem]
+    v_ring = uv[first, 1]
+    np.testing.assert_allclose(uv[last, 1], v_ring, atol=1e-5)
+    np.testing.assert_allclose(uv[last, 0] - uv[first, 0], 1.0, atol=1e-5)
+    same = ring_stem[1:] == ring_stem[:-1]
+    assert np.all(np.diff(v_ring)[same] > 0)
+    apex_v = uv[len(uv) - S:, 1]
+    ring_top = v_ring[np.cumsum(rings) - 1]
+    assert np.all(apex_v >= ring_top - 1e-6)
+    # Tiles no taller than the base circumference unless the stem is a long whip.
+    tiles = apex_v - v_ring[np.cumsum(rings) - rings]
+    span = tree.node_z[tree.stem_node_start + tree.stem_node_count - 1] \
+        - tree.node_z[tree.stem_node_start]
+    short = span / (2 * np.pi * tree.stem_radius) < BARK_MAX_TILES - 2
+    assert np.all(tiles[short] >= span[short] / (2 * np.pi * tree.stem_radius[short]) - 1e-3)
+    assert np.all(tiles <= BARK_MAX_TILES + 1e-3)
+    # Offsets: per stem, the fractional v at its base and its u at column 0 are the stem's
+    # seeded offsets, spread over [0, 1) and different from stem to stem.
+    want = bark_offsets(tree)
+    dv = np.mod(v_ring[np.cumsum(rings) - rings] - want[:, 1] + 0.5, 1.0) - 0.5
+    assert np.abs(dv).max() < 1e-4
+    np.testing.assert_allclose(uv[v0, 0], want[:, 0], atol=1e-6)
+    assert len(np.unique(want)) == want.size and want.min() >= 0 and want.max() < 1
+    assert np.mean(np.abs(np.diff(want[:, 1])) < 0.01) < 0.05
+
+
+@pytest.mark.parametrize("lobes,depth", [(0, 0.0), (5, 0.1)])
+def test_bark_tangents_follow_u_and_their_bitangent_follows_v(lobes, depth):
+    """glTF TANGENT for the bark normal map: unit, orthogonal to the normal, along +u; w·(n × t)
+    points up the stem, where v grows. Checked against each triangle's own UV gradient."""
+    tree = trunk_only(lobes=lobes, lobe_depth=depth, flare=0.5)
+    bark = build_mesh(tree, build_rig(tree))[0]
+    t = bark.tangents.astype(np.float64)
+    n = bark.normals.astype(np.float64)
+    assert t.shape == (len(bark.positions), 4) and np.all(np.abs(t[:, 3]) == 1)
+    np.testing.assert_allclose(np.linalg.norm(t[:, :3], axis=1), 1.0, atol=1e-5)
+    assert np.abs(np.einsum("ij,ij->i", t[:, :3], n)).max() < 1e-5
+    # Per triangle: dP/du and dP/dv from positions and UVs.
+    tri = bark.indices.reshape(-1, 3)
+    P, UV = bark.positions.astype(np.float64)[tri], bark.uvs.astype(np.float64)[tri]
+    e1, e2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
+    d1, d2 = UV[:, 1] - UV[:, 0], UV[:, 2] - UV[:, 0]
+    det = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+    ok = np.abs(det) > 1e-9                                   # not the apex fans' slivers
+    dPdu = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) / det[:, None]
+    dPdv = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) / det[:, None]
+    tv, nv = t[tri[:, 0]], n[tri[:, 0]]
+    bv = np.cross(nv, tv[:, :3]) * tv[:, 3:4]
+    assert np.all(np.einsum("ij,ij->i", tv[ok, :3], dPdu[ok]) > 0)
+    assert np.all(np.einsum("ij,ij->i", bv[ok], dPdv[ok]) > 0)

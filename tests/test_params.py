@@ -193,6 +193,55 @@ def test_round_trip_through_text(path):
     assert parse_params_text(text) == p
 
 
+# ------------------------------------------------------------------------------ colours
+
+def test_leaf_and_bark_colour_are_srgb_hex_stored_linear():
+    p = parse_params_text("LeafColor 5a7a2e\nBarkColor = FFFFFF\n")
+    assert p.bark_color == (1.0, 1.0, 1.0)
+    # 0x5a = 90 → ((90/255 + 0.055) / 1.055)^2.4, the sRGB curve
+    assert p.leaf_color[0] == pytest.approx(((90 / 255 + 0.055) / 1.055) ** 2.4)
+    assert default_params().leaf_color is None and default_params().bark_color is None
+    d = params_dict(p)
+    assert (d["LeafColor"], d["BarkColor"]) == ("5a7a2e", "ffffff")
+    assert params_dict(default_params())["LeafColor"] is None
+    json.dumps(d)
+
+
+def test_colour_round_trips_through_the_writer_for_every_byte():
+    for b in range(256):
+        p = parse_params_text(f"LeafColor {b:02x}{255 - b:02x}{b // 2:02x}")
+        text = format_params_text(p)
+        assert f"{b:02x}{255 - b:02x}{b // 2:02x}" in text
+        assert parse_params_text(text) == p
+    assert "LeafColor" not in format_params_text(default_params())
+
+
+def test_colour_in_arbaro_xml_may_keep_its_hash():
+    xml = ('<arbaro><species name="x"><param name="LeafColor" value="#5a7a2e"/>'
+           '<param name="BarkColor" value="30201a"/></species></arbaro>')
+    p = parse_params_xml(xml)
+    assert p.leaf_color == parse_params_text("LeafColor 5a7a2e").leaf_color
+    assert params_dict(p)["BarkColor"] == "30201a"
+
+
+@pytest.mark.parametrize("value, parts", [
+    ("#5a7a2e", ["LeafColor has no value", "6 hex digits", "'#'"]),     # '#' starts a comment
+    ("5a7a2", ["LeafColor = '5a7a2' is not a colour", "6 hex digits"]),
+    ("green", ["'green' is not a colour", "e.g. 5a7a2e"]),
+    ("5a7a2e00", ["is not a colour"]),
+    ("0x5a7a2e", ["is not a colour"]),
+])
+def test_colour_errors_are_one_line_naming_file_line_and_key(value, parts):
+    expect_error(f"Levels 2\nLeafColor {value}\n", "sp/x.txt:2:", *parts)
+
+
+def test_colour_errors_in_xml_and_duplicates():
+    expect_error('<arbaro><species name="x">\n<param name="BarkColor" value="brown"/>'
+                 '</species></arbaro>', "sp/x.txt:2:", "BarkColor", "not a colour")
+    expect_error("LeafColor 5a7a2e\nleafcolor 5a7a2e\n", ":2:", "duplicate key leafcolor")
+    expect_error("LeafColour 5a7a2e\n", "unknown key LeafColour", "did you mean LeafColor?")
+
+
 # ------------------------------------------------------------------------------ errors
 
 def test_error_out_of_range_names_file_line_key_range():

@@ -70,3 +70,15 @@ def test_trimesh_reads_back_the_counts(built):
     prims = [p for lod in asset.lods for p in lod.primitives]   # trimesh loads every LOD's mesh
     assert verts == sum(len(p.positions) for p in prims)
     assert tris == sum(len(p.indices) // 3 for p in prims)
+
+
+def test_uvs_fit_half_floats_and_leaves_fill_atlas_cells(built):
+    """Engines store UVs as half floats: every UV of every LOD within ±64, in the asset's
+    convention and after glTF's 1 − v; leaf UVs inside the atlas (0..1)."""
+    _, asset, _, _ = built
+    for lod in asset.lods:
+        for prim in lod.primitives:
+            uv = prim.uvs.astype(np.float64)
+            assert np.abs(uv).max() <= 64 and np.abs(1.0 - uv[:, 1]).max() <= 64, prim.name
+            if prim.name == "leaves":
+                assert uv.min() >= 0.0 and uv.max() <= 1.0

@@ -145,7 +145,8 @@ def test_cli_static_format_implies_no_wind(tmp_path):
     proc = treegen("make", PALM, "-o", tmp_path / "palm.obj")
     assert proc.returncode == 0, proc.stderr
     assert "static format: no wind or LODs" in proc.stdout
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["palm.mtl", "palm.obj"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "palm.mtl", "palm.obj", "palm_bark.png", "palm_bark_normal.png", "palm_leaf.png"]
     s = json.loads(treegen("make", PALM, "-o", tmp_path / "palm.ply", "--json").stdout)
     assert s["keys"] == 0 and len(s["lods"]) == 1
     assert "wind" not in s["stages_s"] and "lod" not in s["stages_s"]

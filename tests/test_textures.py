@@ -409,3 +409,10 @@ def test_png_bytes_identical_in_a_fresh_interpreter():
                          check=True).stdout.strip()
     here = T.species_textures(default_params("oak"), 3, 128, 64)
     assert out == hashlib.sha256(b"".join(here.pngs().values())).hexdigest()
+
+
+@pytest.mark.parametrize("variants,size", [(1, 64), (4, 512), (4, 500), (5, 256), (9, 300)])
+def test_atlas_rects_is_the_layout_leaf_atlas_draws(variants, size):
+    """The layout alone (for UV mapping before the pixels exist) is exactly the atlas's."""
+    np.testing.assert_array_equal(T.atlas_rects(variants, size),
+                                  T.leaf_atlas(0, GREEN, size, variants, seed=1).rects)

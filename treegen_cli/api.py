@@ -33,6 +33,10 @@ DEFAULTS: dict[str, object] = {
     "joint_levels": None,
     "sides": None,
     "leaf_geometry": "card",
+    "texture_size": 512,
+    "leaf_texture": None,
+    "bark_texture": None,
+    "no_textures": False,
     "wind_speed": 4.0,
     "wind_dir": 0.0,
     "gust": 0.35,
@@ -52,9 +56,11 @@ DEFAULTS: dict[str, object] = {
     "max_vertices": 20_000_000,
     "max_keys": 5_000_000,
 }
-INTS = ("seed", "max_stems", "max_leaves", "max_joints", "width", "max_vertices", "max_keys")
+INTS = ("seed", "max_stems", "max_leaves", "max_joints", "width", "max_vertices", "max_keys",
+        "texture_size")
+PATHS = ("leaf_texture", "bark_texture")
 FLOATS = ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "fov", "error_px")
-FLAGS = ("no_wind", "no_lod", "lod_files")
+FLAGS = ("no_wind", "no_lod", "lod_files", "no_textures")
 CHOICES = {"leaf_geometry": ("card", "shape"), "error_form": ("exact", "paper"),
            "interpolation": ("linear", "step"), "up_axis": (None, "y", "z")}
 LISTS = ("joint_levels", "sides", "lod_distances")
@@ -121,6 +127,10 @@ def _scalar(key: str, value, label: Callable[[str], str]):
                 or not math.isfinite(value):
             raise TreegenError(f"{label(key)} {value!r}: expected a finite number")
         return float(value)
+    if key in PATHS:
+        if value is not None and not isinstance(value, (str, os.PathLike)):
+            raise TreegenError(f"{label(key)} {value!r}: expected a PNG file name")
+        return None if value is None else Path(value)
     if key in CHOICES:
         if value not in CHOICES[key]:
             raise TreegenError(f"{label(key)} {value!r}: use one of {', '.join(str(c).lower() for c in CHOICES[key])}")
@@ -137,6 +147,7 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
     path for a catalogue entry. Every refusal is a TreegenError naming the option and range."""
     from .limits import Limits
     from .lod import LodOptions
+    from .materials import MaterialOptions
     from .mesh import MESH_DEFAULTS
     from .pipeline import MakeOptions
     from .rig import RigOptions
@@ -177,8 +188,11 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
         generate=GenerateOptions(max_stems=v["max_stems"], max_leaves=v["max_leaves"]),
         rig=RigOptions(max_joints=v["max_joints"], joint_levels=v["joint_levels"]),
         mesh=mesh, wind=wind, lod=lod,
-        limits=Limits(max_vertices=v["max_vertices"], max_keys=v["max_keys"]))
-    values = {k: list(x) if isinstance(x, tuple) else x for k, x in v.items()}
+        limits=Limits(max_vertices=v["max_vertices"], max_keys=v["max_keys"]),
+        materials=MaterialOptions(textures=not v["no_textures"], texture_size=v["texture_size"],
+                                  leaf_texture=v["leaf_texture"], bark_texture=v["bark_texture"]))
+    values = {k: list(x) if isinstance(x, tuple) else str(x) if isinstance(x, Path) else x
+              for k, x in v.items()}
     return Resolved(seed=v["seed"], options=make_options, values=values)
 
 

@@ -157,6 +157,15 @@ def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> lis
               show_default=True,
               help="card: one textured quad per leaf (the leaf outline belongs in the texture's "
                    "alpha); shape: the species' LeafShape outline as geometry.")
+@click.option("--texture-size", type=int, default=512, show_default=True,
+              help="Leaf atlas side in texels, a power of two in [64, 2048]; bark maps are half.")
+@click.option("--leaf-texture", type=click.Path(path_type=Path), default=None, metavar="FILE.png",
+              help="Your own leaf image (PNG, alpha = cut-out), embedded as is; each card maps "
+                   "to the whole image [default: generated from the species].")
+@click.option("--bark-texture", type=click.Path(path_type=Path), default=None, metavar="FILE.png",
+              help="Your own tileable bark image (PNG), embedded as is, wrapping once around "
+                   "every stem [default: generated albedo + normal map].")
+@click.option("--no-textures", is_flag=True, help="Colour-only materials (species colours).")
 @click.option("--wind-speed", type=float, default=4.0, show_default=True, help="Mean wind speed, m/s.")
 @click.option("--wind-dir", type=float, default=0.0, show_default=True,
               help="Direction the wind blows towards, degrees (0 = +X, 90 = +Y in Z-up terms).")
@@ -184,9 +193,9 @@ def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> lis
 @click.option("--json", "as_json", is_flag=True,
               help="Print a machine-readable summary (files, bytes, counts, seconds per stage).")
 def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels, sides,
-         leaf_geometry, wind_speed, wind_dir, gust, turbulence, duration, fps, no_wind, up_axis,
-         lod_distances, fov, width, error_px, error_form, interpolation, no_lod, lod_files,
-         max_vertices, max_keys, as_json):
+         leaf_geometry, texture_size, leaf_texture, bark_texture, no_textures, wind_speed,
+         wind_dir, gust, turbulence, duration, fps, no_wind, up_axis, lod_distances, fov, width,
+         error_px, error_form, interpolation, no_lod, lod_files, max_vertices, max_keys, as_json):
     """Grow SPECIES and write a skinned, wind-animated tree to OUTPUT."""
     from .api import build, check_output, resolve, write
     from .exchange import STATIC
@@ -197,7 +206,9 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
     check_output(output, up_axis)
     job = resolve(dict(seed=seed, max_stems=max_stems, max_leaves=max_leaves,
                        max_joints=max_joints, joint_levels=joint_levels, sides=sides,
-                       leaf_geometry=leaf_geometry, wind_speed=wind_speed, wind_dir=wind_dir,
+                       leaf_geometry=leaf_geometry, texture_size=texture_size,
+                       leaf_texture=leaf_texture, bark_texture=bark_texture,
+                       no_textures=no_textures, wind_speed=wind_speed, wind_dir=wind_dir,
                        gust=gust, turbulence=turbulence, duration=duration, fps=fps,
                        no_wind=no_wind, lod_distances=lod_distances, fov=fov, width=width,
                        error_px=error_px, error_form=error_form, interpolation=interpolation,
@@ -208,8 +219,8 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
     params = _load(species)
     rep = current_reporter()
     per_lod = 3 if options.wind is None else 5          # generate, rig, mesh (, wind, lod)
-    timings = rep.timings(total=per_lod + 2 if options.lod is None else
-                          len(options.lod.distances) * per_lod + 2)   # (+ prepare, write)
+    timings = rep.timings(total=per_lod + 3 if options.lod is None else
+                          len(options.lod.distances) * per_lod + 3)   # (+ materials, prepare, write)
     with rep.live():
         asset, tree = build(params, species, job, timings)
         s = write(asset, tree, output, timings, t0, job)

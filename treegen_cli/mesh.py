@@ -11,6 +11,21 @@ alpha cuts it back to the blade. Bark vertex layout: the
 ring vertices stem by stem (base to tip), then one apex vertex per stem in stem order, so no
 stem, however thin, is ever dropped.
 
+UVs (origin bottom-left, as every Primitive's):
+* Leaves: each leaf draws one cell of the leaf atlas (`MeshOptions.leaf_cells`, the layout the
+  materials stage made the texture with), chosen by a generator seeded from the tree seed, and
+  the card (or outline) fills that cell as textures.card_uvs maps it.
+* Bark: u runs once around every stem (0 → 1 over the sides, seam column duplicated); v runs
+  along it in metres of bark divided by the tile height, the stem's own base circumference, so
+  texels are square at every stem's base (twigs get finer bark than the trunk, as real ones
+  have). A stem longer than BARK_MAX_TILES circumferences (thin whips: most of the willow's
+  twigs) gets taller tiles instead, span / BARK_MAX_TILES, so no stem needs more. Each stem
+  starts at its own seeded (u, v) offset in [0, 1) so neighbouring stems' bark does not line
+  up, and is then shifted by a whole number of tiles (invisible: the texture repeats) to centre
+  its v range on 0. Hence v is continuous and increasing along every stem with no wraps, and
+  |v| ≤ BARK_MAX_TILES / 2 + 1, |u| < 2: engines that store UVs as half floats keep at least
+  1/64 of a tile of precision (a 256² texture: 4 texels) even at the ends of the longest stems.
+
     prims = build_mesh(tree, rig, MeshOptions(sides=(24, 10, 6, 4)))
 
 Everything is ragged-array arithmetic over all stems at once (np.repeat / cumsum): no Python loop
@@ -19,6 +34,7 @@ over stems, rings, leaves or vertices (only over the few trunk stems for their f
 from __future__ import annotations
 
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -27,6 +43,10 @@ from .asset import Primitive
 from .errors import TreegenError
 from .leafshapes import OUTLINES, outline
 from .shapes import flare_factor, taper_radius
+from .textures import card_uvs
+
+FULL_CARD_CELL = ((0.0, 0.0, 1.0, 1.0),)   # one cell, the whole image: the card fills it
+BARK_MAX_TILES = 64.0                      # most texture tiles along one stem (see UVs above)
 
 
 @dataclass(frozen=True)
@@ -45,6 +65,10 @@ class MeshOptions:
     leaves: bool = True           # emit the "leaves" primitive
     leaf_geometry: str = "card"   # "card": a textured quad per leaf; "shape": the LeafShape
                                   # outline as geometry (see leafshapes.py)
+    leaf_cells: tuple[tuple[float, float, float, float], ...] = FULL_CARD_CELL
+                                  # leaf atlas layout: per variant its card rectangle
+                                  # (u0, v0, u1, v1) in glTF UVs (top-left origin), as
+                                  # textures.LeafAtlas.rects; materials.Materials gives it
 
 
 MESH_DEFAULTS = MeshOptions()
@@ -106,6 +130,9 @@ def _check(options: MeshOptions) -> None:
     if options.leaf_geometry not in LEAF_GEOMETRIES:
         raise TreegenError(f"--leaf-geometry '{options.leaf_geometry}': expected one of "
                            f"{', '.join(LEAF_GEOMETRIES)}")
+    cells = np.asarray(options.leaf_cells, dtype=np.float64)
+    if cells.ndim != 2 or cells.shape[1] != 4 or not len(cells) or not np.all(np.isfinite(cells)):
+        raise ValueError(f"leaf_cells must be (u0, v0, u1, v1) rectangles, got {options.leaf_cells!r}")
 
 
 def _ring_params(tree, options: MeshOptions):
@@ -137,6 +164,22 @@ def _ring_params(tree, options: MeshOptions):
         keep[1:] = (stem[1:] != stem[:-1]) | (u[1:] - u[:-1] > 1e-4)
         stem, u = stem[keep], u[keep]
     return stem, u
+
+
+def bark_offsets(tree) -> np.ndarray:
+    """(S, 2) seeded (u, v) bark offsets in [0, 1), one pair per stem, so neighbouring stems'
+    bark does not line up. Stems are ordered level by level, so a LOD that regrows the tree
+    with fewer levels keeps its stems' offsets (the same stream, a prefix of it)."""
+    rng = np.random.default_rng([int(tree.seed), 0xBA4C, 0x0FF5])
+    return rng.random((tree.n_stems, 2))
+
+
+def leaf_variants(tree, n_cells: int) -> np.ndarray:
+    """Atlas cell per leaf (L,), seeded from the tree seed: the same tree, the same leaves."""
+    if n_cells <= 1:
+        return np.zeros(tree.n_leaves, dtype=np.int64)
+    rng = np.random.default_rng([int(tree.seed), 0x1EAF, 0xA71A5])
+    return rng.integers(0, n_cells, tree.n_leaves)
 
 
 def _bark(tree, rig, options: MeshOptions) -> Primitive:
@@ -196,6 +239,16 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
     trunk = level[rs] == 0
     R = rs.size
 
+    # --- bark UVs per stem: tile height, seeded offsets, centring shift (module docstring) ---
+    cap = np.where(pointed, 0.0, options.cap_height * tree.node_radius[tip])
+    z_base = tree.node_z[start]
+    span = tree.node_z[tip] + cap - z_base                  # metres of bark, cap included
+    tile = np.maximum(2.0 * np.pi * np.maximum(tree.stem_radius, 1e-6),
+                      span / BARK_MAX_TILES)
+    off_u, off_v = bark_offsets(tree).T
+    v_shift = off_v - np.round(0.5 * (span / tile + off_v))
+    v_ring = (z - z_base[rs]) / tile[rs] + v_shift[rs]
+
     lobed = p.lobes > 0 and p.lobe_depth != 0
     sides = stem_sides(tree, options)
     sd = sides[rs]
@@ -207,7 +260,7 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
     pos_r = np.empty((Vr, 3), dtype=np.float32)
     nrm_r = np.empty((Vr, 3), dtype=np.float32)
     uv_r = np.empty((Vr, 2), dtype=np.float32)
-    vscale = 1.0 / (2.0 * np.pi * np.maximum(tree.stem_radius, 1e-6))   # square-ish texels
+    tan_r = np.empty((Vr, 3), dtype=np.float32)
     for n in np.unique(sd):
         g = np.flatnonzero(sd == n)
         col = np.arange(n + 1)
@@ -230,8 +283,12 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
             - (lf * lf * slope[g][:, None])[:, :, None] * fr[:, None, :, 2]
         nr /= np.linalg.norm(nr, axis=2, keepdims=True)
         nrm_r[dest] = nr.reshape(-1, 3)
-        uv_r[dest, 0] = np.tile(col / n, len(g))
-        uv_r[dest, 1] = np.repeat(z[g] * vscale[rs[g]], n + 1)
+        # Tangent (for the bark normal map): +u runs with θ, made orthogonal to the normal.
+        tg = tangent - np.einsum("rck,rck->rc", tangent, nr)[:, :, None] * nr
+        tg /= np.linalg.norm(tg, axis=2, keepdims=True)
+        tan_r[dest] = tg.reshape(-1, 3)
+        uv_r[dest, 0] = (col[None, :] / n + off_u[rs[g]][:, None]).ravel()
+        uv_r[dest, 1] = np.repeat(v_ring[g], n + 1)
     rv = np.repeat(np.arange(R), nv)
 
     ring_J = np.concatenate([rig.node_joints[a], rig.node_joints[b]], axis=1)
@@ -241,9 +298,8 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
 
     # --- apex per stem (tip point, or a low cone over a blunt tip) ---
     axis = F[tip][:, :, 2]
-    cap = np.where(pointed, 0.0, options.cap_height * tree.node_radius[tip])
     pos_a = tree.node_pos[tip] + cap[:, None] * axis
-    uv_a = np.column_stack([np.full(S, 0.5), (tree.node_z[tip] + cap) * vscale])
+    uv_a = np.column_stack([0.5 + off_u, span / tile + v_shift])
     apex_J, apex_W = merge_influences(rig.node_joints[tip], rig.node_weights[tip])
 
     # --- triangles: quads between consecutive rings of a stem, then a fan to the apex ---
@@ -261,10 +317,16 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
     l0 = v0[last_ring[fs]] + fj
     fans = np.stack([l0, l0 + 1, Vr + fs], axis=1)
 
+    # Tangents: w = +1, as cross(normal, +u around the stem) points up the stem (+v); the
+    # apex takes its frame's x axis (its normal is the stem axis).
+    tangents = np.ones((Vr + S, 4), dtype=np.float32)
+    tangents[:Vr, :3] = tan_r
+    tangents[Vr:, :3] = F[tip][:, :, 0]
     return Primitive(
         name="bark", material="bark",
         positions=np.concatenate([pos_r, pos_a]).astype(np.float32),
         normals=np.concatenate([nrm_r, axis]).astype(np.float32),
+        tangents=tangents,
         uvs=np.concatenate([uv_r, uv_a]).astype(np.float32),
         indices=np.concatenate([quads, fans]).astype(np.uint32).ravel(),
         joints=np.concatenate([ring_J[rv], apex_J]),
@@ -285,7 +347,19 @@ def _faces_flat(o) -> bool:
     return True
 
 
-def _leaves(tree, rig, geometry: str = "card") -> Primitive:
+def _leaf_uvs(tree, o, cells) -> np.ndarray:
+    """(L·P, 2) bottom-left UVs: each leaf's outline points in its seeded atlas cell. card_uvs
+    maps the P points into each of the few cells once; leaves then index that small table."""
+    K, P = len(cells), len(o.points)
+    table = card_uvs(np.tile(o.uvs, (K, 1)), np.repeat(np.arange(K), P),
+                     SimpleNamespace(rects=np.asarray(cells, dtype=np.float32)),  # reads .rects
+                     origin="bottom-left")
+    pick = leaf_variants(tree, K)[:, None] * P + np.arange(P)[None, :]
+    return table[pick.ravel()]
+
+
+def _leaves(tree, rig, geometry: str = "card",
+            cells: tuple = FULL_CARD_CELL) -> Primitive:
     """Stamp a card (or the LeafShape outline) on every leaf frame (float32 broadcasts)."""
     o = outline(tree.params.leaf_shape)          # validates the code even for cards
     if geometry == "card":
@@ -326,7 +400,7 @@ def _leaves(tree, rig, geometry: str = "card") -> Primitive:
     return Primitive(
         name="leaves", material="leaf",
         positions=pos.reshape(-1, 3), normals=nrm,
-        uvs=np.tile(o.uvs.astype(np.float32), (L, 1)),
+        uvs=_leaf_uvs(tree, o, cells),
         indices=idx.ravel(), joints=joints, weights=weights,
         flat_normals=_faces_flat(o),     # frames are rotations: flat stays flat
     )
@@ -337,5 +411,5 @@ def build_mesh(tree, rig, options: MeshOptions = MESH_DEFAULTS) -> list[Primitiv
     _check(options)
     prims = [_bark(tree, rig, options)]
     if options.leaves and tree.n_leaves:
-        prims.append(_leaves(tree, rig, options.leaf_geometry))
+        prims.append(_leaves(tree, rig, options.leaf_geometry, options.leaf_cells))
     return prims

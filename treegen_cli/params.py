@@ -74,6 +74,10 @@ class Params:
     prune_power_low: float = 0.5   # PrunePowerLow
     prune_power_high: float = 0.5  # PrunePowerHigh
     smooth: float = 0.5          # Smooth (Arbaro mesh smoothness), 0..1
+    leaf_color: tuple[float, float, float] | None = None  # LeafColor rrggbb (sRGB in the file),
+    bark_color: tuple[float, float, float] | None = None  # BarkColor; stored as linear RGB like
+                                                          # Material.base_color; None: the
+                                                          # species default (textures.species_colors)
     level: tuple[LevelParams, ...] = field(
         default_factory=lambda: tuple(LevelParams() for _ in range(LEVEL_SLOTS))
     )
@@ -128,7 +132,7 @@ class KeySpec:
     hi: float = INF
     lo_open: bool = False
     hi_open: bool = False
-    per_level: bool = False
+    per_level: bool = False     # kind str: a colour (6 hex digits, see _color)
 
     def contains(self, v: float) -> bool:
         if v < self.lo or (self.lo_open and v == self.lo):
@@ -139,6 +143,8 @@ class KeySpec:
 
     def range_text(self) -> str:
         """The legal range in interval notation, e.g. '[-180, 180]', '(0, 1]', '[0, inf)'."""
+        if self.kind is str:
+            return COLOR_FORMAT
         def num(x: float) -> str:
             if math.isinf(x):
                 return "inf" if x > 0 else "-inf"
@@ -150,6 +156,11 @@ class KeySpec:
 
 def _k(key, field_, kind, lo=-INF, hi=INF, lo_open=False, hi_open=False):
     return KeySpec(key, field_, kind, lo, hi, lo_open, hi_open, per_level=False)
+
+
+def _c(key, field_):
+    """A colour key: 6 hex digits of sRGB in the file, linear RGB in Params."""
+    return KeySpec(key, field_, str)
 
 
 def _n(key, field_, kind, lo=-INF, hi=INF, lo_open=False, hi_open=False):
@@ -188,6 +199,8 @@ TOP_KEYS: tuple[KeySpec, ...] = (
     _k("PrunePowerLow", "prune_power_low", float, 0, INF),
     _k("PrunePowerHigh", "prune_power_high", float, 0, INF),
     _k("Smooth", "smooth", float, 0, 1),
+    _c("LeafColor", "leaf_color"),
+    _c("BarkColor", "bark_color"),
 )
 
 LEVEL_KEYS: tuple[KeySpec, ...] = (
@@ -222,6 +235,34 @@ _TOP_BY_LOWER = {s.key.lower(): s for s in TOP_KEYS}
 _LEVEL_BY_LOWER = {s.key.lower(): s for s in LEVEL_KEYS}
 _LEVEL_BY_LOWER.update({a.lower(): _LEVEL_BY_LOWER[k.lower()] for a, k in LEVEL_ALIASES.items()})
 _LEVEL_RE = re.compile(r"^(\d+)([A-Za-z]+)$")
+
+# Colours: what artists copy from an image editor (sRGB bytes), without '#', which starts a
+# comment in the text format (Arbaro XML values may keep it). Params holds linear RGB, the
+# space textures and materials compute in; the exact sRGB curve makes the writer round-trip.
+COLOR_FORMAT = "6 hex digits rrggbb, sRGB, e.g. 5a7a2e"
+_HEX_RE = re.compile(r"^#?([0-9A-Fa-f]{6})$")
+
+
+def srgb_hex_to_linear(text: str) -> tuple[float, float, float]:
+    """'5a7a2e' → linear RGB floats (the sRGB transfer curve, exactly)."""
+    m = _HEX_RE.match(text.strip())
+    if m is None:
+        raise ValueError(f"{text!r} is not {COLOR_FORMAT}")
+    out = []
+    for i in range(0, 6, 2):
+        x = int(m.group(1)[i:i + 2], 16) / 255.0
+        out.append(x / 12.92 if x <= 0.04045 else ((x + 0.055) / 1.055) ** 2.4)
+    return tuple(out)
+
+
+def linear_to_srgb_hex(rgb) -> str:
+    """Linear RGB floats → 'rrggbb' (inverse of srgb_hex_to_linear on its outputs)."""
+    out = ""
+    for c in rgb:
+        c = min(max(float(c), 0.0), 1.0)
+        x = 12.92 * c if c <= 0.0031308 else 1.055 * c ** (1 / 2.4) - 0.055
+        out += f"{int(round(x * 255.0)):02x}"
+    return out
 
 # Arbaro's per-level defaults for levels 0..3 (its LevelParams); level n > 3 repeats level 3,
 # as Arbaro uses level 3's values for every deeper level.
@@ -342,9 +383,15 @@ class _Builder:
         else:
             self.entries.append(_Entry(key, value, line))
 
-    def _number(self, spec: KeySpec, canon: str, e: _Entry) -> int | float:
+    def _number(self, spec: KeySpec, canon: str, e: _Entry) -> int | float | tuple:
         raw = e.value.strip()
         shown = _clip(raw)
+        if spec.kind is str:
+            try:
+                return srgb_hex_to_linear(raw)
+            except ValueError:
+                raise self.fail(e.line, f"{canon} = {shown!r} is not a colour "
+                                        f"({COLOR_FORMAT})") from None
         if spec.field == "leaf_shape" and raw.lower() in LEAF_SHAPES:
             return LEAF_SHAPES[raw.lower()]
         rng = spec.range_text()
@@ -442,6 +489,9 @@ def parse_params_text(text: str, source: str = "<string>") -> Params:
         if found is None:
             raise b.fail(lineno, f"unknown key {_clip(key)}{_suggest(key)}")
         if not value:
+            if found[0].kind is str:
+                raise b.fail(lineno, f"{key} has no value ({COLOR_FORMAT}; write it without "
+                                     f"'#', which starts a comment)")
             raise b.fail(lineno, f"{key} has no value (allowed range {found[0].range_text()})")
         if len(value.split()) > 1:
             raise b.fail(lineno, f"{key} = {_clip(value)!r}: expected one value, "
@@ -565,7 +615,9 @@ def load_params(path: str | Path) -> Params:
 
 # ------------------------------------------------------------------------------ output
 
-def _fmt(v: int | float) -> str:
+def _fmt(v: int | float | str) -> str:
+    if isinstance(v, str):
+        return v
     if isinstance(v, bool):
         raise TypeError("bool is not a parameter value")
     if isinstance(v, int):
@@ -577,11 +629,13 @@ def params_dict(params: Params) -> dict[str, object]:
     """Canonical `{key: value}` of a Params: Name, top-level keys, then level keys 0..Levels.
 
     Levels above `Levels` are left out: no file can set them (they repeat Arbaro's defaults
-    or level 3). Used by `treegen info --json` and by the writer.
+    or level 3). Colours are 'rrggbb' text, None when unset (the species default applies).
+    Used by `treegen info --json` and by the writer.
     """
     out: dict[str, object] = {"Name": params.name}
     for s in TOP_KEYS:
-        out[s.key] = getattr(params, s.field)
+        v = getattr(params, s.field)
+        out[s.key] = linear_to_srgb_hex(v) if s.kind is str and v is not None else v
     for n in range(min(params.levels, MAX_LEVELS) + 1):
         lp = params.level[n]
         for s in LEVEL_KEYS:
@@ -597,6 +651,8 @@ def format_params_text(params: Params, header: str | None = None) -> str:
     width = max(len(k) for k in d)
     current = None
     for key, value in d.items():
+        if value is None:                  # an unset colour: the species default
+            continue
         group = key[0] if key[0].isdigit() and key not in ("0Scale", "0ScaleV", "0BaseSplits") else ""
         if group != current:
             lines.append("")

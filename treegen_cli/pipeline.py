@@ -9,20 +9,17 @@ import time
 from dataclasses import dataclass, field, replace
 
 from . import __version__
-from .asset import Asset, Lod, Material
+from .asset import Asset, Lod
 from .generate import DEFAULTS as GENERATE_DEFAULTS, GenerateOptions, generate, regrow_leaves
 from .limits import LIMITS_DEFAULTS, Limits, check_keys, check_mesh
 from .lod import LOD_DEFAULTS, LodOptions, decimate, lod_stage_options, match_leaf_area, screen_coverage
+from .materials import MATERIAL_DEFAULTS, MaterialOptions, build_materials
 from .mesh import MESH_DEFAULTS, MeshOptions, build_mesh
 from .params import Params
 from .prepare import prepare
 from .rig import RIG_DEFAULTS, RigOptions, build_rig
 from .tree import Tree, tree_height
 from .wind import DEFAULTS as WIND_DEFAULTS, WindOptions, bake_wind
-
-BARK = Material("bark", base_color=(0.36, 0.27, 0.19, 1.0), roughness=0.92)
-LEAF = Material("leaf", base_color=(0.26, 0.46, 0.13, 1.0), roughness=0.7, double_sided=True)
-
 
 @dataclass(frozen=True)
 class MakeOptions:
@@ -34,6 +31,7 @@ class MakeOptions:
     wind: WindOptions | None = WIND_DEFAULTS
     lod: LodOptions | None = LOD_DEFAULTS   # None: one LOD with the dense clip
     limits: Limits = LIMITS_DEFAULTS        # refuse oversized meshes / clips before building
+    materials: MaterialOptions = MATERIAL_DEFAULTS   # textures (generated or an artist's) or colours
 
 
 @dataclass
@@ -101,11 +99,16 @@ def build_asset(params: Params, seed: int = 0, options: MakeOptions = MakeOption
     """Grow, rig, mesh and animate `params` with `seed`; returns the asset and its tree.
     `tree`: the tree `generate(params, seed, options.generate)` already grew, to reuse."""
     timings = timings if timings is not None else Timings()
+    # Materials first: they fix the leaf atlas layout the mesh maps leaves into, and a bad
+    # --leaf-texture fails before anything is grown; the textures are drawn meanwhile.
+    mats = timings.run("materials", build_materials, params, options.materials)
+    options = replace(options, mesh=replace(options.mesh, leaf_cells=mats.leaf_cells))
     if tree is None:
         tree = timings.run("generate", generate, params, seed, options.generate)
     lods = [build_lod(tree, options, seed, timings)] if options.lod is None else \
         build_lods(params, tree, options, seed, timings)
-    asset = Asset(name=params.name, materials=[BARK, LEAF], lods=lods,
+    materials = timings.run("textures", lambda: mats.materials)   # waits only if not done
+    asset = Asset(name=params.name, materials=materials, lods=lods,
                   extras={"species": params.name, "seed": seed,
                           "generator": f"treegen {__version__}"})
     return timings.run("prepare", prepare, asset), tree

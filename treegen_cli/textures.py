@@ -28,6 +28,7 @@ from __future__ import annotations
 import colorsys
 import io
 import math
+import zlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,6 +37,10 @@ from scipy import ndimage
 from .leafshapes import outline
 
 PNG_COMPRESS_LEVEL = 6   # fixed: PNG bytes are a function of the pixels only
+# zlib's run-length strategy: 4× faster than the default on these images (0.03 s instead of
+# 0.10 s for a 512² atlas + 256² bark maps) for 12 % more bytes (358 KB instead of 320 KB), which
+# keeps `treegen make` within its time budget.
+PNG_STRATEGY = zlib.Z_RLE
 
 
 # ---------------------------------------------------------------------------------- colour
@@ -147,6 +152,16 @@ def _grid(variants: int, size: int):
     if min(cw, ch) - 2 * pad < 8:
         raise ValueError(f"leaf atlas {size}² is too small for {variants} variants")
     return cols, rows, cw, ch, pad
+
+
+def atlas_rects(variants: int, size: int) -> np.ndarray:
+    """The card rectangles (LeafAtlas.rects) of a `variants`-leaf atlas of side `size`, without
+    drawing it: a mesh can be UV-mapped while the pixels are still being made."""
+    cols, _rows, cw, ch, pad = _grid(variants, size)
+    r, c = np.divmod(np.arange(variants), cols)
+    x0, y0 = c * cw + pad, r * ch + pad
+    return (np.stack([x0, y0, x0 + cw - 2 * pad, y0 + ch - 2 * pad], axis=1)
+            / size).astype(np.float32)
 
 
 def _coverage(shape: int, bw: int, bh: int):
@@ -339,7 +354,7 @@ def leaf_atlas(shape: int, color, size: int = 512, variants: int = 4, seed: int 
     vein_col = np.array([1.35, 1.30, 0.85], dtype=np.float32)        # pale yellow-green
 
     rgba = np.zeros((size, size, 4), dtype=np.uint8)
-    rects = np.zeros((variants, 4), dtype=np.float32)
+    rects = atlas_rects(variants, size)
     alpha8 = np.round(alpha * 255.0).astype(np.uint8)
     lins = []
     for k in range(variants):
@@ -372,8 +387,6 @@ def leaf_atlas(shape: int, color, size: int = 512, variants: int = 4, seed: int 
         # Solid texels are their own nearest; the rest take the nearest solid texel's colour.
         rgba[y0:y0 + ch, x0:x0 + cw, :3] = blade.take(nearest, axis=0).reshape(ch, cw, 3)
         rgba[y0 + pad:y0 + pad + bh, x0 + pad:x0 + pad + bw, 3] = alpha8
-        rects[k] = ((x0 + pad) / size, (y0 + pad) / size,
-                    (x0 + pad + bw) / size, (y0 + pad + bh) / size)
     # Unused cells and texels outside every cell (size not a multiple of the grid) get leaf
     # colour too, alpha 0, so nothing dark bleeds in at small mip levels.
     for k in range(variants, rows * cols):
@@ -565,7 +578,7 @@ def png_bytes(array: np.ndarray) -> bytes:
         raise ValueError(f"png_bytes wants uint8 H×W×3 or H×W×4, got {a.dtype} {a.shape}")
     img = Image.fromarray(a)
     buf = io.BytesIO()
-    img.save(buf, format="PNG", compress_level=PNG_COMPRESS_LEVEL)
+    img.save(buf, format="PNG", compress_level=PNG_COMPRESS_LEVEL, compress_type=PNG_STRATEGY)
     return buf.getvalue()
 
 

@@ -145,8 +145,9 @@ def _weights(joints: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.nd
 
 
 def _y_up32(v: np.ndarray) -> np.ndarray:
-    """float32 (V, 3) → new float32 (V, 3) in Y up: an exact shuffle, no float64 detour."""
-    v = np.asarray(v, dtype=np.float32)
+    """float32 (V, 3) → new float32 (V, 3) in Y up: an exact shuffle, no float64 detour.
+    Contiguous first: numpy 2.4's strided `negative(..., out=)` reads the wrong elements."""
+    v = np.ascontiguousarray(v, dtype=np.float32)
     out = np.empty(v.shape, dtype=np.float32)
     out[:, 0] = v[:, 0]
     out[:, 1] = v[:, 2]
@@ -172,10 +173,21 @@ def _primitive(buf: _Buffer, p: Primitive, n_joints: int, material: int) -> dict
     attrs = {"POSITION": buf.accessor(pos, ARRAY_BUFFER, bounds=True),
              "NORMAL": buf.accessor(nrm, ARRAY_BUFFER),
              "TEXCOORD_0": buf.accessor(uv, ARRAY_BUFFER),
+             **_tangent(buf, p),
              "JOINTS_0": buf.accessor(joints, ARRAY_BUFFER),
              "WEIGHTS_0": buf.accessor(weights, ARRAY_BUFFER, normalized=True)}
     return {"attributes": attrs, "indices": buf.accessor(indices, ELEMENT_ARRAY_BUFFER),
             "material": material, "mode": 4}
+
+
+def _tangent(buf: _Buffer, p: Primitive) -> dict:
+    """TANGENT (xyz + handedness w) where the primitive has them (normal-mapped bark), so no
+    client generates its own tangent space (the validator warns about that)."""
+    if p.tangents is None:
+        return {}
+    t = np.asarray(p.tangents, dtype=np.float32)
+    xyz = _y_up32(t[:, :3])        # a rotation: handedness w is unchanged
+    return {"TANGENT": buf.accessor(np.column_stack([xyz, t[:, 3]]).astype(np.float32), ARRAY_BUFFER)}
 
 
 def moving_joints(clip: Clip) -> np.ndarray:
