@@ -1,0 +1,138 @@
+"""Real clients nobody on the project wrote (tests/clients.py): every bundled species' default
+GLB and its `--lod-files` parts through Godot 3.2's editor import, three.js and Babylon.js.
+
+What a user sees after import is asserted: the import finishes, one skeleton per LOD in the
+file within the joint budget, leaves and bark with normals, UVs in range, the wind clip named
+so Godot loops it and moving bones, no importer errors. A client that is not installed skips
+its tests with the install command (CI installs all three: `make install`).
+"""
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+
+import pytest
+
+import clients
+from conftest import SPECIES, run_treegen, species_path
+
+MAX_BONES = 256
+UV_LIMIT = 64.0           # engines store UVs as half floats
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    """{species: (default GLB, [LOD parts])}, made in two processes at a time."""
+    out = tmp_path_factory.mktemp("clients")
+
+    def make(name):
+        one, parts = out / f"{name}.glb", out / "parts" / f"{name}.glb"
+        parts.parent.mkdir(exist_ok=True)
+        for args in ([one], [parts, "--lod-files"]):
+            proc = run_treegen("make", species_path(name), "-o", *args, "-q")
+            assert proc.returncode == 0, proc.stderr
+        return name, (one, sorted(parts.parent.glob(f"{name}_LOD*.glb")))
+
+    with ThreadPoolExecutor(2) as pool:
+        return dict(pool.map(make, SPECIES))
+
+
+def _call(fn, *args, **kw):
+    try:
+        return fn(*args, **kw)
+    except clients.ClientMissing as exc:
+        pytest.skip(str(exc))
+
+
+@pytest.fixture(scope="module")
+def godot(files):
+    every = [p for one, parts in files.values() for p in [one, *parts]]
+    return _call(clients.godot_import_many, every, timeout=900)
+
+
+def _godot_checks(r, n_lods, sways=True):
+    assert r["imported"], (r["reason"], r.get("log_tail"))
+    assert not r["errors"], r["errors"]
+    skeletons = r["skeletons"]
+    assert len(skeletons) == n_lods, [s["path"] for s in skeletons]
+    assert all(0 < s["bone_count"] <= MAX_BONES for s in skeletons)
+    surfaces = [s for m in r["mesh_instances"] for s in m["surfaces"]]
+    bark = [s for s in surfaces if s["material"]["name"] == "bark"]
+    assert len(bark) == n_lods                               # (+ leaves, where the species has any)
+    for s in surfaces:
+        assert s["has_normal"] and s["zero_normals"] == 0
+        assert all(abs(v) <= UV_LIMIT for v in s["uv_min"] + s["uv_max"]), s
+    leaves = [s for s in surfaces if s["material"]["name"] == "leaf"]
+    for s in leaves:                    # cut-out leaf texture, UVs inside the atlas
+        assert all(0 <= v <= 1 for v in s["uv_min"] + s["uv_max"])
+        m = s["material"]
+        assert m["albedo_texture"] and m["alpha_scissor"] and 0 < m["alpha_scissor_threshold"] < 1, m
+        assert m["cull_mode"] == "disabled"
+    for s in bark:
+        assert s["material"]["albedo_texture"] and s["material"]["normal_texture"], s["material"]
+    anims = [a for p in r["animation_players"] for a in p["animations"]]
+    assert len(anims) == n_lods
+    for a in anims:
+        assert a["name"].endswith("_loop") and a["loop"], a["name"]
+        assert a["loop_closes"] and a["tracks"] == a["tracks_resolved"]
+    # the full-detail clip sways; a far LOD may keep no motion where none would show on screen
+    assert not sways or next(a for a in anims if a["name"] == "wind_loop")["bones_moved"] > 0
+
+
+@pytest.mark.parametrize("species", SPECIES)
+def test_godot_imports_the_default_file(godot, files, species):
+    _godot_checks(godot[str(files[species][0])], 4)
+
+
+@pytest.mark.parametrize("species", SPECIES)
+def test_godot_imports_each_lod_file(godot, files, species):
+    parts = files[species][1]
+    assert [p.stem for p in parts] == [f"{species}_LOD{k}" for k in range(4)]
+    for k, p in enumerate(parts):
+        _godot_checks(godot[str(p)], 1, sways=k == 0)
+
+
+def _web_checks(r, n_skinned_lods=1):
+    assert r["loaded"], r.get("error")
+    assert not [w for w in r["warnings"] if "ormals" in w or "No target node" in w], r["warnings"]
+    assert r["skeletons"] and all(0 < s["bones"] <= MAX_BONES for s in r["skeletons"])
+    meshes = [m for m in r["meshes"] if m.get("skinned", True)]
+    assert meshes and all(m["has_normal"] for m in meshes)
+    for m in r["materials"]:
+        assert m["base_color_texture"], m
+        if m["name"] == "leaf":         # alpha-tested cut-out, both faces drawn
+            if "alpha_test" in m:       # three.js
+                assert m["alpha_test"] > 0 and m["double_sided"], m
+            else:                       # Babylon: ALPHATEST mode
+                assert m["transparency_mode"] == 1 and not m["back_face_culling"], m
+        if m["name"] == "bark":
+            assert m["normal_texture"], m
+    anims = {a["name"]: a for a in r["animations"]}
+    assert anims["wind_loop"]["bones_moved"] > 0 and anims["wind_loop"]["loop_closes"]
+
+
+@pytest.fixture(scope="module")
+def web(files):
+    every = [one for one, _ in files.values()] + files["quaking_aspen"][1]
+
+    def load(p):
+        return str(p), (_call(clients.three_load, p), _call(clients.babylon_load, p))
+
+    with ThreadPoolExecutor(2) as pool:
+        return dict(pool.map(load, every))
+
+
+@pytest.mark.parametrize("species", SPECIES)
+def test_three_and_babylon_load_and_play(web, files, species):
+    three, babylon = web[str(files[species][0])]
+    _web_checks(three)
+    _web_checks(babylon)
+    # Babylon honours MSFT_lod: every level loads; three.js shows LOD0 only
+    assert babylon["msft_lod_levels_loaded"] == [0, 1, 2, 3]
+
+
+def test_lod_files_load_in_three_and_babylon(web, files):
+    for p in files["quaking_aspen"][1]:
+        three, babylon = web[str(p)]
+        _web_checks(three)
+        _web_checks(babylon)
+        assert len(three["skeletons"]) == 1 and len(three["animations"]) == 1
