@@ -749,3 +749,37 @@ def bake_wind(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int =
         rot[:n, idx] = q.transpose(1, 0, 2)
         rot[n] = rot[0]
     return Clip(name="wind", times=times, rotations=rot, interpolation="LINEAR")
+
+
+# ---------------------------------------------------------------------------------------------
+# what an artist tunes with
+
+def wind_report(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int = 0,
+                modes: int = 4) -> dict:
+    """`treegen info --wind`: natural frequencies (Hz) and damping of the lowest modes and of
+    the trunk's sway mode, and what the clip does at `options.speed`: the tree top's mean
+    downwind lean and RMS sway (m), the largest joint turn (degrees)."""
+    parent = np.asarray(rig.skeleton.parent, dtype=np.int64)
+    if parent.shape[0] < 2:
+        return {"modes": [], "sway_hz": None, "sway_damping": None, "speed_m_s": options.speed}
+    loads = joint_loads(tree, rig, options)
+    dyn = dynamics(tree, rig, options, loads)
+    sway = trunk_mode(tree, rig, options, loads, dyn)
+    out = {
+        "modes": [{"hz": round(float(w / (2 * np.pi)), 4), "damping": round(float(z), 4)}
+                  for w, z in zip(dyn.omega[:modes], dyn.damping[:modes])],
+        "sway_hz": round(float(dyn.omega[sway] / (2 * np.pi)), 4),
+        "sway_damping": round(float(dyn.damping[sway]), 4),
+        "speed_m_s": options.speed,
+    }
+    theta = wind_angles(tree, rig, options, seed, dyn)                 # (J, n, 3)
+    j, x = trunk_top(tree, rig)
+    phi = np.deg2rad(options.direction_deg)
+    e_dir = np.array([np.cos(phi), np.sin(phi), 0.0])
+    D = displacement_map(dyn, loads, parent, j, x)
+    top = np.einsum("ia,ak->ki", D, np.einsum("jca,jkc->jak", dyn.basis, theta).reshape(D.shape[1], -1))
+    along = top @ e_dir
+    out |= {"top_lean_m": round(float(along.mean()), 4),
+            "top_sway_rms_m": round(float(np.sqrt(np.mean(np.sum((top - top.mean(axis=0)) ** 2, axis=1)))), 4),
+            "max_joint_deg": round(float(np.degrees(np.linalg.norm(theta, axis=2).max())), 2)}
+    return out
