@@ -78,11 +78,18 @@ def cli():
               help="Also build the LODs and print, per LOD distance, keys kept, max error, leaf-"
                    "vertex updates per frame vs all leaf vertices, joints, triangles.")
 @_lod_options
+@click.option("--wind", "with_wind", is_flag=True,
+              help="Also print the wind physics: natural frequencies and damping, the trunk's "
+                   "sway frequency, and the tree top's lean and sway at --wind-speed.")
+@click.option("--wind-speed", type=float, default=4.0, show_default=True, help="Mean wind speed, m/s.")
+@click.option("--stiffness", type=float, default=1.0, show_default=True,
+              help="Multiplier on every joint's stiffness (frequencies scale with its square root).")
 def info(species, seed, max_stems, max_leaves, as_json, with_lod, lod_distances, fov, width,
-         error_px, error_form, interpolation):
+         error_px, error_form, interpolation, with_wind, wind_speed, stiffness):
     """Grow SPECIES (a Weber–Penn text or Arbaro XML file) and report on the tree:
     stems per level, leaves, leaf area (m²), height and crown width (m), nodes, seconds.
-    With --lod: the analogue of the paper's Table 3, one row per LOD distance."""
+    With --lod: the analogue of the paper's Table 3, one row per LOD distance.
+    With --wind: the wind model's numbers, to tune --wind-speed, --gust and --stiffness."""
     from .generate import generate
     from .tree import tree_stats
 
@@ -100,6 +107,11 @@ def info(species, seed, max_stems, max_leaves, as_json, with_lod, lod_distances,
                                   GenerateOptions(max_stems=max_stems, max_leaves=max_leaves),
                                   _lod_from(lod_distances, fov, width, error_px, error_form,
                                             interpolation))
+    if with_wind:
+        from .rig import build_rig
+        from .wind import WindOptions, wind_report
+        stats["wind"] = wind_report(tree, build_rig(tree),
+                                    WindOptions(speed=wind_speed, stiffness=stiffness), seed)
     if as_json:
         click.echo(json.dumps(stats, indent=2))
         return
@@ -126,6 +138,15 @@ def info(species, seed, max_stems, max_leaves, as_json, with_lod, lod_distances,
             click.echo(f"    {k:<4}{r['distance_m']:>8g}{r['keys_kept']:>9,} {r['keys_kept_pct']:>5.1f}%"
                        f"{r['max_error_px']:>11.3f}{r['leaf_vertex_updates_per_frame']:>15,.0f}"
                        f"{r['leaf_vertices']:>12,}{r['joints']:>8}{r['triangles']:>11,}")
+    if with_wind:
+        w = stats["wind"]
+        click.echo(f"  wind ({wind_speed:g} m/s, stiffness ×{stiffness:g}):")
+        click.echo("    modes        " + ", ".join(f"{m['hz']:.2f} Hz (ζ {m['damping']:.2f})"
+                                                  for m in w["modes"]))
+        if w["sway_hz"] is not None:
+            click.echo(f"    trunk sway   {w['sway_hz']:.3f} Hz, damping ζ {w['sway_damping']:.2f}")
+            click.echo(f"    tree top     leans {w['top_lean_m']:.2f} m downwind, sways "
+                       f"{w['top_sway_rms_m']:.2f} m RMS; largest joint turn {w['max_joint_deg']:.1f}°")
 
 
 def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> list[dict]:
@@ -179,6 +200,9 @@ def _int_list(text: str | None, name: str) -> tuple[int, ...] | None:
 @click.option("--duration", type=float, default=4.0, show_default=True,
               help="Clip length in seconds (the wind loops over it).")
 @click.option("--fps", type=float, default=30.0, show_default=True, help="Keys per second.")
+@click.option("--stiffness", type=float, default=1.0, show_default=True,
+              help="Multiplier on every joint's stiffness: 4 doubles the sway frequencies and "
+                   "roughly quarters the motion (see `treegen info --wind`).")
 @click.option("--no-wind", is_flag=True, help="Write no animation (rest pose only).")
 @_lod_options
 @click.option("--no-lod", is_flag=True, help="Write one LOD with the dense clip.")
@@ -190,7 +214,7 @@ def _int_list(text: str | None, name: str) -> tuple[int, ...] | None:
 @click.option("--json", "as_json", is_flag=True,
               help="Print a machine-readable summary (files, bytes, counts, seconds per stage).")
 def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels, sides,
-         leaf_geometry, wind_speed, wind_dir, gust, turbulence, duration, fps, no_wind, lod_distances, fov, width,
+         leaf_geometry, wind_speed, wind_dir, gust, turbulence, duration, fps, stiffness, no_wind, lod_distances, fov, width,
          error_px, error_form, interpolation, no_lod, max_vertices, max_keys, as_json):
     """Grow SPECIES and write a skinned, wind-animated tree to OUTPUT."""
     from dataclasses import replace
@@ -217,7 +241,8 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
             raise TreegenError(f"--sides '{sides}': each value must be in [3, 64]")
         mesh = replace(mesh, sides=side_list)
     wind = None if no_wind else WindOptions(speed=wind_speed, direction_deg=wind_dir, gust=gust,
-                                            turbulence=turbulence, duration=duration, fps=fps)
+                                            turbulence=turbulence, duration=duration, fps=fps,
+                                            stiffness=stiffness)
     options = MakeOptions(
         generate=GenerateOptions(max_stems=max_stems, max_leaves=max_leaves),
         rig=RigOptions(max_joints=max_joints, joint_levels=_int_list(joint_levels, "--joint-levels")),
