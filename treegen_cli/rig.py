@@ -134,6 +134,15 @@ def build_rig(tree, options: RigOptions = RIG_DEFAULTS) -> Rig:
     node_joints[:, 0] = carrier
     node_joints[:, 1] = np.where(w > 0, joint_of[np.minimum(nxt, N - 1)], 0)
     node_weights = np.column_stack([1.0 - w, w]).astype(np.float32)
+    # A stem without joints of its own takes its parent's skin binding at its attachment point,
+    # so it moves exactly as the parent's bark there and can never separate from it (riding
+    # rigidly on one joint let it float off where the parent blends two). One pass per generation.
+    rigid = np.flatnonzero(~has_prev & (attach >= 0))
+    while rigid.size:
+        src = attach[rigid]
+        node_joints[rigid] = node_joints[src]
+        node_weights[rigid] = node_weights[src]
+        rigid = rigid[np.isin(src, rigid)]           # parents not settled yet: copy again
 
     stem_joint = np.where(tree.stem_parent_node >= 0,
                           carrier[np.maximum(tree.stem_parent_node, 0)], 0).astype(np.int32)
