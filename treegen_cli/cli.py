@@ -197,7 +197,7 @@ def _int_list(text: str | None, name: str) -> tuple[int, ...] | None:
               help="Gust intensity: σ of the gust process / mean speed.")
 @click.option("--turbulence", type=float, default=0.3, show_default=True,
               help="Spatially varying turbulence: σ / mean speed.")
-@click.option("--duration", type=float, default=4.0, show_default=True,
+@click.option("--duration", type=float, default=10.0, show_default=True,
               help="Clip length in seconds (the wind loops over it).")
 @click.option("--fps", type=float, default=30.0, show_default=True, help="Keys per second.")
 @click.option("--stiffness", type=float, default=1.0, show_default=True,

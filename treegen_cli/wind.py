@@ -55,13 +55,13 @@ VERTICAL_RATIO = 0.5       # σ_w / σ_u
 
 @dataclass(frozen=True)
 class WindOptions:
-    """Wind and wood parameters. Defaults: a pleasant 4 m/s breeze looping every 4 s."""
+    """Wind and wood parameters. Defaults: a pleasant 4 m/s breeze looping every 10 s."""
 
     speed: float = 4.0               # mean wind speed, m/s (Beaufort 3: 3.4–5.4)
     direction_deg: float = 0.0       # wind blows towards this azimuth; 0 = +X, 90 = +Y (Z up)
     gust: float = 0.35               # σ of the coherent gust process / mean speed
     turbulence: float = 0.3          # σ of the spatially varying part / mean speed
-    duration: float = 4.0            # clip length = wind period, s
+    duration: float = 10.0           # clip length = wind period, s (long enough not to notice)
     fps: float = 30.0                # keys per second
     wood_density: float = 800.0      # kg/m³, green (living) wood is ~800; dry ~500–700
     leaf_areal_density: float = 0.2  # kg/m², fresh leaf mass per area (dry LMA ~0.05–0.1, ~60% water)
