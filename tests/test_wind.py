@@ -219,13 +219,14 @@ def test_zero_wind_is_rest_at_every_frame(tree_rig):
     assert np.array_equal(clip.rotations, rest)
 
 
-def test_root_never_moves(tree_rig):
+def test_root_rocks_in_place(tree_rig):
+    """The trunk base turns (root plate + lowest wood) but never leaves the ground point."""
     tree, rig = tree_rig
     clip = bake_wind(tree, rig, WindOptions(speed=20.0, **FAST), seed=4)
-    assert np.array_equal(clip.rotations[:, 0], np.broadcast_to(rig.skeleton.rest_rotation[0], (clip.times.shape[0], 4)))
     world = pose_world(rig.skeleton, clip.rotations)
-    assert np.allclose(world[:, 0], rig.skeleton.bind_world[0], atol=1e-12)
-    assert _deviation(clip, rig.skeleton)[:, 1:].max() > 0.0
+    assert np.allclose(world[:, 0, :3, 3], rig.skeleton.bind_world[0, :3, 3], atol=1e-12)
+    dev = _deviation(clip, rig.skeleton)
+    assert 0.0 < dev[:, 0].max() < dev[:, 1:].max()
 
 
 @pytest.mark.parametrize("direction_deg", [0.0, 90.0, 215.0])
@@ -250,9 +251,9 @@ def test_amplitude_grows_monotonically_with_speed(tree_rig):
 
 
 def _dof(theta: np.ndarray, dyn, parent: np.ndarray) -> np.ndarray:
-    """World rotation vectors (J, …, 3) → the free bending coordinates (2·free joints, …)."""
+    """World rotation vectors (J, …, 3) → the bending coordinates (2J, …)."""
     q = np.einsum("jca,j...c->ja...", dyn.basis, theta)
-    return q[parent >= 0].reshape((-1,) + theta.shape[1:-1])
+    return q.reshape((-1,) + theta.shape[1:-1])
 
 
 def test_static_wind_solves_the_coupled_system(tree_rig):
@@ -309,8 +310,7 @@ def test_mass_matrix_is_the_kinetic_energy(tree_rig):
     rng = np.random.default_rng(3)
     for _ in range(3):
         qdot = rng.normal(size=dyn.mass.shape[0])
-        full = np.zeros((parent.shape[0], 2))
-        full[parent >= 0] = qdot.reshape(-1, 2)
+        full = qdot.reshape(-1, 2)
         w = np.einsum("jca,ja->jc", dyn.basis, full)                  # world angular rates
         energy = 0.0
         for i in range(x.shape[0]):
@@ -320,19 +320,19 @@ def test_mass_matrix_is_the_kinetic_energy(tree_rig):
                 spin += w[a]
                 a = parent[a]
             energy += 0.5 * m[i] * v @ v + 0.5 * rod[i] * np.sum(np.cross(spin, u[i]) ** 2)
-        assert np.isclose(0.5 * qdot @ dyn.mass @ qdot, energy, rtol=1e-7)
+        assert np.isclose(0.5 * qdot @ dyn.mass @ qdot, energy, rtol=1e-6)   # M has a 1e-9 floor
 
 
 def test_gravity_stiffness_is_the_potential_energy_curvature(tree_rig):
     """K − springs equals the Hessian of Σ m g z under exact rotations (finite differences)."""
-    from treegen_cli.wind import _clamped_springs
+    from treegen_cli.wind import _springs
 
     tree, rig = tree_rig
     opts = WindOptions()
     loads = joint_loads(tree, rig, opts)
     dyn = dynamics(tree, rig, opts, loads)
     parent = rig.skeleton.parent.astype(np.int64)
-    free = np.flatnonzero(parent >= 0)
+    free = np.arange(parent.shape[0])
     x, m, _, _, owner = _mass_points(tree, rig, opts)
 
     def potential(q: np.ndarray) -> float:
@@ -356,7 +356,7 @@ def test_gravity_stiffness_is_the_potential_energy_curvature(tree_rig):
     e = np.eye(n) * h
     hess = np.array([[(potential(e[i] + e[j]) - potential(e[i] - e[j]) - potential(-e[i] + e[j])
                        + potential(-e[i] - e[j])) / (4 * h * h) for j in range(n)] for i in range(n)])
-    springs = np.repeat(_clamped_springs(loads, rig, opts.anchorage)[free], 2)
+    springs = np.repeat(_springs(loads, rig, opts.anchorage), 2)
     geometric = dyn.stiffness - np.diag(springs)
     assert np.allclose(geometric, hess, rtol=1e-3, atol=1e-3 * np.abs(hess).max())
 
@@ -364,8 +364,7 @@ def test_gravity_stiffness_is_the_potential_energy_curvature(tree_rig):
 def test_modes_are_mass_normalised_and_sorted(tree_rig):
     tree, rig = tree_rig
     dyn = dynamics(tree, rig, WindOptions())
-    free = np.repeat(rig.skeleton.parent >= 0, 2)
-    phi = dyn.modes[free]
+    phi = dyn.modes
     assert np.allclose(phi.T @ dyn.mass @ phi, np.eye(phi.shape[1]), atol=1e-8)
     assert np.allclose(phi.T @ dyn.stiffness @ phi, np.diag(dyn.omega**2), atol=1e-6 * dyn.omega.max() ** 2)
     assert np.all(np.diff(dyn.omega) >= 0.0) and np.all(dyn.damping >= WindOptions().damping_ratio)
@@ -502,7 +501,6 @@ def test_generated_species_sways_downwind_and_loops():
     assert clip.rotations.shape == (31, rig.skeleton.parent.shape[0], 4)
     assert np.all(np.isfinite(clip.rotations))
     assert np.array_equal(clip.rotations[0], clip.rotations[-1])
-    assert np.array_equal(clip.rotations[:, 0], np.broadcast_to(rig.skeleton.rest_rotation[0], (31, 4)))
     assert _deviation(clip, rig.skeleton).max() <= np.deg2rad(opts.max_angle_deg) + 1e-9
     disp = _tip_displacement(clip, rig)[:-1].mean(axis=0)
     wind_dir = np.array([np.cos(np.deg2rad(60.0)), np.sin(np.deg2rad(60.0)), 0.0])
@@ -513,7 +511,7 @@ def test_generated_species_sways_downwind_and_loops():
 @pytest.mark.parametrize("max_joints", [1, 3, 8, 256])
 def test_shared_synthetic_tree_with_real_rig(max_joints):
     """Clones, pointed (zero-radius) tips, rigidly carried twigs, coarsened chains: still finite,
-    bounded, looping, root fixed; a one-joint rig stays at rest."""
+    bounded, looping; a one-joint rig rocks as a whole."""
     try:
         from synthetic_tree import synthetic_tree
         from treegen_cli.rig import RigOptions, build_rig
@@ -526,12 +524,9 @@ def test_shared_synthetic_tree_with_real_rig(max_joints):
     rest = np.broadcast_to(rig.skeleton.rest_rotation, clip.rotations.shape)
     assert np.all(np.isfinite(clip.rotations))
     assert np.array_equal(clip.rotations[0], clip.rotations[-1])
-    assert np.array_equal(clip.rotations[:, 0], rest[:, 0])
     dev = _deviation(clip, rig.skeleton)
     assert dev.max() <= np.deg2rad(opts.max_angle_deg) + 1e-9
-    if rig.skeleton.parent.shape[0] == 1:
-        assert np.array_equal(clip.rotations, rest)
-    else:
-        assert dev.max() > 0.0
+    assert dev.max() > 0.0
+    assert not np.array_equal(clip.rotations, rest)
     loads = joint_loads(tree, rig, opts)
     assert np.all(loads.stiffness > 0) and np.all(np.isfinite(loads.inertia))

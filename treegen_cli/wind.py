@@ -1,7 +1,7 @@
 """Wind: a seeded, periodic wind field and the paper's per-joint spring model, baked into a Clip.
 
 Result: Tree + Rig → Clip "wind" with (fps·duration + 1, J, 4) local quaternions (xyzw);
-key 0 == key K−1 (seamless loop), joint 0 (trunk base) always at rest, speed 0 → rest exactly.
+key 0 == key K−1 (seamless loop), speed 0 → rest exactly.
 
     clip = bake_wind(tree, rig, WindOptions(speed=6.0, direction_deg=90), seed=7)
 
@@ -20,8 +20,8 @@ The model (Kondo et al., after Weber–Penn; REFERENCE.md §1, §3):
   segments, weighted by the square of the moment its load puts there, Castigliano). Where a
   Weber–Penn radius is thinner than wood that could hold its load (cone tapers reach 0.3 mm
   under a leafy twig), the radius is the load-bearing one at the wood's working stress
-  (σ = 4M/πr³); the drawn geometry is unchanged. The clamped root's wood and the root-plate
-  (anchorage) act in series on the next trunk joint.
+  (σ = 4M/πr³); the drawn geometry is unchanged. The trunk-base joint also rocks on the root
+  plate (anchorage, in series), so the trunk bends from the ground up, without an elbow.
 * Periodic steady state, exactly: the wind uses only harmonics of 1/duration, so the loads are
   periodic on the clip's grid; each harmonic's modal response is φᵀQ̂ / (ω_m² − ω² + 2iζ_mω_mω).
   The inverse rFFT is the motion after all transients have died out — it loops with continuous
@@ -432,21 +432,15 @@ def dynamics(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS,
     g_ab[diag] = 0.5 * (g_ab[diag] + g_ab[diag].transpose(0, 2, 1))
     K = _assemble(a, b, np.einsum("kia,kij,kjb->kab", E[a], g_ab, E[b]), n_j)
     n = 2 * n_j
-    K[np.arange(n), np.arange(n)] += np.repeat(_clamped_springs(ld, rig, options.anchorage), 2)
-    # the root (trunk base) is clamped to the ground: its rows leave the system
-    free = np.repeat(parent >= 0, 2)
-    M, K, C = M[np.ix_(free, free)], K[np.ix_(free, free)], C[np.ix_(free, free)]
+    K[np.arange(n), np.arange(n)] += np.repeat(_springs(ld, rig, options.anchorage), 2)
     # massless joints (bare tips of synthetic rigs) get a tiny inertia so M stays definite
-    if M.shape[0]:
-        M[np.diag_indices_from(M)] += 1e-9 * max(float(np.max(np.diag(M))), 1e-12)
-    w2, phi_free = _modes(K, M)
+    M[np.diag_indices_from(M)] += 1e-9 * max(float(np.max(np.diag(M))), 1e-12)
+    w2, phi = _modes(K, M)
     # a stem too thin for gravity would buckle; the load-bearing radius prevents it, the clamp
     # keeps degenerate inputs (zero modulus) finite
     w2 = np.maximum(w2, 1e-6 * max(float(w2.max(initial=0.0)), 1e-12))
     omega = np.sqrt(w2)
-    zeta = options.damping_ratio + np.einsum("im,ij,jm->m", phi_free, C, phi_free) / (2.0 * omega)
-    phi = np.zeros((n, phi_free.shape[1]))
-    phi[free] = phi_free
+    zeta = options.damping_ratio + np.einsum("im,ij,jm->m", phi, C, phi) / (2.0 * omega)
     return Dynamics(E, M, K, omega, phi, zeta)
 
 
@@ -461,21 +455,12 @@ def _modes(K: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return w2, solve_triangular(L.T, v, lower=False)
 
 
-def _clamped_springs(loads: JointLoads, rig: Rig, anchorage: float) -> np.ndarray:
-    """Spring per joint; the root is clamped (its rotation is never animated), so its wood's
-    compliance moves to the next joint on its stem, scaled so that the load's centre (at
-    lever L₀ from the root, L₁ from that joint, mean lever L̄ over the root span) moves as much:
-    1/k = 1/k_own + (1/k_root)·L̄·L₀/L₁². Without this the lowest trunk span would be rigid."""
+def _springs(loads: JointLoads, rig: Rig, anchorage: float) -> np.ndarray:
+    """Spring per joint; a root joint (the trunk base) also has the root plate in series,
+    1/k = 1/k_wood + 1/(anchorage · tree mass): trees rock on their roots as well as bend."""
     k = loads.stiffness.copy()
-    parent = np.asarray(rig.skeleton.parent, dtype=np.int64)
-    stem = np.asarray(rig.joint_stem)
-    for r in np.flatnonzero(parent < 0):
-        above = np.flatnonzero((parent == r) & (stem == stem[r]))
-        centre = loads.pivot[above] + loads.first_moment[above] / np.maximum(loads.mass[above], 1e-12)[:, None]
-        l0 = np.linalg.norm(centre - loads.pivot[r], axis=1)
-        l1 = np.maximum(np.linalg.norm(centre - loads.pivot[above], axis=1), 1e-3)
-        root = 1.0 / k[r] + 1.0 / (anchorage * loads.mass[r])
-        k[above] = 1.0 / (1.0 / k[above] + (0.5 * (l0 + l1) * l0 / l1**2) * root)
+    root = np.asarray(rig.skeleton.parent) < 0
+    k[root] = 1.0 / (1.0 / k[root] + 1.0 / np.maximum(anchorage * loads.mass[root], 1e-12))
     return k
 
 
@@ -509,7 +494,6 @@ def trunk_mode(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS,
     parent = np.asarray(rig.skeleton.parent, dtype=np.int64)
     steady = replace(options, speed=max(options.speed, 1.0), gust=0.0, turbulence=0.0)
     torque = generalized_forces(tree, rig, steady, 0, 1, ld)[:, 0]
-    torque[parent < 0] = 0.0
     Q = np.einsum("jca,jc->ja", dyn.basis, torque).reshape(-1)
     j, x = trunk_top(tree, rig)
     phi = np.deg2rad(options.direction_deg)
@@ -707,20 +691,16 @@ def bound_bends(theta: np.ndarray, parent: np.ndarray, options: WindOptions) -> 
 def wind_angles(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int = 0,
                 dyn: Dynamics | None = None) -> np.ndarray:
     """World-frame rotation vectors (J, n, 3) of each joint's deviation from rest over one
-    period (n = fps·duration samples, the closing key not repeated); root row is zero."""
+    period (n = fps·duration samples, the closing key not repeated)."""
     n, _ = _frames(options)
     n_j = rig.skeleton.parent.shape[0]
-    if options.speed == 0.0 or n_j < 2:
+    if options.speed == 0.0:
         return np.zeros((n_j, n, 3))
     loads = joint_loads(tree, rig, options)
     dyn = dyn if dyn is not None else dynamics(tree, rig, options, loads)
     torque = generalized_forces(tree, rig, options, seed, n, loads)
-    parent = np.asarray(rig.skeleton.parent, dtype=np.int64)
-    root = parent < 0
-    torque[root] = 0.0                         # the trunk base is clamped: no root rotation
     theta = steady_state(dyn, torque, options.duration)
-    theta[root] = 0.0
-    return bound_bends(theta, parent, options)
+    return bound_bends(theta, np.asarray(rig.skeleton.parent, dtype=np.int64), options)
 
 
 def bake_wind(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int = 0) -> Clip:
@@ -760,8 +740,6 @@ def wind_report(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int
     the trunk's sway mode, and what the clip does at `options.speed`: the tree top's mean
     downwind lean and RMS sway (m), the largest joint turn (degrees)."""
     parent = np.asarray(rig.skeleton.parent, dtype=np.int64)
-    if parent.shape[0] < 2:
-        return {"modes": [], "sway_hz": None, "sway_damping": None, "speed_m_s": options.speed}
     loads = joint_loads(tree, rig, options)
     dyn = dynamics(tree, rig, options, loads)
     sway = trunk_mode(tree, rig, options, loads, dyn)
