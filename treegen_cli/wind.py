@@ -81,7 +81,8 @@ class WindOptions:
                                      # measure ~0.05–0.2)
     max_bend_deg: float = 60.0       # soft bound on any joint frame's world-space turn from rest
     max_angle_deg: float = 40.0      # soft bound on any joint's own deviation from rest
-    gust_length: float = 30.0        # m, integral length scale of the gusts (von Kármán)
+    gust_length: float = 80.0        # m, integral length scale of the gusts (von Kármán; ESDU 85020:
+                                     # ~50–150 m at 10–30 m height in open country)
     turbulence_length: float = 3.0   # m, integral length scale of the canopy turbulence
     incoherent: float = 0.3          # share of the turbulence variance that is per-branch noise
     origin: tuple[float, float, float] = (0.0, 0.0, 0.0)  # tree position in the shared field, m
