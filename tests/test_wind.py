@@ -530,3 +530,102 @@ def test_shared_synthetic_tree_with_real_rig(max_joints):
     assert not np.array_equal(clip.rotations, rest)
     loads = joint_loads(tree, rig, opts)
     assert np.all(loads.stiffness > 0) and np.all(np.isfinite(loads.inertia))
+
+
+def test_gusts_never_reverse_the_wind():
+    """Log-normal gusts: however large the gust and turbulence knobs, the along-wind speed stays
+    positive at every point and time, with the mean speed kept."""
+    pts = np.random.default_rng(0).uniform(-5, 5, size=(40, 3))
+    for direction in (0.0, 130.0):
+        opts = WindOptions(speed=25.0, gust=2.0, turbulence=2.0, direction_deg=direction, duration=10.0)
+        v = wind_velocity(pts, np.arange(40) % 7, opts, seed=3, n_samples=300)
+        e = np.array([np.cos(np.deg2rad(direction)), np.sin(np.deg2rad(direction)), 0.0])
+        along = v @ e
+        assert along.min() > 0.0
+        assert np.allclose(along.mean(axis=1), 25.0, rtol=1e-9)
+
+
+PAPER = ["quaking_aspen", "black_tupelo", "weeping_willow", "ca_black_oak"]
+
+
+@pytest.fixture(scope="module")
+def paper_trees():
+    from pathlib import Path
+
+    from treegen_cli.generate import generate
+    from treegen_cli.params import load_params
+    from treegen_cli.rig import build_rig
+
+    root = Path(__file__).resolve().parent.parent / "species"
+    out = {}
+    for name in PAPER:
+        tree = generate(load_params(root / f"{name}.txt"), 0)
+        out[name] = (tree, build_rig(tree))
+    return out
+
+
+def _leaf_motion(tree, rig, clip, every: int = 13) -> np.ndarray:
+    """(K, L', 3) positions of every `every`-th leaf base, carried by its joint."""
+    world = pose_world(rig.skeleton, clip.rotations)
+    j = rig.leaf_joint[::every].astype(int)
+    local = np.einsum("lab,lb->la", np.linalg.inv(rig.skeleton.bind_world[j]),
+                      np.c_[tree.leaf_pos[::every], np.ones(len(j))])
+    return np.einsum("klab,lb->kla", world[:, j], local)[..., :3]
+
+
+@pytest.mark.parametrize("species", PAPER)
+def test_storms_lean_downwind_without_a_trunk_kink(paper_trees, species):
+    """8–25 m/s, default gust and turbulence: the crown's centre (leaf-area mean) is downwind of
+    rest in ≥ 95 % of frames; leaves never move faster than the wind; neighbouring trunk joints
+    differ by at most a few degrees (the trunk bends smoothly, no elbow)."""
+    tree, rig = paper_trees[species]
+    parent = rig.skeleton.parent.astype(np.int64)
+    trunk = np.flatnonzero((rig.joint_stem == 0) & (parent >= 0))       # the trunk's own chain
+    trunk = trunk[rig.joint_stem[parent[trunk]] == 0]
+    area = tree.leaf_area[::13]
+    for speed in (8.0, 12.0, 25.0):
+        opts = WindOptions(speed=speed)
+        clip = bake_wind(tree, rig, opts, seed=0)
+        x = _leaf_motion(tree, rig, clip)
+        crown = ((x - tree.leaf_pos[::13][None]) * area[None, :, None]).sum(axis=1) / area.sum()
+        assert np.mean(crown[:-1, 0] > 0.0) >= 0.95, (species, speed, np.mean(crown[:-1, 0] > 0.0))
+        leaf_speed = np.linalg.norm(np.diff(x, axis=0), axis=2) * opts.fps
+        assert leaf_speed.max() < speed, (speed, leaf_speed.max())
+        theta = wind_angles(tree, rig, opts, seed=0)
+        kink = np.degrees(np.linalg.norm(theta[trunk] - theta[parent[trunk]], axis=2))
+        assert kink.max() <= 6.0, (speed, kink.max())
+
+
+def test_jointless_stems_stay_on_their_parents_bark(paper_trees):
+    """A stem without joints is skinned like its parent's bark where it attaches: at 12 m/s its
+    base stays within the parent's radius of the parent's axis point there (here: exactly on)."""
+    tree, rig = paper_trees["quaking_aspen"]
+    clip = bake_wind(tree, rig, WindOptions(speed=12.0), seed=0)
+    world = pose_world(rig.skeleton, clip.rotations) @ np.linalg.inv(rig.skeleton.bind_world)[None]
+    jointed = np.zeros(tree.n_stems, dtype=bool)
+    jointed[rig.joint_stem] = True
+    stems = np.flatnonzero(~jointed & (tree.stem_parent >= 0))
+    assert stems.size > 100
+
+    def skinned(points: np.ndarray, joints: np.ndarray, weights: np.ndarray) -> np.ndarray:
+        p = np.c_[points, np.ones(len(points))]
+        return sum(weights[None, :, k, None] * np.einsum("knab,nb->kna", world[:, joints[:, k]], p)[..., :3]
+                   for k in range(joints.shape[1]))
+
+    # the parent's bark at the attach point: its axis point between the segment's end nodes,
+    # skinned as the mesh does (both nodes' bindings, blended by the fraction t)
+    a = tree.stem_parent_node[stems]
+    b = np.where(tree.node_stem[np.minimum(a + 1, tree.n_nodes - 1)] == tree.node_stem[a], a + 1, a)
+    base = tree.node_pos[tree.stem_node_start[stems]]
+    ab = tree.node_pos[b] - tree.node_pos[a]
+    t = np.clip(np.sum((base - tree.node_pos[a]) * ab, axis=1) / np.maximum(np.sum(ab * ab, axis=1), 1e-24), 0, 1)
+    axis_point = tree.node_pos[a] + t[:, None] * ab
+    joints = np.concatenate([rig.node_joints[a], rig.node_joints[b]], axis=1).astype(int)
+    weights = np.concatenate([rig.node_weights[a] * (1 - t[:, None]), rig.node_weights[b] * t[:, None]], axis=1)
+    parent_bark = skinned(axis_point, joints, weights)
+    child = skinned(base, rig.node_joints[tree.stem_node_start[stems]].astype(int),
+                    rig.node_weights[tree.stem_node_start[stems]].astype(float))
+    radius = tree.node_radius[a] + t * (tree.node_radius[b] - tree.node_radius[a])
+    distance = np.linalg.norm(child - parent_bark, axis=2)
+    assert np.all(distance <= np.linalg.norm(base - axis_point, axis=1)[None] + radius[None] + 1e-9)
+    assert np.all(distance <= 2.0 * radius[None] + 1e-6)
