@@ -393,7 +393,7 @@ def _hierarchy_matrix(a: np.ndarray, b: np.ndarray, E: np.ndarray, s: np.ndarray
     sb, Sb = s[b], S[b]
     x = ((np.trace(Sb, axis1=1, axis2=2) + np.einsum("ij,ij->i", d, sb))[:, None, None] * np.eye(3)
          - Sb - np.einsum("ji,jk->jik", sb, d))
-    return _assemble(a, b, np.einsum("kia,kij,kjb->kab", E[a], x, E[b]), n_j)
+    return _assemble(a, b, np.swapaxes(E[a], 1, 2) @ x @ E[b], n_j)
 
 
 def _assemble(a: np.ndarray, b: np.ndarray, blocks: np.ndarray, n_j: int) -> np.ndarray:
@@ -431,7 +431,7 @@ def dynamics(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS,
     g_ab = _skew_free_gravity(ld.first_moment[b])
     diag = a == b
     g_ab[diag] = 0.5 * (g_ab[diag] + g_ab[diag].transpose(0, 2, 1))
-    K = _assemble(a, b, np.einsum("kia,kij,kjb->kab", E[a], g_ab, E[b]), n_j)
+    K = _assemble(a, b, np.swapaxes(E[a], 1, 2) @ g_ab @ E[b], n_j)
     n = 2 * n_j
     K[np.arange(n), np.arange(n)] += np.repeat(_springs(ld, rig, options.anchorage), 2)
     # massless joints (bare tips of synthetic rigs) get a tiny inertia so M stays definite
@@ -441,7 +441,7 @@ def dynamics(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS,
     # keeps degenerate inputs (zero modulus) finite
     w2 = np.maximum(w2, 1e-6 * max(float(w2.max(initial=0.0)), 1e-12))
     omega = np.sqrt(w2)
-    zeta = options.damping_ratio + np.einsum("im,ij,jm->m", phi, C, phi) / (2.0 * omega)
+    zeta = options.damping_ratio + np.sum(phi * (C @ phi), axis=0) / (2.0 * omega)
     return Dynamics(E, M, K, omega, phi, zeta)
 
 
