@@ -39,6 +39,7 @@ gallery:
 		treegen preview species/$$s.txt -o docs/gallery/$$s.png --size 320 --png-colors 256 -q || exit 1; \
 		echo "docs/gallery/$$s.png"; done
 	treegen preview species/quaking_aspen.txt --animate docs/gallery/quaking_aspen_wind.gif --size 240 --fps 10 -q
+	treegen preview species/weeping_willow.txt --animate docs/gallery/weeping_willow_wind.gif --size 240 --fps 10 -q
 	@ls -l docs/gallery
 
 clean:

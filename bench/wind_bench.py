@@ -1,13 +1,22 @@
-"""Wind bake benchmark: a 10 s, 30 fps clip for the largest bundled species (weeping willow) at
-the default joint budget and at 4×. Prints joints, frames, seconds (median of 5), µs per
-joint-frame. Target (issue 4): under 0.5 s at the default budget.
+"""Wind bake benchmark: per species, the natural frequencies (lowest modes and the trunk's sway
+mode), the bake time of a 10 s, 30 fps clip at the default joint budget, and the amplitudes at
+4 and 12 m/s (tree top's lean and RMS sway, largest joint turn, median leaf movement).
+Target (issue 14): bake under 0.5 s at the default budget, the willow ≤ 1 s.
 
-    python bench/wind_bench.py [species/weeping_willow.txt] [--seed N]
+    python bench/wind_bench.py [species ...] [--seed N] [--repeat N]
+    (default: the paper's four species; OPENBLAS_NUM_THREADS=1 is faster on a busy machine)
 
-Measured (2-core shared box, willow seed 1: 53,850 stems, 582,188 leaves):
-     budget  joints  frames  seconds  us/joint-frame
-        256     222     301    0.112            1.67
-       1024     858     301    0.233            0.90
+Measured 2026-11-23, seed 0, OPENBLAS_NUM_THREADS=1, 2 shared cores at load average ~14
+(with threaded OpenBLAS at that load the bake took 1.5–3.5 s: threads fight over 2 cores):
+species          joints              modes Hz  sway Hz  bake s    m/s     ζ  lean m  sway m  max ° leaf cm
+quaking_aspen       256      0.56, 0.56, 0.87    0.565   0.320      4  0.22    0.10    0.03    4.6    14.6
+                                                                   12  0.28    0.56    0.24   17.7    94.8
+black_tupelo        210      0.39, 0.39, 0.70    0.393   0.246      4  0.23    0.23    0.07    4.9    17.9
+                                                                   12  0.29    1.28    0.49   21.4   116.2
+weeping_willow      222      0.14, 0.14, 0.14    0.535   0.818      4  0.16    0.02    0.01   10.8     2.1
+                                                                   12  0.17    0.12    0.07   30.4    13.8
+ca_black_oak        238      0.51, 0.51, 0.87    0.511   0.420      4  0.16    0.03    0.01    8.6     2.0
+                                                                   12  0.17    0.14    0.07   29.1    14.5
 """
 from __future__ import annotations
 
@@ -16,39 +25,55 @@ import statistics
 import time
 from pathlib import Path
 
+import numpy as np
+
 from treegen_cli.generate import generate
 from treegen_cli.params import load_params
-from treegen_cli.rig import RIG_DEFAULTS, RigOptions, build_rig
-from treegen_cli.wind import WindOptions, bake_wind
+from treegen_cli.rig import build_rig
+from treegen_cli.skeleton import pose_world
+from treegen_cli.wind import WindOptions, bake_wind, wind_report
 
 ROOT = Path(__file__).resolve().parent.parent
+PAPER = ["quaking_aspen", "black_tupelo", "weeping_willow", "ca_black_oak"]
+
+
+def median_leaf_motion(tree, rig, clip, every: int = 29) -> float:
+    """Median over leaves of the largest distance a leaf base moves from rest in the loop (m)."""
+    j = rig.leaf_joint[::every].astype(int)
+    local = np.einsum("lab,lb->la", np.linalg.inv(rig.skeleton.bind_world[j]),
+                      np.c_[tree.leaf_pos[::every], np.ones(len(j))])
+    x = np.einsum("klab,lb->kla", pose_world(rig.skeleton, clip.rotations)[:, j], local)[..., :3]
+    return float(np.median(np.linalg.norm(x - tree.leaf_pos[::every][None], axis=2).max(axis=0)))
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("species", nargs="?", default=str(ROOT / "species" / "weeping_willow.txt"))
-    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("species", nargs="*", default=[str(ROOT / "species" / f"{s}.txt") for s in PAPER])
+    ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--repeat", type=int, default=5)
     args = ap.parse_args()
 
-    params = load_params(args.species)
-    t0 = time.perf_counter()
-    tree = generate(params, args.seed)
-    print(f"{params.name}: {tree.n_stems} stems, {tree.n_nodes} nodes, {tree.n_leaves} leaves "
-          f"(generated in {time.perf_counter() - t0:.2f} s)")
-    options = WindOptions(duration=10.0, fps=30.0)
-    budget = RIG_DEFAULTS.max_joints
-    print(f"{'budget':>7} {'joints':>7} {'frames':>7} {'seconds':>8} {'us/joint-frame':>15}")
-    for max_joints in (budget, 4 * budget):
-        rig = build_rig(tree, RigOptions(max_joints=max_joints))
+    print(f"{'species':<16}{'joints':>7}{'modes Hz':>22}{'sway Hz':>9}{'bake s':>8}"
+          f"{'':>3}{'m/s':>4}{'ζ':>6}{'lean m':>8}{'sway m':>8}{'max °':>7}{'leaf cm':>8}")
+    for path in args.species:
+        params = load_params(path)
+        tree = generate(params, args.seed)
+        rig = build_rig(tree)
+        options = WindOptions(duration=10.0, fps=30.0)
         times = []
         for _ in range(args.repeat):
             t0 = time.perf_counter()
-            clip = bake_wind(tree, rig, options, seed=args.seed)
+            bake_wind(tree, rig, options, seed=args.seed)
             times.append(time.perf_counter() - t0)
-        k, j = clip.rotations.shape[:2]
-        sec = statistics.median(times)
-        print(f"{max_joints:>7} {j:>7} {k:>7} {sec:>8.3f} {1e6 * sec / (j * k):>15.2f}")
+        for k, speed in enumerate((4.0, 12.0)):
+            o = WindOptions(speed=speed, duration=10.0, fps=30.0)
+            rep = wind_report(tree, rig, o, args.seed)
+            leaf = median_leaf_motion(tree, rig, bake_wind(tree, rig, o, seed=args.seed))
+            modes = ", ".join(f"{m['hz']:.2f}" for m in rep["modes"][:3])
+            head = (f"{params.name:<16}{len(rig.joint_node):>7}{modes:>22}"
+                    f"{rep['sway_hz']:>9.3f}{statistics.median(times):>8.3f}") if k == 0 else " " * 62
+            print(f"{head}{'':>3}{speed:>4g}{rep['sway_damping']:>6.2f}{rep['top_lean_m']:>8.2f}"
+                  f"{rep['top_sway_rms_m']:>8.2f}{rep['max_joint_deg']:>7.1f}{100 * leaf:>8.1f}")
 
 
 if __name__ == "__main__":

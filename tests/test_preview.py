@@ -1,6 +1,7 @@
 """treegen preview and treegen species: real renders (EGL), real files, real readers."""
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -59,9 +60,10 @@ def test_still_has_tree_pixels_with_bark_and_leaf_colours(tmp_path, capsys):
     # the same view without the tree is the background; the tree is what differs from it
     options = PreviewOptions(width=96, height=128)
     scene = load_scene(SMALL, options)
+    rest = dataclasses.replace(scene, skinning=None)       # stills show the rest pose, no wind
     t0 = np.zeros(1)
     with Renderer(scene, 96, 128) as r:
-        args = (camera_for(scene, options, t0), scene.pose(t0)[0], *sun_angles(options))
+        args = (camera_for(rest, options, t0), rest.pose(t0)[0], *sun_angles(options))
         tree, background = r.render(*args), r.render(*args, draw_tree=False)
     assert np.array_equal(tree, img)                       # the command draws exactly this
     mask = np.abs(tree.astype(int) - background.astype(int)).sum(-1) > 24
@@ -94,7 +96,7 @@ def test_gif_loops_and_moves(tmp_path, capsys):
     code, out, err = run(["preview", SMALL, "--animate", gif, "--size", "96", "--fps", "2"], capsys)
     assert code == 0, err
     frames = [np.asarray(f.convert("RGB")) for f in ImageSequence.Iterator(Image.open(gif))]
-    assert len(frames) == round(4.0 * 2) + 1                 # default 4 s loop, both ends
+    assert len(frames) == round(10.0 * 2) + 1                # default 10 s loop, both ends
     assert all(f.shape == (96, 96, 3) for f in frames)
     assert np.array_equal(frames[0], frames[-1])             # the loop closes
     assert all(not np.array_equal(a, b) for a, b in zip(frames, frames[1:]))   # the tree moves

@@ -122,10 +122,14 @@ def test_joint_levels_restrict_and_rigid_stems_ride_on_their_carrier():
     rig = build_rig(tree, RigOptions(joint_levels=(0,)))
     check_rig(tree, rig, 256)
     assert np.all(tree.stem_level[rig.joint_stem] == 0)
-    # Stem 2 grows from trunk node 1: all its nodes and its child's leaves ride on that joint.
+    # Stem 2 grows from trunk segment 1 at z = 3, half-way between the trunk joints on nodes 1
+    # and 2: all its nodes and its child's take the trunk bark's binding there, (0.5, 0.5), so
+    # they move with the bark; leaves ride on the dominant (first) joint.
     j = np.flatnonzero(rig.joint_node == 1)[0]
+    j2 = np.flatnonzero(rig.joint_node == 2)[0]
     nodes2 = np.flatnonzero(np.isin(tree.node_stem, [2, 4]))
-    assert np.all(rig.node_joints[nodes2, 0] == j) and np.all(rig.node_weights[nodes2, 0] == 1)
+    assert np.all(rig.node_joints[nodes2, 0] == j) and np.all(rig.node_joints[nodes2, 1] == j2)
+    np.testing.assert_allclose(rig.node_weights[nodes2], 0.5)
     assert np.all(rig.leaf_joint[tree.leaf_stem == 4] == j)
     # Levels that skip the trunk still get the trunk base as root.
     r2 = build_rig(tree, RigOptions(joint_levels=(2,)))

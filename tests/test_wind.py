@@ -18,6 +18,7 @@ from treegen_cli.wind import (
     AIR_DENSITY,
     WindOptions,
     bake_wind,
+    dynamics,
     joint_loads,
     wind_angles,
     wind_velocity,
@@ -218,13 +219,14 @@ def test_zero_wind_is_rest_at_every_frame(tree_rig):
     assert np.array_equal(clip.rotations, rest)
 
 
-def test_root_never_moves(tree_rig):
+def test_root_rocks_in_place(tree_rig):
+    """The trunk base turns (root plate + lowest wood) but never leaves the ground point."""
     tree, rig = tree_rig
     clip = bake_wind(tree, rig, WindOptions(speed=20.0, **FAST), seed=4)
-    assert np.array_equal(clip.rotations[:, 0], np.broadcast_to(rig.skeleton.rest_rotation[0], (clip.times.shape[0], 4)))
     world = pose_world(rig.skeleton, clip.rotations)
-    assert np.allclose(world[:, 0], rig.skeleton.bind_world[0], atol=1e-12)
-    assert _deviation(clip, rig.skeleton)[:, 1:].max() > 0.0
+    assert np.allclose(world[:, 0, :3, 3], rig.skeleton.bind_world[0, :3, 3], atol=1e-12)
+    dev = _deviation(clip, rig.skeleton)
+    assert 0.0 < dev[:, 0].max() < dev[:, 1:].max()
 
 
 @pytest.mark.parametrize("direction_deg", [0.0, 90.0, 215.0])
@@ -248,27 +250,124 @@ def test_amplitude_grows_monotonically_with_speed(tree_rig):
     assert np.all(np.diff(amps) > 0.0), amps
 
 
-def test_static_wind_matches_hand_computed_beam_rotation(tree_rig):
-    """Steady wind, no gusts: the last joint of the thin branch turns by τ⊥/k exactly."""
+def _dof(theta: np.ndarray, dyn, parent: np.ndarray) -> np.ndarray:
+    """World rotation vectors (J, …, 3) → the bending coordinates (2J, …)."""
+    q = np.einsum("jca,j...c->ja...", dyn.basis, theta)
+    return q.reshape((-1,) + theta.shape[1:-1])
+
+
+def test_static_wind_solves_the_coupled_system(tree_rig):
+    """Steady wind, no gusts: the angles solve K θ = Q, with Q the hand-computed torques of the
+    leaves' drag about each joint, summed over its subtree (the paper's load model)."""
     tree, rig = tree_rig
     opts = WindOptions(speed=5.0, gust=0.0, turbulence=0.0, stem_drag_coefficient=0.0, **FAST)
     theta = wind_angles(tree, rig, opts, seed=0)
-    j = int(np.flatnonzero(rig.joint_node == tree.stem_node_start[1] + 2)[0])   # last joint, stem 1
-    on = rig.leaf_joint == j
-    assert on.any()
-    centre = tree.leaf_pos[on] + 0.5 * tree.leaf_size[on, :1] * tree.leaf_frame[on][:, :, 1]
+    assert np.allclose(theta, theta[:, :1], atol=1e-15)              # steady: constant in time
+    loads = joint_loads(tree, rig, opts)
+    dyn = dynamics(tree, rig, opts, loads)
+    parent = rig.skeleton.parent.astype(np.int64)
+    # hand: drag of every leaf about every ancestor joint of its carrier
+    centre = tree.leaf_pos + 0.5 * tree.leaf_size[:, :1] * tree.leaf_frame[:, :, 1]
     soften = (1.0 + (5.0 / opts.reconfig_speed) ** 2) ** (0.5 * opts.vogel_exponent)
-    force = 0.5 * AIR_DENSITY * opts.drag_coefficient * soften * tree.leaf_area[on, None] * 25.0 * np.array([1.0, 0, 0])
-    torque = np.cross(centre - rig.skeleton.bind_world[j, :3, 3], force).sum(axis=0)
-    d = tree.node_frame[rig.joint_node[j], :, 2]
-    torque -= (torque @ d) * d
-    r = tree.node_radius[rig.joint_node[j]]
-    span = np.linalg.norm(tree.node_pos[rig.joint_node[j] + 1] - tree.node_pos[rig.joint_node[j]])
-    k = opts.elastic_modulus * np.pi * r**4 / 4.0 / span
-    expected = torque / k
-    max_angle = np.deg2rad(opts.max_angle_deg)
-    expected *= max_angle * np.tanh(np.linalg.norm(expected) / max_angle) / np.linalg.norm(expected)
-    assert np.allclose(theta[j], expected[None], rtol=1e-9, atol=1e-15)
+    force = 0.5 * AIR_DENSITY * opts.drag_coefficient * soften * tree.leaf_area[:, None] * 25.0 * np.array([1.0, 0, 0])
+    torque = np.zeros((parent.shape[0], 1, 3))
+    for i, j in enumerate(rig.leaf_joint.astype(int)):
+        a = j
+        while a >= 0:
+            torque[a, 0] += np.cross(centre[i] - loads.pivot[a], force[i])
+            a = parent[a]
+    expected = np.linalg.solve(dyn.stiffness, _dof(torque, dyn, parent))
+    assert np.allclose(_dof(theta[:, :1], dyn, parent), expected, rtol=1e-6, atol=1e-14)
+    assert np.abs(expected).max() > 0.0
+
+
+def _mass_points(tree, rig, opts):
+    """Every wood segment (mid-point, mass, rod term) and leaf of the tree, with its carrier."""
+    from treegen_cli.wind import _node_carrier
+
+    carrier = _node_carrier(tree, rig, rig.skeleton.parent.shape[0])
+    seg = np.flatnonzero(tree.node_stem[:-1] == tree.node_stem[1:])
+    a, b = tree.node_pos[seg], tree.node_pos[seg + 1]
+    r0, r1 = tree.node_radius[seg], tree.node_radius[seg + 1]
+    length = np.linalg.norm(b - a, axis=1)
+    wood = opts.wood_density * np.pi * length * (r0**2 + r0 * r1 + r1**2) / 3.0
+    leaf = opts.leaf_areal_density * tree.leaf_area
+    x = np.concatenate([0.5 * (a + b), tree.leaf_pos + 0.5 * tree.leaf_size[:, :1] * tree.leaf_frame[:, :, 1]])
+    u = np.concatenate([(b - a) / length[:, None], np.zeros((tree.n_leaves, 3))])
+    rod = np.concatenate([wood * length**2 / 12.0, np.zeros(tree.n_leaves)])
+    owner = np.concatenate([carrier[seg], rig.leaf_joint.astype(int)])
+    return x, np.concatenate([wood, leaf]), rod, u, owner
+
+
+def test_mass_matrix_is_the_kinetic_energy(tree_rig):
+    """½ θ̇ᵀ M θ̇ equals ½ Σ m |v|² (+ rods' spin) of every mass point moving with the joints."""
+    tree, rig = tree_rig
+    opts = WindOptions()
+    loads = joint_loads(tree, rig, opts)
+    dyn = dynamics(tree, rig, opts, loads)
+    parent = rig.skeleton.parent.astype(np.int64)
+    x, m, rod, u, owner = _mass_points(tree, rig, opts)
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        qdot = rng.normal(size=dyn.mass.shape[0])
+        full = qdot.reshape(-1, 2)
+        w = np.einsum("jca,ja->jc", dyn.basis, full)                  # world angular rates
+        energy = 0.0
+        for i in range(x.shape[0]):
+            v, spin, a = np.zeros(3), np.zeros(3), owner[i]
+            while a >= 0:
+                v += np.cross(w[a], x[i] - loads.pivot[a])
+                spin += w[a]
+                a = parent[a]
+            energy += 0.5 * m[i] * v @ v + 0.5 * rod[i] * np.sum(np.cross(spin, u[i]) ** 2)
+        assert np.isclose(0.5 * qdot @ dyn.mass @ qdot, energy, rtol=1e-6)   # M has a 1e-9 floor
+
+
+def test_gravity_stiffness_is_the_potential_energy_curvature(tree_rig):
+    """K − springs equals the Hessian of Σ m g z under exact rotations (finite differences)."""
+    from treegen_cli.wind import _springs
+
+    tree, rig = tree_rig
+    opts = WindOptions()
+    loads = joint_loads(tree, rig, opts)
+    dyn = dynamics(tree, rig, opts, loads)
+    parent = rig.skeleton.parent.astype(np.int64)
+    free = np.arange(parent.shape[0])
+    x, m, _, _, owner = _mass_points(tree, rig, opts)
+
+    def potential(q: np.ndarray) -> float:
+        full = np.zeros((parent.shape[0], 2))
+        full[free] = q.reshape(-1, 2)
+        theta = np.einsum("jca,ja->jc", dyn.basis, full)
+        total = 0.0
+        for i in range(x.shape[0]):
+            chain, a = [], owner[i]
+            while a >= 0:
+                chain.append(a)
+                a = parent[a]
+            p = x[i]
+            for a in chain:                                            # innermost joint first
+                p = loads.pivot[a] + Rotation.from_rotvec(theta[a]).apply(p - loads.pivot[a])
+            total += 9.81 * m[i] * p[2]
+        return total
+
+    n = dyn.mass.shape[0]
+    h = 1e-4
+    e = np.eye(n) * h
+    hess = np.array([[(potential(e[i] + e[j]) - potential(e[i] - e[j]) - potential(-e[i] + e[j])
+                       + potential(-e[i] - e[j])) / (4 * h * h) for j in range(n)] for i in range(n)])
+    springs = np.repeat(_springs(loads, rig, opts.anchorage), 2)
+    geometric = dyn.stiffness - np.diag(springs)
+    assert np.allclose(geometric, hess, rtol=1e-3, atol=1e-3 * np.abs(hess).max())
+
+
+def test_modes_are_mass_normalised_and_sorted(tree_rig):
+    tree, rig = tree_rig
+    dyn = dynamics(tree, rig, WindOptions())
+    phi = dyn.modes
+    assert np.allclose(phi.T @ dyn.mass @ phi, np.eye(phi.shape[1]), atol=1e-8)
+    assert np.allclose(phi.T @ dyn.stiffness @ phi, np.diag(dyn.omega**2), atol=1e-6 * dyn.omega.max() ** 2)
+    assert np.all(np.diff(dyn.omega) >= 0.0) and np.all(dyn.damping >= WindOptions().damping_ratio)
 
 
 def test_thin_branch_deflects_more_per_length_than_thick(tree_rig):
@@ -279,22 +378,23 @@ def test_thin_branch_deflects_more_per_length_than_thick(tree_rig):
     base_thick = int(np.flatnonzero(rig.joint_node == tree.stem_node_start[2])[0])
     per_len = np.linalg.norm(theta, axis=2).mean(axis=1) / loads.span
     assert per_len[base_thin] > 4.0 * per_len[base_thick]
-    # across levels too: every joint of the thin level-1 branch bends more per metre than the trunk
-    trunk = rig.joint_stem == 0
-    assert per_len[rig.joint_stem == 1].min() > 5.0 * per_len[trunk][1:].max()
 
 
 @pytest.mark.parametrize("elastic_modulus", [9.0e9, 5.0e7])
 def test_gale_stays_bounded_and_finite(tree_rig, elastic_modulus):
     """40 m/s on real wood, and on wood so soft the linear response would spin twigs round."""
     tree, rig = tree_rig
-    opts = WindOptions(speed=40.0, elastic_modulus=elastic_modulus, max_sag_deg=90.0, **FAST)
+    opts = WindOptions(speed=40.0, elastic_modulus=elastic_modulus, working_stress=1e9, **FAST)
     clip = bake_wind(tree, rig, opts, seed=8)
     assert np.all(np.isfinite(clip.rotations))
     dev = _deviation(clip, rig.skeleton)
     assert dev.max() <= np.deg2rad(opts.max_angle_deg) + 1e-9
+    world = pose_world(rig.skeleton, clip.rotations)[:, :, :3, :3]
+    turn = Rotation.from_matrix((world @ np.swapaxes(rig.skeleton.bind_world[None, :, :3, :3], -1, -2)
+                                 ).reshape(-1, 3, 3)).magnitude()
+    assert turn.max() <= 1.05 * np.deg2rad(opts.max_bend_deg)          # chains bound in world space
     if elastic_modulus < 1e9:
-        assert dev.max() > 0.9 * np.deg2rad(opts.max_angle_deg)      # the bound is doing work
+        assert dev.max() > 0.8 * np.deg2rad(opts.max_angle_deg)      # the bound is doing work
 
 
 def test_seam_is_smooth(tree_rig):
@@ -328,9 +428,10 @@ def test_wind_field_statistics_and_periodicity():
     opts = WindOptions(speed=5.0, gust=0.4, turbulence=0.0, duration=8.0, fps=30.0)
     v = wind_velocity(pts, np.arange(4), opts, seed=1, n_samples=240)
     assert v.shape == (4, 240, 3)
-    # mean exactly U along +X (all fluctuations are zero-mean harmonics); σ_u from the gust knob
+    # mean exactly U along +X; σ_u from the gust knob, less the gusts slower than the loop
     assert np.allclose(v.mean(axis=1), [5.0, 0.0, 0.0], atol=1e-9)
-    assert np.allclose(v[:, :, 0].std(axis=1), 0.4 * 5.0, rtol=1e-9)
+    assert np.all((v[:, :, 0].std(axis=1) > 0.3 * 0.4 * 5.0) & (v[:, :, 0].std(axis=1) < 0.4 * 5.0))
+    assert np.all(v[:, :, 0] > 0.0)
     assert np.all(v[:, :, 1].std(axis=1) < v[:, :, 0].std(axis=1))   # lateral smaller
     # frozen turbulence: the downwind point sees the upwind point's series 1 s later
     shift = int(round(5.0 / 5.0 * 30))
@@ -400,7 +501,6 @@ def test_generated_species_sways_downwind_and_loops():
     assert clip.rotations.shape == (31, rig.skeleton.parent.shape[0], 4)
     assert np.all(np.isfinite(clip.rotations))
     assert np.array_equal(clip.rotations[0], clip.rotations[-1])
-    assert np.array_equal(clip.rotations[:, 0], np.broadcast_to(rig.skeleton.rest_rotation[0], (31, 4)))
     assert _deviation(clip, rig.skeleton).max() <= np.deg2rad(opts.max_angle_deg) + 1e-9
     disp = _tip_displacement(clip, rig)[:-1].mean(axis=0)
     wind_dir = np.array([np.cos(np.deg2rad(60.0)), np.sin(np.deg2rad(60.0)), 0.0])
@@ -411,7 +511,7 @@ def test_generated_species_sways_downwind_and_loops():
 @pytest.mark.parametrize("max_joints", [1, 3, 8, 256])
 def test_shared_synthetic_tree_with_real_rig(max_joints):
     """Clones, pointed (zero-radius) tips, rigidly carried twigs, coarsened chains: still finite,
-    bounded, looping, root fixed; a one-joint rig stays at rest."""
+    bounded, looping; a one-joint rig rocks as a whole."""
     try:
         from synthetic_tree import synthetic_tree
         from treegen_cli.rig import RigOptions, build_rig
@@ -424,12 +524,108 @@ def test_shared_synthetic_tree_with_real_rig(max_joints):
     rest = np.broadcast_to(rig.skeleton.rest_rotation, clip.rotations.shape)
     assert np.all(np.isfinite(clip.rotations))
     assert np.array_equal(clip.rotations[0], clip.rotations[-1])
-    assert np.array_equal(clip.rotations[:, 0], rest[:, 0])
     dev = _deviation(clip, rig.skeleton)
     assert dev.max() <= np.deg2rad(opts.max_angle_deg) + 1e-9
-    if rig.skeleton.parent.shape[0] == 1:
-        assert np.array_equal(clip.rotations, rest)
-    else:
-        assert dev.max() > 0.0
+    assert dev.max() > 0.0
+    assert not np.array_equal(clip.rotations, rest)
     loads = joint_loads(tree, rig, opts)
     assert np.all(loads.stiffness > 0) and np.all(np.isfinite(loads.inertia))
+
+
+def test_gusts_never_reverse_the_wind():
+    """Log-normal gusts: however large the gust and turbulence knobs, the along-wind speed stays
+    positive at every point and time, with the mean speed kept."""
+    pts = np.random.default_rng(0).uniform(-5, 5, size=(40, 3))
+    for direction in (0.0, 130.0):
+        opts = WindOptions(speed=25.0, gust=2.0, turbulence=2.0, direction_deg=direction, duration=10.0)
+        v = wind_velocity(pts, np.arange(40) % 7, opts, seed=3, n_samples=300)
+        e = np.array([np.cos(np.deg2rad(direction)), np.sin(np.deg2rad(direction)), 0.0])
+        along = v @ e
+        assert along.min() > 0.0
+        assert np.allclose(along.mean(axis=1), 25.0, rtol=1e-9)
+
+
+PAPER = ["quaking_aspen", "black_tupelo", "weeping_willow", "ca_black_oak"]
+
+
+@pytest.fixture(scope="module")
+def paper_trees():
+    from pathlib import Path
+
+    from treegen_cli.generate import generate
+    from treegen_cli.params import load_params
+    from treegen_cli.rig import build_rig
+
+    root = Path(__file__).resolve().parent.parent / "species"
+    out = {}
+    for name in PAPER:
+        tree = generate(load_params(root / f"{name}.txt"), 0)
+        out[name] = (tree, build_rig(tree))
+    return out
+
+
+def _leaf_motion(tree, rig, clip, every: int = 13) -> np.ndarray:
+    """(K, L', 3) positions of every `every`-th leaf base, carried by its joint."""
+    world = pose_world(rig.skeleton, clip.rotations)
+    j = rig.leaf_joint[::every].astype(int)
+    local = np.einsum("lab,lb->la", np.linalg.inv(rig.skeleton.bind_world[j]),
+                      np.c_[tree.leaf_pos[::every], np.ones(len(j))])
+    return np.einsum("klab,lb->kla", world[:, j], local)[..., :3]
+
+
+@pytest.mark.parametrize("species", PAPER)
+def test_storms_lean_downwind_without_a_trunk_kink(paper_trees, species):
+    """8–25 m/s, default gust and turbulence: the crown's centre (leaf-area mean) is downwind of
+    rest in ≥ 95 % of frames; leaves never move faster than the wind; neighbouring trunk joints
+    differ by at most a few degrees (the trunk bends smoothly, no elbow)."""
+    tree, rig = paper_trees[species]
+    parent = rig.skeleton.parent.astype(np.int64)
+    trunk = np.flatnonzero((rig.joint_stem == 0) & (parent >= 0))       # the trunk's own chain
+    trunk = trunk[rig.joint_stem[parent[trunk]] == 0]
+    area = tree.leaf_area[::13]
+    for speed in (8.0, 12.0, 25.0):
+        opts = WindOptions(speed=speed)
+        clip = bake_wind(tree, rig, opts, seed=0)
+        x = _leaf_motion(tree, rig, clip)
+        crown = ((x - tree.leaf_pos[::13][None]) * area[None, :, None]).sum(axis=1) / area.sum()
+        assert np.mean(crown[:-1, 0] > 0.0) >= 0.95, (species, speed, np.mean(crown[:-1, 0] > 0.0))
+        leaf_speed = np.linalg.norm(np.diff(x, axis=0), axis=2) * opts.fps
+        assert leaf_speed.max() < speed, (speed, leaf_speed.max())
+        theta = wind_angles(tree, rig, opts, seed=0)
+        kink = np.degrees(np.linalg.norm(theta[trunk] - theta[parent[trunk]], axis=2))
+        assert kink.max() <= 6.0, (speed, kink.max())
+
+
+def test_jointless_stems_stay_on_their_parents_bark(paper_trees):
+    """A stem without joints is skinned like its parent's bark where it attaches: at 12 m/s its
+    base stays within the parent's radius of the parent's axis point there (here: exactly on)."""
+    tree, rig = paper_trees["quaking_aspen"]
+    clip = bake_wind(tree, rig, WindOptions(speed=12.0), seed=0)
+    world = pose_world(rig.skeleton, clip.rotations) @ np.linalg.inv(rig.skeleton.bind_world)[None]
+    jointed = np.zeros(tree.n_stems, dtype=bool)
+    jointed[rig.joint_stem] = True
+    stems = np.flatnonzero(~jointed & (tree.stem_parent >= 0))
+    assert stems.size > 100
+
+    def skinned(points: np.ndarray, joints: np.ndarray, weights: np.ndarray) -> np.ndarray:
+        p = np.c_[points, np.ones(len(points))]
+        return sum(weights[None, :, k, None] * np.einsum("knab,nb->kna", world[:, joints[:, k]], p)[..., :3]
+                   for k in range(joints.shape[1]))
+
+    # the parent's bark at the attach point: its axis point between the segment's end nodes,
+    # skinned as the mesh does (both nodes' bindings, blended by the fraction t)
+    a = tree.stem_parent_node[stems]
+    b = np.where(tree.node_stem[np.minimum(a + 1, tree.n_nodes - 1)] == tree.node_stem[a], a + 1, a)
+    base = tree.node_pos[tree.stem_node_start[stems]]
+    ab = tree.node_pos[b] - tree.node_pos[a]
+    t = np.clip(np.sum((base - tree.node_pos[a]) * ab, axis=1) / np.maximum(np.sum(ab * ab, axis=1), 1e-24), 0, 1)
+    axis_point = tree.node_pos[a] + t[:, None] * ab
+    joints = np.concatenate([rig.node_joints[a], rig.node_joints[b]], axis=1).astype(int)
+    weights = np.concatenate([rig.node_weights[a] * (1 - t[:, None]), rig.node_weights[b] * t[:, None]], axis=1)
+    parent_bark = skinned(axis_point, joints, weights)
+    child = skinned(base, rig.node_joints[tree.stem_node_start[stems]].astype(int),
+                    rig.node_weights[tree.stem_node_start[stems]].astype(float))
+    radius = tree.node_radius[a] + t * (tree.node_radius[b] - tree.node_radius[a])
+    distance = np.linalg.norm(child - parent_bark, axis=2)
+    assert np.all(distance <= np.linalg.norm(base - axis_point, axis=1)[None] + radius[None] + 1e-9)
+    assert np.all(distance <= 2.0 * radius[None] + 1e-6)

@@ -41,8 +41,9 @@ DEFAULTS: dict[str, object] = {
     "wind_dir": 0.0,
     "gust": 0.35,
     "turbulence": 0.3,
-    "duration": 4.0,
+    "duration": 10.0,
     "fps": 30.0,
+    "stiffness": 1.0,
     "no_wind": False,
     "lod_distances": "0,10,30,130",
     "fov": 60.0,
@@ -59,7 +60,8 @@ DEFAULTS: dict[str, object] = {
 INTS = ("seed", "max_stems", "max_leaves", "max_joints", "width", "max_vertices", "max_keys",
         "texture_size")
 PATHS = ("leaf_texture", "bark_texture")
-FLOATS = ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "fov", "error_px")
+FLOATS = ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "fov", "error_px",
+          "stiffness")
 FLAGS = ("no_wind", "no_lod", "lod_files", "no_textures")
 CHOICES = {"leaf_geometry": ("card", "shape"), "error_form": ("exact", "paper"),
            "interpolation": ("linear", "step"), "up_axis": (None, "y", "z")}
@@ -180,7 +182,8 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
     static = output is not None and Path(output).suffix.lower() in STATIC
     wind = None if v["no_wind"] or static else WindOptions(
         speed=v["wind_speed"], direction_deg=v["wind_dir"], gust=v["gust"],
-        turbulence=v["turbulence"], duration=v["duration"], fps=v["fps"])
+        turbulence=v["turbulence"], duration=v["duration"], fps=v["fps"],
+        stiffness=v["stiffness"])
     lod = None if v["no_lod"] or static else LodOptions(
         distances=v["lod_distances"], fov_deg=v["fov"], width=v["width"], error_px=v["error_px"],
         error_form=v["error_form"], interpolation=v["interpolation"].upper())

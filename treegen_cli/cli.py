@@ -78,11 +78,18 @@ def cli():
               help="Also build the LODs and print, per LOD distance, keys kept, max error, leaf-"
                    "vertex updates per frame vs all leaf vertices, joints, triangles.")
 @_lod_options
+@click.option("--wind", "with_wind", is_flag=True,
+              help="Also print the wind physics: natural frequencies and damping, the trunk's "
+                   "sway frequency, and the tree top's lean and sway at --wind-speed.")
+@click.option("--wind-speed", type=float, default=4.0, show_default=True, help="Mean wind speed, m/s.")
+@click.option("--stiffness", type=float, default=1.0, show_default=True,
+              help="Multiplier on every joint's stiffness (frequencies scale with its square root).")
 def info(species, seed, max_stems, max_leaves, as_json, with_lod, lod_distances, fov, width,
-         error_px, error_form, interpolation):
+         error_px, error_form, interpolation, with_wind, wind_speed, stiffness):
     """Grow SPECIES (a Weber–Penn text or Arbaro XML file) and report on the tree:
     stems per level, leaves, leaf area (m²), height and crown width (m), nodes, seconds.
-    With --lod: the analogue of the paper's Table 3, one row per LOD distance."""
+    With --lod: the analogue of the paper's Table 3, one row per LOD distance.
+    With --wind: the wind model's numbers, to tune --wind-speed, --gust and --stiffness."""
     from .generate import generate
     from .tree import tree_stats
 
@@ -100,6 +107,11 @@ def info(species, seed, max_stems, max_leaves, as_json, with_lod, lod_distances,
                                   GenerateOptions(max_stems=max_stems, max_leaves=max_leaves),
                                   _lod_from(lod_distances, fov, width, error_px, error_form,
                                             interpolation))
+    if with_wind:
+        from .rig import build_rig
+        from .wind import WindOptions, wind_report
+        stats["wind"] = wind_report(tree, build_rig(tree),
+                                    WindOptions(speed=wind_speed, stiffness=stiffness), seed)
     if as_json:
         click.echo(json.dumps(stats, indent=2))
         return
@@ -126,6 +138,15 @@ def info(species, seed, max_stems, max_leaves, as_json, with_lod, lod_distances,
             click.echo(f"    {k:<4}{r['distance_m']:>8g}{r['keys_kept']:>9,} {r['keys_kept_pct']:>5.1f}%"
                        f"{r['max_error_px']:>11.3f}{r['leaf_vertex_updates_per_frame']:>15,.0f}"
                        f"{r['leaf_vertices']:>12,}{r['joints']:>8}{r['triangles']:>11,}")
+    if with_wind:
+        w = stats["wind"]
+        click.echo(f"  wind ({wind_speed:g} m/s, stiffness ×{stiffness:g}):")
+        click.echo("    modes        " + ", ".join(f"{m['hz']:.2f} Hz (ζ {m['damping']:.2f})"
+                                                  for m in w["modes"]))
+        if w["sway_hz"] is not None:
+            click.echo(f"    trunk sway   {w['sway_hz']:.3f} Hz, damping ζ {w['sway_damping']:.2f}")
+            click.echo(f"    tree top     leans {w['top_lean_m']:.2f} m downwind, sways "
+                       f"{w['top_sway_rms_m']:.2f} m RMS; largest joint turn {w['max_joint_deg']:.1f}°")
 
 
 def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> list[dict]:
@@ -173,9 +194,12 @@ def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> lis
               help="Gust intensity: σ of the gust process / mean speed.")
 @click.option("--turbulence", type=float, default=0.3, show_default=True,
               help="Spatially varying turbulence: σ / mean speed.")
-@click.option("--duration", type=float, default=4.0, show_default=True,
+@click.option("--duration", type=float, default=10.0, show_default=True,
               help="Clip length in seconds (the wind loops over it).")
 @click.option("--fps", type=float, default=30.0, show_default=True, help="Keys per second.")
+@click.option("--stiffness", type=float, default=1.0, show_default=True,
+              help="Multiplier on every joint's stiffness: 4 doubles the sway frequencies and "
+                   "roughly quarters the motion (see `treegen info --wind`).")
 @click.option("--no-wind", is_flag=True, help="Write no animation (rest pose only).")
 @click.option("--up-axis", type=click.Choice(["y", "z"]), default=None,
               help="Up axis of USD, OBJ and PLY files, metres either way [default: y for .usdz "
@@ -194,8 +218,9 @@ def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> lis
               help="Print a machine-readable summary (files, bytes, counts, seconds per stage).")
 def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels, sides,
          leaf_geometry, texture_size, leaf_texture, bark_texture, no_textures, wind_speed,
-         wind_dir, gust, turbulence, duration, fps, no_wind, up_axis, lod_distances, fov, width,
-         error_px, error_form, interpolation, no_lod, lod_files, max_vertices, max_keys, as_json):
+         wind_dir, gust, turbulence, duration, fps, stiffness, no_wind, up_axis, lod_distances,
+         fov, width, error_px, error_form, interpolation, no_lod, lod_files, max_vertices,
+         max_keys, as_json):
     """Grow SPECIES and write a skinned, wind-animated tree to OUTPUT."""
     from .api import build, check_output, resolve, write
     from .exchange import STATIC
@@ -210,10 +235,11 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
                        leaf_texture=leaf_texture, bark_texture=bark_texture,
                        no_textures=no_textures, wind_speed=wind_speed, wind_dir=wind_dir,
                        gust=gust, turbulence=turbulence, duration=duration, fps=fps,
-                       no_wind=no_wind, lod_distances=lod_distances, fov=fov, width=width,
-                       error_px=error_px, error_form=error_form, interpolation=interpolation,
-                       no_lod=no_lod, lod_files=lod_files, up_axis=up_axis,
-                       max_vertices=max_vertices, max_keys=max_keys), output=output)
+                       stiffness=stiffness, no_wind=no_wind, lod_distances=lod_distances,
+                       fov=fov, width=width, error_px=error_px, error_form=error_form,
+                       interpolation=interpolation, no_lod=no_lod, lod_files=lod_files,
+                       up_axis=up_axis, max_vertices=max_vertices, max_keys=max_keys),
+                  output=output)
     options = job.options
     static = output.suffix.lower() in STATIC
     params = _load(species)

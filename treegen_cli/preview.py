@@ -13,7 +13,7 @@ import json
 import os
 import re
 from contextlib import nullcontext
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import click
@@ -98,12 +98,14 @@ def _renderer(scene: Drawable, options: PreviewOptions, renderer=None):
 
 
 def render_still(scene: Drawable, options: PreviewOptions = DEFAULTS, renderer=None) -> np.ndarray:
-    """The rest pose (t = 0) as uint8 (height, width, 3); `renderer`: an open one to reuse."""
+    """The rest (bind) pose, no wind, as uint8 (height, width, 3); `renderer`: an open one to
+    reuse. (The wind clip's t = 0 is a swayed pose, not the rest pose the help promises.)"""
+    rest = replace(scene, skinning=None)
     times = np.zeros(1)
-    camera = camera_for(scene, options, times)
+    camera = camera_for(rest, options, times)
     with _renderer(scene, options, renderer) as r:
         az, el = sun_angles(options)
-        return r.render(camera, scene.pose(times)[0], az, el)
+        return r.render(camera, rest.pose(times)[0], az, el)
 
 
 def render_loop(scene: Drawable, options: PreviewOptions = DEFAULTS,

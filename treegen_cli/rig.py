@@ -148,7 +148,37 @@ def build_rig(tree, options: RigOptions = RIG_DEFAULTS) -> Rig:
     node_joints[:, 0] = carrier
     node_joints[:, 1] = np.where(w > 0, joint_of[np.minimum(nxt, N - 1)], 0)
     node_weights = np.column_stack([1.0 - w, w]).astype(np.float32)
-
+    # A stem without joints of its own takes its parent's skin binding where it attaches (the
+    # parent's bark there blends its segment's two end nodes by the attach point's fraction t),
+    # so it moves exactly as that bark and can never separate from it; riding rigidly on one
+    # joint let it float off wherever the parent blends two. Both end bindings only ever use the
+    # segment's two chain joints. One pass per stem generation.
+    rigid = np.flatnonzero(~has_prev & (attach >= 0))
+    stem_of = s[rigid]
+    a = attach[rigid]
+    b = np.where((a + 1 < N) & (s[np.minimum(a + 1, N - 1)] == s[a]), a + 1, a)
+    ab = tree.node_pos[b] - tree.node_pos[a]
+    base = tree.node_pos[tree.stem_node_start[stem_of]]
+    t = np.clip(np.einsum("ij,ij->i", base - tree.node_pos[a], ab)
+                / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-24), 0.0, 1.0)
+    todo = rigid
+    while todo.size:
+        k = np.searchsorted(rigid, todo)
+        ja, wa = node_joints[a[k]].astype(np.int64), node_weights[a[k]].astype(np.float64)
+        jb, wb = node_joints[b[k]].astype(np.int64), node_weights[b[k]].astype(np.float64)
+        cand = np.concatenate([ja, jb], axis=1)
+        wt = np.concatenate([wa * (1.0 - t[k, None]), wb * t[k, None]], axis=1)
+        first = cand[:, 0]
+        w0 = np.sum(np.where(cand == first[:, None], wt, 0.0), axis=1)
+        other = np.where((cand != first[:, None]) & (wt > 0.0), wt, -1.0)
+        second = cand[np.arange(len(todo)), np.argmax(other, axis=1)]
+        has2 = other.max(axis=1) > 0.0
+        node_joints[todo, 0] = first
+        node_joints[todo, 1] = np.where(has2, second, 0)
+        node_weights[todo, 0] = np.where(has2, w0, 1.0)
+        node_weights[todo, 1] = np.where(has2, 1.0 - w0, 0.0)
+        node_joints[todo, 1] = np.where(node_weights[todo, 1] > 0, node_joints[todo, 1], 0)
+        todo = todo[np.isin(a[k], todo) | np.isin(b[k], todo)]      # parent not settled yet
     stem_joint = np.where(tree.stem_parent_node >= 0,
                           carrier[np.maximum(tree.stem_parent_node, 0)], 0).astype(np.int32)
     lj = node_joints[tree.leaf_node, np.argmax(node_weights[tree.leaf_node], axis=1)] \

@@ -1,36 +1,43 @@
 """Wind: a seeded, periodic wind field and the paper's per-joint spring model, baked into a Clip.
 
 Result: Tree + Rig → Clip "wind" with (fps·duration + 1, J, 4) local quaternions (xyzw);
-key 0 == key K−1 (seamless loop), joint 0 (trunk base) always at rest, speed 0 → rest exactly.
+key 0 == key K−1 (seamless loop), speed 0 → rest exactly.
 
     clip = bake_wind(tree, rig, WindOptions(speed=6.0, direction_deg=90), seed=7)
 
 The model (Kondo et al., after Weber–Penn; REFERENCE.md §1, §3):
 
-* Every joint carries the stem segments from its node up to the next joint on its chain, the
-  leaves bound to it (``rig.leaf_joint``) and the stems it carries rigidly. The wind force on a
-  joint's load is the leaves' drag F = ½·ρ_air·C_d·A·|v|·v (the paper's F_w = W·A with W the
-  dynamic pressure, so it scales physically with speed; softened at high speed by Vogel's
-  reconfiguration exponent), plus cylinder drag on the wood so leafless species still sway. Forces and their torques Σ (x_i − p_j) × F_i are summed over
-  each joint's whole subtree with reverse (deepest-first) accumulation by depth.
-* Gravity is in the rest shape already: its moment is constant and drops out of the deviation,
-  so weight (F_g = G·(l·r²·π·d + A·A_g)) only enters as inertia.
-* Each joint is a damped rotational spring: k = E·I/ℓ with I = π r⁴/4 (beam theory: curvature
-  M/EI integrated over the span ℓ the joint bends over), floored so that the subtree's weight
-  moment would sag it at most max_sag (Weber–Penn twigs are often thinner than wood could bear),
-  inertia = second moment of the subtree mass about the joint, c = 2ζ√(k·I_m). It turns about the torque's component perpendicular to
-  the branch (no twist), in the joint's rest world frame, composed down the hierarchy.
-* Periodic steady state, exactly: the wind uses only harmonics of 1/duration, so the torque is
-  periodic on the clip's grid; the system is linear, so each harmonic's response is the torque's
-  rFFT coefficient divided by (k − I_m ω² + i c ω). The inverse rFFT is the motion after all
-  transients have died out — it loops with continuous derivatives and needs no spin-up period.
-  Angles then saturate smoothly (max_angle·tanh(θ/max_angle)) so gales never explode.
+* Loads, as the paper: the wind on the leaves F = W·A (W = ½·ρ_air·|v|·v, softened at high speed by
+  Vogel's reconfiguration) plus cylinder drag on the wood; weight F_g = G·(l·π r²·d + A·A_g) as
+  mass. Forces, masses and their moments are summed over each joint's whole subtree.
+* Coupled dynamics: the joints are one linear system M θ̈ + C θ̇ + K θ = Q in two bending angles
+  per joint (world axes perpendicular to the branch, no twist). M is the kinetic energy of every
+  leaf and wood segment moving with all of its ancestors' joints; K the springs plus gravity's
+  geometric stiffness (hanging strands swing back as pendulums); C a structural ζ plus the drag
+  linearised in the branch's own velocity (aerodynamic damping, grows with the wind). Solved by
+  its natural modes, K φ = ω² M φ: the trunk's sway mode falls out of the whole tree's masses.
+* Springs from the node radius, k = E·π r⁴/4 over the wood the joint bends (the series sum of its
+  segments, weighted by the square of the moment its load puts there, Castigliano). Where a
+  Weber–Penn radius is thinner than wood that could hold its load (cone tapers reach 0.3 mm
+  under a leafy twig), the radius is the load-bearing one at the wood's working stress
+  (σ = 4M/πr³); the drawn geometry is unchanged. The trunk-base joint also rocks on the root
+  plate (anchorage, in series), so the trunk bends from the ground up, without an elbow.
+* Periodic steady state, exactly: the wind uses only harmonics of 1/duration, so the loads are
+  periodic on the clip's grid; each harmonic's modal response is φᵀQ̂ / (ω_m² − ω² + 2iζ_mω_mω).
+  The inverse rFFT is the motion after all transients have died out — it loops with continuous
+  derivatives and needs no spin-up period.
+* Gusts are log-normal along the wind (never reversing it). Large motion is bounded softly
+  (b·tanh(|x|/b)): first each joint frame's world-space turn summed down its chain (so chains
+  stream downwind instead of folding over), then each joint's own turn.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import functools
+from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.linalg import cholesky, solve_triangular
+from threadpoolctl import threadpool_limits
 from scipy.spatial.transform import Rotation
 
 from .asset import Clip
@@ -38,6 +45,7 @@ from .clip import loop_times
 from .errors import TreegenError
 from .quat import mul as quat_mul, unit as quat_unit
 from .rig import Rig
+from .shapes import flare_factor
 from .skeleton import depth_levels
 from .tree import Tree
 
@@ -49,13 +57,13 @@ VERTICAL_RATIO = 0.5       # σ_w / σ_u
 
 @dataclass(frozen=True)
 class WindOptions:
-    """Wind and wood parameters. Defaults: a pleasant 4 m/s breeze looping every 4 s."""
+    """Wind and wood parameters. Defaults: a pleasant 4 m/s breeze looping every 10 s."""
 
     speed: float = 4.0               # mean wind speed, m/s (Beaufort 3: 3.4–5.4)
     direction_deg: float = 0.0       # wind blows towards this azimuth; 0 = +X, 90 = +Y (Z up)
     gust: float = 0.35               # σ of the coherent gust process / mean speed
     turbulence: float = 0.3          # σ of the spatially varying part / mean speed
-    duration: float = 4.0            # clip length = wind period, s
+    duration: float = 10.0           # clip length = wind period, s (long enough not to notice)
     fps: float = 30.0                # keys per second
     wood_density: float = 800.0      # kg/m³, green (living) wood is ~800; dry ~500–700
     leaf_areal_density: float = 0.2  # kg/m², fresh leaf mass per area (dry LMA ~0.05–0.1, ~60% water)
@@ -64,11 +72,19 @@ class WindOptions:
     vogel_exponent: float = -0.5     # B: leaves streamline, drag ∝ |v|^(2+B) above reconfig_speed
     reconfig_speed: float = 2.0      # m/s, where reconfiguration sets in
     stem_drag_coefficient: float = 1.2  # cylinder C_d on the wood's 2·r·l; 0 = the paper's leaves only
-    elastic_modulus: float = 9.0e9   # Pa, green wood E ≈ 8–10 GPa
-    damping_ratio: float = 0.1       # ζ, structural + aerodynamic damping of branches
-    max_angle_deg: float = 25.0      # soft bound on any joint's deviation from rest
-    max_sag_deg: float = 5.0         # stiffness floor: its own weight bends no joint further
-    gust_length: float = 30.0        # m, integral length scale of the gusts (von Kármán)
+    elastic_modulus: float = 6.0e9   # Pa, green wood (Wood Handbook: 5.4–7.1 GPa for the paper's
+                                     # aspen, tupelo, willow and oak)
+    anchorage: float = 1500.0        # N·m/rad per kg of tree: root-plate rotational stiffness
+                                     # (winching tests: ~150 N·m/kg turning moment at ~0.1 rad)
+    stiffness: float = 1.0           # multiplier on every spring (artist's knob: f ∝ √stiffness)
+    working_stress: float = 10.0e6   # Pa, bending stress wood holds its own weight at (green
+                                     # modulus of rupture ~40 MPa over a safety factor ~4)
+    damping_ratio: float = 0.15      # structural ζ of every mode (drag adds aerodynamic ζ; trees in leaf
+                                     # measure ~0.05–0.2)
+    max_bend_deg: float = 60.0       # soft bound on any joint frame's world-space turn from rest
+    max_angle_deg: float = 40.0      # soft bound on any joint's own deviation from rest
+    gust_length: float = 80.0        # m, integral length scale of the gusts (von Kármán; ESDU 85020:
+                                     # ~50–150 m at 10–30 m height in open country)
     turbulence_length: float = 3.0   # m, integral length scale of the canopy turbulence
     incoherent: float = 0.3          # share of the turbulence variance that is per-branch noise
     origin: tuple[float, float, float] = (0.0, 0.0, 0.0)  # tree position in the shared field, m
@@ -81,8 +97,8 @@ class WindOptions:
                 raise TreegenError(
                     f"wind option '{name}' = {value!r}: allowed range {lo:g}..{hi:g} {unit}".rstrip()
                 )
-        for name in ("duration", "fps", "elastic_modulus", "max_angle_deg", "max_sag_deg", "gust_length",
-                     "turbulence_length"):
+        for name in ("duration", "fps", "elastic_modulus", "stiffness", "working_stress", "anchorage",
+                     "max_angle_deg", "max_bend_deg", "gust_length", "turbulence_length"):
             if getattr(self, name) <= 0:
                 raise TreegenError(f"wind option '{name}' must be > 0, got {getattr(self, name)!r}")
         if len(self.origin) != 3 or not np.all(np.isfinite(self.origin)):
@@ -103,9 +119,12 @@ _RANGES = {
     "reconfig_speed": (0.1, 100.0, "m/s"),
     "stem_drag_coefficient": (0.0, 3.0, ""),
     "elastic_modulus": (0.0, 1.0e12, "Pa"),
+    "stiffness": (0.0, 1000.0, ""),
+    "anchorage": (0.0, 1.0e9, "N·m/rad/kg"),
+    "working_stress": (0.0, 1.0e9, "Pa"),
     "damping_ratio": (0.001, 10.0, ""),
     "max_angle_deg": (0.0, 90.0, "degrees"),
-    "max_sag_deg": (0.0, 90.0, "degrees"),
+    "max_bend_deg": (0.0, 90.0, "degrees"),
     "gust_length": (0.0, 1000.0, "m"),
     "turbulence_length": (0.0, 1000.0, "m"),
     "incoherent": (0.0, 1.0, ""),
@@ -119,16 +138,21 @@ DEFAULTS = WindOptions()
 
 @dataclass(frozen=True, eq=False)
 class JointLoads:
-    """Static per-joint quantities of the spring model (subtree sums about each joint)."""
+    """Static per-joint quantities of the model (subtree sums about each joint)."""
 
     pivot: np.ndarray        # (J, 3) joint positions at rest
     direction: np.ndarray    # (J, 3) unit branch direction at the joint
     area: np.ndarray         # (J,) drag area Σ C_d·A of the joint's own load, m²
     area_moment: np.ndarray  # (J, 3) Σ C_d·A_i (x_i − pivot) of its own load
     mass: np.ndarray         # (J,) subtree mass, kg
-    inertia: np.ndarray      # (J,) subtree second moment of mass about the joint, kg·m²
-    stiffness: np.ndarray    # (J,) k = max(E·π r⁴/4 / ℓ, |weight moment⊥| / max_sag), N·m/rad
+    inertia: np.ndarray      # (J,) subtree second moment of mass about the joint, kg·m² (trace)
+    first_moment: np.ndarray   # (J, 3) s = Σ m (x − pivot) over the subtree, kg·m
+    second_moment: np.ndarray  # (J, 3, 3) S = Σ m (x − pivot)(x − pivot)ᵀ (+ rods' own), kg·m²
+    radius: np.ndarray       # (J,) r used for the stiffness: max(node radius, load-bearing radius)
+    stiffness: np.ndarray    # (J,) k = E / ∫ (M/M₀)² dz / (π r⁴/4), N·m/rad
     span: np.ndarray         # (J,) ℓ, m
+    area_first: np.ndarray   # (J, 3) Σ C_d·A (x − pivot) over the subtree (aerodynamic damping)
+    area_second: np.ndarray  # (J, 3, 3) Σ C_d·A (x − pivot)(x − pivot)ᵀ over the subtree
 
 
 def _node_carrier(tree: Tree, rig: Rig, n_joints: int) -> np.ndarray:
@@ -161,8 +185,92 @@ def _joint_span(tree: Tree, rig: Rig) -> np.ndarray:
     return np.maximum(np.where(span > 1e-9, span, seg), 1e-3)
 
 
+def load_bearing_radius(weight_moment: np.ndarray, options: WindOptions) -> np.ndarray:
+    """Radius whose wood carries `weight_moment` (N·m) at the working stress σ_w:
+    σ = M·r/I = 4M/(π r³) → r = (4M / (π σ_w))^(1/3) (constant-stress sizing, McMahon/Niklas).
+
+    Why: Weber–Penn tapers stems to a point (nTaper 1 is a cone), so tip joints reach radii
+    (0.3 mm) that no wood can hold a leafy branch with. The geometry stays as drawn; the spring
+    keeps the radius law k = E·π r⁴/4 / ℓ, with the radius the wood would need where the drawn
+    one is thinner. Where the drawn radius suffices (the trunk, most of the branches) nothing
+    changes."""
+    return np.cbrt(4.0 * np.maximum(weight_moment, 0.0) / (np.pi * options.working_stress))
+
+
+def wood_radius(tree: Tree) -> np.ndarray:
+    """Node radii without the trunk's flare: the buttress at the foot is short and stiff and
+    does not bend the stem above it."""
+    r = np.asarray(tree.node_radius, dtype=np.float64)
+    trunk = tree.stem_level[tree.node_stem] == 0
+    if not trunk.any():
+        return r
+    rel = tree.node_z / np.maximum(tree.stem_length[tree.node_stem], 1e-12)
+    return np.where(trunk, r / flare_factor(tree.params.flare, rel), r)
+
+
+def _span_compliance(tree: Tree, rig: Rig, carrier: np.ndarray, bearing: np.ndarray,
+                     lever: np.ndarray, spread: np.ndarray) -> np.ndarray:
+    """Per joint, the lumped hinge compliance of the wood it bends (its own stem from its node
+    to the next joint): c = ∫ (M(z)/M(0))² dz / (π r⁴/4) (the span's bending energy, Castigliano),
+    r linear between nodes and at least the joint's load-bearing radius; the load beyond the
+    joint is spread evenly over [L − a, L + a] along the lever (L = |s|/m its centre, a from its
+    second moment), so M(z) falls to zero past the load. 4-point Gauss per segment.
+
+    Why: the paper turns each node by its radius; a joint standing for several segments bends
+    as all of them do (series sum), but only as far as its load's moment reaches: a leafless tip
+    whose radius tapers to nothing carries almost no moment where it is thin, so it no longer
+    whips round, while a trunk span under the crown bends along its whole length."""
+    n_j = rig.skeleton.parent.shape[0]
+    seg = np.flatnonzero(tree.node_stem[:-1] == tree.node_stem[1:])
+    joint = carrier[seg]
+    own = np.asarray(rig.joint_stem)[joint] == tree.node_stem[seg]     # rigid stems bend nothing
+    seg, joint = seg[own], joint[own]
+    r = wood_radius(tree)
+    z0 = tree.node_z[seg] - tree.node_z[np.asarray(rig.joint_node)[joint]]
+    z1 = tree.node_z[seg + 1] - tree.node_z[np.asarray(rig.joint_node)[joint]]
+    ell = np.linalg.norm(tree.node_pos[seg + 1] - tree.node_pos[seg], axis=1)
+    t, wq = np.polynomial.legendre.leggauss(4)
+    t, wq = 0.5 * (t + 1.0), 0.5 * wq
+    rr = np.maximum(r[seg, None] + (r[seg + 1] - r[seg])[:, None] * t, bearing[joint, None])
+    z = z0[:, None] + (z1 - z0)[:, None] * t
+    L = np.maximum(lever[joint], 1e-6)[:, None]
+    a = np.minimum(spread[joint], lever[joint])[:, None]
+    ramp = np.clip(L + a - z, 0.0, None) ** 2 / np.maximum(4.0 * a, 1e-12)
+    beyond = np.where(z <= L - a, L - z, np.where(a > 0.0, ramp, 0.0))   # E[(x − z)⁺] / 1
+    w = (beyond / L) ** 2
+    per = ell * np.sum(wq * w / (0.25 * np.pi * np.maximum(rr, 1e-9) ** 4), axis=1)
+    return np.bincount(joint, weights=per, minlength=n_j)
+
+
+def subtree_moments(owner: np.ndarray, rel: np.ndarray, weight: np.ndarray, rod: np.ndarray,
+                    u: np.ndarray, pivot: np.ndarray, parent: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Zeroth, first and second moments (J,), (J, 3), (J, 3, 3) of `weight` at offsets `rel`
+    from their owner joint's pivot (plus rod terms rod·u uᵀ), summed over each joint's whole
+    subtree about its own pivot: deepest level first, parallel-axis shift to the parent."""
+    n_j = pivot.shape[0]
+
+    def per_joint(w: np.ndarray) -> np.ndarray:
+        return np.bincount(owner, weights=w, minlength=n_j)
+
+    m = per_joint(weight)
+    s = np.stack([per_joint(weight * rel[:, i]) for i in range(3)], axis=1)
+    S = np.empty((n_j, 3, 3))
+    for i in range(3):
+        for k in range(i, 3):
+            S[:, i, k] = S[:, k, i] = per_joint(weight * rel[:, i] * rel[:, k] + rod * u[:, i] * u[:, k])
+    for idx in reversed(depth_levels(parent)[1:]):
+        p = parent[idx]
+        d = pivot[idx] - pivot[p]
+        sd = np.einsum("ji,jk->jik", s[idx], d)
+        np.add.at(S, p, S[idx] + sd + sd.transpose(0, 2, 1) + m[idx, None, None] * np.einsum("ji,jk->jik", d, d))
+        np.add.at(s, p, s[idx] + m[idx, None] * d)
+        np.add.at(m, p, m[idx])
+    return m, s, S
+
+
 def joint_loads(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS) -> JointLoads:
-    """Drag areas, masses, inertias and stiffnesses per joint (all vectorised)."""
+    """Drag areas, masses, mass moments and stiffnesses per joint (all vectorised)."""
     skel = rig.skeleton
     n_j = skel.parent.shape[0]
     pivot = np.asarray(skel.bind_world, dtype=np.float64)[:, :3, 3]
@@ -175,6 +283,7 @@ def joint_loads(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS) -> JointL
     a, b = tree.node_pos[seg], tree.node_pos[seg + 1]
     r0, r1 = tree.node_radius[seg], tree.node_radius[seg + 1]
     length = np.linalg.norm(b - a, axis=1)
+    axis = (b - a) / np.maximum(length, 1e-12)[:, None]
     wood_mid = 0.5 * (a + b)
     wood_mass = options.wood_density * np.pi * length * (r0 * r0 + r0 * r1 + r1 * r1) / 3.0
     wood_area = options.stem_drag_coefficient * (r0 + r1) * length      # C_d · 2·r̄·l
@@ -190,37 +299,211 @@ def joint_loads(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS) -> JointL
     x = np.concatenate([wood_mid, leaf_mid])
     owner = np.concatenate([wood_joint, leaf_joint])
     mass = np.concatenate([wood_mass, leaf_mass])
-    rod = np.concatenate([wood_mass * length**2 / 12.0, np.zeros_like(leaf_mass)])
     area = np.concatenate([wood_area, leaf_drag])
     rel = x - pivot[owner]
 
     own_area = np.bincount(owner, weights=area, minlength=n_j)
     own_moment = np.stack([np.bincount(owner, weights=area * rel[:, i], minlength=n_j)
                            for i in range(3)], axis=1)
-    m_sub = np.bincount(owner, weights=mass, minlength=n_j)
-    s_sub = np.stack([np.bincount(owner, weights=mass * rel[:, i], minlength=n_j)
-                      for i in range(3)], axis=1)
-    i_sub = np.bincount(owner, weights=mass * np.einsum("ij,ij->i", rel, rel) + rod, minlength=n_j)
-
+    # rods: each wood segment's own second moment m·l²/12·u uᵀ (leaves are points)
+    rod = np.concatenate([wood_mass * length**2 / 12.0, np.zeros_like(leaf_mass)])
+    u = np.concatenate([axis, np.zeros_like(leaf_mid)])
     parent = np.asarray(skel.parent, dtype=np.int64)
-    for idx in reversed(depth_levels(parent)[1:]):      # deepest first: parallel-axis accumulation
-        p = parent[idx]
-        d = pivot[idx] - pivot[p]
-        np.add.at(i_sub, p, i_sub[idx] + 2.0 * np.einsum("ij,ij->i", s_sub[idx], d)
-                  + m_sub[idx] * np.einsum("ij,ij->i", d, d))
-        np.add.at(s_sub, p, s_sub[idx] + m_sub[idx, None] * d)
-        np.add.at(m_sub, p, m_sub[idx])
+    m_sub, s_sub, S_sub = subtree_moments(owner, rel, mass, rod, u, pivot, parent)
+    rod_area = np.concatenate([wood_area * length**2 / 12.0, np.zeros_like(leaf_drag)])
+    a_sub, as_sub, aS_sub = subtree_moments(owner, rel, area, rod_area, u, pivot, parent)
 
     span = _joint_span(tree, rig)
-    r = tree.node_radius[rig.joint_node]
-    stiffness = options.elastic_modulus * np.pi * r**4 / 4.0 / span
-    # Weber–Penn radii can be far thinner than wood could hold (a 1 mm, 1.5 m leafy branch):
-    # the rest shape carries its weight, so a joint is at least stiff enough that its subtree's
-    # weight, held out sideways, would bend it no more than max_sag (orientation-independent).
+    # weight moment of the subtree held sideways (orientation-independent, the worst case)
     weight_moment = GRAVITY * np.linalg.norm(s_sub, axis=1)
-    stiffness = np.maximum(np.maximum(stiffness, weight_moment / np.deg2rad(options.max_sag_deg)),
-                           1e-6)     # a massless zero-radius tip joint must not divide by zero
-    return JointLoads(pivot, direction, own_area, own_moment, m_sub, i_sub, stiffness, span)
+    bearing = load_bearing_radius(weight_moment, options)
+    radius = np.maximum(tree.node_radius[rig.joint_node], bearing)
+    inertia = np.trace(S_sub, axis1=1, axis2=2)
+    lever = np.linalg.norm(s_sub, axis=1) / np.maximum(m_sub, 1e-12)     # load centre's lever
+    spread = np.sqrt(3.0 * np.maximum(inertia / np.maximum(m_sub, 1e-12) - lever**2, 0.0))
+    compliance = _span_compliance(tree, rig, carrier, bearing, lever, spread)
+    stiffness = options.stiffness * options.elastic_modulus / np.maximum(compliance, 1e-300)
+    stiffness = np.maximum(stiffness, 1e-9)   # a massless zero-radius joint must not divide by zero
+    return JointLoads(pivot, direction, own_area, own_moment, m_sub, inertia, s_sub, S_sub,
+                      radius, stiffness, span, as_sub, aS_sub)
+
+
+# ---------------------------------------------------------------------------------------------
+# the coupled linear system
+
+@dataclass(frozen=True, eq=False)
+class Dynamics:
+    """The tree as one linear system in the joints' bending angles (two per joint, about the
+    axes perpendicular to the branch; no twist), and its natural modes.
+
+    M θ̈ + C θ̇ + K θ = Q. θ_j are world-frame rotation vectors of each joint's deviation from
+    rest (a point x carried by joint j moves by Σ_{a ∈ ancestors(j) ∪ {j}} θ_a × (x − p_a)).
+    M: kinetic energy of every mass over the hierarchy (joint a and its descendant b share
+    their mass through b's subtree). K: the springs E·π r⁴/4/ℓ plus gravity's second-order
+    (geometric) stiffness — hanging strands swing back as pendulums, upright stems soften a
+    little. C: the structural ζ plus the drag on every leaf and stem linearised in its own
+    velocity (aerodynamic damping grows with the wind, so storms sway less about their lean),
+    kept on the modes' diagonal."""
+
+    basis: np.ndarray        # (J, 3, 2) bending axes per joint
+    mass: np.ndarray         # (n, n), n = 2J
+    stiffness: np.ndarray    # (n, n)
+    omega: np.ndarray        # (n,) natural angular frequencies, rad/s, ascending
+    modes: np.ndarray        # (n, n) mass-normalised mode shapes (columns)
+    damping: np.ndarray      # (n,) ζ per mode: structural + aerodynamic
+
+
+def _ancestor_pairs(parent: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(a, b) for every joint b and every a in ancestors(b) ∪ {b} (one numpy pass per level)."""
+    n_j = parent.shape[0]
+    anc = np.zeros((n_j, n_j), dtype=bool)
+    for idx in depth_levels(parent):
+        p = parent[idx]
+        has = p >= 0
+        anc[idx[has]] = anc[p[has]]
+        anc[idx, idx] = True
+    b, a = np.nonzero(anc)
+    return a, b
+
+
+def _bending_basis(loads: JointLoads) -> np.ndarray:
+    """Two unit axes per joint perpendicular to the branch direction."""
+    d = loads.direction
+    helper = np.where(np.abs(d[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
+    e1 = np.cross(helper, d)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    e2 = np.cross(d, e1)
+    return np.stack([e1, e2], axis=2)
+
+
+def _skew_free_gravity(s: np.ndarray) -> np.ndarray:
+    """g·(s ẑᵀ − s_z I): gravity's bilinear form between a joint and a descendant whose
+    subtree has first moment s (about the descendant's pivot)."""
+    out = np.zeros(s.shape[:-1] + (3, 3))
+    out[..., :, 2] = s
+    out -= s[..., 2, None, None] * np.eye(3)
+    return GRAVITY * out
+
+
+def _hierarchy_matrix(a: np.ndarray, b: np.ndarray, E: np.ndarray, s: np.ndarray,
+                      S: np.ndarray, pivot: np.ndarray) -> np.ndarray:
+    """(2J, 2J) quadratic form ½ θ̇ᵀ X θ̇ of a weight field moving with the joints (mass: kinetic
+    energy; drag area: dissipation): X_ab = Σ_{i ∈ sub(b)} w [r_a×]ᵀ[r_b×]
+    = (tr S_b + d·s_b) I − S_b − s_b dᵀ with r_a = r_b + d, d = p_b − p_a, a ancestor of b."""
+    n_j = pivot.shape[0]
+    d = pivot[b] - pivot[a]
+    sb, Sb = s[b], S[b]
+    x = ((np.trace(Sb, axis1=1, axis2=2) + np.einsum("ij,ij->i", d, sb))[:, None, None] * np.eye(3)
+         - Sb - np.einsum("ji,jk->jik", sb, d))
+    return _assemble(a, b, np.swapaxes(E[a], 1, 2) @ x @ E[b], n_j)
+
+
+def _assemble(a: np.ndarray, b: np.ndarray, blocks: np.ndarray, n_j: int) -> np.ndarray:
+    """Symmetric (2J, 2J) matrix from its (a, b) blocks, a ancestor-or-self of b."""
+    out = np.zeros((n_j, 2, n_j, 2))
+    out[a, :, b, :] = blocks
+    off = a != b
+    out[b[off], :, a[off], :] = blocks[off].transpose(0, 2, 1)
+    return out.reshape(2 * n_j, 2 * n_j)
+
+
+def drag_damping_coefficient(options: WindOptions) -> float:
+    """c per unit drag area (N·s/m³): the drag ½ρ s(|v|)|v|v linearised in the branch's own
+    velocity about the mean wind U, ρ·s(U)·U·(1 + β/2), β = d ln s / d ln U (Vogel)."""
+    u = options.speed
+    x = (u / options.reconfig_speed) ** 2
+    soften = (1.0 + x) ** (0.5 * options.vogel_exponent)
+    beta = options.vogel_exponent * x / (1.0 + x)
+    return AIR_DENSITY * soften * u * (1.0 + 0.5 * beta)
+
+
+def dynamics(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS,
+             loads: JointLoads | None = None) -> Dynamics:
+    """Assemble M, K and the aerodynamic damping over the hierarchy and solve K φ = ω² M φ
+    (dense, n = 2J ≤ 512); modal damping ζ_m = ζ + φ_mᵀ C_aero φ_m / (2 ω_m)."""
+    ld = loads if loads is not None else joint_loads(tree, rig, options)
+    parent = np.asarray(rig.skeleton.parent, dtype=np.int64)
+    n_j = parent.shape[0]
+    E = _bending_basis(ld)
+    a, b = _ancestor_pairs(parent)
+    M = _hierarchy_matrix(a, b, E, ld.first_moment, ld.second_moment, ld.pivot)
+    C = drag_damping_coefficient(options) * _hierarchy_matrix(a, b, E, ld.area_first,
+                                                              ld.area_second, ld.pivot)
+    # gravity: K_ab (a strict ancestor of b) = g(s_b ẑᵀ − s_bz I); K_aa = its symmetric part
+    g_ab = _skew_free_gravity(ld.first_moment[b])
+    diag = a == b
+    g_ab[diag] = 0.5 * (g_ab[diag] + g_ab[diag].transpose(0, 2, 1))
+    K = _assemble(a, b, np.swapaxes(E[a], 1, 2) @ g_ab @ E[b], n_j)
+    n = 2 * n_j
+    K[np.arange(n), np.arange(n)] += np.repeat(_springs(ld, rig, options.anchorage), 2)
+    # massless joints (bare tips of synthetic rigs) get a tiny inertia so M stays definite
+    M[np.diag_indices_from(M)] += 1e-9 * max(float(np.max(np.diag(M))), 1e-12)
+    w2, phi = _modes(K, M)
+    # a stem too thin for gravity would buckle; the load-bearing radius prevents it, the clamp
+    # keeps degenerate inputs (zero modulus) finite
+    w2 = np.maximum(w2, 1e-6 * max(float(w2.max(initial=0.0)), 1e-12))
+    omega = np.sqrt(w2)
+    zeta = options.damping_ratio + np.sum(phi * (C @ phi), axis=0) / (2.0 * omega)
+    return Dynamics(E, M, K, omega, phi, zeta)
+
+
+def _modes(K: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """K φ = ω² M φ via Cholesky M = L Lᵀ and a symmetric eigenproblem (faster than LAPACK's
+    generalized drivers here); φ mass-normalised (φᵀ M φ = I)."""
+    if M.shape[0] == 0:
+        return np.zeros(0), np.zeros((0, 0))
+    L = cholesky(M, lower=True)
+    a = solve_triangular(L, solve_triangular(L, K, lower=True).T, lower=True)
+    w2, v = np.linalg.eigh(0.5 * (a + a.T))
+    return w2, solve_triangular(L.T, v, lower=False)
+
+
+def _springs(loads: JointLoads, rig: Rig, anchorage: float) -> np.ndarray:
+    """Spring per joint; a root joint (the trunk base) also has the root plate in series,
+    1/k = 1/k_wood + 1/(anchorage · tree mass): trees rock on their roots as well as bend."""
+    k = loads.stiffness.copy()
+    root = np.asarray(rig.skeleton.parent) < 0
+    k[root] = 1.0 / (1.0 / k[root] + 1.0 / np.maximum(anchorage * loads.mass[root], 1e-12))
+    return k
+
+
+def trunk_top(tree: Tree, rig: Rig) -> tuple[int, np.ndarray]:
+    """(joint, rest position) of the trunk's tip: the last node of stem 0, carried by the last
+    trunk joint."""
+    tip = int(tree.stem_node_start[0] + tree.stem_node_count[0] - 1)
+    carrier = _node_carrier(tree, rig, rig.skeleton.parent.shape[0])
+    return int(carrier[tip]), tree.node_pos[tip]
+
+
+def displacement_map(dyn: Dynamics, loads: JointLoads, parent: np.ndarray, joint: int,
+                     point: np.ndarray) -> np.ndarray:
+    """D (3, 2J): small-angle displacement of `point`, carried by `joint`, per bending angle."""
+    n_j = parent.shape[0]
+    D = np.zeros((3, n_j, 2))
+    a = joint
+    while a >= 0:
+        r = point - loads.pivot[a]
+        D[:, a, :] = -np.cross(r[None, :], dyn.basis[a].T).T      # θ × r = −r × θ
+        a = int(parent[a])
+    return D.reshape(3, 2 * n_j)
+
+
+def trunk_mode(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS,
+               loads: JointLoads | None = None, dyn: Dynamics | None = None) -> int:
+    """Index of the mode that carries most of the trunk top's static downwind deflection under
+    the mean wind: the tree's sway mode (lower modes may be single hanging branches)."""
+    ld = loads if loads is not None else joint_loads(tree, rig, options)
+    dyn = dyn if dyn is not None else dynamics(tree, rig, options, ld)
+    parent = np.asarray(rig.skeleton.parent, dtype=np.int64)
+    steady = replace(options, speed=max(options.speed, 1.0), gust=0.0, turbulence=0.0)
+    torque = generalized_forces(tree, rig, steady, 0, 1, ld)[:, 0]
+    Q = np.einsum("jca,jc->ja", dyn.basis, torque).reshape(-1)
+    j, x = trunk_top(tree, rig)
+    phi = np.deg2rad(options.direction_deg)
+    e_dir = np.array([np.cos(phi), np.sin(phi), 0.0])
+    along = e_dir @ displacement_map(dyn, ld, parent, j, x)
+    share = (along @ dyn.modes) * (Q @ dyn.modes) / dyn.omega**2
+    return int(np.argmax(share))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -236,14 +519,18 @@ def _von_karman(f: np.ndarray, length: float, speed: float, lateral: bool) -> np
 
 def _amplitudes(n_bins: int, n_max: int, duration: float, sigma: float, length: float,
                 speed: float, lateral: bool) -> np.ndarray:
-    """Cosine amplitudes of harmonics 0..n_bins−1 (only 1..n_max nonzero) with the spectrum's
-    shape and total variance σ² over the clip's resolvable band (periodic: no energy lost)."""
+    """Cosine amplitudes of harmonics 0..n_bins−1 (only 1..n_max nonzero) sampling the spectrum
+    at its own level, a_b² / 2 = σ²·S(f_b)·Δf with Δf = 1/duration.
+
+    Why: gusts slower than the loop cannot repeat within it; they would only change the clip's
+    mean. Squeezing their variance into the resolvable band (as before) doubled the energy
+    near a tree's resonance and swung crowns upwind in lulls."""
     amp = np.zeros(n_bins)
     if n_max < 1 or sigma <= 0.0:
         return amp
     f = np.arange(1, n_max + 1) / duration
     s = _von_karman(f, length, speed, lateral)
-    amp[1:n_max + 1] = np.sqrt(2.0 * s / s.sum()) * sigma     # Σ a²/2 = σ²
+    amp[1:n_max + 1] = np.sqrt(2.0 * s / duration) * sigma
     return amp
 
 
@@ -282,34 +569,58 @@ def wind_velocity(points: np.ndarray, groups: np.ndarray, options: WindOptions, 
     out = np.broadcast_to(u * e_dir, (p.shape[0], n_samples, 3)).copy()
     if u == 0.0:
         return out
+    along = np.zeros((p.shape[0], n_samples))       # Gaussian along-wind fluctuation, reshaped below
 
     def draw(r: np.random.Generator, rows: int) -> np.ndarray:
         return r.uniform(0.0, 2.0 * np.pi, size=(rows, n_bins))
 
-    coherent = [  # (σ, length, lateral spectrum, axis)
-        (o.gust * u, o.gust_length, False, e_dir),
+    coherent = [  # (σ, length, lateral spectrum, axis; None = along-wind)
+        (o.gust * u, o.gust_length, False, None),
         (LATERAL_RATIO * o.gust * u, o.gust_length, True, e_lat),
-        (np.sqrt(1.0 - o.incoherent) * o.turbulence * u, o.turbulence_length, False, e_dir),
+        (np.sqrt(1.0 - o.incoherent) * o.turbulence * u, o.turbulence_length, False, None),
         (np.sqrt(1.0 - o.incoherent) * LATERAL_RATIO * o.turbulence * u, o.turbulence_length, True, e_lat),
         (np.sqrt(1.0 - o.incoherent) * VERTICAL_RATIO * o.turbulence * u, o.turbulence_length, True, e_up),
     ]
     for sigma, length, lateral, axis in coherent:
         phase = draw(field_rng, 1)
         amp = _amplitudes(n_bins, n_max, o.duration, sigma, length, u_adv, lateral)
-        out += _series(amp, phase, delay, o.duration, n_samples)[:, :, None] * axis
+        series = _series(amp, phase, delay, o.duration, n_samples)
+        if axis is None:
+            along += series
+        else:
+            out += series[:, :, None] * axis
 
     uniq, inverse = np.unique(np.asarray(groups), return_inverse=True)
     group_delay = np.zeros(uniq.shape[0])
     incoherent = [
-        (np.sqrt(o.incoherent) * o.turbulence * u, False, e_dir),
+        (np.sqrt(o.incoherent) * o.turbulence * u, False, None),
         (np.sqrt(o.incoherent) * LATERAL_RATIO * o.turbulence * u, True, e_lat),
         (np.sqrt(o.incoherent) * VERTICAL_RATIO * o.turbulence * u, True, e_up),
     ]
     for sigma, lateral, axis in incoherent:
         phase = draw(rng, uniq.shape[0])
         amp = _amplitudes(n_bins, n_max, o.duration, sigma, o.turbulence_length, u_adv, lateral)
-        out += _series(amp, phase, group_delay, o.duration, n_samples)[inverse][:, :, None] * axis
+        series = _series(amp, phase, group_delay, o.duration, n_samples)[inverse]
+        if axis is None:
+            along += series
+        else:
+            out += series[:, :, None] * axis
+    out += (_positive_gusts(along, u, np.hypot(o.gust, o.turbulence)) - u)[:, :, None] * e_dir
     return out
+
+
+def _positive_gusts(fluctuation: np.ndarray, speed: float, intensity: float) -> np.ndarray:
+    """Along-wind speed (P, n) from a Gaussian fluctuation of σ = intensity·speed: log-normal,
+    U·exp(σ_ln·X − σ_ln²/2) with σ_ln² = ln(1 + intensity²), rescaled to mean U per point.
+
+    Why: gust speeds are skewed and never reverse the mean wind; a Gaussian with a large gust
+    knob blew trees upwind. Same mean and (nearly) the same σ as the Gaussian, always > 0."""
+    if intensity <= 0.0:
+        return np.full_like(fluctuation, speed)
+    sigma_ln = np.sqrt(np.log1p(intensity * intensity))
+    x = fluctuation / (intensity * speed)
+    e = np.exp(sigma_ln * x)
+    return speed * e / e.mean(axis=1, keepdims=True)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -328,40 +639,83 @@ def drag_pressure(v: np.ndarray, options: WindOptions) -> np.ndarray:
     return (0.5 * AIR_DENSITY) * soften * speed * v
 
 
-def wind_angles(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int = 0) -> np.ndarray:
-    """World-frame rotation vectors (J, n, 3) of each joint's deviation from rest over one
-    period (n = fps·duration samples, the closing key not repeated); root row is zero."""
-    n, _ = _frames(options)
-    n_j = rig.skeleton.parent.shape[0]
-    if options.speed == 0.0 or n_j < 2:
-        return np.zeros((n_j, n, 3))
-    ld = joint_loads(tree, rig, options)
-    v = wind_velocity(ld.pivot, rig.joint_stem, options, seed, n)           # (J, n, 3)
+def generalized_forces(tree: Tree, rig: Rig, options: WindOptions, seed: int, n: int,
+                       loads: JointLoads) -> np.ndarray:
+    """Torques (J, n, 3) about each joint of the wind on its whole subtree (the paper's load
+    summed over the branch and its children), one period on the clip's grid."""
+    v = wind_velocity(loads.pivot, rig.joint_stem, options, seed, n)          # (J, n, 3)
     pressure = drag_pressure(v, options)
-    force = ld.area[:, None, None] * pressure                               # (J, n, 3)
-    torque = np.cross(ld.area_moment[:, None, :], pressure)                 # about own pivot
-
+    force = loads.area[:, None, None] * pressure                             # (J, n, 3)
+    torque = np.cross(loads.area_moment[:, None, :], pressure)               # about own pivot
     parent = np.asarray(rig.skeleton.parent, dtype=np.int64)
     for idx in reversed(depth_levels(parent)[1:]):
         p = parent[idx]
-        d = ld.pivot[idx] - ld.pivot[p]
+        d = loads.pivot[idx] - loads.pivot[p]
         np.add.at(torque, p, torque[idx] + np.cross(d[:, None, :], force[idx]))
         np.add.at(force, p, force[idx])
+    return torque
 
-    torque -= np.einsum("jkc,jc->jk", torque, ld.direction)[:, :, None] * ld.direction[:, None, :]
-    spectrum = np.fft.rfft(torque, axis=1)                                   # (J, B, 3)
-    omega = 2.0 * np.pi * np.arange(spectrum.shape[1]) / options.duration
-    damping = 2.0 * options.damping_ratio * np.sqrt(ld.stiffness * ld.inertia)
-    response = 1.0 / (ld.stiffness[:, None] - ld.inertia[:, None] * omega[None, :] ** 2
-                      + 1j * damping[:, None] * omega[None, :])
-    theta = np.fft.irfft(spectrum * response[:, :, None], n=n, axis=1)
 
-    max_angle = np.deg2rad(options.max_angle_deg)
-    mag = np.linalg.norm(theta, axis=2, keepdims=True)
-    scale = np.where(mag > 0.0, max_angle * np.tanh(mag / max_angle) / np.where(mag > 0.0, mag, 1.0), 0.0)
-    theta *= scale
-    theta[parent < 0] = 0.0
-    return theta
+def steady_state(dyn: Dynamics, torque: np.ndarray, duration: float) -> np.ndarray:
+    """Periodic steady-state angles (J, n, 3) under periodic torques (J, n, 3), exactly: per rFFT
+    harmonic ω and mode m, q̂ = φ_mᵀQ̂ / (ω_m² − ω² + 2iζω_mω); θ = Σ φ_m q_m. No spin-up, no
+    transient: the result loops with continuous derivatives."""
+    n_j, n = torque.shape[:2]
+    Q = np.einsum("jca,jkc->jak", dyn.basis, torque).reshape(2 * n_j, n)     # (2J, n)
+    spectrum = np.fft.rfft(Q, axis=1)
+    omega = 2.0 * np.pi * np.arange(spectrum.shape[1]) / duration
+    wm = dyn.omega[:, None]
+    h = 1.0 / (wm * wm - omega[None, :] ** 2 + 2j * dyn.damping[:, None] * wm * omega[None, :])
+    q = (dyn.modes.T @ spectrum) * h
+    theta = np.fft.irfft(dyn.modes @ q, n=n, axis=1).reshape(n_j, 2, n)
+    return np.einsum("jca,jak->jkc", dyn.basis, theta)
+
+
+def bound_bends(theta: np.ndarray, parent: np.ndarray, options: WindOptions) -> np.ndarray:
+    """Soft bounds, first on each joint frame's world-space turn Θ_j = Σ_{ancestors} θ (so a
+    chain streams downwind instead of folding over however many joints it has), then on each
+    joint's own turn: x → b·tanh(|x|/b)·x/|x|, smooth and identity for small angles."""
+    def soft(x: np.ndarray, bound: float) -> np.ndarray:
+        mag = np.linalg.norm(x, axis=-1, keepdims=True)
+        safe = np.where(mag > 0.0, mag, 1.0)
+        return np.where(mag > 0.0, bound * np.tanh(mag / bound) / safe, 0.0) * x
+
+    levels = depth_levels(parent)
+    total = theta.copy()
+    for idx in levels[1:]:
+        total[idx] += total[parent[idx]]
+    total = soft(total, np.deg2rad(options.max_bend_deg))
+    out = total.copy()
+    for idx in levels[1:]:
+        out[idx] -= total[parent[idx]]
+    return soft(out, np.deg2rad(options.max_angle_deg))
+
+
+def one_blas_thread(fn):
+    """Run `fn` with single-threaded BLAS/LAPACK: a threaded reduction sums in a different
+    order, so the same tree would bake to different bytes under `treegen make` (all cores) and
+    a Dask worker (one thread). One thread is also faster at these sizes (J ≤ 256)."""
+    @functools.wraps(fn)
+    def run(*args, **kwargs):
+        with threadpool_limits(limits=1, user_api="blas"):
+            return fn(*args, **kwargs)
+    return run
+
+
+@one_blas_thread
+def wind_angles(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int = 0,
+                dyn: Dynamics | None = None) -> np.ndarray:
+    """World-frame rotation vectors (J, n, 3) of each joint's deviation from rest over one
+    period (n = fps·duration samples, the closing key not repeated)."""
+    n, _ = _frames(options)
+    n_j = rig.skeleton.parent.shape[0]
+    if options.speed == 0.0:
+        return np.zeros((n_j, n, 3))
+    loads = joint_loads(tree, rig, options)
+    dyn = dyn if dyn is not None else dynamics(tree, rig, options, loads)
+    torque = generalized_forces(tree, rig, options, seed, n, loads)
+    theta = steady_state(dyn, torque, options.duration)
+    return bound_bends(theta, np.asarray(rig.skeleton.parent, dtype=np.int64), options)
 
 
 def bake_wind(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int = 0) -> Clip:
@@ -390,3 +744,36 @@ def bake_wind(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int =
         rot[:n, idx] = q.transpose(1, 0, 2)
         rot[n] = rot[0]
     return Clip(name="wind", times=times, rotations=rot, interpolation="LINEAR")
+
+
+# ---------------------------------------------------------------------------------------------
+# what an artist tunes with
+
+@one_blas_thread
+def wind_report(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int = 0,
+                modes: int = 4) -> dict:
+    """`treegen info --wind`: natural frequencies (Hz) and damping of the lowest modes and of
+    the trunk's sway mode, and what the clip does at `options.speed`: the tree top's mean
+    downwind lean and RMS sway (m), the largest joint turn (degrees)."""
+    parent = np.asarray(rig.skeleton.parent, dtype=np.int64)
+    loads = joint_loads(tree, rig, options)
+    dyn = dynamics(tree, rig, options, loads)
+    sway = trunk_mode(tree, rig, options, loads, dyn)
+    out = {
+        "modes": [{"hz": round(float(w / (2 * np.pi)), 4), "damping": round(float(z), 4)}
+                  for w, z in zip(dyn.omega[:modes], dyn.damping[:modes])],
+        "sway_hz": round(float(dyn.omega[sway] / (2 * np.pi)), 4),
+        "sway_damping": round(float(dyn.damping[sway]), 4),
+        "speed_m_s": options.speed,
+    }
+    theta = wind_angles(tree, rig, options, seed, dyn)                 # (J, n, 3)
+    j, x = trunk_top(tree, rig)
+    phi = np.deg2rad(options.direction_deg)
+    e_dir = np.array([np.cos(phi), np.sin(phi), 0.0])
+    D = displacement_map(dyn, loads, parent, j, x)
+    top = np.einsum("ia,ak->ki", D, np.einsum("jca,jkc->jak", dyn.basis, theta).reshape(D.shape[1], -1))
+    along = top @ e_dir
+    out |= {"top_lean_m": round(float(along.mean()), 4),
+            "top_sway_rms_m": round(float(np.sqrt(np.mean(np.sum((top - top.mean(axis=0)) ** 2, axis=1)))), 4),
+            "max_joint_deg": round(float(np.degrees(np.linalg.norm(theta, axis=2).max())), 2)}
+    return out
