@@ -214,3 +214,140 @@ def test_preview_json_summary(tmp_path):
     assert proc.returncode == 0, proc.stderr
     summary = _json.loads(proc.stdout)
     assert summary["image"] == str(out) and summary["width"] == 64 and out.exists()
+
+
+# ------------------------------------------------------------------------------ textures
+
+def _card(uvs=None, **material) -> "Part":
+    """A 1 m × 2 m vertical card facing +Z (towards a camera at azimuth −90°, elevation 0)."""
+    from treegen_cli.drawable import Part
+
+    pos = np.float32([[-0.5, 0, 0], [0.5, 0, 0], [0.5, 2, 0], [-0.5, 2, 0]])
+    uv = np.float32([[0, 0], [1, 0], [1, 1], [0, 1]]) if uvs is None else np.float32(uvs)
+    return Part(name="card", positions=pos, normals=np.tile(np.float32([0, 0, 1]), (4, 1)),
+                indices=np.uint32([0, 1, 2, 0, 2, 3]), joints=np.zeros((4, 4), np.int64),
+                weights=np.tile(np.float32([1, 0, 0, 0]), (4, 1)), uvs=uv, **material)
+
+
+def _shoot(part, size=96, sun=(-140.0, 50.0)):
+    """(tree, background) renders of one part, framed from the front; background keeps the
+    part's shadow."""
+    from treegen_cli.drawable import Drawable
+    from treegen_cli.render import frame_points
+
+    scene = Drawable(parts=[part], n_joints=1)
+    cam = frame_points(part.positions, -90.0, 0.0, margin=0.3)
+    with Renderer(scene, size, size) as r:
+        return r.render(cam, None, *sun), r.render(cam, None, *sun, draw_tree=False)
+
+
+def _leaf_rgba(size=128):
+    """One-variant oval leaf (LeafShape 0) and the card UVs (bottom-left) that fill the card."""
+    from treegen_cli.textures import card_uvs, leaf_atlas
+
+    atlas = leaf_atlas(0, (0.16, 0.30, 0.06), size=size, variants=1)
+    card = np.float32([[0, 0], [1, 0], [1, 1], [0, 1]])
+    return atlas.rgba, card_uvs(card, np.zeros(4, int), atlas, origin="bottom-left")
+
+
+def _covered(tree, background):
+    return np.abs(tree.astype(int) - background.astype(int)).sum(-1) > 24
+
+
+@needs_egl
+def test_cut_out_leaf_covers_less_of_the_card_and_of_its_shadow():
+    rgba, uv = _leaf_rgba()
+    flat = _card(uv, color=(0.3, 0.5, 0.1), double_sided=True)
+    leaf = _card(uv, color=(1, 1, 1), double_sided=True, texture=rgba, alpha_cutoff=0.5,
+                 wrap=("CLAMP", "CLAMP"))
+    (ft, fb), (lt, lb) = _shoot(flat), _shoot(leaf)
+    full, cut = _covered(ft, fb).sum(), _covered(lt, lb).sum()
+    assert full > 500
+    assert 0.35 * full < cut < 0.85 * full         # an oval blade on its card: ~ π/4 of it
+    # the shadow pass tests alpha too: the card's shadow on the ground shrinks alike
+    shade_flat = (fb.astype(int).sum(-1) < lb.astype(int).sum(-1) - 24).sum()
+    assert shade_flat > 50
+    # no alpha test without a cutoff (OPAQUE): the whole card again
+    opaque = _card(uv, color=(1, 1, 1), double_sided=True, texture=rgba)
+    assert _covered(*_shoot(opaque)).sum() >= 0.97 * full
+
+
+@needs_egl
+def test_bark_texture_shows_and_normal_map_follows_the_opengl_convention():
+    from treegen_cli.textures import bark_textures
+
+    albedo, normal = bark_textures((0.2, 0.19, 0.17), size=64, seed=1)
+    rgba = np.concatenate([albedo, np.full((64, 64, 1), 255, np.uint8)], axis=2)
+    tiles = [[0, 0], [2, 0], [2, 4], [0, 4]]             # REPEAT: two tiles across, four up
+    flat_t, flat_b = _shoot(_card(tiles, color=(0.2, 0.19, 0.17)))
+    bark_t, bark_b = _shoot(_card(tiles, color=(1, 1, 1), texture=rgba, normal_map=normal))
+    m = _covered(flat_t, flat_b) & _covered(bark_t, bark_b)
+    m = m[:, 1:] & m[:, :-1]
+
+    def grain(img):                     # pixel-to-pixel change across the card (not shading)
+        lum = img.astype(float).sum(-1)
+        return np.abs(np.diff(lum, axis=1))[m].mean()
+    assert grain(bark_t) > 5 * grain(flat_t) + 5
+    # a constant normal map leaning towards +u is lit by a sun on the +u (+X) side, and the
+    # one leaning to −u is not: T = +u, and G = +v (up), the glTF / OpenGL convention
+    def lit(r, g):
+        nm = np.zeros((4, 4, 3), np.uint8)
+        nm[...] = (r, g, 200)
+        t, b = _shoot(_card(color=(0.5, 0.5, 0.5), normal_map=nm), sun=(0.0, 20.0))
+        return t.astype(float)[_covered(t, b)].mean()
+    assert lit(230, 128) > lit(25, 128) + 20
+    up = lambda g: _shoot(_card(color=(0.5, 0.5, 0.5), normal_map=np.full((4, 4, 3), (128, g, 200), np.uint8)),  # noqa: E731
+                          sun=(-90.0, 80.0))[0].astype(float).mean()
+    assert up(230) > up(25)                               # sun overhead: +v leans to it
+
+
+def test_mips_keep_the_cut_out_coverage():
+    """Fine cut-out detail (needles, lobes, 30 % of the texels) box-filters into alpha below
+    the cutoff; the preview's mips keep the share of texels that pass instead."""
+    from treegen_cli.render import mip_chain
+
+    rng = np.random.default_rng(0)
+    rgba = np.zeros((128, 128, 4), np.uint8)
+    rgba[..., :3] = (40, 90, 20)
+    rgba[..., 3] = np.where(rng.random((128, 128)) < 0.3, 255, 0)
+    levels = mip_chain(rgba, True, ("CLAMP", "CLAMP"), alpha_cutoff=0.5)
+    assert [lv.shape[:2] for lv in levels] == [(128 >> k, 128 >> k) for k in range(8)]
+    cover = [float((lv[..., 3] >= 128).mean()) for lv in levels]
+    assert all(abs(c - cover[0]) < 0.05 for c in cover[1:6])         # down to 4 × 4 texels
+    plain = mip_chain(rgba, True, ("CLAMP", "CLAMP"))                # no cutoff: plain box filter
+    assert float((plain[3][..., 3] >= 128).mean()) < 0.1             # would go bald
+    # colour is averaged where the blade is (no dark fringe from transparent texels)
+    assert np.abs(levels[3][..., :3].astype(int) - (40, 90, 20)).max() <= 1
+
+
+def _tiny_asset(material, uvs):
+    """A one-card Asset (one joint) with `material` on it."""
+    from treegen_cli.asset import Asset, Lod, Primitive, Skeleton
+
+    pos = np.float32([[-0.5, 0, 0], [0.5, 0, 0], [0.5, 0, 2], [-0.5, 0, 2]])   # Z up, faces −Y
+    prim = Primitive(name="leaves", material=material.name, positions=pos,
+                     normals=np.tile(np.float32([0, -1, 0]), (4, 1)), uvs=np.float32(uvs),
+                     indices=np.uint32([0, 1, 2, 0, 2, 3]), joints=np.zeros((4, 4), np.uint16),
+                     weights=np.tile(np.float32([1, 0, 0, 0]), (4, 1)))
+    sk = Skeleton(names=["j0"], parent=np.int32([-1]), rest_translation=np.zeros((1, 3)),
+                  rest_rotation=np.float64([[0, 0, 0, 1]]), bind_world=np.eye(4)[None])
+    return Asset(name="card", materials=[material], lods=[Lod([prim], sk)])
+
+
+@needs_egl
+def test_asset_textures_decode_into_parts_and_render_deterministically():
+    from treegen_cli.asset import Material, Texture
+    from treegen_cli.textures import png_bytes
+
+    rgba, uv = _leaf_rgba()
+    mat = Material("leaf", (1, 1, 1, 1), double_sided=True, alpha_cutoff=0.5,
+                   base_texture=Texture("leaf", png_bytes(rgba), wrap="CLAMP"))
+    scene = scene_from_asset(_tiny_asset(mat, uv))
+    part = scene.parts[0]
+    assert part.textured and np.array_equal(part.texture, rgba)
+    assert np.allclose(part.uvs, uv) and part.alpha_cutoff == 0.5
+    assert part.wrap == ("CLAMP", "CLAMP") and part.normal_map is None
+    options = PreviewOptions(width=64, height=64)
+    from treegen_cli.preview import render_still
+    a, b = render_still(scene, options), render_still(scene_from_asset(_tiny_asset(mat, uv)), options)
+    assert np.array_equal(a, b)
