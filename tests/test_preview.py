@@ -351,3 +351,109 @@ def test_asset_textures_decode_into_parts_and_render_deterministically():
     from treegen_cli.preview import render_still
     a, b = render_still(scene, options), render_still(scene_from_asset(_tiny_asset(mat, uv)), options)
     assert np.array_equal(a, b)
+
+
+def _glb(doc: dict, blob: bytes) -> bytes:
+    """A GLB container around a JSON document and its binary chunk (both padded to 4)."""
+    import struct
+
+    js = json.dumps(doc).encode()
+    js += b" " * (-len(js) % 4)
+    blob += b"\0" * (-len(blob) % 4)
+    total = 12 + 8 + len(js) + 8 + len(blob)
+    return (struct.pack("<4sII", b"glTF", 2, total) + struct.pack("<I4s", len(js), b"JSON") + js
+            + struct.pack("<I4s", len(blob), b"BIN\0") + blob)
+
+
+def _textured_gltf(rgba, uv_bl, normal, interleaved=False, image_uri=None):
+    """(JSON, binary) of a one-card glTF with a MASK leaf material, written by hand to the glTF
+    2.0 spec the way other exporters do: TEXCOORD_0 as normalized shorts (glTF's v down), or
+    interleaved floats (byteStride); images in bufferViews or behind a URI."""
+    from treegen_cli.textures import png_bytes
+
+    pos = np.float32([[-0.5, 0, 0], [0.5, 0, 0], [0.5, 2, 0], [-0.5, 2, 0]])
+    uv = np.column_stack([uv_bl[:, 0], 1.0 - uv_bl[:, 1]])        # glTF: origin top-left
+    chunks, views, accessors = [], [], []
+
+    def view(data: bytes, **extra) -> int:
+        off = sum(len(c) for c in chunks)
+        chunks.append(data + b"\0" * (-len(data) % 4))
+        views.append({"buffer": 0, "byteOffset": off, "byteLength": len(data), **extra})
+        return len(views) - 1
+
+    if interleaved:
+        v = view(np.hstack([pos, uv.astype(np.float32)]).astype("<f4").tobytes(), byteStride=20)
+        accessors += [{"bufferView": v, "componentType": 5126, "count": 4, "type": "VEC3",
+                       "min": [-0.5, 0, 0], "max": [0.5, 2, 0]},
+                      {"bufferView": v, "byteOffset": 12, "componentType": 5126, "count": 4,
+                       "type": "VEC2"}]
+    else:
+        accessors += [{"bufferView": view(pos.tobytes()), "componentType": 5126, "count": 4,
+                       "type": "VEC3", "min": [-0.5, 0, 0], "max": [0.5, 2, 0]},
+                      {"bufferView": view(np.round(uv * 65535).astype("<u2").tobytes()),
+                       "componentType": 5123, "normalized": True, "count": 4, "type": "VEC2"}]
+    accessors.append({"bufferView": view(np.uint16([0, 1, 2, 0, 2, 3]).tobytes()),
+                      "componentType": 5123, "count": 6, "type": "SCALAR"})
+    images = [{"uri": image_uri} if image_uri else
+              {"bufferView": view(png_bytes(rgba)), "mimeType": "image/png"},
+              {"bufferView": view(png_bytes(normal)), "mimeType": "image/png"}]
+    doc = {
+        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1},
+                                    "indices": 2, "material": 0}]}],
+        "materials": [{"name": "leaf", "doubleSided": True, "alphaMode": "MASK",
+                       "alphaCutoff": 0.4,
+                       "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}},
+                       "normalTexture": {"index": 1, "scale": 0.7}}],
+        "samplers": [{"wrapS": 33071, "wrapT": 33071}, {"wrapS": 33648}],
+        "textures": [{"source": 0, "sampler": 0}, {"source": 1, "sampler": 1}],
+        "images": images, "accessors": accessors, "bufferViews": views,
+        "buffers": [{"byteLength": sum(len(c) for c in chunks)}],
+    }
+    return doc, b"".join(chunks)
+
+
+def test_gltf_reader_reads_uvs_textures_and_cut_out_of_a_hand_built_file(tmp_path):
+    rgba, uv = _leaf_rgba(64)
+    normal = np.zeros((8, 8, 3), np.uint8)
+    normal[...] = (128, 128, 255)
+    normal[0, 0] = (200, 90, 220)                           # not symmetric: orientation shows
+    doc, blob = _textured_gltf(rgba, uv, normal)
+    (tmp_path / "card.glb").write_bytes(_glb(doc, blob))
+    # the same card as .gltf + .bin, floats interleaved with positions, the atlas a PNG file
+    from treegen_cli.textures import png_bytes
+    doc2, blob2 = _textured_gltf(rgba, uv, normal, interleaved=True, image_uri="leaf%20atlas.png")
+    doc2["buffers"][0]["uri"] = "card.bin"
+    (tmp_path / "card.bin").write_bytes(blob2)
+    (tmp_path / "leaf atlas.png").write_bytes(png_bytes(rgba))
+    (tmp_path / "card.gltf").write_text(json.dumps(doc2))
+
+    for name, tol in (("card.glb", 1e-4), ("card.gltf", 1e-6)):
+        part = scene_from_gltf(tmp_path / name).parts[0]
+        assert np.allclose(part.uvs, uv, atol=tol), name             # back to bottom-left
+        assert np.array_equal(part.texture, rgba) and np.array_equal(part.normal_map, normal)
+        assert part.alpha_cutoff == pytest.approx(0.4) and part.double_sided
+        assert part.wrap == ("CLAMP", "CLAMP") and part.normal_wrap == ("MIRROR", "REPEAT")
+        assert part.normal_scale == pytest.approx(0.7) and part.color == (1.0, 1.0, 1.0)
+
+    (tmp_path / "leaf atlas.png").unlink()
+    with pytest.raises(TreegenError, match="not found"):
+        scene_from_gltf(tmp_path / "card.gltf")
+
+
+@needs_egl
+def test_preview_of_a_textured_glb_shows_the_cut_out(tmp_path, capsys):
+    rgba, uv = _leaf_rgba(64)
+    doc, blob = _textured_gltf(rgba, uv, np.full((4, 4, 3), (128, 128, 255), np.uint8))
+    (tmp_path / "cut.glb").write_bytes(_glb(doc, blob))
+    doc["materials"][0]["alphaMode"] = "OPAQUE"
+    (tmp_path / "full.glb").write_bytes(_glb(doc, blob))
+    covered = {}
+    for name in ("cut", "full"):
+        code, out, err = run(["preview", tmp_path / f"{name}.glb", "-o", tmp_path / f"{name}.png",
+                              "--size", "64", "--elevation", "0"], capsys)
+        assert code == 0, err
+        img = _rgb(tmp_path / f"{name}.png").astype(int)
+        covered[name] = (img[..., 1] > img[..., 2] + 45).sum()     # leaf green, not sky or ground
+    assert 0.3 * covered["full"] < covered["cut"] < 0.85 * covered["full"]
