@@ -457,3 +457,97 @@ def test_preview_of_a_textured_glb_shows_the_cut_out(tmp_path, capsys):
         img = _rgb(tmp_path / f"{name}.png").astype(int)
         covered[name] = (img[..., 1] > img[..., 2] + 45).sum()     # leaf green, not sky or ground
     assert 0.3 * covered["full"] < covered["cut"] < 0.85 * covered["full"]
+
+
+def _textured_usd(path, rgba, uv_bl, normal, face_varying=False):
+    """A one-card UsdSkel stage with a UsdPreviewSurface leaf written by hand to the spec:
+    diffuseColor and opacity from one UsdUVTexture (rgb, a), opacityThreshold, a normal map
+    (scale 2, bias −1), st through a UsdPrimvarReader_float2 whose varname comes from a
+    material interface input; textures in textures/ beside the layer."""
+    from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, UsdSkel, Vt
+
+    from treegen_cli.textures import png_bytes
+
+    (path.parent / "textures").mkdir(exist_ok=True)
+    (path.parent / "textures" / "leaf.png").write_bytes(png_bytes(rgba))
+    (path.parent / "textures" / "leaf_normal.png").write_bytes(png_bytes(normal))
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    root = UsdSkel.Root.Define(stage, "/Card")
+    skel = UsdSkel.Skeleton.Define(stage, "/Card/Skel")
+    skel.CreateJointsAttr(["j0"])
+    skel.CreateBindTransformsAttr(Vt.Matrix4dArray([Gf.Matrix4d(1)]))
+    skel.CreateRestTransformsAttr(Vt.Matrix4dArray([Gf.Matrix4d(1)]))
+    mesh = UsdGeom.Mesh.Define(stage, "/Card/Mesh")
+    mesh.CreatePointsAttr([(-0.5, 0, 0), (0.5, 0, 0), (0.5, 2, 0), (-0.5, 2, 0)])
+    mesh.CreateFaceVertexCountsAttr([4])
+    order = [1, 2, 3, 0] if face_varying else [0, 1, 2, 3]     # corners ≠ points
+    mesh.CreateFaceVertexIndicesAttr(order)
+    mesh.CreateDoubleSidedAttr(True)
+    interp = UsdGeom.Tokens.faceVarying if face_varying else UsdGeom.Tokens.vertex
+    st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("uvmap", Sdf.ValueTypeNames.TexCoord2fArray, interp)
+    st.Set(Vt.Vec2fArray.FromNumpy(np.ascontiguousarray(uv_bl[order], np.float32)))
+    binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
+    binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
+    binding.CreateJointIndicesPrimvar(True, 1).Set([0])
+    binding.CreateJointWeightsPrimvar(True, 1).Set([1.0])
+    UsdSkel.BindingAPI.Apply(root.GetPrim()).CreateSkeletonRel().SetTargets([skel.GetPath()])
+
+    mat = UsdShade.Material.Define(stage, "/Card/Looks/leaf")
+    var = mat.CreateInput("frame:stPrimvarName", Sdf.ValueTypeNames.Token)
+    var.Set("uvmap")
+    surf = UsdShade.Shader.Define(stage, "/Card/Looks/leaf/Surface")
+    surf.CreateIdAttr("UsdPreviewSurface")
+    surf.CreateInput("opacityThreshold", Sdf.ValueTypeNames.Float).Set(0.4)
+    mat.CreateSurfaceOutput().ConnectToSource(surf.ConnectableAPI(), "surface")
+    reader = UsdShade.Shader.Define(stage, "/Card/Looks/leaf/st")
+    reader.CreateIdAttr("UsdPrimvarReader_float2")
+    reader.CreateInput("varname", Sdf.ValueTypeNames.Token).ConnectToSource(var)
+    reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
+    for name, file, outputs in (("tex", "leaf.png", (("rgb", "diffuseColor"), ("a", "opacity"))),
+                                ("nrm", "leaf_normal.png", (("rgb", "normal"),))):
+        t = UsdShade.Shader.Define(stage, f"/Card/Looks/leaf/{name}")
+        t.CreateIdAttr("UsdUVTexture")
+        t.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(f"./textures/{file}")
+        t.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
+        t.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set("clamp" if name == "tex" else "mirror")
+        if name == "nrm":
+            t.CreateInput("scale", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(1.4, 1.4, 1.4, 1))
+            t.CreateInput("bias", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(-0.7, -0.7, -0.7, 0))
+            t.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("raw")
+        for out, inp in outputs:
+            kind = Sdf.ValueTypeNames.Float if out == "a" else (
+                Sdf.ValueTypeNames.Normal3f if inp == "normal" else Sdf.ValueTypeNames.Color3f)
+            o = t.CreateOutput(out, Sdf.ValueTypeNames.Float if out == "a" else Sdf.ValueTypeNames.Float3)
+            surf.CreateInput(inp, kind).ConnectToSource(o)
+    UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(mat)
+    stage.GetRootLayer().Save()
+
+
+def test_usd_reader_reads_st_and_preview_surface_textures(tmp_path):
+    from pxr import UsdUtils
+
+    rgba, uv = _leaf_rgba(64)
+    normal = np.zeros((8, 8, 3), np.uint8)
+    normal[...] = (128, 128, 255)
+    normal[0, 0] = (200, 90, 220)
+    _textured_usd(tmp_path / "card.usda", rgba, uv, normal)
+    (tmp_path / "fv").mkdir()
+    _textured_usd(tmp_path / "fv" / "card.usda", rgba, uv, normal, face_varying=True)
+    assert UsdUtils.CreateNewUsdzPackage(str(tmp_path / "card.usda"), str(tmp_path / "card.usdz"))
+    for f in ("card.usda", "fv/card.usda", "card.usdz"):
+        part = scene_from_usd(tmp_path / f).parts[0]
+        assert len(part.indices) == 6
+        # each drawn corner carries the UV of its point (points: x = ±0.5, y = 0 or 2)
+        p = part.positions[part.indices]
+        point = (p[:, 0] > 0).astype(int) + 2 * (p[:, 1] > 1) * 1
+        want = uv[np.array([0, 1, 3, 2])[point]]
+        assert np.allclose(part.uvs[part.indices], want), f
+        assert np.array_equal(part.texture, rgba) and np.array_equal(part.normal_map, normal)
+        assert part.alpha_cutoff == pytest.approx(0.4) and part.double_sided
+        assert part.wrap == ("CLAMP", "REPEAT") and part.normal_wrap == ("MIRROR", "REPEAT")
+        assert part.normal_scale == pytest.approx(0.7) and part.color == (1.0, 1.0, 1.0)
+    (tmp_path / "textures" / "leaf.png").unlink()
+    with pytest.raises(TreegenError, match="not found"):
+        scene_from_usd(tmp_path / "card.usda")
+    assert scene_from_usd(tmp_path / "card.usdz").parts[0].textured     # packaged: still there
