@@ -301,23 +301,59 @@ def test_bark_texture_shows_and_normal_map_follows_the_opengl_convention():
     assert up(230) > up(25)                               # sun overhead: +v leans to it
 
 
-def test_mips_keep_the_cut_out_coverage():
-    """Fine cut-out detail (needles, lobes, 30 % of the texels) box-filters into alpha below
-    the cutoff; the preview's mips keep the share of texels that pass instead."""
+def test_mips_average_in_linear_light_weighted_by_alpha():
     from treegen_cli.render import mip_chain
 
     rng = np.random.default_rng(0)
-    rgba = np.zeros((128, 128, 4), np.uint8)
+    rgba = np.zeros((128, 96, 4), np.uint8)
     rgba[..., :3] = (40, 90, 20)
-    rgba[..., 3] = np.where(rng.random((128, 128)) < 0.3, 255, 0)
-    levels = mip_chain(rgba, True, ("CLAMP", "CLAMP"), alpha_cutoff=0.5)
-    assert [lv.shape[:2] for lv in levels] == [(128 >> k, 128 >> k) for k in range(8)]
-    cover = [float((lv[..., 3] >= 128).mean()) for lv in levels]
-    assert all(abs(c - cover[0]) < 0.05 for c in cover[1:6])         # down to 4 × 4 texels
-    plain = mip_chain(rgba, True, ("CLAMP", "CLAMP"))                # no cutoff: plain box filter
-    assert float((plain[3][..., 3] >= 128).mean()) < 0.1             # would go bald
-    # colour is averaged where the blade is (no dark fringe from transparent texels)
+    rgba[..., 3] = np.where(rng.random((128, 96)) < 0.3, 255, 0)
+    rgba[rgba[..., 3] == 0, :3] = 0                     # black where transparent: no fringe
+    levels = mip_chain(rgba, True, ("CLAMP", "CLAMP"))
+    assert [lv.shape[:2] for lv in levels][:4] == [(128, 96), (64, 48), (32, 24), (16, 12)]
+    assert levels[-1].shape[:2] == (1, 1) and len(levels) == 8
+    # alpha is the plain mean (coverage); colour the mean of the opaque texels only
+    assert abs(levels[3][..., 3].mean() / 255 - (rgba[..., 3] > 0).mean()) < 0.01
     assert np.abs(levels[3][..., :3].astype(int) - (40, 90, 20)).max() <= 1
+    # sRGB is averaged as light: black and white make 0.5 linear = 188 in sRGB, not 128
+    bw = np.zeros((2, 2, 3), np.uint8)
+    bw[0] = 255
+    assert mip_chain(bw, True)[1][0, 0, 0] == 188 and mip_chain(bw, False)[1][0, 0, 0] == 128
+
+
+@needs_egl
+def test_tiny_cut_out_leaves_keep_their_share_of_coverage(monkeypatch):
+    """Leaves far smaller than a pixel: a fixed cutoff on their blurred alpha keeps all or none
+    of them; the hashed test keeps about the blade's share of the card."""
+    from treegen_cli import render
+    from treegen_cli.drawable import Part
+
+    rgba, uv = _leaf_rgba(128)
+    n = 60                                               # 60 × 60 cards of 1.5 × 3 cm in 2 m
+    gx, gy = np.meshgrid(np.linspace(-1, 1, n), np.linspace(0.1, 2.1, n))
+    corner = np.float32([[-0.0075, 0], [0.0075, 0], [0.0075, 0.03], [-0.0075, 0.03]])
+    pos = np.zeros((n * n, 4, 3), np.float32)
+    pos[..., :2] = np.stack([gx, gy], -1).reshape(-1, 1, 2) + corner
+    idx = (np.uint32([0, 1, 2, 0, 2, 3]) + 4 * np.arange(n * n, dtype=np.uint32)[:, None]).ravel()
+    V = 4 * n * n
+
+    def field(**material):
+        return Part(name="leaves", positions=pos.reshape(-1, 3), indices=idx,
+                    normals=np.tile(np.float32([0, 0, 1]), (V, 1)),
+                    joints=np.zeros((V, 4), np.int64), weights=np.tile(np.float32([1, 0, 0, 0]), (V, 1)),
+                    uvs=np.tile(uv, (n * n, 1)), double_sided=True, **material)
+
+    def darkening(part):
+        t, b = _shoot(part, size=64)
+        return np.abs(t.astype(float) - b.astype(float)).sum(-1).mean()
+
+    flat = darkening(field(color=(0.16, 0.30, 0.06)))         # the atlas's mean colour
+    cut = dict(color=(1, 1, 1), texture=rgba, alpha_cutoff=0.5, wrap=("CLAMP", "CLAMP"))
+    hashed = darkening(field(**cut))
+    blade = float((rgba[..., 3] >= 128).mean()) / float(np.prod(np.ptp(uv, 0)))   # ≈ π/4
+    assert 0.5 * blade < hashed / flat < 1.3 * blade
+    monkeypatch.setattr(render, "HASH_LOD", 99.0)         # a fixed cutoff all the way down
+    assert abs(darkening(field(**cut)) / flat - blade) > abs(hashed / flat - blade)
 
 
 def _tiny_asset(material, uvs):

@@ -9,8 +9,9 @@ What it draws, so a picture says something about the asset before an engine open
   - textures as an engine samples them: base colour (sRGB, mipmapped, anisotropic) times the
     material colour, alpha-tested cut-outs (also in the shadow pass, so leaf shadows have leaf
     shapes) and tangent-space normal maps with tangents from screen-space derivatives (no
-    tangent attribute needed); mip chains are built on the CPU, in linear light, with the
-    cut-out's coverage kept at every level so distant leaves do not thin out,
+    tangent attribute needed); mips are built on the CPU in linear light, and minified
+    cut-outs turn into hashed alpha tests so small or distant leaves keep their share of
+    coverage instead of all or nothing,
   - 2×2 supersampling, box-filtered down on the CPU.
 
 World space here is Y up (glTF's), metres. Everything the renderer needs comes in a
@@ -18,7 +19,6 @@ World space here is Y up (glTF's), metres. Everything the renderer needs comes i
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,6 +35,7 @@ GROUND = (0.085, 0.10, 0.045)
 SUN_COLOR = (2.6, 2.45, 2.2)        # linear, HDR (tone-mapped in the shader)
 MIP_BIAS = -0.5                     # sharper than the 1:1 mip: the 2× supersampling averages
 ANISOTROPY = 8.0                    # bark along thin branches and leaves seen edge-on
+HASH_LOD = 1.0                      # mip level from which cut-outs fade into hashed alpha tests
 GL_SRGB8_ALPHA8 = 0x8C43
 
 
@@ -202,6 +203,7 @@ uniform ivec2 tex_wrap;        // per axis: 0 repeat, 1 clamp, 2 mirror (done he
 uniform float alpha_cutoff;    // < 0: opaque
 uniform float opacity;
 uniform float mip_bias;
+uniform float hash_from;       // mip level where the cut-out starts turning into a hashed test
 
 vec2 wrap_uv(vec2 uv, ivec2 mode) {
     vec2 m = 1.0 - abs(mod(uv, 2.0) - 1.0);
@@ -213,6 +215,24 @@ vec4 sample_tex(sampler2D t, vec2 uv, ivec2 mode) {
     float k = exp2(mip_bias);
     return textureGrad(t, wrap_uv(uv, mode), dFdx(uv) * k, dFdy(uv) * k);
 }
+
+// Cut-out test that survives minification. Up close: alpha against the cutoff, as an engine
+// does. Where a texel covers many pixels' worth of blade (small or distant leaves) the
+// filtered alpha is the blade's coverage of the footprint, and a fixed cutoff would keep all
+// or nothing of it; there the threshold becomes a per-sample hash (hashed alpha testing,
+// Wyman & McGuire 2017), so on average `alpha` of the samples pass and the 2×2 supersampling
+// turns that into partial coverage. Deterministic: the hash is of the pixel and the card.
+bool cut_away(float alpha, vec2 uv) {
+    if (alpha_cutoff < 0.0) return false;
+    vec2 size = vec2(textureSize(base_tex, 0));
+    vec2 dx = dFdx(uv) * size, dy = dFdy(uv) * size;
+    float lod = 0.5 * log2(max(max(dot(dx, dx), dot(dy, dy)), 1e-12));
+    uvec2 q = uvec2(gl_FragCoord.xy);
+    uint x = q.x * 73856093u ^ q.y * 19349663u ^ uint(gl_PrimitiveID >> 1) * 83492791u;
+    x ^= x >> 16; x *= 0x7feb352du; x ^= x >> 15; x *= 0x846ca68bu; x ^= x >> 16;
+    float h = (float(x) + 0.5) / 4294967296.0;
+    return alpha < mix(alpha_cutoff, h, smoothstep(hash_from, hash_from + 2.0, lod));
+}
 """
 
 _TREE_FS = """
@@ -222,6 +242,7 @@ uniform vec3 base_color;
 uniform bool leaf;
 uniform vec3 crown_center;
 uniform vec3 crown_radius;
+uniform vec3 eye;
 uniform bool has_nmap;
 uniform sampler2D normal_tex;
 uniform ivec2 nmap_wrap;
@@ -253,7 +274,7 @@ void main() {
     vec4 texel = has_tex ? sample_tex(base_tex, v_uv, tex_wrap) : vec4(1.0);
     vec3 nm = has_nmap ? sample_tex(normal_tex, v_uv, nmap_wrap).xyz * 2.0 - 1.0 : vec3(0, 0, 1);
     mat3 tbn = cotangent_frame(normalize(v_normal), v_pos, v_uv);   // derivatives: uniform flow
-    if (alpha_cutoff >= 0.0 && texel.a * opacity < alpha_cutoff) discard;
+    if (has_tex && cut_away(texel.a * opacity, v_uv)) discard;
     vec3 n = normalize(v_normal);
     if (has_nmap) {
         vec3 p = normalize(tbn * vec3(nm.xy * normal_scale, nm.z));
@@ -268,12 +289,16 @@ void main() {
     }
     float ndl = dot(n, sun_dir);
     float vis = sun_visibility(v_pos, n);
-    float direct = max(ndl, 0.0) + (leaf ? 0.45 * max(-ndl, 0.0) : 0.0);
+    // Light through a leaf (sun behind it) is filtered twice by the blade: yellower, and
+    // brightest when looking into the sun (forward scattering).
+    float toward = max(dot(normalize(v_pos - eye), sun_dir), 0.0);
+    float through = leaf ? max(-ndl, 0.0) * (0.3 + 0.9 * toward * toward * toward) : 0.0;
+    vec3 trans = albedo * vec3(1.15, 1.2, 0.5) * through;
     // inner crown gets less sky: a cheap ambient occlusion from the depth in the crown
     float r = length((v_pos - crown_center) / crown_radius);
     float ao = mix(0.45, 1.0, smoothstep(0.1, 1.0, r));
     vec3 hemi = mix(ground_color * 0.6, sky_zenith * 0.9 + 0.1, 0.5 + 0.5 * n.y);
-    vec3 c = albedo * (sun_color * direct * vis + hemi * ao);
+    vec3 c = albedo * (sun_color * max(ndl, 0.0) * vis + hemi * ao) + sun_color * vis * trans;
     f_color = vec4(tonemap(c), 1.0);
 }
 """
@@ -283,8 +308,7 @@ _DEPTH_FS = """
 """ + _TEX + """
 in vec2 v_uv;
 void main() {        // cut-outs cast cut-out shadows
-    if (has_tex && alpha_cutoff >= 0.0 && sample_tex(base_tex, v_uv, tex_wrap).a * opacity < alpha_cutoff)
-        discard;
+    if (has_tex && cut_away(sample_tex(base_tex, v_uv, tex_wrap).a * opacity, v_uv)) discard;
 }
 """
 
@@ -394,23 +418,19 @@ def _half(a: np.ndarray, wrap: tuple[str, str]) -> np.ndarray:
     return a
 
 
-def mip_chain(image: np.ndarray, srgb: bool, wrap=("REPEAT", "REPEAT"),
-              alpha_cutoff: float | None = None) -> list[np.ndarray]:
-    """Every mip level of a uint8 (H, W, C) image, level 0 first, filtered in linear light.
+def mip_chain(image: np.ndarray, srgb: bool, wrap=("REPEAT", "REPEAT")) -> list[np.ndarray]:
+    """Every mip level of a uint8 (H, W, C) image, level 0 first, box-filtered in linear light
+    (GL's own mipmap generation is not specified to be; colour must not darken as it shrinks).
 
-    Colour is averaged weighted by alpha (no dark fringes from transparent texels). With a
-    cut-out, each level's alpha is scaled so the fraction of texels passing the cutoff stays
-    that of level 0 (coverage-preserving mips, Castaño 2010): box-filtered alpha otherwise
-    sinks below the cutoff and distant foliage goes bald."""
+    Colour is averaged weighted by alpha (no dark fringes from transparent texels); alpha is the
+    plain mean, the blade's coverage of the texel, which the hashed cut-out test relies on."""
     img = np.asarray(image)
-    c = img.shape[2]
     lin = img.astype(np.float32) / np.float32(255.0)
     if srgb:
         lin[..., :3] = _srgb_to_linear(img[..., :3])
-    has_alpha = c == 4
+    has_alpha = img.shape[2] == 4
     if has_alpha:
         lin[..., :3] *= lin[..., 3:]                   # premultiplied while filtering
-        cover = float(np.mean(lin[..., 3] >= alpha_cutoff)) if alpha_cutoff is not None else None
     levels, cur = [np.ascontiguousarray(img)], lin
     while cur.shape[0] > 1 or cur.shape[1] > 1:
         cur = _half(cur, wrap)
@@ -418,9 +438,6 @@ def mip_chain(image: np.ndarray, srgb: bool, wrap=("REPEAT", "REPEAT"),
         if has_alpha:
             a = out[..., 3:]
             out[..., :3] = np.where(a > 1e-6, out[..., :3] / np.maximum(a, 1e-6), 0.0)
-            if cover is not None and 0.0 < cover < 1.0 and a.size > 1:
-                a *= np.float32(_coverage_scale(a, alpha_cutoff, cover))
-                np.clip(a, 0.0, 1.0, out=a)
         enc = np.empty(out.shape, np.uint8)
         enc[..., :3] = _linear_to_srgb8(out[..., :3]) if srgb else \
             np.round(np.clip(out[..., :3], 0, 1) * 255).astype(np.uint8)
@@ -428,21 +445,6 @@ def mip_chain(image: np.ndarray, srgb: bool, wrap=("REPEAT", "REPEAT"),
             enc[..., 3] = np.round(out[..., 3] * 255).astype(np.uint8)
         levels.append(enc)
     return levels
-
-
-def _coverage_scale(alpha: np.ndarray, cutoff: float, cover: float) -> float:
-    """Scale s for which the 8-bit texels round(a·s·255) passing the cutoff (as the shader
-    tests them) are the fraction `cover` of the level: bisection, coverage grows with s."""
-    k = math.ceil(cutoff * 255 - 1e-6)
-
-    def passing(s: float) -> float:
-        return float(np.mean(np.round(np.clip(alpha * s, 0, 1) * 255) >= k))
-
-    lo, hi = 1 / 16, 16.0
-    for _ in range(24):
-        mid = math.sqrt(lo * hi)
-        lo, hi = (mid, hi) if passing(mid) < cover else (lo, mid)
-    return hi if abs(passing(hi) - cover) <= abs(passing(lo) - cover) else lo
 
 
 _WRAP_CODE = {"REPEAT": 0, "CLAMP": 1, "MIRROR": 2}
@@ -497,16 +499,16 @@ class Renderer:
         vao = ctx.vertex_array(self.tree_prog, bufs, index_buffer=ibo, index_element_size=4)
         dvao = ctx.vertex_array(self.depth_prog, [b for b in bufs if b[2] != "in_normal"],
                                 index_buffer=ibo, index_element_size=4)
-        tex = self._texture(p.texture, True, p.wrap, p.alpha_cutoff) if p.textured else None
+        tex = self._texture(p.texture, True, p.wrap) if p.textured else None
         nmap = self._texture(p.normal_map, False, p.normal_wrap) if p.bumpy else None
         return _GpuPart(vao, dvao, p, tex, nmap)
 
-    def _texture(self, image: np.ndarray, srgb: bool, wrap, alpha_cutoff=None):
+    def _texture(self, image: np.ndarray, srgb: bool, wrap):
         """A mipmapped GL texture; rows flipped so texture t = the bottom-left-origin v."""
         img = np.asarray(image, np.uint8)
         if img.shape[2] == 3:                              # RGBA texels: no row alignment fuss
             img = np.concatenate([img, np.full(img.shape[:2] + (1,), 255, np.uint8)], axis=2)
-        levels = mip_chain(img[::-1], srgb, wrap, alpha_cutoff)
+        levels = mip_chain(img[::-1], srgb, wrap)
         h, w = img.shape[:2]
         tex = self.ctx.texture((w, h), 4, levels[0].tobytes(),
                                internal_format=GL_SRGB8_ALPHA8 if srgb else None)
@@ -592,6 +594,7 @@ class Renderer:
         self._set(self.depth_prog, "skin", 0)
         self._set(self.depth_prog, "base_tex", 2)
         self._set(self.depth_prog, "mip_bias", MIP_BIAS)
+        self._set(self.depth_prog, "hash_from", HASH_LOD)
         for g in self.parts:
             self._material(self.depth_prog, g)
             g.depth_vao.render()
@@ -624,9 +627,11 @@ class Renderer:
         self._set(self.tree_prog, "skin", 0)
         self._set(self.tree_prog, "crown_center", self.crown_center)
         self._set(self.tree_prog, "crown_radius", self.crown_radius)
+        self._set(self.tree_prog, "eye", camera.eye)
         self._set(self.tree_prog, "base_tex", 2)
         self._set(self.tree_prog, "normal_tex", 3)
         self._set(self.tree_prog, "mip_bias", MIP_BIAS)
+        self._set(self.tree_prog, "hash_from", HASH_LOD)
         for g in self.parts if draw_tree else []:
             self._set(self.tree_prog, "base_color", g.part.color)
             self._set(self.tree_prog, "leaf", g.part.double_sided)
