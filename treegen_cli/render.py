@@ -403,22 +403,24 @@ def _linear_to_srgb8(x: np.ndarray) -> np.ndarray:
     return np.round(s * 255.0).astype(np.uint8)
 
 
-def _half(a: np.ndarray, wrap: tuple[str, str]) -> np.ndarray:
-    """2×2 box filter of (H, W, C) float32; an odd side borrows its next texel (wrapped for
-    REPEAT, the edge otherwise), so the tile still tiles."""
-    for axis, mode in ((0, wrap[1]), (1, wrap[0])):    # rows are v, columns u
+def _half(a: np.ndarray) -> np.ndarray:
+    """Next mip level of (H, W, C) float32, GL's size rule (each side floor(n / 2), at least 1):
+    a 2-tap box on even sides, a 1-2-1 tent over the 2n + 1 texels of odd ones."""
+    for axis in (0, 1):
         n = a.shape[axis]
         if n == 1:
             continue
-        if n % 2:
-            extra = np.take(a, [0 if mode == "REPEAT" else n - 1], axis=axis)
-            a = np.concatenate([a, extra], axis=axis)
-        a = 0.5 * (np.take(a, np.arange(0, a.shape[axis], 2), axis=axis)
-                   + np.take(a, np.arange(1, a.shape[axis], 2), axis=axis))
+        even = np.take(a, np.arange(0, n - 1, 2), axis=axis)
+        odd = np.take(a, np.arange(1, n, 2), axis=axis)
+        if n % 2 == 0:
+            a = 0.5 * (even + odd)
+        else:
+            nxt = np.take(a, np.arange(2, n, 2), axis=axis)
+            a = 0.25 * even + 0.5 * odd + 0.25 * nxt
     return a
 
 
-def mip_chain(image: np.ndarray, srgb: bool, wrap=("REPEAT", "REPEAT")) -> list[np.ndarray]:
+def mip_chain(image: np.ndarray, srgb: bool) -> list[np.ndarray]:
     """Every mip level of a uint8 (H, W, C) image, level 0 first, box-filtered in linear light
     (GL's own mipmap generation is not specified to be; colour must not darken as it shrinks).
 
@@ -433,7 +435,7 @@ def mip_chain(image: np.ndarray, srgb: bool, wrap=("REPEAT", "REPEAT")) -> list[
         lin[..., :3] *= lin[..., 3:]                   # premultiplied while filtering
     levels, cur = [np.ascontiguousarray(img)], lin
     while cur.shape[0] > 1 or cur.shape[1] > 1:
-        cur = _half(cur, wrap)
+        cur = _half(cur)
         out = cur.copy()
         if has_alpha:
             a = out[..., 3:]
@@ -508,7 +510,7 @@ class Renderer:
         img = np.asarray(image, np.uint8)
         if img.shape[2] == 3:                              # RGBA texels: no row alignment fuss
             img = np.concatenate([img, np.full(img.shape[:2] + (1,), 255, np.uint8)], axis=2)
-        levels = mip_chain(img[::-1], srgb, wrap)
+        levels = mip_chain(img[::-1], srgb)
         h, w = img.shape[:2]
         tex = self.ctx.texture((w, h), 4, levels[0].tobytes(),
                                internal_format=GL_SRGB8_ALPHA8 if srgb else None)
