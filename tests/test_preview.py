@@ -11,7 +11,7 @@ import pytest
 from treegen_cli.cli import main
 from treegen_cli.errors import TreegenError
 from treegen_cli.clip import sample_track
-from treegen_cli.drawable import from_asset as scene_from_asset
+from treegen_cli.drawable import Part, from_asset as scene_from_asset
 from treegen_cli.exchange.read_gltf import read_drawable as scene_from_gltf
 from treegen_cli.exchange.read_usd import read_drawable as scene_from_usd
 from treegen_cli.preview import PreviewOptions, camera_for, load_scene, sun_angles
@@ -216,3 +216,378 @@ def test_preview_json_summary(tmp_path):
     assert proc.returncode == 0, proc.stderr
     summary = _json.loads(proc.stdout)
     assert summary["image"] == str(out) and summary["width"] == 64 and out.exists()
+
+
+# ------------------------------------------------------------------------------ textures
+
+def _card(uvs=None, **material) -> "Part":
+    """A 1 m × 2 m vertical card facing +Z (towards a camera at azimuth −90°, elevation 0)."""
+    from treegen_cli.drawable import Part
+
+    pos = np.float32([[-0.5, 0, 0], [0.5, 0, 0], [0.5, 2, 0], [-0.5, 2, 0]])
+    uv = np.float32([[0, 0], [1, 0], [1, 1], [0, 1]]) if uvs is None else np.float32(uvs)
+    return Part(name="card", positions=pos, normals=np.tile(np.float32([0, 0, 1]), (4, 1)),
+                indices=np.uint32([0, 1, 2, 0, 2, 3]), joints=np.zeros((4, 4), np.int64),
+                weights=np.tile(np.float32([1, 0, 0, 0]), (4, 1)), uvs=uv, **material)
+
+
+def _shoot(part, size=96, sun=(-140.0, 50.0)):
+    """(tree, background) renders of one part, framed from the front; background keeps the
+    part's shadow."""
+    from treegen_cli.drawable import Drawable
+    from treegen_cli.render import frame_points
+
+    scene = Drawable(parts=[part], n_joints=1)
+    cam = frame_points(part.positions, -90.0, 0.0, margin=0.3)
+    with Renderer(scene, size, size) as r:
+        return r.render(cam, None, *sun), r.render(cam, None, *sun, draw_tree=False)
+
+
+def _leaf_rgba(size=128):
+    """One-variant oval leaf (LeafShape 0) and the card UVs (bottom-left) that fill the card."""
+    from treegen_cli.textures import card_uvs, leaf_atlas
+
+    atlas = leaf_atlas(0, (0.16, 0.30, 0.06), size=size, variants=1)
+    card = np.float32([[0, 0], [1, 0], [1, 1], [0, 1]])
+    return atlas.rgba, card_uvs(card, np.zeros(4, int), atlas, origin="bottom-left")
+
+
+def _covered(tree, background):
+    return np.abs(tree.astype(int) - background.astype(int)).sum(-1) > 24
+
+
+@needs_egl
+def test_cut_out_leaf_covers_less_of_the_card_and_of_its_shadow():
+    rgba, uv = _leaf_rgba(100)                            # 100 → 50 → 25 → 12: odd levels too
+    flat = _card(uv, color=(0.3, 0.5, 0.1), double_sided=True)
+    leaf = _card(uv, color=(1, 1, 1), double_sided=True, texture=rgba, alpha_cutoff=0.5,
+                 wrap=("CLAMP", "CLAMP"))
+    (ft, fb), (lt, lb) = _shoot(flat), _shoot(leaf)
+    full, cut = _covered(ft, fb).sum(), _covered(lt, lb).sum()
+    assert full > 500
+    assert 0.35 * full < cut < 0.85 * full         # an oval blade on its card: ~ π/4 of it
+    # the shadow pass tests alpha too: the card's shadow on the ground shrinks alike
+    shade_flat = (fb.astype(int).sum(-1) < lb.astype(int).sum(-1) - 24).sum()
+    assert shade_flat > 50
+    # no alpha test without a cutoff (OPAQUE): the whole card again
+    opaque = _card(uv, color=(1, 1, 1), double_sided=True, texture=rgba)
+    assert _covered(*_shoot(opaque)).sum() >= 0.97 * full
+
+
+@needs_egl
+def test_bark_texture_shows_and_normal_map_follows_the_opengl_convention():
+    from treegen_cli.textures import bark_textures
+
+    albedo, normal = bark_textures((0.2, 0.19, 0.17), size=64, seed=1)
+    rgba = np.concatenate([albedo, np.full((64, 64, 1), 255, np.uint8)], axis=2)
+    tiles = [[0, 0], [2, 0], [2, 4], [0, 4]]             # REPEAT: two tiles across, four up
+    flat_t, flat_b = _shoot(_card(tiles, color=(0.2, 0.19, 0.17)))
+    bark_t, bark_b = _shoot(_card(tiles, color=(1, 1, 1), texture=rgba, normal_map=normal))
+    m = _covered(flat_t, flat_b) & _covered(bark_t, bark_b)
+    m = m[:, 1:] & m[:, :-1]
+
+    def grain(img):                     # pixel-to-pixel change across the card (not shading)
+        lum = img.astype(float).sum(-1)
+        return np.abs(np.diff(lum, axis=1))[m].mean()
+    assert grain(bark_t) > 5 * grain(flat_t) + 5
+    # a constant normal map leaning towards +u is lit by a sun on the +u (+X) side, and the
+    # one leaning to −u is not: T = +u, and G = +v (up), the glTF / OpenGL convention
+    def lit(r, g):
+        nm = np.zeros((4, 4, 3), np.uint8)
+        nm[...] = (r, g, 200)
+        t, b = _shoot(_card(color=(0.5, 0.5, 0.5), normal_map=nm), sun=(0.0, 20.0))
+        return t.astype(float)[_covered(t, b)].mean()
+    assert lit(230, 128) > lit(25, 128) + 20
+    up = lambda g: _shoot(_card(color=(0.5, 0.5, 0.5), normal_map=np.full((4, 4, 3), (128, g, 200), np.uint8)),  # noqa: E731
+                          sun=(-90.0, 80.0))[0].astype(float).mean()
+    assert up(230) > up(25)                               # sun overhead: +v leans to it
+
+
+def test_mips_average_in_linear_light_weighted_by_alpha():
+    from treegen_cli.render import mip_chain
+
+    rng = np.random.default_rng(0)
+    rgba = np.zeros((128, 96, 4), np.uint8)
+    rgba[..., :3] = (40, 90, 20)
+    rgba[..., 3] = np.where(rng.random((128, 96)) < 0.3, 255, 0)
+    rgba[rgba[..., 3] == 0, :3] = 0                     # black where transparent: no fringe
+    levels = mip_chain(rgba, True)
+    assert [lv.shape[:2] for lv in levels] == [(128, 96), (64, 48), (32, 24), (16, 12), (8, 6),
+                                               (4, 3), (2, 1), (1, 1)]        # GL: floor(n / 2)
+    odd = mip_chain(np.zeros((45, 63, 3), np.uint8), False)
+    assert [lv.shape[:2] for lv in odd] == [(45, 63), (22, 31), (11, 15), (5, 7), (2, 3), (1, 1)]
+    # alpha is the plain mean (coverage); colour the mean of the opaque texels only
+    assert abs(levels[3][..., 3].mean() / 255 - (rgba[..., 3] > 0).mean()) < 0.01
+    assert np.abs(levels[3][..., :3].astype(int) - (40, 90, 20)).max() <= 1
+    # sRGB is averaged as light: black and white make 0.5 linear = 188 in sRGB, not 128
+    bw = np.zeros((2, 2, 3), np.uint8)
+    bw[0] = 255
+    assert mip_chain(bw, True)[1][0, 0, 0] == 188 and mip_chain(bw, False)[1][0, 0, 0] == 128
+
+
+@needs_egl
+def test_tiny_cut_out_leaves_keep_their_share_of_coverage(monkeypatch):
+    """Leaves far smaller than a pixel: a fixed cutoff on their blurred alpha keeps all or none
+    of them; the hashed test keeps about the blade's share of the card."""
+    from treegen_cli import render
+    from treegen_cli.drawable import Part
+
+    rgba, uv = _leaf_rgba(128)
+    n = 60                                               # 60 × 60 cards of 1.5 × 3 cm in 2 m
+    gx, gy = np.meshgrid(np.linspace(-1, 1, n), np.linspace(0.1, 2.1, n))
+    corner = np.float32([[-0.0075, 0], [0.0075, 0], [0.0075, 0.03], [-0.0075, 0.03]])
+    pos = np.zeros((n * n, 4, 3), np.float32)
+    pos[..., :2] = np.stack([gx, gy], -1).reshape(-1, 1, 2) + corner
+    idx = (np.uint32([0, 1, 2, 0, 2, 3]) + 4 * np.arange(n * n, dtype=np.uint32)[:, None]).ravel()
+    V = 4 * n * n
+
+    def field(**material):
+        return Part(name="leaves", positions=pos.reshape(-1, 3), indices=idx,
+                    normals=np.tile(np.float32([0, 0, 1]), (V, 1)),
+                    joints=np.zeros((V, 4), np.int64), weights=np.tile(np.float32([1, 0, 0, 0]), (V, 1)),
+                    uvs=np.tile(uv, (n * n, 1)), double_sided=True, **material)
+
+    def darkening(part):
+        t, b = _shoot(part, size=64)
+        return np.abs(t.astype(float) - b.astype(float)).sum(-1).mean()
+
+    flat = darkening(field(color=(0.16, 0.30, 0.06)))         # the atlas's mean colour
+    cut = dict(color=(1, 1, 1), texture=rgba, alpha_cutoff=0.5, wrap=("CLAMP", "CLAMP"))
+    hashed = darkening(field(**cut))
+    blade = float((rgba[..., 3] >= 128).mean()) / float(np.prod(np.ptp(uv, 0)))   # ≈ π/4
+    assert 0.5 * blade < hashed / flat < 1.3 * blade
+    monkeypatch.setattr(render, "HASH_LOD", 99.0)         # a fixed cutoff all the way down
+    assert abs(darkening(field(**cut)) / flat - blade) > abs(hashed / flat - blade)
+
+
+def _tiny_asset(material, uvs):
+    """A one-card Asset (one joint) with `material` on it."""
+    from treegen_cli.asset import Asset, Lod, Primitive, Skeleton
+
+    pos = np.float32([[-0.5, 0, 0], [0.5, 0, 0], [0.5, 0, 2], [-0.5, 0, 2]])   # Z up, faces −Y
+    prim = Primitive(name="leaves", material=material.name, positions=pos,
+                     normals=np.tile(np.float32([0, -1, 0]), (4, 1)), uvs=np.float32(uvs),
+                     indices=np.uint32([0, 1, 2, 0, 2, 3]), joints=np.zeros((4, 4), np.uint16),
+                     weights=np.tile(np.float32([1, 0, 0, 0]), (4, 1)))
+    sk = Skeleton(names=["j0"], parent=np.int32([-1]), rest_translation=np.zeros((1, 3)),
+                  rest_rotation=np.float64([[0, 0, 0, 1]]), bind_world=np.eye(4)[None])
+    return Asset(name="card", materials=[material], lods=[Lod([prim], sk)])
+
+
+@needs_egl
+def test_asset_textures_decode_into_parts_and_render_deterministically():
+    from treegen_cli.asset import Material, Texture
+    from treegen_cli.textures import png_bytes
+
+    rgba, uv = _leaf_rgba()
+    mat = Material("leaf", (1, 1, 1, 1), double_sided=True, alpha_cutoff=0.5,
+                   base_texture=Texture("leaf", png_bytes(rgba), wrap="CLAMP"))
+    scene = scene_from_asset(_tiny_asset(mat, uv))
+    part = scene.parts[0]
+    assert part.textured and np.array_equal(part.texture, rgba)
+    assert np.allclose(part.uvs, uv) and part.alpha_cutoff == 0.5
+    assert part.wrap == ("CLAMP", "CLAMP") and part.normal_map is None
+    options = PreviewOptions(width=64, height=64)
+    from treegen_cli.preview import render_still
+    a, b = render_still(scene, options), render_still(scene_from_asset(_tiny_asset(mat, uv)), options)
+    assert np.array_equal(a, b)
+
+
+def _glb(doc: dict, blob: bytes) -> bytes:
+    """A GLB container around a JSON document and its binary chunk (both padded to 4)."""
+    import struct
+
+    js = json.dumps(doc).encode()
+    js += b" " * (-len(js) % 4)
+    blob += b"\0" * (-len(blob) % 4)
+    total = 12 + 8 + len(js) + 8 + len(blob)
+    return (struct.pack("<4sII", b"glTF", 2, total) + struct.pack("<I4s", len(js), b"JSON") + js
+            + struct.pack("<I4s", len(blob), b"BIN\0") + blob)
+
+
+def _textured_gltf(rgba, uv_bl, normal, interleaved=False, image_uri=None):
+    """(JSON, binary) of a one-card glTF with a MASK leaf material, written by hand to the glTF
+    2.0 spec the way other exporters do: TEXCOORD_0 as normalized shorts (glTF's v down), or
+    interleaved floats (byteStride); images in bufferViews or behind a URI."""
+    from treegen_cli.textures import png_bytes
+
+    pos = np.float32([[-0.5, 0, 0], [0.5, 0, 0], [0.5, 2, 0], [-0.5, 2, 0]])
+    uv = np.column_stack([uv_bl[:, 0], 1.0 - uv_bl[:, 1]])        # glTF: origin top-left
+    chunks, views, accessors = [], [], []
+
+    def view(data: bytes, **extra) -> int:
+        off = sum(len(c) for c in chunks)
+        chunks.append(data + b"\0" * (-len(data) % 4))
+        views.append({"buffer": 0, "byteOffset": off, "byteLength": len(data), **extra})
+        return len(views) - 1
+
+    if interleaved:
+        v = view(np.hstack([pos, uv.astype(np.float32)]).astype("<f4").tobytes(), byteStride=20)
+        accessors += [{"bufferView": v, "componentType": 5126, "count": 4, "type": "VEC3",
+                       "min": [-0.5, 0, 0], "max": [0.5, 2, 0]},
+                      {"bufferView": v, "byteOffset": 12, "componentType": 5126, "count": 4,
+                       "type": "VEC2"}]
+    else:
+        accessors += [{"bufferView": view(pos.tobytes()), "componentType": 5126, "count": 4,
+                       "type": "VEC3", "min": [-0.5, 0, 0], "max": [0.5, 2, 0]},
+                      {"bufferView": view(np.round(uv * 65535).astype("<u2").tobytes()),
+                       "componentType": 5123, "normalized": True, "count": 4, "type": "VEC2"}]
+    accessors.append({"bufferView": view(np.uint16([0, 1, 2, 0, 2, 3]).tobytes()),
+                      "componentType": 5123, "count": 6, "type": "SCALAR"})
+    images = [{"uri": image_uri} if image_uri else
+              {"bufferView": view(png_bytes(rgba)), "mimeType": "image/png"},
+              {"bufferView": view(png_bytes(normal)), "mimeType": "image/png"}]
+    doc = {
+        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1},
+                                    "indices": 2, "material": 0}]}],
+        "materials": [{"name": "leaf", "doubleSided": True, "alphaMode": "MASK",
+                       "alphaCutoff": 0.4,
+                       "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}},
+                       "normalTexture": {"index": 1, "scale": 0.7}}],
+        "samplers": [{"wrapS": 33071, "wrapT": 33071}, {"wrapS": 33648}],
+        "textures": [{"source": 0, "sampler": 0}, {"source": 1, "sampler": 1}],
+        "images": images, "accessors": accessors, "bufferViews": views,
+        "buffers": [{"byteLength": sum(len(c) for c in chunks)}],
+    }
+    return doc, b"".join(chunks)
+
+
+def test_gltf_reader_reads_uvs_textures_and_cut_out_of_a_hand_built_file(tmp_path):
+    rgba, uv = _leaf_rgba(64)
+    normal = np.zeros((8, 8, 3), np.uint8)
+    normal[...] = (128, 128, 255)
+    normal[0, 0] = (200, 90, 220)                           # not symmetric: orientation shows
+    doc, blob = _textured_gltf(rgba, uv, normal)
+    (tmp_path / "card.glb").write_bytes(_glb(doc, blob))
+    # the same card as .gltf + .bin, floats interleaved with positions, the atlas a PNG file
+    from treegen_cli.textures import png_bytes
+    doc2, blob2 = _textured_gltf(rgba, uv, normal, interleaved=True, image_uri="leaf%20atlas.png")
+    doc2["buffers"][0]["uri"] = "card.bin"
+    (tmp_path / "card.bin").write_bytes(blob2)
+    (tmp_path / "leaf atlas.png").write_bytes(png_bytes(rgba))
+    (tmp_path / "card.gltf").write_text(json.dumps(doc2))
+
+    for name, tol in (("card.glb", 1e-4), ("card.gltf", 1e-6)):
+        part = scene_from_gltf(tmp_path / name).parts[0]
+        assert np.allclose(part.uvs, uv, atol=tol), name             # back to bottom-left
+        assert np.array_equal(part.texture, rgba) and np.array_equal(part.normal_map, normal)
+        assert part.alpha_cutoff == pytest.approx(0.4) and part.double_sided
+        assert part.wrap == ("CLAMP", "CLAMP") and part.normal_wrap == ("MIRROR", "REPEAT")
+        assert part.normal_scale == pytest.approx(0.7) and part.color == (1.0, 1.0, 1.0)
+
+    (tmp_path / "leaf atlas.png").unlink()
+    with pytest.raises(TreegenError, match="not found"):
+        scene_from_gltf(tmp_path / "card.gltf")
+
+
+@needs_egl
+def test_preview_of_a_textured_glb_shows_the_cut_out(tmp_path, capsys):
+    rgba, uv = _leaf_rgba(64)
+    doc, blob = _textured_gltf(rgba, uv, np.full((4, 4, 3), (128, 128, 255), np.uint8))
+    (tmp_path / "cut.glb").write_bytes(_glb(doc, blob))
+    doc["materials"][0]["alphaMode"] = "OPAQUE"
+    (tmp_path / "full.glb").write_bytes(_glb(doc, blob))
+    covered = {}
+    for name in ("cut", "full"):
+        code, out, err = run(["preview", tmp_path / f"{name}.glb", "-o", tmp_path / f"{name}.png",
+                              "--size", "64", "--elevation", "0"], capsys)
+        assert code == 0, err
+        img = _rgb(tmp_path / f"{name}.png").astype(int)
+        covered[name] = (img[..., 1] > img[..., 2] + 45).sum()     # leaf green, not sky or ground
+    assert 0.3 * covered["full"] < covered["cut"] < 0.85 * covered["full"]
+
+
+def _textured_usd(path, rgba, uv_bl, normal, face_varying=False):
+    """A one-card UsdSkel stage with a UsdPreviewSurface leaf written by hand to the spec:
+    diffuseColor and opacity from one UsdUVTexture (rgb, a), opacityThreshold, a normal map
+    (scale 2, bias −1), st through a UsdPrimvarReader_float2 whose varname comes from a
+    material interface input; textures in textures/ beside the layer."""
+    from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, UsdSkel, Vt
+
+    from treegen_cli.textures import png_bytes
+
+    (path.parent / "textures").mkdir(exist_ok=True)
+    (path.parent / "textures" / "leaf.png").write_bytes(png_bytes(rgba))
+    (path.parent / "textures" / "leaf_normal.png").write_bytes(png_bytes(normal))
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    root = UsdSkel.Root.Define(stage, "/Card")
+    skel = UsdSkel.Skeleton.Define(stage, "/Card/Skel")
+    skel.CreateJointsAttr(["j0"])
+    skel.CreateBindTransformsAttr(Vt.Matrix4dArray([Gf.Matrix4d(1)]))
+    skel.CreateRestTransformsAttr(Vt.Matrix4dArray([Gf.Matrix4d(1)]))
+    mesh = UsdGeom.Mesh.Define(stage, "/Card/Mesh")
+    mesh.CreatePointsAttr([(-0.5, 0, 0), (0.5, 0, 0), (0.5, 2, 0), (-0.5, 2, 0)])
+    mesh.CreateFaceVertexCountsAttr([4])
+    order = [1, 2, 3, 0] if face_varying else [0, 1, 2, 3]     # corners ≠ points
+    mesh.CreateFaceVertexIndicesAttr(order)
+    mesh.CreateDoubleSidedAttr(True)
+    interp = UsdGeom.Tokens.faceVarying if face_varying else UsdGeom.Tokens.vertex
+    st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("uvmap", Sdf.ValueTypeNames.TexCoord2fArray, interp)
+    st.Set(Vt.Vec2fArray.FromNumpy(np.ascontiguousarray(uv_bl[order], np.float32)))
+    binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
+    binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
+    binding.CreateJointIndicesPrimvar(True, 1).Set([0])
+    binding.CreateJointWeightsPrimvar(True, 1).Set([1.0])
+    UsdSkel.BindingAPI.Apply(root.GetPrim()).CreateSkeletonRel().SetTargets([skel.GetPath()])
+
+    mat = UsdShade.Material.Define(stage, "/Card/Looks/leaf")
+    var = mat.CreateInput("frame:stPrimvarName", Sdf.ValueTypeNames.Token)
+    var.Set("uvmap")
+    surf = UsdShade.Shader.Define(stage, "/Card/Looks/leaf/Surface")
+    surf.CreateIdAttr("UsdPreviewSurface")
+    surf.CreateInput("opacityThreshold", Sdf.ValueTypeNames.Float).Set(0.4)
+    mat.CreateSurfaceOutput().ConnectToSource(surf.ConnectableAPI(), "surface")
+    reader = UsdShade.Shader.Define(stage, "/Card/Looks/leaf/st")
+    reader.CreateIdAttr("UsdPrimvarReader_float2")
+    reader.CreateInput("varname", Sdf.ValueTypeNames.Token).ConnectToSource(var)
+    reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
+    for name, file, outputs in (("tex", "leaf.png", (("rgb", "diffuseColor"), ("a", "opacity"))),
+                                ("nrm", "leaf_normal.png", (("rgb", "normal"),))):
+        t = UsdShade.Shader.Define(stage, f"/Card/Looks/leaf/{name}")
+        t.CreateIdAttr("UsdUVTexture")
+        t.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(f"./textures/{file}")
+        t.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
+        t.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set("clamp" if name == "tex" else "mirror")
+        if name == "nrm":
+            t.CreateInput("scale", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(1.4, 1.4, 1.4, 1))
+            t.CreateInput("bias", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(-0.7, -0.7, -0.7, 0))
+            t.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("raw")
+        for out, inp in outputs:
+            kind = Sdf.ValueTypeNames.Float if out == "a" else (
+                Sdf.ValueTypeNames.Normal3f if inp == "normal" else Sdf.ValueTypeNames.Color3f)
+            o = t.CreateOutput(out, Sdf.ValueTypeNames.Float if out == "a" else Sdf.ValueTypeNames.Float3)
+            surf.CreateInput(inp, kind).ConnectToSource(o)
+    UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(mat)
+    stage.GetRootLayer().Save()
+
+
+def test_usd_reader_reads_st_and_preview_surface_textures(tmp_path):
+    from pxr import UsdUtils
+
+    rgba, uv = _leaf_rgba(64)
+    normal = np.zeros((8, 8, 3), np.uint8)
+    normal[...] = (128, 128, 255)
+    normal[0, 0] = (200, 90, 220)
+    _textured_usd(tmp_path / "card.usda", rgba, uv, normal)
+    (tmp_path / "fv").mkdir()
+    _textured_usd(tmp_path / "fv" / "card.usda", rgba, uv, normal, face_varying=True)
+    assert UsdUtils.CreateNewUsdzPackage(str(tmp_path / "card.usda"), str(tmp_path / "card.usdz"))
+    for f in ("card.usda", "fv/card.usda", "card.usdz"):
+        part = scene_from_usd(tmp_path / f).parts[0]
+        assert len(part.indices) == 6
+        # each drawn corner carries the UV of its point (points: x = ±0.5, y = 0 or 2)
+        p = part.positions[part.indices]
+        point = (p[:, 0] > 0).astype(int) + 2 * (p[:, 1] > 1) * 1
+        want = uv[np.array([0, 1, 3, 2])[point]]
+        assert np.allclose(part.uvs[part.indices], want), f
+        assert np.array_equal(part.texture, rgba) and np.array_equal(part.normal_map, normal)
+        assert part.alpha_cutoff == pytest.approx(0.4) and part.double_sided
+        assert part.wrap == ("CLAMP", "REPEAT") and part.normal_wrap == ("MIRROR", "REPEAT")
+        assert part.normal_scale == pytest.approx(0.7) and part.color == (1.0, 1.0, 1.0)
+    (tmp_path / "textures" / "leaf.png").unlink()
+    with pytest.raises(TreegenError, match="not found"):
+        scene_from_usd(tmp_path / "card.usda")
+    assert scene_from_usd(tmp_path / "card.usdz").parts[0].textured     # packaged: still there

@@ -27,8 +27,41 @@ class Part:
     indices: np.ndarray         # uint32 (T*3,)
     joints: np.ndarray          # (V, 4) ints, into the scene's skinning matrices
     weights: np.ndarray         # float32 (V, 4)
-    color: tuple[float, float, float]   # linear base colour
+    color: tuple[float, float, float]   # linear base colour (multiplies `texture`)
     double_sided: bool = False  # leaves: lit from both faces, light passes through
+    uvs: np.ndarray | None = None         # float32 (V, 2), origin bottom-left (OpenGL/USD)
+    texture: np.ndarray | None = None     # uint8 (H, W, 4) sRGB colour + straight alpha, top row first
+    normal_map: np.ndarray | None = None  # uint8 (H, W, 3) tangent space, +Y = +v (OpenGL/glTF)
+    normal_scale: float = 1.0             # glTF normalTexture.scale: strength of the bumps
+    alpha_cutoff: float | None = None     # cut-out: discard where alpha < this (None: opaque)
+    opacity: float = 1.0                  # base colour alpha factor (multiplies texture alpha)
+    wrap: tuple[str, str] = ("REPEAT", "REPEAT")         # texture's (u, v): REPEAT CLAMP MIRROR
+    normal_wrap: tuple[str, str] = ("REPEAT", "REPEAT")  # normal map's (u, v)
+
+    @property
+    def textured(self) -> bool:
+        return self.uvs is not None and self.texture is not None
+
+    @property
+    def bumpy(self) -> bool:
+        return self.uvs is not None and self.normal_map is not None
+
+
+WRAPS = ("REPEAT", "CLAMP", "MIRROR")
+
+
+def decode_image(data: bytes, channels: int, what: str = "texture") -> np.ndarray:
+    """PNG/JPEG/WebP bytes → uint8 (H, W, channels), top row first (Pillow; any mode in)."""
+    import io
+
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(io.BytesIO(data)) as img:
+            img = img.convert("RGBA" if channels == 4 else "RGB")
+            return np.asarray(img, dtype=np.uint8).copy()
+    except (UnidentifiedImageError, OSError, ValueError) as e:
+        raise TreegenError(f"{what}: not a readable image ({type(e).__name__}: {e})") from None
 
 
 @dataclass(frozen=True, eq=False)
@@ -107,15 +140,34 @@ def from_asset(asset, lod: int = 0, label: str = "") -> Drawable:
     L = asset.lods[lod]
     mats = {m.name: m for m in asset.materials}
     parts = []
+    decoded: dict[int, np.ndarray] = {}      # a Texture shared by materials is decoded once
+
+    def image(tex, channels):
+        if tex is None:
+            return None
+        key = (id(tex), channels)
+        if key not in decoded:
+            decoded[key] = decode_image(tex.png, channels, f"{asset.name}: texture {tex.name!r}")
+        return decoded[key]
+
     for p in L.primitives:
         m = mats.get(p.material)
+        uvs = getattr(p, "uvs", None)
+        has_uv = uvs is not None and len(uvs) == len(p.positions)
+        base = m.base_texture if m and has_uv else None
+        normal = m.normal_texture if m and has_uv else None
         parts.append(Part(
             name=p.name, positions=to_y_up(p.positions).astype(np.float32),
             normals=to_y_up(p.normals).astype(np.float32),
             indices=np.asarray(p.indices, np.uint32), joints=np.asarray(p.joints),
             weights=np.asarray(p.weights, np.float32),
             color=tuple(m.base_color[:3]) if m else (0.6, 0.6, 0.6),
-            double_sided=bool(m and m.double_sided)))
+            double_sided=bool(m and m.double_sided),
+            uvs=np.asarray(uvs, np.float32) if has_uv else None,
+            texture=image(base, 4), normal_map=image(normal, 3),
+            alpha_cutoff=m.alpha_cutoff if m else None,
+            opacity=float(m.base_color[3]) if m and len(m.base_color) > 3 else 1.0,
+            wrap=_wrap(base), normal_wrap=_wrap(normal)))
     sk = L.skeleton
     J = len(sk.names)
     channels = []
@@ -137,6 +189,12 @@ def from_asset(asset, lod: int = 0, label: str = "") -> Drawable:
                   channels=channels, to_world=z_up_to_y_up())
     return Drawable(parts=parts, n_joints=J, duration=rig.duration,
                  skinning=rig.skinning if channels else None, label=label or asset.name)
+
+
+def _wrap(tex) -> tuple[str, str]:
+    w = getattr(tex, "wrap", "REPEAT") if tex is not None else "REPEAT"
+    w = w if w in WRAPS else "REPEAT"
+    return (w, w)
 
 
 def check_lod(lod: int, n: int, what) -> None:

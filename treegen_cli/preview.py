@@ -173,7 +173,8 @@ def preview_command(input_path, output, animate, azimuth, elevation, size, lod, 
                     png_colors, as_json):
     """Render INPUT headless (OpenGL on EGL; no display needed): a species file (.txt .xml,
     grown in-process) or a tree written by `treegen make` (.glb .gltf .usda .usdc .usdz).
-    Lit by a sun with shadows and sky light, bark and leaf colours from the materials, framed
+    Lit by a sun with shadows and sky light; bark and leaves as their materials say: colours,
+    textures (cut-out leaves, casting cut-out shadows; bark with its normal map), framed
     automatically from the bounds of the whole animation."""
     import time
 

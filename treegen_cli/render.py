@@ -6,6 +6,12 @@ What it draws, so a picture says something about the asset before an engine open
     Sᵢ = joint world matrix · inverse bind matrix, four influences), so a broken skin shows,
   - a sun with a shadow map (the tree shades itself and the ground) plus a sky/ground
     hemisphere ambient; leaves are lit from both sides with some light through them,
+  - textures as an engine samples them: base colour (sRGB, mipmapped, anisotropic) times the
+    material colour, alpha-tested cut-outs (also in the shadow pass, so leaf shadows have leaf
+    shapes) and tangent-space normal maps with tangents from screen-space derivatives (no
+    tangent attribute needed); mips are built on the CPU in linear light, and minified
+    cut-outs turn into hashed alpha tests so small or distant leaves keep their share of
+    coverage instead of all or nothing,
   - 2×2 supersampling, box-filtered down on the CPU.
 
 World space here is Y up (glTF's), metres. Everything the renderer needs comes in a
@@ -27,6 +33,10 @@ SKY_ZENITH = (0.23, 0.42, 0.78)     # linear RGB
 SKY_HORIZON = (0.72, 0.80, 0.90)
 GROUND = (0.085, 0.10, 0.045)
 SUN_COLOR = (2.6, 2.45, 2.2)        # linear, HDR (tone-mapped in the shader)
+MIP_BIAS = -0.5                     # sharper than the 1:1 mip: the 2× supersampling averages
+ANISOTROPY = 8.0                    # bark along thin branches and leaves seen edge-on
+HASH_LOD = 1.0                      # mip level from which cut-outs fade into hashed alpha tests
+GL_SRGB8_ALPHA8 = 0x8C43
 
 
 def skin_points(points: np.ndarray, joints: np.ndarray, weights: np.ndarray,
@@ -164,8 +174,10 @@ in vec3 in_pos;
 in vec3 in_normal;
 in vec4 in_joints;
 in vec4 in_weights;
+in vec2 in_uv;
 out vec3 v_pos;
 out vec3 v_normal;
+out vec2 v_uv;
 
 mat4 joint_matrix(float j) {
     int r = int(j + 0.5);
@@ -179,19 +191,65 @@ void main() {
     vec4 p = m * vec4(in_pos, 1.0);
     v_pos = p.xyz;
     v_normal = mat3(m) * in_normal;
+    v_uv = in_uv;
     gl_Position = view_proj * p;
+}
+"""
+
+_TEX = """
+uniform bool has_tex;
+uniform sampler2D base_tex;
+uniform ivec2 tex_wrap;        // per axis: 0 repeat, 1 clamp, 2 mirror (done here, GL clamps)
+uniform float alpha_cutoff;    // < 0: opaque
+uniform float opacity;
+uniform float mip_bias;
+uniform float hash_from;       // mip level where the cut-out starts turning into a hashed test
+
+vec2 wrap_uv(vec2 uv, ivec2 mode) {
+    vec2 m = 1.0 - abs(mod(uv, 2.0) - 1.0);
+    return vec2(mode.x == 2 ? m.x : uv.x, mode.y == 2 ? m.y : uv.y);
+}
+
+// Explicit gradients: mirrored coordinates fold, the footprint must not; and the bias.
+vec4 sample_tex(sampler2D t, vec2 uv, ivec2 mode) {
+    float k = exp2(mip_bias);
+    return textureGrad(t, wrap_uv(uv, mode), dFdx(uv) * k, dFdy(uv) * k);
+}
+
+// Cut-out test that survives minification. Up close: alpha against the cutoff, as an engine
+// does. Where a texel covers many pixels' worth of blade (small or distant leaves) the
+// filtered alpha is the blade's coverage of the footprint, and a fixed cutoff would keep all
+// or nothing of it; there the threshold becomes a per-sample hash (hashed alpha testing,
+// Wyman & McGuire 2017), so on average `alpha` of the samples pass and the 2×2 supersampling
+// turns that into partial coverage. Deterministic: the hash is of the pixel and the card.
+bool cut_away(float alpha, vec2 uv) {
+    if (alpha_cutoff < 0.0) return false;
+    vec2 size = vec2(textureSize(base_tex, 0));
+    vec2 dx = dFdx(uv) * size, dy = dFdy(uv) * size;
+    float lod = 0.5 * log2(max(max(dot(dx, dx), dot(dy, dy)), 1e-12));
+    uvec2 q = uvec2(gl_FragCoord.xy);
+    uint x = q.x * 73856093u ^ q.y * 19349663u ^ uint(gl_PrimitiveID >> 1) * 83492791u;
+    x ^= x >> 16; x *= 0x7feb352du; x ^= x >> 15; x *= 0x846ca68bu; x ^= x >> 16;
+    float h = (float(x) + 0.5) / 4294967296.0;
+    return alpha < mix(alpha_cutoff, h, smoothstep(hash_from, hash_from + 2.0, lod));
 }
 """
 
 _TREE_FS = """
 #version 330
-""" + _COMMON + """
+""" + _COMMON + _TEX + """
 uniform vec3 base_color;
 uniform bool leaf;
 uniform vec3 crown_center;
 uniform vec3 crown_radius;
+uniform vec3 eye;
+uniform bool has_nmap;
+uniform sampler2D normal_tex;
+uniform ivec2 nmap_wrap;
+uniform float normal_scale;
 in vec3 v_pos;
 in vec3 v_normal;
+in vec2 v_uv;
 out vec4 f_color;
 
 float hash(uint x) {
@@ -199,29 +257,59 @@ float hash(uint x) {
     return float(x) / 4294967295.0;
 }
 
+// Tangent frame from screen-space derivatives of position and UV (Schüler 2013): T along +u,
+// B along +v, so an OpenGL/glTF normal map (+Y = +v, bottom-left UV origin) reads right.
+mat3 cotangent_frame(vec3 n, vec3 p, vec2 uv) {
+    vec3 dp1 = dFdx(p), dp2 = dFdy(p);
+    vec2 duv1 = dFdx(uv), duv2 = dFdy(uv);
+    vec3 dp2perp = cross(dp2, n), dp1perp = cross(n, dp1);
+    vec3 t = dp2perp * duv1.x + dp1perp * duv2.x;
+    vec3 b = dp2perp * duv1.y + dp1perp * duv2.y;
+    float m = max(dot(t, t), dot(b, b));
+    float inv = m > 0.0 ? inversesqrt(m) : 0.0;
+    return mat3(t * inv, b * inv, n);
+}
+
 void main() {
+    vec4 texel = has_tex ? sample_tex(base_tex, v_uv, tex_wrap) : vec4(1.0);
+    vec3 nm = has_nmap ? sample_tex(normal_tex, v_uv, nmap_wrap).xyz * 2.0 - 1.0 : vec3(0, 0, 1);
+    mat3 tbn = cotangent_frame(normalize(v_normal), v_pos, v_uv);   // derivatives: uniform flow
+    if (has_tex && cut_away(texel.a * opacity, v_uv)) discard;
     vec3 n = normalize(v_normal);
+    if (has_nmap) {
+        vec3 p = normalize(tbn * vec3(nm.xy * normal_scale, nm.z));
+        if (dot(p, p) > 0.5) n = p;                   // degenerate UVs: keep the vertex normal
+    }
     if (!gl_FrontFacing) n = -n;                       // light the face we look at
-    vec3 albedo = base_color;
+    vec3 albedo = base_color * texel.rgb;
     if (leaf) {                                        // per-leaf tint (2 triangles a card)
         float h = hash(uint(gl_PrimitiveID) >> 1u);
-        albedo *= vec3(0.85 + 0.3 * h, 0.8 + 0.4 * h, 0.8 + 0.2 * h);
+        float k = has_tex ? 0.5 : 1.0;                 // textures bring their own variation
+        albedo *= 1.0 + k * (vec3(0.3 * h, 0.4 * h, 0.2 * h) - vec3(0.15, 0.2, 0.2));
     }
     float ndl = dot(n, sun_dir);
     float vis = sun_visibility(v_pos, n);
-    float direct = max(ndl, 0.0) + (leaf ? 0.45 * max(-ndl, 0.0) : 0.0);
+    // Light through a leaf (sun behind it) is filtered twice by the blade: yellower, and
+    // brightest when looking into the sun (forward scattering).
+    float toward = max(dot(normalize(v_pos - eye), sun_dir), 0.0);
+    float through = leaf ? max(-ndl, 0.0) * (0.3 + 0.9 * toward * toward * toward) : 0.0;
+    vec3 trans = albedo * vec3(1.15, 1.2, 0.5) * through;
     // inner crown gets less sky: a cheap ambient occlusion from the depth in the crown
     float r = length((v_pos - crown_center) / crown_radius);
     float ao = mix(0.45, 1.0, smoothstep(0.1, 1.0, r));
     vec3 hemi = mix(ground_color * 0.6, sky_zenith * 0.9 + 0.1, 0.5 + 0.5 * n.y);
-    vec3 c = albedo * (sun_color * direct * vis + hemi * ao);
+    vec3 c = albedo * (sun_color * max(ndl, 0.0) * vis + hemi * ao) + sun_color * vis * trans;
     f_color = vec4(tonemap(c), 1.0);
 }
 """
 
 _DEPTH_FS = """
 #version 330
-void main() {}
+""" + _TEX + """
+in vec2 v_uv;
+void main() {        // cut-outs cast cut-out shadows
+    if (has_tex && cut_away(sample_tex(base_tex, v_uv, tex_wrap).a * opacity, v_uv)) discard;
+}
 """
 
 _SKY_VS = """
@@ -301,11 +389,76 @@ def egl_available() -> bool:
     return True
 
 
+# --------------------------------------------------------------------------------- textures
+
+def _srgb_to_linear(c: np.ndarray) -> np.ndarray:
+    x = c.astype(np.float32) / np.float32(255.0)
+    return np.where(x <= 0.04045, x / np.float32(12.92),
+                    ((x + np.float32(0.055)) / np.float32(1.055)) ** np.float32(2.4))
+
+
+def _linear_to_srgb8(x: np.ndarray) -> np.ndarray:
+    x = np.clip(x, 0.0, 1.0)
+    s = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    return np.round(s * 255.0).astype(np.uint8)
+
+
+def _half(a: np.ndarray) -> np.ndarray:
+    """Next mip level of (H, W, C) float32, GL's size rule (each side floor(n / 2), at least 1):
+    a 2-tap box on even sides, a 1-2-1 tent over the 2n + 1 texels of odd ones."""
+    for axis in (0, 1):
+        n = a.shape[axis]
+        if n == 1:
+            continue
+        even = np.take(a, np.arange(0, n - 1, 2), axis=axis)
+        odd = np.take(a, np.arange(1, n, 2), axis=axis)
+        if n % 2 == 0:
+            a = 0.5 * (even + odd)
+        else:
+            nxt = np.take(a, np.arange(2, n, 2), axis=axis)
+            a = 0.25 * even + 0.5 * odd + 0.25 * nxt
+    return a
+
+
+def mip_chain(image: np.ndarray, srgb: bool) -> list[np.ndarray]:
+    """Every mip level of a uint8 (H, W, C) image, level 0 first, box-filtered in linear light
+    (GL's own mipmap generation is not specified to be; colour must not darken as it shrinks).
+
+    Colour is averaged weighted by alpha (no dark fringes from transparent texels); alpha is the
+    plain mean, the blade's coverage of the texel, which the hashed cut-out test relies on."""
+    img = np.asarray(image)
+    lin = img.astype(np.float32) / np.float32(255.0)
+    if srgb:
+        lin[..., :3] = _srgb_to_linear(img[..., :3])
+    has_alpha = img.shape[2] == 4
+    if has_alpha:
+        lin[..., :3] *= lin[..., 3:]                   # premultiplied while filtering
+    levels, cur = [np.ascontiguousarray(img)], lin
+    while cur.shape[0] > 1 or cur.shape[1] > 1:
+        cur = _half(cur)
+        out = cur.copy()
+        if has_alpha:
+            a = out[..., 3:]
+            out[..., :3] = np.where(a > 1e-6, out[..., :3] / np.maximum(a, 1e-6), 0.0)
+        enc = np.empty(out.shape, np.uint8)
+        enc[..., :3] = _linear_to_srgb8(out[..., :3]) if srgb else \
+            np.round(np.clip(out[..., :3], 0, 1) * 255).astype(np.uint8)
+        if has_alpha:
+            enc[..., 3] = np.round(out[..., 3] * 255).astype(np.uint8)
+        levels.append(enc)
+    return levels
+
+
+_WRAP_CODE = {"REPEAT": 0, "CLAMP": 1, "MIRROR": 2}
+
+
 @dataclass
 class _GpuPart:
     vao: object
     depth_vao: object
     part: Part
+    tex: object = None
+    nmap: object = None
 
 
 class Renderer:
@@ -342,11 +495,32 @@ class Renderer:
                 (ctx.buffer(np.ascontiguousarray(p.normals, "f4").tobytes()), "3f", "in_normal"),
                 (ctx.buffer(np.ascontiguousarray(p.joints, "f4").tobytes()), "4f", "in_joints"),
                 (ctx.buffer(np.ascontiguousarray(p.weights, "f4").tobytes()), "4f", "in_weights")]
+        if p.uvs is not None:
+            bufs.append((ctx.buffer(np.ascontiguousarray(p.uvs, "f4").tobytes()), "2f", "in_uv"))
         ibo = ctx.buffer(np.ascontiguousarray(p.indices, "u4").tobytes())
         vao = ctx.vertex_array(self.tree_prog, bufs, index_buffer=ibo, index_element_size=4)
         dvao = ctx.vertex_array(self.depth_prog, [b for b in bufs if b[2] != "in_normal"],
                                 index_buffer=ibo, index_element_size=4)
-        return _GpuPart(vao, dvao, p)
+        tex = self._texture(p.texture, True, p.wrap) if p.textured else None
+        nmap = self._texture(p.normal_map, False, p.normal_wrap) if p.bumpy else None
+        return _GpuPart(vao, dvao, p, tex, nmap)
+
+    def _texture(self, image: np.ndarray, srgb: bool, wrap):
+        """A mipmapped GL texture; rows flipped so texture t = the bottom-left-origin v."""
+        img = np.asarray(image, np.uint8)
+        if img.shape[2] == 3:                              # RGBA texels: no row alignment fuss
+            img = np.concatenate([img, np.full(img.shape[:2] + (1,), 255, np.uint8)], axis=2)
+        levels = mip_chain(img[::-1], srgb)
+        h, w = img.shape[:2]
+        tex = self.ctx.texture((w, h), 4, levels[0].tobytes(),
+                               internal_format=GL_SRGB8_ALPHA8 if srgb else None)
+        tex.build_mipmaps(0, len(levels) - 1)              # allocates; our levels replace them
+        for k, lv in enumerate(levels[1:], 1):
+            tex.write(lv.tobytes(), level=k)
+        tex.repeat_x, tex.repeat_y = (m == "REPEAT" for m in wrap)
+        tex.filter = (self.ctx.LINEAR_MIPMAP_LINEAR, self.ctx.LINEAR)
+        tex.anisotropy = ANISOTROPY
+        return tex
 
     def _setup_lighting(self) -> None:
         pts = np.concatenate([p.positions for p in self.scene.parts if len(p.positions)] or
@@ -368,8 +542,26 @@ class Renderer:
                 u.value = bool(value)
             elif isinstance(value, int):
                 u.value = value
+            elif isinstance(value, tuple) and all(isinstance(v, int) for v in value):
+                u.value = value                           # ivec
             else:
                 u.value = tuple(float(v) for v in np.ravel(value)) if np.ndim(value) else float(value)
+
+    def _material(self, prog, g: _GpuPart) -> None:
+        """Texture bindings and cut-out uniforms of one part."""
+        p = g.part
+        self._set(prog, "has_tex", g.tex is not None)
+        self._set(prog, "has_nmap", g.nmap is not None)
+        if g.tex is not None:
+            g.tex.use(location=2)
+            self._set(prog, "tex_wrap", tuple(_WRAP_CODE[m] for m in p.wrap))
+        if g.nmap is not None:
+            g.nmap.use(location=3)
+            self._set(prog, "nmap_wrap", tuple(_WRAP_CODE[m] for m in p.normal_wrap))
+            self._set(prog, "normal_scale", p.normal_scale)
+        cut = p.alpha_cutoff if g.tex is not None and p.alpha_cutoff is not None else -1.0
+        self._set(prog, "alpha_cutoff", float(cut))
+        self._set(prog, "opacity", p.opacity)
 
     def render(self, camera: Camera, skinning: np.ndarray | None = None,
                sun_azimuth_deg: float = 0.0, sun_elevation_deg: float = 50.0,
@@ -402,7 +594,11 @@ class Renderer:
         ctx.disable(ctx.CULL_FACE)
         self._set(self.depth_prog, "view_proj", light_vp)
         self._set(self.depth_prog, "skin", 0)
+        self._set(self.depth_prog, "base_tex", 2)
+        self._set(self.depth_prog, "mip_bias", MIP_BIAS)
+        self._set(self.depth_prog, "hash_from", HASH_LOD)
         for g in self.parts:
+            self._material(self.depth_prog, g)
             g.depth_vao.render()
 
         # main pass
@@ -433,9 +629,15 @@ class Renderer:
         self._set(self.tree_prog, "skin", 0)
         self._set(self.tree_prog, "crown_center", self.crown_center)
         self._set(self.tree_prog, "crown_radius", self.crown_radius)
+        self._set(self.tree_prog, "eye", camera.eye)
+        self._set(self.tree_prog, "base_tex", 2)
+        self._set(self.tree_prog, "normal_tex", 3)
+        self._set(self.tree_prog, "mip_bias", MIP_BIAS)
+        self._set(self.tree_prog, "hash_from", HASH_LOD)
         for g in self.parts if draw_tree else []:
             self._set(self.tree_prog, "base_color", g.part.color)
             self._set(self.tree_prog, "leaf", g.part.double_sided)
+            self._material(self.tree_prog, g)
             g.vao.render()
 
         W, H = self.width * self.ss, self.height * self.ss

@@ -1,18 +1,30 @@
 """glTF reader: a .glb/.gltf (ours, or any triangle glTF with at most one skin per LOD node) as a
 Drawable, for the preview and the tests. LOD k is the k-th node of the first mesh node's
 MSFT_lod chain; animation samplers are played with glTF's own interpolation rules.
+
+Materials as core glTF 2.0 defines them, so any engine-bound file previews textured: the
+baseColorTexture (PNG/JPEG, or WebP through EXT_texture_webp, decoded by Pillow) with its
+TEXCOORD_n (float, or normalized unsigned byte/short), sampler wrap modes, normalTexture
+(+ scale, when it shares the base texture's UV set), alphaMode MASK + alphaCutoff (BLEND is
+previewed as a cut-out at 0.5: no sorting in a preview), doubleSided. Images come from a
+bufferView, a data: URI, or a relative URI beside the file. Not read: KHR_texture_transform,
+occlusion/emissive/metallic-roughness maps (the preview's lighting has no use for them).
 """
 from __future__ import annotations
 
+import base64
 import struct
 from pathlib import Path
+from urllib.parse import unquote
 
 import numpy as np
 
-from ..drawable import Channel, Drawable, Part, PoseRig, check_lod, vertex_normals
+from ..drawable import Channel, Drawable, Part, PoseRig, check_lod, decode_image, vertex_normals
 from ..errors import TreegenError
 from ..skeleton import forward, trs
 from .gltf import read_accessor, read_gltf
+
+WRAP = {10497: "REPEAT", 33071: "CLAMP", 33648: "MIRROR"}      # sampler wrapS / wrapT
 
 
 def _node_world(gltf: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -70,6 +82,7 @@ def _gltf_scene(gltf, blob, read_accessor, lod, path) -> Drawable:
         ibm = np.eye(4)[None]
 
     parts = []
+    images = _Images(gltf, blob, Path(path))
     for k, prim in enumerate(gltf["meshes"][node["mesh"]]["primitives"]):
         if prim.get("mode", 4) != 4:
             continue
@@ -86,10 +99,14 @@ def _gltf_scene(gltf, blob, read_accessor, lod, path) -> Drawable:
             jnt = np.zeros((len(pos), 4), np.int64)
             wgt = np.tile(np.float32([1, 0, 0, 0]), (len(pos), 1))
         mat = materials[prim["material"]] if "material" in prim else {}
-        color = mat.get("pbrMetallicRoughness", {}).get("baseColorFactor", [0.6, 0.6, 0.6, 1])
+        pbr = mat.get("pbrMetallicRoughness", {})
+        looks = _surface(gltf, blob, a, mat, images)
+        color = pbr.get("baseColorFactor",
+                        [1.0, 1.0, 1.0, 1.0] if "texture" in looks else [0.6, 0.6, 0.6, 1])
         parts.append(Part(name=mat.get("name", f"primitive{k}"), positions=pos, normals=nrm,
                           indices=idx, joints=jnt, weights=wgt, color=tuple(color[:3]),
-                          double_sided=bool(mat.get("doubleSided", False))))
+                          double_sided=bool(mat.get("doubleSided", False)),
+                          opacity=float(color[3]) if len(color) > 3 else 1.0, **looks))
 
     jparent = np.full(J, -1, dtype=np.int64)
     slot = {int(n): j for j, n in enumerate(joints)}
@@ -111,6 +128,102 @@ def _gltf_scene(gltf, blob, read_accessor, lod, path) -> Drawable:
         raise TreegenError(f"{path}: joint nodes with 'matrix' transforms are not supported")
     return Drawable(parts=parts, n_joints=J, duration=rig.duration,
                  skinning=rig.skinning, label=str(path))
+
+
+class _Images:
+    """Decoded images by (index, channels), each read once per file."""
+
+    def __init__(self, gltf: dict, blob: bytes, path: Path):
+        self.gltf, self.blob, self.path = gltf, blob, path
+        self.cache: dict[tuple[int, int], np.ndarray] = {}
+
+    def get(self, index: int, channels: int) -> np.ndarray:
+        if (index, channels) not in self.cache:
+            img = self.gltf["images"][index]
+            what = f"{self.path}: image {index} ({img.get('name') or img.get('uri', 'embedded')})"
+            self.cache[index, channels] = decode_image(self._bytes(img), channels, what)
+        return self.cache[index, channels]
+
+    def _bytes(self, img: dict) -> bytes:
+        if "bufferView" in img:
+            view = self.gltf["bufferViews"][img["bufferView"]]
+            data = self.blob if view.get("buffer", 0) == 0 else \
+                self._uri(self.gltf["buffers"][view["buffer"]]["uri"])
+            start = view.get("byteOffset", 0)
+            return bytes(data[start:start + view["byteLength"]])
+        return self._uri(img["uri"])
+
+    def _uri(self, uri: str) -> bytes:
+        """A data: URI or a file relative to the glTF (URI-encoded, per the spec)."""
+        if uri.startswith("data:"):
+            head, _, payload = uri.partition(",")
+            return base64.b64decode(payload) if head.endswith(";base64") else unquote(payload).encode()
+        f = self.path.parent / unquote(uri)
+        if not f.is_file():
+            raise TreegenError(f"{self.path}: texture file {uri!r} not found beside it ({f})")
+        return f.read_bytes()
+
+
+def _texture(gltf: dict, ref: dict, images: _Images, channels: int):
+    """(image, (wrap u, wrap v)) of a textureInfo."""
+    tex = gltf["textures"][ref["index"]]
+    source = tex.get("source")
+    if source is None:                           # EXT_texture_webp and the like: own source
+        source = next((e["source"] for e in tex.get("extensions", {}).values()
+                       if isinstance(e, dict) and "source" in e), None)
+    if source is None:
+        return None, ("REPEAT", "REPEAT")
+    sampler = gltf["samplers"][tex["sampler"]] if "sampler" in tex else {}
+    wrap = (WRAP.get(sampler.get("wrapS", 10497), "REPEAT"),
+            WRAP.get(sampler.get("wrapT", 10497), "REPEAT"))
+    return images.get(source, channels), wrap
+
+
+def _texcoords(gltf: dict, blob: bytes, attributes: dict, n: int) -> np.ndarray | None:
+    """TEXCOORD_n as float32 with the bottom-left origin (glTF's v runs down: v → 1 − v)."""
+    key = f"TEXCOORD_{n}"
+    if key not in attributes:
+        return None
+    uv = _accessor(gltf, blob, attributes[key]).astype(np.float32)
+    uv[:, 1] = 1.0 - uv[:, 1]
+    return uv
+
+
+def _accessor(gltf: dict, blob: bytes, index: int) -> np.ndarray:
+    """read_accessor, plus interleaved views (byteStride) as other exporters write them."""
+    acc = gltf["accessors"][index]
+    view = gltf["bufferViews"][acc["bufferView"]]
+    stride = view.get("byteStride")
+    dtype = np.dtype({5120: "i1", 5121: "u1", 5122: "<i2", 5123: "<u2", 5125: "<u4",
+                      5126: "<f4"}[acc["componentType"]])
+    ncomp = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}.get(acc["type"])
+    if not stride or ncomp is None or stride == ncomp * dtype.itemsize:
+        return read_accessor(gltf, blob, index)
+    start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+    a = np.ndarray((acc["count"], ncomp), dtype, buffer=blob, offset=start,
+                   strides=(stride, dtype.itemsize)).copy()
+    if acc.get("normalized"):
+        a = a / float(np.iinfo(dtype).max)
+    return a
+
+
+def _surface(gltf: dict, blob: bytes, attributes: dict, mat: dict, images: _Images) -> dict:
+    """Part fields for a material's textures: uvs, texture, normal map, wrap, cut-out."""
+    pbr = mat.get("pbrMetallicRoughness", {})
+    base, normal = pbr.get("baseColorTexture"), mat.get("normalTexture")
+    uv_set = (base or normal or {}).get("texCoord", 0)
+    out: dict = {"uvs": _texcoords(gltf, blob, attributes, uv_set)}
+    mode = mat.get("alphaMode", "OPAQUE")
+    if mode in ("MASK", "BLEND"):
+        out["alpha_cutoff"] = float(mat.get("alphaCutoff", 0.5)) if mode == "MASK" else 0.5
+    if out["uvs"] is None:
+        return out
+    if base is not None:
+        out["texture"], out["wrap"] = _texture(gltf, base, images, 4)
+    if normal is not None and normal.get("texCoord", 0) == uv_set:
+        out["normal_map"], out["normal_wrap"] = _texture(gltf, normal, images, 3)
+        out["normal_scale"] = float(normal.get("scale", 1.0))
+    return out
 
 
 def _gltf_channels(gltf, blob, read_accessor, slot: dict[int, int]) -> list[Channel]:

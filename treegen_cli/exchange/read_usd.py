@@ -1,12 +1,22 @@
 """UsdSkel reader: a .usda/.usdc/.usdz as a Drawable (LOD k is the k-th SkelRoot), skinned with
-UsdSkel's own query, for the preview and the tests."""
+UsdSkel's own query, for the preview and the tests.
+
+Materials as the UsdPreviewSurface spec wires them: diffuseColor and opacity constant or from
+a UsdUVTexture (its rgb / a outputs; scale multiplies), opacityThreshold > 0 as the cut-out,
+normal from a UsdUVTexture (scale 2, bias −1) as a tangent-space map; the texture's st from
+the UsdPrimvarReader_float2 its st input connects to (varname followed through material
+interface inputs), vertex/varying or faceVarying (then the mesh is split per face corner).
+Image files resolve through Ar relative to the layer that authored them, inside a .usdz too
+(read out of the package with Sdf.ZipFile). wrapS/T: repeat, clamp, mirror; black previews
+as clamp, useMetadata as repeat. Not read: UsdTransform2d, sourceColorSpace "raw" on colour.
+"""
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
 
-from ..drawable import Drawable, Part, check_lod, vertex_normals, z_up_to_y_up
+from ..drawable import Drawable, Part, check_lod, decode_image, vertex_normals, z_up_to_y_up
 from ..errors import TreegenError
 
 
@@ -63,16 +73,33 @@ def read_drawable(path: Path, lod: int = 0) -> Drawable:
             ji, jw = np.repeat(ji, len(pos), 0), np.repeat(jw, len(pos), 0)
         ji, jw = _four_influences(ji, jw)
         color, double = (0.6, 0.6, 0.6), bool(mesh.GetDoubleSidedAttr().Get())
+        looks: dict = {}
         material = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()[0]
         if material:
             shader = material.ComputeSurfaceSource()[0]
             inp = shader.GetInput("diffuseColor") if shader else None
             if inp and inp.Get() is not None:
                 color = tuple(float(c) for c in inp.Get())
+            if shader:
+                looks = _surface(shader, mesh, path)
+                color = looks.pop("color", color)
+        uvs = looks.pop("st", None)
+        uvs, st_interp = uvs if uvs is not None else (None, None)
+        if uvs is not None and st_interp == "faceVarying" and len(uvs) == len(fvi):
+            corners = np.arange(len(fvi))
+            idx = _triangulate(counts, corners)
+            if mesh.GetOrientationAttr().Get() == UsdGeom.Tokens.leftHanded:
+                idx = idx.reshape(-1, 3)[:, ::-1].reshape(-1)
+            pos, nrm, ji, jw = pos[fvi], nrm[fvi], ji[fvi], jw[fvi]
+        elif uvs is not None and len(uvs) != len(pos):
+            uvs = None
+        if uvs is None:
+            looks = {k: v for k, v in looks.items()
+                     if k not in ("texture", "normal_map", "wrap", "normal_wrap")}
         parts.append(Part(name=prim.GetName(), positions=_apply(to_world, pos).astype(np.float32),
                           normals=_apply(to_world, nrm, vector=True).astype(np.float32),
                           indices=idx.astype(np.uint32), joints=ji, weights=jw, color=color,
-                          double_sided=double))
+                          double_sided=double, uvs=uvs, **looks))
     anim = skel_query.GetAnimQuery()
     duration = 0.0
     if anim:
@@ -89,6 +116,104 @@ def read_drawable(path: Path, lod: int = 0) -> Drawable:
         return to_world @ out @ to_world.T
 
     return Drawable(parts=parts, n_joints=J, duration=duration, skinning=skinning, label=str(path))
+
+
+USD_WRAP = {"repeat": "REPEAT", "clamp": "CLAMP", "mirror": "MIRROR", "black": "CLAMP",
+            "useMetadata": "REPEAT"}
+
+
+def _source(inp):
+    """(shader, output name) an input is connected to, or (None, None)."""
+    from pxr import UsdShade
+
+    if not inp or not inp.HasConnectedSource():
+        return None, None
+    src = inp.GetConnectedSources()[0][0]
+    return UsdShade.Shader(src.source.GetPrim()), src.sourceName
+
+
+def _value(shader, name, default=None):
+    """An input's value, following connections to material interface inputs."""
+    inp = shader.GetInput(name)
+    if not inp:
+        return default
+    attrs = inp.GetValueProducingAttributes()
+    v = attrs[0].Get() if attrs else inp.Get()
+    return default if v is None else v
+
+
+def _asset_bytes(asset_path, shader, path) -> bytes:
+    """Bytes of a UsdUVTexture file: resolved by Ar against the authoring layer (an asset path
+    is relative to the layer that wrote it); package paths (x.usdz[tex/leaf.png]) read out of
+    the zip, as Ar's package resolver would."""
+    from pxr import Ar, Sdf
+
+    resolved = asset_path.resolvedPath if asset_path is not None else ""
+    if not resolved:
+        raise TreegenError(f"{path}: texture {getattr(asset_path, 'path', '')!r} of "
+                           f"{shader.GetPath()} not found (resolved against its layer)")
+    if Ar.IsPackageRelativePath(resolved):
+        outer, inner = Ar.SplitPackageRelativePathOuter(resolved)
+        if Ar.IsPackageRelativePath(inner):
+            raise TreegenError(f"{path}: texture {resolved!r} in a nested package (not supported)")
+        z = Sdf.ZipFile.Open(outer)
+        data = z.GetFile(inner) if z else None
+        if data is None:
+            raise TreegenError(f"{path}: texture {inner!r} missing from package {outer}")
+        return bytes(data)
+    return Path(resolved).read_bytes()
+
+
+def _texture(shader, channels: int, path):
+    """(image, (wrap s, wrap t), scale, st primvar name) of a UsdUVTexture shader."""
+    image = decode_image(_asset_bytes(_value(shader, "file"), shader, path), channels,
+                         f"{path}: {shader.GetPath()}")
+    wrap = tuple(USD_WRAP.get(str(_value(shader, k, "useMetadata")), "REPEAT")
+                 for k in ("wrapS", "wrapT"))
+    scale = tuple(float(c) for c in _value(shader, "scale", (1.0, 1.0, 1.0, 1.0)))
+    reader, _ = _source(shader.GetInput("st"))
+    varname = str(_value(reader, "varname", "st")) if reader else "st"
+    return image, wrap, scale, varname
+
+
+def _surface(surf, mesh, path) -> dict:
+    """Part fields (and "st", "color") of a UsdPreviewSurface and the mesh's st primvar."""
+    from pxr import UsdGeom
+
+    out: dict = {}
+    names = []
+    tex, _ = _source(surf.GetInput("diffuseColor"))
+    if tex is not None and tex.GetIdAttr().Get() == "UsdUVTexture":
+        rgba, out["wrap"], scale, name = _texture(tex, 4, path)
+        out["texture"], out["color"] = rgba, scale[:3]
+        names.append(name)
+        op, channel = _source(surf.GetInput("opacity"))
+        if op is None:
+            rgba[..., 3] = 255                                   # colour texture, opaque
+        elif op.GetPath() != tex.GetPath() or channel != "a":   # alpha from its own texture
+            other = _texture(op, 4, path)[0] if op.GetIdAttr().Get() == "UsdUVTexture" else None
+            ch = {"r": 0, "g": 1, "b": 2}.get(channel, 3)
+            if other is not None and other.shape[:2] == rgba.shape[:2]:
+                rgba[..., 3] = other[..., ch]
+    else:
+        op, _ = _source(surf.GetInput("opacity"))
+    if op is None:
+        out["opacity"] = float(_value(surf, "opacity", 1.0))
+    threshold = float(_value(surf, "opacityThreshold", 0.0))
+    if threshold > 0.0:
+        out["alpha_cutoff"] = threshold
+    ntex, _ = _source(surf.GetInput("normal"))
+    if ntex is not None and ntex.GetIdAttr().Get() == "UsdUVTexture":
+        nmap, out["normal_wrap"], scale, name = _texture(ntex, 3, path)
+        if not names or name == names[0]:
+            out["normal_map"], out["normal_scale"] = nmap, abs(scale[0]) / 2.0
+            names.append(name)
+    if names:
+        pv = UsdGeom.PrimvarsAPI(mesh).GetPrimvar(names[0])
+        st = pv.ComputeFlattened() if pv and pv.HasValue() else None
+        if st is not None and pv.GetInterpolation() in ("vertex", "varying", "faceVarying"):
+            out["st"] = (np.asarray(st, np.float32).reshape(-1, 2), str(pv.GetInterpolation()))
+    return out
 
 
 def _apply(m: np.ndarray, v: np.ndarray, vector: bool = False) -> np.ndarray:
