@@ -32,12 +32,10 @@ The model (Kondo et al., after Weber–Penn; REFERENCE.md §1, §3):
 """
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.linalg import cholesky, solve_triangular
-from threadpoolctl import threadpool_limits
 from scipy.spatial.transform import Rotation
 
 from .asset import Clip
@@ -691,18 +689,6 @@ def bound_bends(theta: np.ndarray, parent: np.ndarray, options: WindOptions) -> 
     return soft(out, np.deg2rad(options.max_angle_deg))
 
 
-def one_blas_thread(fn):
-    """Run `fn` with single-threaded BLAS/LAPACK: a threaded reduction sums in a different
-    order, so the same tree would bake to different bytes under `treegen make` (all cores) and
-    a Dask worker (one thread). One thread is also faster at these sizes (J ≤ 256)."""
-    @functools.wraps(fn)
-    def run(*args, **kwargs):
-        with threadpool_limits(limits=1, user_api="blas"):
-            return fn(*args, **kwargs)
-    return run
-
-
-@one_blas_thread
 def wind_angles(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int = 0,
                 dyn: Dynamics | None = None) -> np.ndarray:
     """World-frame rotation vectors (J, n, 3) of each joint's deviation from rest over one
@@ -749,7 +735,6 @@ def bake_wind(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int =
 # ---------------------------------------------------------------------------------------------
 # what an artist tunes with
 
-@one_blas_thread
 def wind_report(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int = 0,
                 modes: int = 4) -> dict:
     """`treegen info --wind`: natural frequencies (Hz) and damping of the lowest modes and of
