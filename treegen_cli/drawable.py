@@ -57,8 +57,8 @@ def decode_image(data: bytes, channels: int, what: str = "texture") -> np.ndarra
     from PIL import Image, UnidentifiedImageError
 
     try:
-        with Image.open(io.BytesIO(data)) as img:
-            img = img.convert("RGBA" if channels == 4 else "RGB")
+        with Image.open(io.BytesIO(data)) as src:
+            img = src.convert("RGBA" if channels == 4 else "RGB")
             return np.asarray(img, dtype=np.uint8).copy()
     except (UnidentifiedImageError, OSError, ValueError) as e:
         raise TreegenError(f"{what}: not a readable image ({type(e).__name__}: {e})") from None
