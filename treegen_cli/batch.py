@@ -34,6 +34,7 @@ from pathlib import Path, PurePosixPath
 
 from . import __version__
 from .errors import TreegenError
+from .forest.schema import check_schema, read_json_file
 
 SCHEMA_NAME = "catalogue.schema.json"
 DEFAULT_NAME = "{species}_{seed}.{ext}"
@@ -79,16 +80,7 @@ class Catalogue:
 def load_catalogue(path: str | os.PathLike, max_jobs: int = MAX_JOBS) -> Catalogue:
     """Read, validate and expand a catalogue; every error starts with the file and JSON path."""
     path = Path(path)
-    try:
-        text = path.read_text("utf-8")
-    except FileNotFoundError:
-        raise TreegenError(f"{path}: no such catalogue file") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise TreegenError(f"{path}: cannot read the catalogue ({e})") from None
-    try:
-        data = json.loads(text, parse_constant=lambda c: float("nan"))
-    except json.JSONDecodeError as e:
-        raise TreegenError(f"{path}: line {e.lineno} column {e.colno}: invalid JSON ({e.msg})") from None
+    data = read_json_file(path, "catalogue")
     try:
         return parse_catalogue(data, path, max_jobs)
     except TreegenError as e:
@@ -195,8 +187,6 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
     """Validate decoded JSON `data` of the catalogue at `path` and expand it into jobs, in
     catalogue order; refuses two jobs with one output before anything runs."""
     from . import api
-    from .forest import check_schema
-
     schema = json.loads(schema_text())
     check_schema(data, schema, schema)
     base = path.parent

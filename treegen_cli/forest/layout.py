@@ -4,7 +4,6 @@ reported at the path that names it before anything is grown or written.
 """
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -15,7 +14,7 @@ from ..errors import TreegenError
 from ..limits import MAX_TREES
 from ..params import load_params
 from .scatter import polygon_area, scatter_points
-from .schema import show_value, check_schema, layout_schema
+from .schema import check_schema, layout_schema, read_json_file, show_value
 
 
 @dataclass(frozen=True)
@@ -80,16 +79,7 @@ def _xyz(v) -> tuple[float, float, float]:
 def load_layout(path: str | os.PathLike, max_trees: int = MAX_TREES) -> Layout:
     """Read, validate and expand a layout file (scatters become placements)."""
     path = Path(path)
-    try:
-        text = path.read_text("utf-8")
-    except FileNotFoundError:
-        raise TreegenError(f"{path}: no such layout file") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise TreegenError(f"{path}: cannot read the layout ({e})") from None
-    try:
-        data = json.loads(text, parse_constant=lambda c: float("nan"))
-    except json.JSONDecodeError as e:
-        raise TreegenError(f"{path}: line {e.lineno} column {e.colno}: invalid JSON ({e.msg})") from None
+    data = read_json_file(path, "layout")
     try:
         return parse_layout(data, path, max_trees)
     except TreegenError as e:

@@ -8,10 +8,27 @@ from __future__ import annotations
 import json
 import math
 from importlib import resources
+from pathlib import Path
 
 from ..errors import TreegenError
 
 SCHEMA_NAME = "layout.schema.json"
+
+
+def read_json_file(path: Path, kind: str):
+    """The decoded JSON of a `kind` file ("layout", "catalogue"), or the one-line error naming
+    the file (and line and column for bad JSON). NaN/Infinity literals decode to NaN, which the
+    schema's finite-number check then reports at its JSON path."""
+    try:
+        text = path.read_text("utf-8")
+    except FileNotFoundError:
+        raise TreegenError(f"{path}: no such {kind} file") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise TreegenError(f"{path}: cannot read the {kind} ({e})") from None
+    try:
+        return json.loads(text, parse_constant=lambda c: float("nan"))
+    except json.JSONDecodeError as e:
+        raise TreegenError(f"{path}: line {e.lineno} column {e.colno}: invalid JSON ({e.msg})") from None
 
 
 def schema_text() -> str:
