@@ -47,16 +47,12 @@ def _lod_options(f):
     return f
 
 
-def _lod_from(lod_distances, fov, width, error_px, error_form, interpolation):
-    from .lod import LodOptions
+def _lod_options_from(lod_distances, fov, width, error_px, error_form, interpolation):
+    """LodOptions from the LOD flags, validated as `make` validates them (api.resolve)."""
+    from .api import resolve
 
-    try:
-        distances = tuple(float(v) for v in lod_distances.split(",") if v.strip() != "")
-    except ValueError:
-        raise TreegenError(f"--lod-distances '{lod_distances}': expected comma-separated metres, "
-                           "e.g. 0,10,30,130") from None
-    return LodOptions(distances=distances, fov_deg=fov, width=width, error_px=error_px,
-                      error_form=error_form, interpolation=interpolation.upper())
+    return resolve(dict(lod_distances=lod_distances, fov=fov, width=width, error_px=error_px,
+                        error_form=error_form, interpolation=interpolation)).options.lod
 
 
 def _load(species: Path):
@@ -105,8 +101,8 @@ def info(species, seed, max_stems, max_leaves, as_json, with_lod, lod_distances,
     if with_lod:
         stats["lods"] = _lod_rows(species, params, seed, tree,
                                   GenerateOptions(max_stems=max_stems, max_leaves=max_leaves),
-                                  _lod_from(lod_distances, fov, width, error_px, error_form,
-                                            interpolation))
+                                  _lod_options_from(lod_distances, fov, width, error_px,
+                                                    error_form, interpolation))
     if with_wind:
         from .rig import build_rig
         from .wind import WindOptions, wind_report
