@@ -145,10 +145,6 @@ class Forest:
     looped: list[Asset] = field(default_factory=list)
 
 
-def is_prepared(asset: Asset) -> bool:
-    return all(lod.bounds is not None for lod in asset.lods)
-
-
 def lod_bounds(lod: Lod) -> tuple[np.ndarray, np.ndarray]:
     """(min, max) corners of a LOD's rest-pose geometry; zeros when it has none."""
     pts = [np.asarray(p.positions, np.float64) for p in lod.primitives if len(p.positions)]

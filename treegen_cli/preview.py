@@ -124,14 +124,6 @@ def render_loop(scene: Drawable, options: PreviewOptions = DEFAULTS,
     return frames
 
 
-def save_image(pixels: np.ndarray, path: str | os.PathLike, colors: int = 0) -> Path:
-    return exchange.save_still(pixels, path, colors)
-
-
-def save_gif(frames: list[np.ndarray], path: str | os.PathLike, fps: float) -> Path:
-    return exchange.save_loop(frames, path, fps)
-
-
 # ------------------------------------------------------------------------------ command
 
 def _size(text: str) -> tuple[int, int]:
@@ -198,12 +190,12 @@ def preview_command(input_path, output, animate, azimuth, elevation, size, lod, 
     lines, summary = [], {"input": str(input_path), "width": width, "height": height, "lod": lod}
     with _renderer(scene, options) as renderer:   # one GL context for the still and the loop
         if output is not None:
-            save_image(render_still(scene, options, renderer), output, png_colors)
+            exchange.save_still(render_still(scene, options, renderer), output, png_colors)
             lines.append(f"wrote {output}  ({width}×{height}, LOD {lod})")
             summary["image"] = str(output)
         if animate is not None:
             frames = render_loop(scene, options, renderer)
-            save_gif(frames, animate, fps)
+            exchange.save_loop(frames, animate, fps)
             lines.append(f"wrote {animate}  ({width}×{height}, {len(frames)} frames over "
                          f"{scene.duration:.2f} s, LOD {lod})")
             summary |= {"animation": str(animate), "frames": len(frames),
