@@ -139,6 +139,36 @@ def _godot_messages(stderr: str, phase: str, noise: dict) -> list[dict]:
     return list(found.values())
 
 
+def _project(tmp: Path) -> tuple[Path, dict]:
+    """A fresh Godot project (with inspect.gd) under `tmp`, and an environment whose config,
+    data and cache folders live there too (nothing leaks into the user's Godot settings)."""
+    proj = tmp / "project"
+    proj.mkdir()
+    (proj / "project.godot").write_text(_PROJECT)
+    shutil.copyfile(TOOLS / "godot" / "inspect.gd", proj / "inspect.gd")
+    env = dict(os.environ, LANG="en_US.UTF-8", XDG_CONFIG_HOME=str(tmp / "config"),
+               XDG_DATA_HOME=str(tmp / "data"), XDG_CACHE_HOME=str(tmp / "cache"))
+    return proj, env
+
+
+def _inspect(proj: Path, env: dict, scene: str, result: dict, timeout: float) -> None:
+    """Run inspect.gd on the imported `scene` and merge its report into `result`."""
+    rc, out, err, secs = _run([GODOT, "--path", str(proj), "-s", "res://inspect.gd",
+                               f"--scene={scene}"], env=env, timeout=timeout)
+    result["inspect_seconds"] = round(secs, 2)
+    result["errors"] += _godot_messages(err, "inspect", result["noise"])
+    line = next((ln for ln in out.splitlines() if ln.startswith("TREEGEN_JSON ")), None)
+    if line is None:
+        result["reason"] = "inspect: timeout" if rc is None else f"inspect: no output (exit {rc})"
+        result["log_tail"] = _tail(out + err)
+        return
+    report = json.loads(line[len("TREEGEN_JSON "):])
+    result.update({k: v for k, v in report.items() if k != "scene"})
+    result["imported"] = bool(report.get("loaded"))
+    if not result["imported"]:
+        result["reason"] = report.get("reason", "not loaded")
+
+
 def godot_import(glb_path, timeout: float = 120, *, options: dict | None = None,
                  keep_project: str | None = None) -> dict:
     """Import glb_path the way the Godot 3.2 editor does, then load and inspect the imported scene.
@@ -172,16 +202,10 @@ def godot_import(glb_path, timeout: float = 120, *, options: dict | None = None,
     result: dict = {"client": "godot", "version": version, "file": str(glb_path), "imported": False,
                     "reason": None, "errors": [], "noise": {}}
     with tempfile.TemporaryDirectory(prefix="treegen_godot_") as tmp:
-        tmp = Path(tmp)
-        proj = tmp / "project"
-        proj.mkdir()
-        (proj / "project.godot").write_text(_PROJECT)
+        proj, env = _project(Path(tmp))
         shutil.copyfile(glb_path, proj / "x.glb")
         (proj / "x.glb.import").write_text(_IMPORT_PRESET + "".join(
             f"{k}={_godot_literal(v)}\n" for k, v in (options or {}).items()))
-        shutil.copyfile(TOOLS / "godot" / "inspect.gd", proj / "inspect.gd")
-        env = dict(os.environ, LANG="en_US.UTF-8", XDG_CONFIG_HOME=str(tmp / "config"),
-                   XDG_DATA_HOME=str(tmp / "data"), XDG_CACHE_HOME=str(tmp / "cache"))
 
         rc, _, err, secs = _run([GODOT, "--path", str(proj), "--editor", "--quit"], env=env,
                                 timeout=timeout)
@@ -195,20 +219,7 @@ def godot_import(glb_path, timeout: float = 120, *, options: dict | None = None,
         else:
             if rc is None:
                 result["reason"] = "imported, but the editor did not exit before the timeout"
-            rc2, out, err2, secs2 = _run([GODOT, "--path", str(proj), "-s", "res://inspect.gd"],
-                                         env=env, timeout=timeout)
-            result["inspect_seconds"] = round(secs2, 2)
-            result["errors"] += _godot_messages(err2, "inspect", result["noise"])
-            line = next((ln for ln in out.splitlines() if ln.startswith("TREEGEN_JSON ")), None)
-            if line is None:
-                result["reason"] = "inspect: timeout" if rc2 is None else f"inspect: no output (exit {rc2})"
-                result["log_tail"] = _tail(out + err2)
-            else:
-                report = json.loads(line[len("TREEGEN_JSON "):])
-                result.update({k: v for k, v in report.items() if k != "scene"})
-                result["imported"] = bool(report.get("loaded"))
-                if not result["imported"]:
-                    result["reason"] = report.get("reason", "not loaded")
+            _inspect(proj, env, "res://x.glb", result, timeout)
         if keep_project:
             shutil.copytree(proj, keep_project, dirs_exist_ok=True)
     return result
@@ -222,19 +233,13 @@ def godot_import_many(glb_paths, timeout: float = 600, *, inspect_timeout: float
     paths = [Path(p) for p in glb_paths]
     results: dict = {}
     with tempfile.TemporaryDirectory(prefix="treegen_godot_") as tmp:
-        tmp = Path(tmp)
-        proj = tmp / "project"
-        proj.mkdir()
-        (proj / "project.godot").write_text(_PROJECT)
+        proj, env = _project(Path(tmp))
         names = {}
         for i, p in enumerate(paths):
             name = f"f{i:03d}_{p.stem}.glb"
             names[p] = name
             shutil.copyfile(p, proj / name)
             (proj / f"{name}.import").write_text(_IMPORT_PRESET)
-        shutil.copyfile(TOOLS / "godot" / "inspect.gd", proj / "inspect.gd")
-        env = dict(os.environ, LANG="en_US.UTF-8", XDG_CONFIG_HOME=str(tmp / "config"),
-                   XDG_DATA_HOME=str(tmp / "data"), XDG_CACHE_HOME=str(tmp / "cache"))
         rc, _, err, secs = _run([GODOT, "--path", str(proj), "--editor", "--quit"], env=env,
                                 timeout=timeout)
         import_noise: dict = {}
@@ -252,20 +257,7 @@ def godot_import_many(glb_paths, timeout: float = 600, *, inspect_timeout: float
                 r["log_tail"] = _tail(err)
                 results[str(p)] = r
                 continue
-            rc2, out, err2, secs2 = _run([GODOT, "--path", str(proj), "-s", "res://inspect.gd",
-                                          f"--scene=res://{name}"], env=env, timeout=inspect_timeout)
-            r["inspect_seconds"] = round(secs2, 2)
-            r["errors"] += _godot_messages(err2, "inspect", r["noise"])
-            line = next((ln for ln in out.splitlines() if ln.startswith("TREEGEN_JSON ")), None)
-            if line is None:
-                r["reason"] = "inspect: timeout" if rc2 is None else f"inspect: no output (exit {rc2})"
-                r["log_tail"] = _tail(out + err2)
-            else:
-                report = json.loads(line[len("TREEGEN_JSON "):])
-                r.update({k: v for k, v in report.items() if k != "scene"})
-                r["imported"] = bool(report.get("loaded"))
-                if not r["imported"]:
-                    r["reason"] = report.get("reason", "not loaded")
+            _inspect(proj, env, f"res://{name}", r, inspect_timeout)
             results[str(p)] = r
     return results
 
