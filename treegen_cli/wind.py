@@ -32,10 +32,12 @@ The model (Kondo et al., after Weber–Penn; REFERENCE.md §1, §3):
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.linalg import cholesky, solve_triangular
+from threadpoolctl import ThreadpoolController
 from scipy.spatial.transform import Rotation
 
 from .asset import Clip
@@ -689,6 +691,24 @@ def bound_bends(theta: np.ndarray, parent: np.ndarray, options: WindOptions) -> 
     return soft(out, np.deg2rad(options.max_angle_deg))
 
 
+# BLAS/LAPACK libraries found once, at import (before any worker thread of ours runs): a scan
+# walks the loaded libraries under the dynamic loader's lock and would deadlock against a
+# thread importing an extension
+_BLAS = ThreadpoolController()
+
+
+def one_blas_thread(fn):
+    """Run `fn` with single-threaded BLAS/LAPACK: a threaded reduction sums in another order,
+    so the same tree would bake to different bytes under `treegen make` (all cores) and a Dask
+    worker; at these sizes (J <= 256) one thread is also faster."""
+    @functools.wraps(fn)
+    def run(*args, **kwargs):
+        with _BLAS.limit(limits=1, user_api="blas"):
+            return fn(*args, **kwargs)
+    return run
+
+
+@one_blas_thread
 def wind_angles(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int = 0,
                 dyn: Dynamics | None = None) -> np.ndarray:
     """World-frame rotation vectors (J, n, 3) of each joint's deviation from rest over one
@@ -735,6 +755,7 @@ def bake_wind(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int =
 # ---------------------------------------------------------------------------------------------
 # what an artist tunes with
 
+@one_blas_thread
 def wind_report(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int = 0,
                 modes: int = 4) -> dict:
     """`treegen info --wind`: natural frequencies (Hz) and damping of the lowest modes and of
