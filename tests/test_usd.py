@@ -21,7 +21,7 @@ FORMATS = ("usda", "usdc", "usdz")
 
 def write_usd(asset, path, **opts):
     """Hand-built assets go through the prepare stage, as the pipeline's do."""
-    return _write_usd(prepare(asset), path, **opts)
+    return _write_usd(prepare(asset, bounds=True), path, **opts)
 
 
 
@@ -497,7 +497,7 @@ def test_arkit_checker_is_not_vacuous(tmp_path):
     from treegen_cli.exchange.usd import build_stage, write_stage
 
     path = tmp_path / "z.usdz"
-    stage = build_stage(prepare(synthetic_asset(lods=3)), "Z", None, lod_schemas=True)
+    stage = build_stage(prepare(synthetic_asset(lods=3), bounds=True), "Z", None, lod_schemas=True)
     write_stage(stage, path, "z.usdc")
     failed = " ".join(arkit_check.check(path)["failed"])
     assert "upAxis" in failed and "LODDistanceHeuristic" in failed

@@ -1,8 +1,9 @@
 """The last stage before export: fill in what writers need, so writers only encode.
 
 Result: prepare(asset) → the same asset with every clip's moving joints (`Clip.animated`) and
-shared timeline (`Clip.timeline`) and every LOD's animated bounds (`Lod.bounds`) set;
-prepare_forest(forest) also fills the phase variants and repeated clips of the prototypes.
+shared timeline (`Clip.timeline`) set; with_bounds(asset) adds every LOD's animated bounds
+(`Lod.bounds`), which only formats that store extents need (the export table's USD entry);
+prepare_forest(forest) does both and fills the phase variants and repeated clips of the prototypes.
 """
 from __future__ import annotations
 
@@ -79,20 +80,27 @@ def animated_bounds(lod: Lod) -> tuple[np.ndarray, np.ndarray]:
     return lo - margin, hi + margin
 
 
-def prepare_lod(lod: Lod) -> Lod:
+def prepare_lod(lod: Lod, bounds: bool = False) -> Lod:
     lod = replace(lod, clips=[prepare_clip(c, lod.skeleton) for c in lod.clips])
-    return replace(lod, bounds=animated_bounds(lod))
+    return replace(lod, bounds=animated_bounds(lod)) if bounds else lod
 
 
-def prepare(asset: Asset) -> Asset:
-    """Every LOD prepared (idempotent)."""
-    return replace(asset, lods=[prepare_lod(lod) for lod in asset.lods])
+def prepare(asset: Asset, bounds: bool = False) -> Asset:
+    """Every LOD prepared (idempotent); `bounds` also fills `Lod.bounds` (with_bounds)."""
+    return replace(asset, lods=[prepare_lod(lod, bounds) for lod in asset.lods])
+
+
+def with_bounds(asset: Asset) -> Asset:
+    """Every LOD's animated bounds filled (kept where already set): forward kinematics over
+    every key, so it runs only for formats that store extents (USD: exchange's table)."""
+    return replace(asset, lods=[lod if lod.bounds is not None else replace(lod, bounds=animated_bounds(lod))
+                                for lod in asset.lods])
 
 
 def prepare_forest(forest: Forest) -> Forest:
     """Prototypes prepared; for each (prototype, LOD) an instance uses, its first clip at every
     phase variant (moving joints as the base clip's); and every prototype's clips repeated over two periods."""
-    protos = [prepare(a) for a in forest.prototypes]
+    protos = [prepare(a, bounds=True) for a in forest.prototypes]
     used = sorted({(i.prototype, k) for i in forest.instances
                    for k in (range(len(protos[i.prototype].lods)) if forest.all_lods else [i.lod])})
     V = max(1, forest.phase_variants)
@@ -107,7 +115,7 @@ def prepare_forest(forest: Forest) -> Forest:
     if forest.loop > 0:
         for a in protos:
             looped.append(prepare(replace(a, lods=[
-                replace(lod, clips=[repeat_clip(c, 2) for c in lod.clips]) for lod in a.lods])))
+                replace(lod, clips=[repeat_clip(c, 2) for c in lod.clips]) for lod in a.lods]), bounds=True))
     return replace(forest, prototypes=protos, variants=variants, looped=looped)
 
 

@@ -21,6 +21,7 @@ import numpy as np
 
 from ..asset import Asset, Forest
 from ..errors import TreegenError
+from ..prepare import with_bounds
 from . import gltf, image, read_gltf
 from .forest_gltf import write_forest_gltf
 from .staging import staged, sweep, written  # noqa: F401  (re-exported)
@@ -28,7 +29,7 @@ from .staging import staged, sweep, written  # noqa: F401  (re-exported)
 
 def _usd(asset: Asset, path: Path) -> None:
     from .usd import write_usd   # lazy: pxr takes ~0.5 s to import; most runs write glTF
-    write_usd(asset, path)
+    write_usd(with_bounds(asset), path)   # UsdSkel stores animated extents; only USD pays for them
 
 
 def _forest_usd(forest: Forest, path: Path) -> None:
