@@ -9,6 +9,8 @@ from pathlib import Path
 
 import pytest
 
+import treegen_cli  # noqa: F401  (first: pins OpenBLAS's kernel before numpy loads, as the CLI does)
+
 ROOT = Path(__file__).resolve().parent.parent
 SPECIES_DIR = ROOT / "species"
 SPECIES = sorted(p.stem for p in SPECIES_DIR.glob("*.txt"))

@@ -409,3 +409,27 @@ def test_progress_shows_on_a_terminal_and_is_cleared(tmp_path):
     assert b"generate" in seen or b"mesh" in seen or b"write" in seen   # the live display
     assert seen.endswith(b"\x1b[2K") or b"\x1b[?25h" in seen          # cleared, cursor back
     assert "\x1b" not in out and out.startswith("wrote ")               # stdout stays clean
+
+
+BLAS_PROBE = ("import sys, treegen_cli, numpy; from threadpoolctl import threadpool_info; "
+              "print(sorted({i.get('architecture') for i in threadpool_info() if i['internal_api'] == 'openblas'}))")
+
+
+def test_openblas_kernel_is_pinned_for_cross_machine_bytes():
+    """On every AVX2 x86-64 CPU the CLI, its Dask workers and this test process run OpenBLAS's
+    Haswell kernel, so a tree built on an AVX-512 node has the bytes of one built elsewhere (the
+    wind's eigen solve differs in the last bits between kernels: palm, sassafras, fan_palm)."""
+    from threadpoolctl import threadpool_info
+
+    from treegen_cli.blas_kernel import KERNEL, NEEDS, _cpu_flags
+
+    if not NEEDS <= _cpu_flags():
+        pytest.skip("this CPU lacks AVX2/FMA: OpenBLAS keeps its own kernel (nothing to pin)")
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_CORETYPE"}
+    child = subprocess.run([sys.executable, "-c", BLAS_PROBE], env=env, capture_output=True, text=True)
+    assert child.stdout.strip() == f"['{KERNEL}']", child.stderr
+    here = {i.get("architecture") for i in threadpool_info() if i["internal_api"] == "openblas"}
+    assert here == {KERNEL}     # conftest imports treegen_cli before numpy, as the CLI does
+    mine = dict(env, OPENBLAS_CORETYPE="Sandybridge")   # the user's own choice wins
+    child = subprocess.run([sys.executable, "-c", BLAS_PROBE], env=mine, capture_output=True, text=True)
+    assert child.stdout.strip() == "['Sandybridge']", child.stderr

@@ -66,7 +66,19 @@ class Skeleton:
     rest_translation: np.ndarray           # float64 (J, 3), local (in the parent's frame)
     rest_rotation: np.ndarray              # float64 (J, 4), local quaternion xyzw
     bind_world: np.ndarray                 # float64 (J, 4, 4), world matrix of each joint at
-                                           # rest; inverse bind matrix = inv(bind_world)
+                                           # rest (rigid); inverse bind matrix = inv(bind_world)
+
+    def inverse_bind(self) -> np.ndarray:
+        """inv(bind_world) (J, 4, 4) as the rigid inverse [Rᵀ | −Rᵀt], in elementwise arithmetic:
+        LAPACK's inverse picks CPU-specific kernels, so its last bits (and the file's bytes)
+        would differ from machine to machine."""
+        m = np.asarray(self.bind_world, dtype=np.float64)
+        rt = np.swapaxes(m[:, :3, :3], 1, 2)
+        out = np.zeros_like(m)
+        out[:, :3, :3] = rt
+        out[:, :3, 3] = -(rt * m[:, None, :3, 3]).sum(axis=2)
+        out[:, 3, 3] = 1.0
+        return out
 
 
 @dataclass(frozen=True, eq=False)

@@ -185,7 +185,7 @@ def from_asset(asset, lod: int = 0, label: str = "") -> Drawable:
     rig = PoseRig(parent=np.asarray(sk.parent), translation=np.asarray(sk.rest_translation),
                   rotation=np.asarray(sk.rest_rotation), scale=np.ones((J, 3)),
                   root_world=np.broadcast_to(np.eye(4), (J, 4, 4)),
-                  inverse_bind=np.linalg.inv(np.asarray(sk.bind_world, dtype=np.float64)),
+                  inverse_bind=sk.inverse_bind(),
                   channels=channels, to_world=z_up_to_y_up())
     return Drawable(parts=parts, n_joints=J, duration=rig.duration,
                  skinning=rig.skinning if channels else None, label=label or asset.name)

@@ -220,7 +220,7 @@ def probes(skeleton: Skeleton, primitives: list[Primitive], exact: bool = False)
         pick = np.concatenate([np.arange(J + int(np.count_nonzero(parent >= 0))),
                                x.shape[0] - corners.shape[0] + np.arange(corners.shape[0])])
     joint, rest = owner[pick], x[pick].astype(np.float64)
-    inv = np.linalg.inv(bind[joint])
+    inv = skeleton.inverse_bind()[joint]
     local = np.einsum("pij,pj->pi", inv[:, :3, :3], rest) + inv[:, :3, 3]
 
     # reach: farthest probe (own or descendant's) from each joint, walking probes up the chain

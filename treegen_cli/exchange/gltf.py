@@ -246,7 +246,7 @@ def joint_fields(skeleton: Skeleton) -> list[dict]:
 
 def inverse_bind_accessor(buf: _Buffer, skeleton: Skeleton) -> int:
     """Accessor of the skin's inverse bind matrices (Y up, column-major float32)."""
-    ibm = matrix_to_y_up(np.linalg.inv(np.asarray(skeleton.bind_world, dtype=np.float64)))
+    ibm = matrix_to_y_up(skeleton.inverse_bind())
     ibm[:, 3, :] = (0.0, 0.0, 0.0, 1.0)
     return buf.accessor(ibm.transpose(0, 2, 1).reshape(len(ibm), 16).astype(np.float32))
 
