@@ -367,3 +367,79 @@ def test_oversized_forest_is_refused_naming_the_flag(tmp_path):
     assert proc.returncode == 2, proc.stderr
     assert "--max-trees" in proc.stderr and "scatter[0]" in proc.stderr
     assert "Traceback" not in proc.stderr and not out.exists()
+
+
+# ----------------------------------------------------------------------------- on Dask
+
+def test_dask_prototypes_equal_the_in_process_build_byte_for_byte(scene, tmp_path):
+    """The `scene` fixture built its prototypes on an embedded 2-worker Dask cluster; built
+    in this process instead, every writer gives the same bytes."""
+    layout, on_dask = scene
+    here = build_scene(layout, workers=1, progress=False)
+    assert (on_dask.cluster, here.cluster) == ("2 local worker(s)", "this process")
+    (tmp_path / "dask").mkdir()
+    (tmp_path / "here").mkdir()
+    for suffix in (".glb", ".usda"):     # (.usda: texture files are named after the stem)
+        a, b = tmp_path / "dask" / f"f{suffix}", tmp_path / "here" / f"f{suffix}"
+        write_scene(on_dask, a)
+        write_scene(here, b)
+        assert a.read_bytes() == b.read_bytes(), suffix
+
+
+@pytest.fixture(scope="module")
+def dask_scheduler():
+    """A real `dask scheduler` and one `dask worker` (separate processes, this checkout's
+    treegen_cli), as a studio starts them."""
+    import os
+    import signal
+    import socket
+    import subprocess
+
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        [str(root), *filter(None, [os.environ.get("PYTHONPATH")])])}
+    env.pop("DASK_SCHEDULER_ADDRESS", None)
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    address = f"tcp://127.0.0.1:{port}"
+    common = dict(env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                  start_new_session=True)
+    procs = [subprocess.Popen(["dask", "scheduler", "--host", "127.0.0.1", "--port", str(port),
+                               "--no-dashboard"], **common),
+             subprocess.Popen(["dask", "worker", address, "--nthreads", "1", "--nworkers", "1",
+                               "--host", "127.0.0.1", "--no-dashboard"], **common)]
+    try:
+        yield address, env
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+
+
+def test_forest_on_a_dask_scheduler_writes_the_in_process_bytes(dask_scheduler, tmp_path):
+    """`treegen forest --scheduler ADDRESS` (and DASK_SCHEDULER_ADDRESS) builds the
+    prototypes on that cluster's workers; the file is the one a one-process run writes."""
+    import subprocess
+    import sys
+
+    address, env = dask_scheduler
+    layout = write_layout(tmp_path, layout_dict(scatter=[]))
+    (tmp_path / "remote").mkdir()
+    (tmp_path / "here").mkdir()
+    for suffix, args, extra_env in ((".glb", ["--scheduler", address], {}),
+                                    (".usda", [], {"DASK_SCHEDULER_ADDRESS": address})):
+        remote, here = tmp_path / "remote" / f"f{suffix}", tmp_path / "here" / f"f{suffix}"
+        proc = subprocess.run([sys.executable, "-m", "treegen_cli", "forest", str(layout),
+                               "-o", str(remote), *args, "--json"],
+                              capture_output=True, text=True, env={**env, **extra_env})
+        assert proc.returncode == 0, proc.stderr
+        s = json.loads(proc.stdout)
+        assert s["prototypes"] == 2 and s["cluster"] == f"1 worker(s) at {address}"
+        run_forest(layout, here, workers=1, progress=False)
+        assert remote.read_bytes() == here.read_bytes(), suffix
+    proc = subprocess.run([sys.executable, "-m", "treegen_cli", "forest", str(layout), "-o",
+                           str(tmp_path / "x.glb"), "--scheduler", address, "--workers", "2"],
+                          capture_output=True, text=True, env=env)
+    assert proc.returncode == 2 and "--workers 2: only for the embedded cluster" in proc.stderr

@@ -23,11 +23,15 @@ from .limits import MAX_TREES
               help="Screen-space error bound of the key schedules, pixels [default: the "
                    "layout's defaults.error_px, else 1].")
 @click.option("--workers", type=int, default=None,
-              help="Processes building prototypes [default: all cores].")
+              help="Worker processes of the embedded Dask cluster building the prototypes "
+                   "[default: one per core; 1: in this process].")
+@click.option("--scheduler", default=None, metavar="tcp://HOST:8786",
+              help="Build the prototypes on this Dask scheduler's workers instead [default: "
+                   "$DASK_SCHEDULER_ADDRESS, else an embedded cluster].")
 @click.option("--max-trees", type=int, default=MAX_TREES, show_default=True,
               help="Refuse layouts that place more trees than this (checked before building).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
-def forest(layout, output, schema, all_lods, error_px, workers, max_trees, as_json):
+def forest(layout, output, schema, all_lods, error_px, workers, scheduler, max_trees, as_json):
     """Build the forest described by LAYOUT (JSON; see --schema): each distinct (species, seed)
     tree is built once and instanced, each instance at the LOD its camera distance calls for."""
     from .forest import run_forest, schema_text
@@ -41,10 +45,16 @@ def forest(layout, output, schema, all_lods, error_px, workers, max_trees, as_js
         raise TreegenError("forest: give an output file with -o, e.g. -o forest.glb")
     if workers is not None and workers < 1:
         raise TreegenError(f"--workers {workers}: must be at least 1")
+    from .executor import scheduler_address
     from .progress import current_reporter
 
+    if workers is not None and scheduler_address(scheduler):
+        raise TreegenError(f"--workers {workers}: only for the embedded cluster; a --scheduler "
+                           "(or DASK_SCHEDULER_ADDRESS) cluster has its own workers")
+
     s = run_forest(layout, output, all_lods=all_lods, error_px=error_px, workers=workers,
-                   max_trees=max_trees, progress=current_reporter().show_progress)
+                   max_trees=max_trees, progress=current_reporter().show_progress,
+                   scheduler=scheduler)
     if as_json:
         click.echo(json.dumps(s, indent=2))
         return
@@ -55,5 +65,5 @@ def forest(layout, output, schema, all_lods, error_px, workers, max_trees, as_js
     w, wo = s["leaf_vertex_updates_per_frame"], s["leaf_vertex_updates_per_frame_without_lod"]
     ratio = f" ({w / wo:.1%})" if wo else ""
     click.echo(f"  leaf-vertex updates per frame: {w:,} with LOD vs {wo:,} without{ratio}")
-    click.echo(f"  {s['seconds']:.2f} s  (prototypes {s['prototypes_s']:.2f}, "
+    click.echo(f"  {s['seconds']:.2f} s  (prototypes {s['prototypes_s']:.2f} on {s['cluster']}, "
                f"write {s['write_s']:.2f})")

@@ -1,4 +1,4 @@
-"""Layout → Forest: each distinct (species, seed) built once (a prototype, in a process pool),
+"""Layout → Forest: each distinct (species, seed) built once (a prototype, on Dask),
 placed many times, each instance with the LOD its camera distance calls for and the phase
 variant nearest its time offset; then prepared for the writers.
 
@@ -12,7 +12,6 @@ import math
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import replace
 from pathlib import Path
 
@@ -68,24 +67,34 @@ def make_options(layout: Layout, error_px: float | None = None):
     return MakeOptions(rig=RigOptions(max_joints=layout.defaults.max_joints), wind=wind, lod=lod)
 
 
-def _build_one(params, seed: int, options) -> Asset:
-    """Worker: grow, rig, skin, bake (and decimate) one prototype."""
+def build_prototype(params, seed: int, options) -> Asset:
+    """One Dask task (or a call in this process): grow, rig, skin, bake (and decimate) one
+    prototype."""
+    from ..executor import tune_worker_malloc
+
+    tune_worker_malloc()
     asset, _tree = build_asset(params, seed, options)
     return asset
 
 
 def build_prototypes(keys: list[tuple[Path, int]], options, workers: int | None = None,
-                     progress: bool | None = None, parsed: dict | None = None) -> list[Asset]:
-    """Each (species file, seed) built once, in a process pool on all cores (workers=1: in
-    this process). A rich progress bar on an interactive stderr only. `parsed`: species
-    already read (the layout's), so no file is parsed twice."""
+                     progress: bool | None = None, parsed: dict | None = None,
+                     scheduler: str | None = None, report: dict | None = None) -> list[Asset]:
+    """Each (species file, seed) built once, on the Dask cluster `treegen batch` uses
+    (executor.dask_client): an embedded one with `workers` processes (default one per core),
+    or the one at `scheduler` / $DASK_SCHEDULER_ADDRESS. Without a scheduler, one worker or
+    one prototype builds in this process (no cluster to start). Results stream back as they
+    finish; the list is in `keys` order, so the bytes never depend on who built what. A rich
+    progress bar on an interactive stderr only. `parsed`: species already read (the
+    layout's), so no file is parsed twice. `report["cluster"]` is set to where they ran."""
+    from ..executor import default_workers, scheduler_address
 
     params = dict(parsed or {})
     for path, _seed in keys:
         if path not in params:
             params[path] = load_params(path)
-    workers = workers or os.cpu_count() or 1
-    workers = max(1, min(workers, len(keys)))
+    remote = scheduler_address(scheduler) is not None
+    workers = max(1, min(workers or default_workers(), len(keys)))
     if progress is None:
         progress = sys.stderr.isatty()
     out: list[Asset | None] = [None] * len(keys)
@@ -95,24 +104,42 @@ def build_prototypes(keys: list[tuple[Path, int]], options, workers: int | None 
         bar.start()
         task = bar.add_task("prototypes", total=len(keys))
     try:
-        if workers == 1:
+        if not remote and workers == 1:
+            if report is not None:
+                report["cluster"] = "this process"
             for i, (path, seed) in enumerate(keys):
-                out[i] = _in_file(path, _build_one, params[path], seed, options)
+                out[i] = _in_file(path, build_prototype, params[path], seed, options)
                 if bar:
                     bar.advance(task)
         else:
-            with ProcessPoolExecutor(max_workers=workers) as pool:
-                futures = {pool.submit(_build_one, params[p], s, options): i
-                           for i, (p, s) in enumerate(keys)}
-                for fut in as_completed(futures):
-                    i = futures[fut]
-                    out[i] = _in_file(keys[i][0], fut.result)
-                    if bar:
-                        bar.advance(task)
+            for i, asset in _on_dask(keys, params, options, workers, scheduler, report):
+                out[i] = asset
+                if bar:
+                    bar.advance(task)
     finally:
         if bar:
             bar.stop()
     return out  # type: ignore[return-value]
+
+
+def _on_dask(keys, params, options, workers: int, scheduler: str | None, report: dict | None):
+    """Yield (index, prototype) as the cluster finishes them; a worker's TreegenError comes
+    back naming its species file. The embedded cluster forks its workers where it can."""
+    from distributed import as_completed
+
+    from ..executor import dask_client, fork_available
+
+    run = f"{os.getpid():x}{time.time_ns() & 0xFFFFFF:x}"
+    with dask_client(scheduler, workers, "fork" if fork_available() else None) as (client, where):
+        if report is not None:
+            report["cluster"] = where
+        futures = {client.submit(build_prototype, params[p], s, options,
+                                 key=f"treegen-forest-{p.stem}-{s}-{run}"): i
+                   for i, (p, s) in enumerate(keys)}
+        for fut in as_completed(list(futures), loop=client.loop):
+            i = futures.pop(fut)
+            yield i, _in_file(keys[i][0], fut.result)
+            fut.release()
 
 
 def _crown_center(asset: Asset) -> np.ndarray:
@@ -129,13 +156,16 @@ def _rotz(deg: np.ndarray) -> np.ndarray:
 
 
 def build_scene(layout: Layout, all_lods: bool = False, error_px: float | None = None,
-                workers: int | None = None, progress: bool | None = None) -> Forest:
+                workers: int | None = None, progress: bool | None = None,
+                scheduler: str | None = None) -> Forest:
     """Prototypes (built once each) and instances with their LOD and time offset."""
     t0 = time.perf_counter()
     keys = sorted({(p.species, p.seed) for p in layout.placements}, key=lambda k: (str(k[0]), k[1]))
     index = {k: i for i, k in enumerate(keys)}
     options = make_options(layout, error_px)
-    prototypes = build_prototypes(keys, options, workers, progress, layout.params)
+    report: dict = {}
+    prototypes = build_prototypes(keys, options, workers, progress, layout.params, scheduler,
+                                  report)
     t1 = time.perf_counter()
     placements = layout.placements
     proto = np.array([index[(p.species, p.seed)] for p in placements], int)
@@ -159,7 +189,7 @@ def build_scene(layout: Layout, all_lods: bool = False, error_px: float | None =
                  for i in range(len(placements))]
     forest = prepare_forest(Forest(name=layout.name, prototypes=prototypes, instances=instances,
                                    all_lods=all_lods, phase_variants=layout.defaults.phase_variants,
-                                   loop=loop))
+                                   loop=loop, cluster=report.get("cluster", "")))
     forest.timings.update(prototypes_s=t1 - t0, place_s=time.perf_counter() - t1)
     return forest
 
@@ -188,6 +218,7 @@ def summary(scene: Forest, written: list[Path], seconds: float) -> dict:
         "instances": len(scene.instances),
         "instances_per_lod": {f"lod{k}": v for k, v in sorted(per_lod.items())},
         "all_lods": scene.all_lods,
+        "cluster": scene.cluster,
         "files": [str(p) for p in written],
         "bytes": int(sum(p.stat().st_size for p in written)),
         "seconds": round(seconds, 3),
@@ -199,14 +230,14 @@ def summary(scene: Forest, written: list[Path], seconds: float) -> dict:
 
 def run_forest(layout_path, output, all_lods: bool = False, error_px: float | None = None,
                workers: int | None = None, progress: bool | None = None,
-               max_trees: int = MAX_TREES) -> dict:
+               max_trees: int = MAX_TREES, scheduler: str | None = None) -> dict:
     """The whole command: validate (nothing written on error), build, write, summarise."""
     t0 = time.perf_counter()
     output = check_suffix(output, FOREST_WRITERS)
     if error_px is not None and not (math.isfinite(error_px) and 0 <= error_px <= 100):
         raise TreegenError(f"--error-px {error_px}: allowed range 0..100 pixels")
     layout = load_layout(layout_path, max_trees)
-    scene = build_scene(layout, all_lods, error_px, workers, progress)
+    scene = build_scene(layout, all_lods, error_px, workers, progress, scheduler)
     t1 = time.perf_counter()
     written = export_forest(scene, output)
     scene.timings["write_s"] = time.perf_counter() - t1
