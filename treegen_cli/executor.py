@@ -76,8 +76,11 @@ def dask_client(scheduler: str | None = None, workers: int | None = None,
         if start_method:
             config["distributed.worker.multiprocessing-method"] = start_method
         with dask.config.set(config):
+            # the scheduler's HTTP server (health routes) always starts; on a free port, so a
+            # busy 8787 (someone's dashboard) costs no "Port 8787 is already in use" warning
             cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, silence_logs=logging.CRITICAL)
+                                   dashboard_address=None, silence_logs=logging.CRITICAL,
+                                   scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
     finally:
         signal.signal(signal.SIGINT, previous)
     try:
