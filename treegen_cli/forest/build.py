@@ -1,6 +1,7 @@
 """Layout → Forest: each distinct (species, seed) built once (a prototype, on Dask),
-placed many times, each instance with the LOD its camera distance calls for and the phase
-variant nearest its time offset; then prepared for the writers.
+placed many times, each instance with all its prototype's LODs (or, baking a camera, the one
+its distance calls for) and the phase variant nearest its time offset; then prepared for the
+writers.
 
 Phase variety: an instance's time offset is the travel time of the shared wind field's gusts
 from the upwind edge (x·dir / speed: trees downwind sway later, as in a frozen, advected field)
@@ -54,14 +55,15 @@ def time_offsets(positions: np.ndarray, wind: WindSpec, seed: int = 0) -> np.nda
 
 def make_options(layout: Layout, error_px: float | None = None):
     """MakeOptions for every prototype: the layout's joint budget, the shared-field wind, and
-    LOD schedules for the layout's camera (fov, width) and error bound."""
+    LOD schedules for the layout's camera (fov, width; else the make defaults) and error bound."""
 
     w = layout.wind
     wind = WindOptions(speed=w.speed, direction_deg=w.direction_deg, gust=w.gust,
                        turbulence=w.turbulence, duration=w.duration, fps=w.fps,
                        field_seed=w.seed) if w.enabled else None
     cam = layout.camera
-    lod = replace(LOD_DEFAULTS, fov_deg=cam.fov_deg, width=cam.width_px,
+    lod = replace(LOD_DEFAULTS, fov_deg=cam.fov_deg if cam else LOD_DEFAULTS.fov_deg,
+                  width=cam.width_px if cam else LOD_DEFAULTS.width,
                   error_px=layout.defaults.error_px if error_px is None else error_px,
                   distances=layout.defaults.lod_distances or LOD_DEFAULTS.distances)
     return MakeOptions(rig=RigOptions(max_joints=layout.defaults.max_joints), wind=wind, lod=lod)
@@ -155,10 +157,18 @@ def _rotz(deg: np.ndarray) -> np.ndarray:
     return m
 
 
-def build_scene(layout: Layout, all_lods: bool = False, error_px: float | None = None,
+def build_scene(layout: Layout, all_lods: bool = True, error_px: float | None = None,
                 workers: int | None = None, progress: bool | None = None,
                 scheduler: str | None = None) -> Forest:
-    """Prototypes (built once each) and instances with their LOD and time offset."""
+    """Prototypes (built once each) and instances with their time offset.
+
+    all_lods (default): every instance carries all its prototype's LODs, for an engine to
+    switch as the player walks; the camera, if the layout has one, only orders the instances
+    nearest first (what a progressive loader fetches first) and records the LOD it would see.
+    all_lods=False bakes the layout's camera: each instance gets only that LOD, in layout order."""
+    if not all_lods and layout.camera is None:
+        raise TreegenError(f"--camera-lod: {layout.path} has no camera; add \"camera\": "
+                           "{\"position\": [x, y, z], \"target\": [x, y, z]} or drop --camera-lod")
     t0 = time.perf_counter()
     keys = sorted({(p.species, p.seed) for p in layout.placements}, key=lambda k: (str(k[0]), k[1]))
     index = {k: i for i, k in enumerate(keys)}
@@ -174,11 +184,16 @@ def build_scene(layout: Layout, all_lods: bool = False, error_px: float | None =
     rot = np.array([p.rotation_deg for p in placements], float)
     centers = np.array([_crown_center(a) for a in prototypes]).reshape(-1, 3)
     world_center = pos + scale[:, None] * np.einsum("nij,nj->ni", _rotz(rot), centers[proto])
-    dist = np.linalg.norm(world_center - np.asarray(layout.camera.position), axis=1)
     lods = np.zeros(len(placements), int)
-    for k, asset in enumerate(prototypes):     # per prototype (few), vectorised over instances
-        sel = proto == k
-        lods[sel] = select_lod(dist[sel], [lod.distance for lod in asset.lods], scale[sel])
+    dist = np.zeros(len(placements))
+    order = np.arange(len(placements))
+    if layout.camera is not None:
+        dist = np.linalg.norm(world_center - np.asarray(layout.camera.position), axis=1)
+        for k, asset in enumerate(prototypes):     # per prototype (few), vectorised over instances
+            sel = proto == k
+            lods[sel] = select_lod(dist[sel], [lod.distance for lod in asset.lods], scale[sel])
+        if all_lods:
+            order = np.argsort(dist / scale, kind="stable")   # nearest (on screen) first
     animated = layout.wind.enabled
     offsets = time_offsets(pos, layout.wind) if animated else np.zeros(len(placements))
     loop = layout.wind.duration if animated else 0.0
@@ -186,7 +201,7 @@ def build_scene(layout: Layout, all_lods: bool = False, error_px: float | None =
     variant = np.round(offsets / loop * V).astype(int) % V if loop > 0 else np.zeros(len(placements), int)
     instances = [Instance(int(proto[i]), tuple(pos[i]), float(rot[i]), float(scale[i]), int(lods[i]),
                           float(offsets[i]), float(dist[i]), placements[i].source, int(variant[i]))
-                 for i in range(len(placements))]
+                 for i in order]
     forest = prepare_forest(Forest(name=layout.name, prototypes=prototypes, instances=instances,
                                    all_lods=all_lods, phase_variants=layout.defaults.phase_variants,
                                    loop=loop, cluster=report.get("cluster", "")))
@@ -202,9 +217,10 @@ def leaf_updates(lod: Lod) -> tuple[int, float]:
     return lod_leaf_updates(lod)
 
 
-def summary(scene: Forest, written: list[Path], seconds: float) -> dict:
-    """The paper's comparison for the whole scene: leaf-vertex updates per frame with the
-    chosen LODs versus every leaf vertex of LOD0 every frame (no LOD)."""
+def summary(scene: Forest, written: list[Path], seconds: float, camera: bool = True) -> dict:
+    """The paper's comparison for the whole scene: leaf-vertex updates per frame with the LODs
+    the camera sees (without a camera: LOD0 everywhere, what the engine starts from) versus
+    every leaf vertex of LOD0 every frame (no LOD)."""
     per = [[leaf_updates(lod) for lod in a.lods] for a in scene.prototypes]
     per_lod: dict[int, int] = {}
     with_lod = without = 0.0
@@ -218,6 +234,7 @@ def summary(scene: Forest, written: list[Path], seconds: float) -> dict:
         "instances": len(scene.instances),
         "instances_per_lod": {f"lod{k}": v for k, v in sorted(per_lod.items())},
         "all_lods": scene.all_lods,
+        "camera": camera,
         "cluster": scene.cluster,
         "files": [str(p) for p in written],
         "bytes": int(sum(p.stat().st_size for p in written)),
@@ -228,7 +245,7 @@ def summary(scene: Forest, written: list[Path], seconds: float) -> dict:
     }
 
 
-def run_forest(layout_path, output, all_lods: bool = False, error_px: float | None = None,
+def run_forest(layout_path, output, all_lods: bool = True, error_px: float | None = None,
                workers: int | None = None, progress: bool | None = None,
                max_trees: int = MAX_TREES, scheduler: str | None = None) -> dict:
     """The whole command: validate (nothing written on error), build, write, summarise."""
@@ -241,4 +258,4 @@ def run_forest(layout_path, output, all_lods: bool = False, error_px: float | No
     t1 = time.perf_counter()
     written = export_forest(scene, output)
     scene.timings["write_s"] = time.perf_counter() - t1
-    return summary(scene, written, time.perf_counter() - t0)
+    return summary(scene, written, time.perf_counter() - t0, layout.camera is not None)
