@@ -1,27 +1,44 @@
 """Forest benchmark: the 1,000-tree example (examples/forest_1000.json) to .glb and .usdc.
-Prints seconds (prototypes / write / total), peak MB (this process + its worker processes,
-ru_maxrss), output MB, prototypes, instances per LOD, and leaf-vertex updates per frame with
-LOD vs without. Target (issue 6): under 60 s on the 2-core box, output ∝ prototypes.
 
-    python bench/forest_bench.py [layout.json] [--all-lods] [--workers N]
+Three tables:
+  1. per LOD mode (every tree with all its LODs, the default; --camera-lod, one LOD per tree)
+     and format: seconds (prototypes / write), output MB, and the size against the sum of the
+     prototypes' own files (what `treegen make` writes for each; issue 15: all LODs ≤ 1.2 ×);
+  2. building the prototypes: the process pool `treegen forest` used before issue 15 (kept
+     here only as the reference) against the Dask cluster it uses now (executor.dask_client,
+     embedded, forked workers) and against one process; medians of --reps runs, and whether
+     Dask's prototypes write the same bytes (they must);
+  3. peak MB (this process + its worker processes, ru_maxrss).
+
+    python bench/forest_bench.py [layout.json] [--workers N] [--reps R]
 
     (run from the repo root with PYTHONPATH=. so the working tree's treegen_cli is used)
 
-Measured (2-core shared box, 7 prototypes × 4 LODs, 1,000 trees, 32 joints, 4 s at 15 fps):
-    format  total_s  out_MB  leaf-vertex updates/frame LOD vs no LOD   per LOD
-       glb     2.8     42.2          4,258,436 vs 109,765,268      lod1 19, lod2 232, lod3 749
-      usdc     2.5     27.0          (same)
-    --all-lods: glb 3.9 s / 106 MB, usdc 3.1 s / 59 MB; peak 551 MB main, 320 MB per worker.
+Measured 2026-11-23 (2-core box shared with other jobs, load 16-22; 7 prototypes × 4 LODs,
+1,000 trees; `PYTHONPATH=. python bench/forest_bench.py --reps 3`):
+       LODs format proto_s write_s out_MB own_MB ratio
+        all    glb   25.25    6.33  122.4  106.2  1.15
+        all   usdc   25.25    4.01   65.3   66.3  0.98
+     camera    glb   15.20    0.96   50.6  106.2  0.48
+     camera   usdc   15.20    2.45   31.0   66.3  0.47
+    prototypes, 2 workers, median of 3: old pool 14.02 s, Dask 18.33 s (1.31×), one process
+    11.40 s (0.81×: on a box this loaded two workers gain nothing); same bytes from every path.
+    Before the quiet worker settings (executor.QUIET) Dask was 1.53× the old pool.
+    Idle-box figures before issue 15: camera glb 2.8 s / 42 MB, all LODs 3.9 s / 106 MB.
 """
 from __future__ import annotations
 
 import argparse
 import resource
+import statistics
 import tempfile
 import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from treegen_cli.forest import run_forest
+from treegen_cli.exchange import export, export_forest
+from treegen_cli.forest import build_prototypes, build_scene, load_layout
+from treegen_cli.forest.build import build_prototype, make_options
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -32,24 +49,70 @@ def _peak_mb() -> tuple[float, float]:
     return own, kids
 
 
+def old_pool(keys, params, options, workers: int) -> list:
+    """The pre-Dask prototype pool (a concurrent.futures process pool), as a reference."""
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        futures = [pool.submit(build_prototype, params[p], s, options) for p, s in keys]
+        return [f.result() for f in futures]
+
+
+def sizes(layout_path: str, workers: int | None, tmp: Path) -> None:
+    layout = load_layout(layout_path)
+    print(f"{'LODs':>7} {'format':>6} {'protos':>6} {'trees':>6} {'proto_s':>8} {'write_s':>8} "
+          f"{'out_MB':>8} {'own_MB':>8} {'ratio':>6}")
+    own: dict[str, float] = {}
+    for all_lods in (True, False):
+        scene = build_scene(layout, all_lods=all_lods, workers=workers, progress=False)
+        for suffix in (".glb", ".usdc"):
+            if suffix not in own:     # the prototypes' own files, as `treegen make` writes them
+                own[suffix] = sum(p.stat().st_size for k, a in enumerate(scene.prototypes)
+                                  for p in export(a, tmp / f"proto{k}{suffix}"))
+            t0 = time.perf_counter()
+            out = sum(p.stat().st_size for p in export_forest(scene, tmp / f"forest{suffix}"))
+            write = time.perf_counter() - t0
+            print(f"{'all' if all_lods else 'camera':>7} {suffix[1:]:>6} {len(scene.prototypes):>6} "
+                  f"{len(scene.instances):>6} {scene.timings['prototypes_s']:>8.2f} {write:>8.2f} "
+                  f"{out / 1e6:>8.1f} {own[suffix] / 1e6:>8.1f} {out / own[suffix]:>6.2f}")
+
+
+def pools(layout_path: str, workers: int, reps: int, tmp: Path) -> None:
+    layout = load_layout(layout_path)
+    keys = sorted({(p.species, p.seed) for p in layout.placements}, key=lambda k: (str(k[0]), k[1]))
+    options = make_options(layout)
+    runs: dict[str, list[float]] = {"old pool": [], "dask": [], "in process": []}
+    built = {}
+    for _ in range(reps):          # interleaved, so a busy spell hits every method alike
+        for name in runs:
+            t0 = time.perf_counter()
+            if name == "old pool":
+                built[name] = old_pool(keys, layout.params, options, workers)
+            else:
+                built[name] = build_prototypes(keys, options, workers if name == "dask" else 1,
+                                               False, layout.params)
+            runs[name].append(time.perf_counter() - t0)
+    same = all(_bytes(built["dask"], tmp, "d") == _bytes(b, tmp, n[:3]) for n, b in built.items())
+    base = statistics.median(runs["old pool"])
+    print(f"\nprototypes ({len(keys)}), {workers} workers, median of {reps}:")
+    for name, ts in runs.items():
+        m = statistics.median(ts)
+        print(f"  {name:>10}  {m:6.2f} s  ({m / base:.2f} × the old pool)  runs "
+              + " ".join(f"{t:.2f}" for t in ts))
+    print(f"  same bytes from every path: {same}")
+
+
+def _bytes(assets: list, tmp: Path, tag: str) -> list[bytes]:
+    return [export(a, tmp / f"{tag}{k}.glb")[0].read_bytes() for k, a in enumerate(assets)]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("layout", nargs="?", default=str(ROOT / "examples" / "forest_1000.json"))
-    ap.add_argument("--all-lods", action="store_true")
-    ap.add_argument("--workers", type=int, default=None)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--reps", type=int, default=3)
     args = ap.parse_args()
-    print(f"{'format':>6} {'protos':>6} {'trees':>6} {'proto_s':>8} {'write_s':>8} {'total_s':>8} "
-          f"{'out_MB':>8} {'upd/frame LOD':>14} {'no LOD':>12}  per LOD")
     with tempfile.TemporaryDirectory() as tmp:
-        for suffix in (".glb", ".usdc"):
-            t0 = time.perf_counter()
-            s = run_forest(args.layout, Path(tmp) / f"forest{suffix}", all_lods=args.all_lods,
-                           workers=args.workers, progress=False)
-            total = time.perf_counter() - t0
-            print(f"{suffix[1:]:>6} {s['prototypes']:>6} {s['instances']:>6} {s['prototypes_s']:>8.2f} "
-                  f"{s['write_s']:>8.2f} {total:>8.2f} {s['bytes'] / 1e6:>8.1f} "
-                  f"{s['leaf_vertex_updates_per_frame']:>14,} "
-                  f"{s['leaf_vertex_updates_per_frame_without_lod']:>12,}  {s['instances_per_lod']}")
+        sizes(args.layout, args.workers, Path(tmp))
+        pools(args.layout, args.workers, args.reps, Path(tmp))
     own, kids = _peak_mb()
     print(f"peak MB: main process {own:.0f}, largest worker {kids:.0f}")
 

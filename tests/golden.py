@@ -29,8 +29,13 @@ def cases() -> dict[str, list[str]]:
             out[f"{sp.stem}.{ext}"] = ["make", str(sp), "-o", "{out}", *CLIP]
     for ex in sorted((ROOT / "examples").glob("forest_*.json")):
         if ex.stem != "forest_1000":
-            out[f"{ex.stem}.glb"] = ["forest", str(ex), "-o", "{out}"]
-    out["forest_30m.usda"] = ["forest", str(ROOT / "examples" / "forest_30m.json"), "-o", "{out}"]
+            out[f"{ex.stem}.glb"] = ["forest", str(ex), "-o", "{out}", "--camera-lod"]
+    out["forest_30m.usda"] = ["forest", str(ROOT / "examples" / "forest_30m.json"), "-o", "{out}",
+                              "--camera-lod"]
+    # the default: every tree with all its LODs
+    for ext in ("glb", "usda"):
+        out[f"forest_30m_walk.{ext}"] = ["forest", str(ROOT / "examples" / "forest_30m.json"),
+                                         "-o", "{out}"]
     out["palm.obj"] = ["make", str(ROOT / "species" / "palm.txt"), "-o", "{out}", "--no-wind"]
     out["quaking_aspen.png"] = ["preview", str(ROOT / "species" / "quaking_aspen.txt"),
                                 "-o", "{out}", "--size", "96"]

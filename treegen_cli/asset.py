@@ -150,6 +150,7 @@ class Forest:
     phase_variants: int = 4
     loop: float = 0.0                      # clip period, s (0: static)
     timings: dict = field(default_factory=dict)
+    cluster: str = ""                      # where the prototypes were built (summary)
     # prepared: per (prototype, LOD) used, the first clip started at each phase variant
     variants: dict[tuple[int, int], list[Clip]] = field(default_factory=dict)
     # prepared: each prototype with its clips played over two periods (room for per-instance

@@ -16,20 +16,26 @@ from .limits import MAX_TREES
               help="Output scene: .glb .gltf (one file, shared meshes/skins/animation data) or "
                    ".usda .usdc .usdz (prototypes once, instanceable references).")
 @click.option("--schema", is_flag=True, help="Print the layout file's JSON Schema and exit.")
-@click.option("--all-lods", is_flag=True,
-              help="Write every LOD of every tree (MSFT_lod / UsdLod) instead of the one the "
-                   "camera distance calls for.")
+@click.option("--all-lods/--camera-lod", default=True,
+              help="Every tree carries all its LODs (glTF MSFT_lod, USD \"LOD\" variant set) for "
+                   "the engine to switch as the player walks [default], or only the LOD the "
+                   "layout's camera needs (a baked view: smaller, in layout order).")
 @click.option("--error-px", type=float, default=None,
               help="Screen-space error bound of the key schedules, pixels [default: the "
                    "layout's defaults.error_px, else 1].")
 @click.option("--workers", type=int, default=None,
-              help="Processes building prototypes [default: all cores].")
+              help="Worker processes of the embedded Dask cluster building the prototypes "
+                   "[default: one per core; 1: in this process].")
+@click.option("--scheduler", default=None, metavar="tcp://HOST:8786",
+              help="Build the prototypes on this Dask scheduler's workers instead [default: "
+                   "$DASK_SCHEDULER_ADDRESS, else an embedded cluster].")
 @click.option("--max-trees", type=int, default=MAX_TREES, show_default=True,
               help="Refuse layouts that place more trees than this (checked before building).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
-def forest(layout, output, schema, all_lods, error_px, workers, max_trees, as_json):
+def forest(layout, output, schema, all_lods, error_px, workers, scheduler, max_trees, as_json):
     """Build the forest described by LAYOUT (JSON; see --schema): each distinct (species, seed)
-    tree is built once and instanced, each instance at the LOD its camera distance calls for."""
+    tree is built once and instanced; every instance carries all its LODs (--camera-lod: the
+    one the layout's camera needs)."""
     from .forest import run_forest, schema_text
 
     if schema:
@@ -41,19 +47,28 @@ def forest(layout, output, schema, all_lods, error_px, workers, max_trees, as_js
         raise TreegenError("forest: give an output file with -o, e.g. -o forest.glb")
     if workers is not None and workers < 1:
         raise TreegenError(f"--workers {workers}: must be at least 1")
+    from .executor import scheduler_address
     from .progress import current_reporter
 
+    if workers is not None and scheduler_address(scheduler):
+        raise TreegenError(f"--workers {workers}: only for the embedded cluster; a --scheduler "
+                           "(or DASK_SCHEDULER_ADDRESS) cluster has its own workers")
+
     s = run_forest(layout, output, all_lods=all_lods, error_px=error_px, workers=workers,
-                   max_trees=max_trees, progress=current_reporter().show_progress)
+                   max_trees=max_trees, progress=current_reporter().show_progress,
+                   scheduler=scheduler)
     if as_json:
         click.echo(json.dumps(s, indent=2))
         return
     lods = ", ".join(f"{k} {v}" for k, v in s["instances_per_lod"].items())
     click.echo(f"wrote {', '.join(s['files'])}  ({s['bytes'] / 1e6:.2f} MB)")
-    click.echo(f"  {s['instances']} trees from {s['prototypes']} prototypes; per LOD: {lods}"
-               + ("  (all LODs written)" if s["all_lods"] else ""))
-    w, wo = s["leaf_vertex_updates_per_frame"], s["leaf_vertex_updates_per_frame_without_lod"]
-    ratio = f" ({w / wo:.1%})" if wo else ""
-    click.echo(f"  leaf-vertex updates per frame: {w:,} with LOD vs {wo:,} without{ratio}")
-    click.echo(f"  {s['seconds']:.2f} s  (prototypes {s['prototypes_s']:.2f}, "
+    click.echo(f"  {s['instances']} trees from {s['prototypes']} prototypes, "
+               + ("each with all its LODs" if s["all_lods"] else "each with one LOD")
+               + (f"; at the camera per LOD: {lods}" if s["camera"] else "; no camera"))
+    if s["camera"]:
+        w, wo = s["leaf_vertex_updates_per_frame"], s["leaf_vertex_updates_per_frame_without_lod"]
+        ratio = f" ({w / wo:.1%})" if wo else ""
+        click.echo(f"  leaf-vertex updates per frame at the camera: {w:,} with LOD vs {wo:,} "
+                   f"without{ratio}")
+    click.echo(f"  {s['seconds']:.2f} s  (prototypes {s['prototypes_s']:.2f} on {s['cluster']}, "
                f"write {s['write_s']:.2f})")

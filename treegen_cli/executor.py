@@ -32,9 +32,23 @@ def default_workers() -> int:
     return os.cpu_count() or 1
 
 
+# Monitors of the embedded cluster that we never read (no dashboard), slowed down or off:
+# each wakes a worker's event-loop thread, which must take the GIL from the building thread
+# (profiler: every 10 ms; loop tick: 20 ms; memory monitor: 100 ms). On a busy machine the
+# loop thread is then often preempted holding the GIL and the build waits (measured: 8
+# prototypes of forest_130m, 2 workers on a loaded 2-core box, 33-38 s → 28-29 s).
+QUIET = {"distributed.worker.profile.enabled": False,
+         "distributed.admin.tick.interval": "1s",
+         "distributed.admin.system-monitor.interval": "5s",
+         "distributed.admin.system-monitor.gil.enabled": False,
+         "distributed.worker.memory.monitor-interval": "2s"}
+
+
 @contextlib.contextmanager
 def dask_client(scheduler: str | None = None, workers: int | None = None):
-    """Yield (client, description); the cluster is closed on exit, even on Ctrl-C."""
+    """Yield (client, description); the cluster is closed on exit, even on Ctrl-C. The embedded
+    cluster spawns its workers (Dask's default): a fork of a process with running threads can
+    inherit a held lock and hang."""
     import dask
     from distributed import Client, LocalCluster
 
@@ -58,9 +72,13 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
     # this every worker prints its own KeyboardInterrupt traceback.
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        with dask.config.set({f"distributed.nanny.pre-spawn-environ.{TRIM}": None}):
+        config: dict = {f"distributed.nanny.pre-spawn-environ.{TRIM}": None, **QUIET}
+        with dask.config.set(config):
+            # the scheduler's HTTP server (health routes) always starts; on a free port, so a
+            # busy 8787 (someone's dashboard) costs no "Port 8787 is already in use" warning
             cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, silence_logs=logging.CRITICAL)
+                                   dashboard_address=None, silence_logs=logging.CRITICAL,
+                                   scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
     finally:
         signal.signal(signal.SIGINT, previous)
     try:

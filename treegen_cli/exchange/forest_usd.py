@@ -13,8 +13,9 @@ time offset in whole frames), so over the stage's one-period range it plays [o_i
 which loops seamlessly because the clip is periodic. Whole-frame offsets keep the number of
 distinct instancing prototypes bounded (≤ frames per loop per prototype).
 
-With `all_lods` a prototype keeps all its LODs (LODRootAPI + the "LOD" variant set from
-exchange.usd); otherwise one prototype prim per (prototype, LOD) actually used.
+With `all_lods` (the default) a prototype keeps all its LODs (LODRootAPI + exchange.usd's "LOD"
+variant set, lifted to the prototype's root so each tree has the set itself: LOD0 by default,
+any tree switchable, still instanced); otherwise one prototype prim per (prototype, LOD) used.
 
 Textures and axes as exchange.usd: a .usdz packages the textures and is Y up (instances then
 translate by the converted position and turn about +Y), a .usda/.usdc keeps Z up with the
@@ -39,6 +40,27 @@ def _prototype_asset(forest: Forest, p: int, lods: list[int], loop: bool):
     """Prototype p with only `lods`; its clips over two periods (Forest.looped) when looping."""
     asset = forest.looped[p] if loop else forest.prototypes[p]
     return replace(asset, lods=[asset.lods[k] for k in lods])
+
+
+def _lift_lod_variants(layer, proto, n: int) -> None:
+    """Give the prototype's root prim the "LOD" variant set, so every tree that references it
+    has one of its own: variant LODk selects LODk of the inner LODs prim (exchange.usd's set,
+    whose own default selection is dropped so the outer one decides). LOD0 is the default; an
+    engine or a user picks per tree (`tree0042{LOD=LOD2}`), which stays instanceable (the
+    selection is part of the instance's key)."""
+    from pxr import Sdf
+
+    spec = layer.GetPrimAtPath(proto)
+    inner = layer.GetPrimAtPath(proto.AppendChild("LODs"))
+    if inner is None or "LOD" not in inner.variantSelections:
+        raise TreegenError(f"prototype {proto.name}: has no LOD variant set to lift")
+    del inner.variantSelections["LOD"]
+    vset = Sdf.VariantSetSpec(spec, "LOD")
+    for k in range(n):
+        over = Sdf.PrimSpec(Sdf.VariantSpec(vset, f"LOD{k}").primSpec, "LODs", Sdf.SpecifierOver)
+        over.variantSelections["LOD"] = f"LOD{k}"
+    spec.variantSetNameList.Prepend("LOD")
+    spec.variantSelections["LOD"] = "LOD0"
 
 
 def build_forest_stage(scene: Forest, up: str = "Z", textures: TextureFiles | None = None,
@@ -83,6 +105,8 @@ def build_forest_stage(scene: Forest, up: str = "Z", textures: TextureFiles | No
         dst = protos_path.AppendChild(name)
         if not Sdf.CopySpec(sub.GetRootLayer(), src, layer, dst):
             raise TreegenError(f"prototype {name}: could not copy into the forest layer")
+        if k < 0 and len(lods) > 1:
+            _lift_lod_variants(layer, dst, len(lods))
         proto_paths[(p, k)] = dst
 
     trees_path = root_path.AppendChild("Trees")

@@ -1,16 +1,17 @@
-"""Layout file → placed instances → shared prototypes → one animated, LOD-selected scene.
+"""Layout file → placed instances → shared prototypes → one animated scene to walk through.
 
 Result: `treegen forest layout.json -o forest.glb` writes every distinct (species, seed) tree
-once (a prototype, with whatever LODs the pipeline gives it) and places it many times; each
-instance gets the LOD its distance to the camera calls for, or all of them with `--all-lods`.
+once (a prototype, built on Dask, with whatever LODs the pipeline gives it) and places it many
+times; each instance carries all its prototype's LODs for the engine to switch, or, with
+`--camera-lod`, only the one its distance to the layout's camera calls for.
 
     layout = load_layout("examples/forest_30m.json")      # validated; TreegenError names the
-    forest = build_scene(layout)                          #   JSON path, e.g. instances[12].species
+    forest = build_scene(layout, workers=2)               #   JSON path, e.g. instances[12].species
     export_forest(forest, "forest.glb")                   # atomic (exchange)
 
 One module per job: schema.py (the published JSON Schema and its checker), layout.py (file →
-placements), scatter.py (placing trees in a region), build.py (prototypes, LOD and phase per
-instance, the summary, the whole command).
+placements), scatter.py (placing trees in a region), build.py (prototypes on Dask, order or
+camera LOD and phase per instance, the summary, the whole command).
 """
 from __future__ import annotations
 

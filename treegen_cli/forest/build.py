@@ -1,6 +1,7 @@
-"""Layout → Forest: each distinct (species, seed) built once (a prototype, in a process pool),
-placed many times, each instance with the LOD its camera distance calls for and the phase
-variant nearest its time offset; then prepared for the writers.
+"""Layout → Forest: each distinct (species, seed) built once (a prototype, on Dask),
+placed many times, each instance with all its prototype's LODs (or, baking a camera, the one
+its distance calls for) and the phase variant nearest its time offset; then prepared for the
+writers.
 
 Phase variety: an instance's time offset is the travel time of the shared wind field's gusts
 from the upwind edge (x·dir / speed: trees downwind sway later, as in a frozen, advected field)
@@ -12,7 +13,6 @@ import math
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import replace
 from pathlib import Path
 
@@ -55,37 +55,48 @@ def time_offsets(positions: np.ndarray, wind: WindSpec, seed: int = 0) -> np.nda
 
 def make_options(layout: Layout, error_px: float | None = None):
     """MakeOptions for every prototype: the layout's joint budget, the shared-field wind, and
-    LOD schedules for the layout's camera (fov, width) and error bound."""
+    LOD schedules for the layout's camera (fov, width; else the make defaults) and error bound."""
 
     w = layout.wind
     wind = WindOptions(speed=w.speed, direction_deg=w.direction_deg, gust=w.gust,
                        turbulence=w.turbulence, duration=w.duration, fps=w.fps,
                        field_seed=w.seed) if w.enabled else None
     cam = layout.camera
-    lod = replace(LOD_DEFAULTS, fov_deg=cam.fov_deg, width=cam.width_px,
+    lod = replace(LOD_DEFAULTS, fov_deg=cam.fov_deg if cam else LOD_DEFAULTS.fov_deg,
+                  width=cam.width_px if cam else LOD_DEFAULTS.width,
                   error_px=layout.defaults.error_px if error_px is None else error_px,
                   distances=layout.defaults.lod_distances or LOD_DEFAULTS.distances)
     return MakeOptions(rig=RigOptions(max_joints=layout.defaults.max_joints), wind=wind, lod=lod)
 
 
-def _build_one(params, seed: int, options) -> Asset:
-    """Worker: grow, rig, skin, bake (and decimate) one prototype."""
+def build_prototype(params, seed: int, options) -> Asset:
+    """One Dask task (or a call in this process): grow, rig, skin, bake (and decimate) one
+    prototype."""
+    from ..executor import tune_worker_malloc
+
+    tune_worker_malloc()
     asset, _tree = build_asset(params, seed, options)
     return asset
 
 
 def build_prototypes(keys: list[tuple[Path, int]], options, workers: int | None = None,
-                     progress: bool | None = None, parsed: dict | None = None) -> list[Asset]:
-    """Each (species file, seed) built once, in a process pool on all cores (workers=1: in
-    this process). A rich progress bar on an interactive stderr only. `parsed`: species
-    already read (the layout's), so no file is parsed twice."""
+                     progress: bool | None = None, parsed: dict | None = None,
+                     scheduler: str | None = None, report: dict | None = None) -> list[Asset]:
+    """Each (species file, seed) built once, on the Dask cluster `treegen batch` uses
+    (executor.dask_client): an embedded one with `workers` processes (default one per core),
+    or the one at `scheduler` / $DASK_SCHEDULER_ADDRESS. Without a scheduler, one worker or
+    one prototype builds in this process (no cluster to start). Results stream back as they
+    finish; the list is in `keys` order, so the bytes never depend on who built what. A rich
+    progress bar on an interactive stderr only. `parsed`: species already read (the
+    layout's), so no file is parsed twice. `report["cluster"]` is set to where they ran."""
+    from ..executor import default_workers, scheduler_address
 
     params = dict(parsed or {})
     for path, _seed in keys:
         if path not in params:
             params[path] = load_params(path)
-    workers = workers or os.cpu_count() or 1
-    workers = max(1, min(workers, len(keys)))
+    remote = scheduler_address(scheduler) is not None
+    workers = max(1, min(workers or default_workers(), len(keys)))
     if progress is None:
         progress = sys.stderr.isatty()
     out: list[Asset | None] = [None] * len(keys)
@@ -95,24 +106,43 @@ def build_prototypes(keys: list[tuple[Path, int]], options, workers: int | None 
         bar.start()
         task = bar.add_task("prototypes", total=len(keys))
     try:
-        if workers == 1:
+        if not remote and workers == 1:
+            if report is not None:
+                report["cluster"] = "this process"
             for i, (path, seed) in enumerate(keys):
-                out[i] = _in_file(path, _build_one, params[path], seed, options)
+                out[i] = _in_file(path, build_prototype, params[path], seed, options)
                 if bar:
                     bar.advance(task)
         else:
-            with ProcessPoolExecutor(max_workers=workers) as pool:
-                futures = {pool.submit(_build_one, params[p], s, options): i
-                           for i, (p, s) in enumerate(keys)}
-                for fut in as_completed(futures):
-                    i = futures[fut]
-                    out[i] = _in_file(keys[i][0], fut.result)
-                    if bar:
-                        bar.advance(task)
+            for i, asset in _on_dask(keys, params, options, workers, scheduler, report):
+                out[i] = asset
+                if bar:
+                    bar.advance(task)
     finally:
         if bar:
             bar.stop()
     return out  # type: ignore[return-value]
+
+
+def _on_dask(keys, params, options, workers: int, scheduler: str | None, report: dict | None):
+    """Yield (index, prototype) as the cluster finishes them; a worker's TreegenError comes
+    back naming its species file. The embedded cluster spawns its workers: forking a client
+    whose event-loop and texture threads may hold locks can leave a worker hung (seen once)."""
+    from distributed import as_completed
+
+    from ..executor import dask_client
+
+    run = f"{os.getpid():x}{time.time_ns() & 0xFFFFFF:x}"
+    with dask_client(scheduler, workers) as (client, where):
+        if report is not None:
+            report["cluster"] = where
+        futures = {client.submit(build_prototype, params[p], s, options,
+                                 key=f"treegen-forest-{p.stem}-{s}-{run}"): i
+                   for i, (p, s) in enumerate(keys)}
+        for fut in as_completed(list(futures), loop=client.loop):
+            i = futures.pop(fut)
+            yield i, _in_file(keys[i][0], fut.result)
+            fut.release()
 
 
 def _crown_center(asset: Asset) -> np.ndarray:
@@ -128,14 +158,25 @@ def _rotz(deg: np.ndarray) -> np.ndarray:
     return m
 
 
-def build_scene(layout: Layout, all_lods: bool = False, error_px: float | None = None,
-                workers: int | None = None, progress: bool | None = None) -> Forest:
-    """Prototypes (built once each) and instances with their LOD and time offset."""
+def build_scene(layout: Layout, all_lods: bool = True, error_px: float | None = None,
+                workers: int | None = None, progress: bool | None = None,
+                scheduler: str | None = None) -> Forest:
+    """Prototypes (built once each) and instances with their time offset.
+
+    all_lods (default): every instance carries all its prototype's LODs, for an engine to
+    switch as the player walks; the camera, if the layout has one, only orders the instances
+    nearest first (what a progressive loader fetches first) and records the LOD it would see.
+    all_lods=False bakes the layout's camera: each instance gets only that LOD, in layout order."""
+    if not all_lods and layout.camera is None:
+        raise TreegenError(f"--camera-lod: {layout.path} has no camera; add \"camera\": "
+                           "{\"position\": [x, y, z], \"target\": [x, y, z]} or drop --camera-lod")
     t0 = time.perf_counter()
     keys = sorted({(p.species, p.seed) for p in layout.placements}, key=lambda k: (str(k[0]), k[1]))
     index = {k: i for i, k in enumerate(keys)}
     options = make_options(layout, error_px)
-    prototypes = build_prototypes(keys, options, workers, progress, layout.params)
+    report: dict = {}
+    prototypes = build_prototypes(keys, options, workers, progress, layout.params, scheduler,
+                                  report)
     t1 = time.perf_counter()
     placements = layout.placements
     proto = np.array([index[(p.species, p.seed)] for p in placements], int)
@@ -144,11 +185,16 @@ def build_scene(layout: Layout, all_lods: bool = False, error_px: float | None =
     rot = np.array([p.rotation_deg for p in placements], float)
     centers = np.array([_crown_center(a) for a in prototypes]).reshape(-1, 3)
     world_center = pos + scale[:, None] * np.einsum("nij,nj->ni", _rotz(rot), centers[proto])
-    dist = np.linalg.norm(world_center - np.asarray(layout.camera.position), axis=1)
     lods = np.zeros(len(placements), int)
-    for k, asset in enumerate(prototypes):     # per prototype (few), vectorised over instances
-        sel = proto == k
-        lods[sel] = select_lod(dist[sel], [lod.distance for lod in asset.lods], scale[sel])
+    dist = np.zeros(len(placements))
+    order = np.arange(len(placements))
+    if layout.camera is not None:
+        dist = np.linalg.norm(world_center - np.asarray(layout.camera.position), axis=1)
+        for k, asset in enumerate(prototypes):     # per prototype (few), vectorised over instances
+            sel = proto == k
+            lods[sel] = select_lod(dist[sel], [lod.distance for lod in asset.lods], scale[sel])
+        if all_lods:
+            order = np.argsort(dist / scale, kind="stable")   # nearest (on screen) first
     animated = layout.wind.enabled
     offsets = time_offsets(pos, layout.wind) if animated else np.zeros(len(placements))
     loop = layout.wind.duration if animated else 0.0
@@ -156,10 +202,10 @@ def build_scene(layout: Layout, all_lods: bool = False, error_px: float | None =
     variant = np.round(offsets / loop * V).astype(int) % V if loop > 0 else np.zeros(len(placements), int)
     instances = [Instance(int(proto[i]), tuple(pos[i]), float(rot[i]), float(scale[i]), int(lods[i]),
                           float(offsets[i]), float(dist[i]), placements[i].source, int(variant[i]))
-                 for i in range(len(placements))]
+                 for i in order]
     forest = prepare_forest(Forest(name=layout.name, prototypes=prototypes, instances=instances,
                                    all_lods=all_lods, phase_variants=layout.defaults.phase_variants,
-                                   loop=loop))
+                                   loop=loop, cluster=report.get("cluster", "")))
     forest.timings.update(prototypes_s=t1 - t0, place_s=time.perf_counter() - t1)
     return forest
 
@@ -172,9 +218,10 @@ def leaf_updates(lod: Lod) -> tuple[int, float]:
     return lod_leaf_updates(lod)
 
 
-def summary(scene: Forest, written: list[Path], seconds: float) -> dict:
-    """The paper's comparison for the whole scene: leaf-vertex updates per frame with the
-    chosen LODs versus every leaf vertex of LOD0 every frame (no LOD)."""
+def summary(scene: Forest, written: list[Path], seconds: float, camera: bool = True) -> dict:
+    """The paper's comparison for the whole scene: leaf-vertex updates per frame with the LODs
+    the camera sees (without a camera: LOD0 everywhere, what the engine starts from) versus
+    every leaf vertex of LOD0 every frame (no LOD)."""
     per = [[leaf_updates(lod) for lod in a.lods] for a in scene.prototypes]
     per_lod: dict[int, int] = {}
     with_lod = without = 0.0
@@ -188,6 +235,8 @@ def summary(scene: Forest, written: list[Path], seconds: float) -> dict:
         "instances": len(scene.instances),
         "instances_per_lod": {f"lod{k}": v for k, v in sorted(per_lod.items())},
         "all_lods": scene.all_lods,
+        "camera": camera,
+        "cluster": scene.cluster,
         "files": [str(p) for p in written],
         "bytes": int(sum(p.stat().st_size for p in written)),
         "seconds": round(seconds, 3),
@@ -197,17 +246,17 @@ def summary(scene: Forest, written: list[Path], seconds: float) -> dict:
     }
 
 
-def run_forest(layout_path, output, all_lods: bool = False, error_px: float | None = None,
+def run_forest(layout_path, output, all_lods: bool = True, error_px: float | None = None,
                workers: int | None = None, progress: bool | None = None,
-               max_trees: int = MAX_TREES) -> dict:
+               max_trees: int = MAX_TREES, scheduler: str | None = None) -> dict:
     """The whole command: validate (nothing written on error), build, write, summarise."""
     t0 = time.perf_counter()
     output = check_suffix(output, FOREST_WRITERS)
     if error_px is not None and not (math.isfinite(error_px) and 0 <= error_px <= 100):
         raise TreegenError(f"--error-px {error_px}: allowed range 0..100 pixels")
     layout = load_layout(layout_path, max_trees)
-    scene = build_scene(layout, all_lods, error_px, workers, progress)
+    scene = build_scene(layout, all_lods, error_px, workers, progress, scheduler)
     t1 = time.perf_counter()
     written = export_forest(scene, output)
     scene.timings["write_s"] = time.perf_counter() - t1
-    return summary(scene, written, time.perf_counter() - t0)
+    return summary(scene, written, time.perf_counter() - t0, layout.camera is not None)

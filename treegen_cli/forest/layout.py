@@ -65,7 +65,7 @@ class Placement:
 class Layout:
     name: str
     path: Path
-    camera: Camera
+    camera: Camera | None         # optional: orders the trees; --camera-lod picks LODs by it
     wind: WindSpec
     defaults: Defaults
     placements: list[Placement]
@@ -110,11 +110,13 @@ def parse_layout(data, path: Path, max_trees: int = MAX_TREES) -> Layout:
     schema = layout_schema()
     check_schema(data, schema, schema)
     base = path.parent
-    cam = data["camera"]
-    camera = Camera(_xyz(cam["position"]), _xyz(cam["target"]),
-                    float(cam.get("fov_deg", 60.0)), int(cam.get("width_px", 1920)))
-    if np.allclose(camera.position, camera.target):
-        raise TreegenError("camera.target: must differ from camera.position")
+    camera = None
+    if "camera" in data:
+        cam = data["camera"]
+        camera = Camera(_xyz(cam["position"]), _xyz(cam["target"]),
+                        float(cam.get("fov_deg", 60.0)), int(cam.get("width_px", 1920)))
+        if np.allclose(camera.position, camera.target):
+            raise TreegenError("camera.target: must differ from camera.position")
     wind = WindSpec(**data.get("wind", {}))
     d = dict(data.get("defaults", {}))
     if "lod_distances" in d:
