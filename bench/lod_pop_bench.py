@@ -7,6 +7,12 @@ Each switch LOD k−1 → k is rendered at the size the tree has on screen at LO
 project's renderer (treegen_cli.silhouette). IoU: the lowest over the views; coverage: new/old
 area, the farthest from 1. Target (issue 13): IoU ≥ 0.9 and coverage within ±5 % everywhere.
 Also prints each LOD's triangles as a fraction of LOD0's.
+
+Measured (one view, 768 px): before lod_budget (LeafQuality regrowth): aspen LOD1→2 IoU 0.745,
+cover −17.8 %, oak −25.8 %, cottonwood −36.2 %, farthest LOD 5–72 % of LOD0's triangles.
+After: cover within ±5 % for 9 of 15 species (larch −22 %, fan palm +29 %, shave grass +28 %,
+rush ±17 %, palm +6 %, tamarack +5.3 % are not), triangles 50/15/5 % for all but shave grass
+(4.8 %); IoU 0.49–0.95, the 0.9 target met only by balsam fir and the willow.
 """
 from __future__ import annotations
 
