@@ -51,6 +51,7 @@ DEFAULTS: dict[str, object] = {
     "error_px": 1.0,
     "error_form": "exact",
     "interpolation": "linear",
+    "lod_triangles": "0.5,0.15,0.05",
     "no_lod": False,
     "lod_files": False,
     "up_axis": None,
@@ -65,7 +66,7 @@ FLOATS = ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "fo
 FLAGS = ("no_wind", "no_lod", "lod_files", "no_textures")
 CHOICES = {"leaf_geometry": ("card", "shape"), "error_form": ("exact", "paper"),
            "interpolation": ("linear", "step"), "up_axis": (None, "y", "z")}
-LISTS = ("joint_levels", "sides", "lod_distances")
+LISTS = ("joint_levels", "sides", "lod_distances", "lod_triangles")
 
 
 def cli_name(key: str) -> str:
@@ -99,6 +100,8 @@ def _number_list(key: str, value, kind: type, label: Callable[[str], str]) -> tu
         except ValueError:
             example = "0,10,30,130" if kind is float else "0,1,2"
             what = "metres" if kind is float else "whole numbers"
+            if key == "lod_triangles":
+                example, what = "0.5,0.15,0.05", "fractions"
             raise TreegenError(f"{label(key)} '{value}': expected comma-separated {what}, "
                                f"e.g. {example}") from None
     elif isinstance(value, (list, tuple)) and all(
@@ -163,6 +166,7 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
     v["joint_levels"] = _number_list("joint_levels", v["joint_levels"], int, label)
     v["sides"] = _number_list("sides", v["sides"], int, label)
     v["lod_distances"] = _number_list("lod_distances", v["lod_distances"], float, label)
+    v["lod_triangles"] = _number_list("lod_triangles", v["lod_triangles"], float, label)
 
     d = v["lod_distances"]
     if not v["no_lod"]:
@@ -171,6 +175,10 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
                                "give one or more ascending distances in metres, each >= 0")
         if len(set(d)) != len(d):
             raise TreegenError(f"{label('lod_distances')} {_text(d)}: distances repeat")
+        t = v["lod_triangles"]
+        if not t or any(not (math.isfinite(x) and 0.0 < x <= 1.0) for x in t):
+            raise TreegenError(f"{label('lod_triangles')} '{_text(t)}': give LOD1, LOD2, … "
+                               "triangles as fractions of LOD0's, each in (0, 1], e.g. 0.5,0.15,0.05")
     if v["max_joints"] < 1:
         raise TreegenError(f"{label('max_joints')} {v['max_joints']}: the joint budget must be at least 1")
     mesh = replace(MESH_DEFAULTS, leaf_geometry=v["leaf_geometry"])
@@ -186,7 +194,8 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
         stiffness=v["stiffness"])
     lod = None if v["no_lod"] or static else LodOptions(
         distances=v["lod_distances"], fov_deg=v["fov"], width=v["width"], error_px=v["error_px"],
-        error_form=v["error_form"], interpolation=v["interpolation"].upper())
+        error_form=v["error_form"], interpolation=v["interpolation"].upper(),
+        triangles=(1.0, *v["lod_triangles"]))
     make_options = MakeOptions(
         generate=GenerateOptions(max_stems=v["max_stems"], max_leaves=v["max_leaves"]),
         rig=RigOptions(max_joints=v["max_joints"], joint_levels=v["joint_levels"]),

@@ -201,6 +201,11 @@ def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> lis
               help="Up axis of USD, OBJ and PLY files, metres either way [default: y for .usdz "
                    ".obj .ply, z for .usda .usdc]; glTF is always Y up.")
 @_lod_options
+@click.option("--lod-triangles", default="0.5,0.15,0.05", show_default=True, metavar="0.5,0.15,0.05",
+              help="Triangles of LOD1, LOD2, … as fractions of LOD0's (the last repeats); a LOD "
+                   "never has more than the one before it. Each is cut from LOD0's tree: fewer "
+                   "sides, stems thinner than half a pixel at its distance dropped, fewer leaves "
+                   "spread over the whole crown and scaled to cover what all of them covered.")
 @click.option("--no-lod", is_flag=True, help="Write one LOD with the dense clip.")
 @click.option("--lod-files", is_flag=True,
               help="Write each LOD as its own complete file, NAME_LOD0.glb, NAME_LOD1.glb, … "
@@ -215,8 +220,8 @@ def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> lis
 def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels, sides,
          leaf_geometry, texture_size, leaf_texture, bark_texture, no_textures, wind_speed,
          wind_dir, gust, turbulence, duration, fps, stiffness, no_wind, up_axis, lod_distances,
-         fov, width, error_px, error_form, interpolation, no_lod, lod_files, max_vertices,
-         max_keys, as_json):
+         fov, width, error_px, error_form, interpolation, lod_triangles, no_lod, lod_files,
+         max_vertices, max_keys, as_json):
     """Grow SPECIES and write a skinned, wind-animated tree to OUTPUT."""
     from .api import build, check_output, resolve, write
     from .exchange import STATIC
@@ -233,7 +238,8 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
                        gust=gust, turbulence=turbulence, duration=duration, fps=fps,
                        stiffness=stiffness, no_wind=no_wind, lod_distances=lod_distances,
                        fov=fov, width=width, error_px=error_px, error_form=error_form,
-                       interpolation=interpolation, no_lod=no_lod, lod_files=lod_files,
+                       interpolation=interpolation, lod_triangles=lod_triangles,
+                       no_lod=no_lod, lod_files=lod_files,
                        up_axis=up_axis, max_vertices=max_vertices, max_keys=max_keys),
                   output=output)
     options = job.options

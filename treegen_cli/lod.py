@@ -28,9 +28,9 @@ Two steps per distance:
      bound holds (parents' keys move children). Under LINEAR step 1 runs against
      linear_schedule_scale × the threshold, since slerp errs far less than holding.
 
-Geometric LODs (`lod_stage_options`): per LOD index a coarser tree — LeafQuality scaled down
-(fewer, larger leaves, same total area), fewer stem sides, the finest stem level dropped far
-away (leaf sizes rescaled so total leaf area is kept), a smaller joint budget.
+Geometric LODs (lod_budget.py): per LOD index a coarser tree cut from LOD0's within
+`triangles` × LOD0's triangles — fewer sides, thin stems dropped, a stratified subset of the
+leaves scaled to cover what all of them covered (lod_leaves.py) — and a smaller joint budget.
 """
 from __future__ import annotations
 
@@ -62,10 +62,9 @@ class LodOptions:
     error_form: str = "exact"                  # "exact" 2·d·tan(fov/2)/width, or "paper" d·tan(fov)/width
     interpolation: str = "LINEAR"              # "LINEAR" (slerp) or "STEP" (the paper's hold)
     aspect: float = 16.0 / 9.0
-    leaf_quality: tuple[float, ...] = (1.0, 0.5, 0.25, 0.125)   # × the species' LeafQuality
     sides: tuple[tuple[int, ...], ...] = ((16, 8, 6, 4, 3), (8, 6, 4, 3), (6, 4, 3), (4, 3))
     joint_fraction: tuple[float, ...] = (1.0, 0.5, 0.25, 0.125)  # × the joint budget
-    drop_levels: tuple[int, ...] = (0, 0, 1, 1)  # finest stem levels dropped (≥ 2 levels remain)
+    triangles: tuple[float, ...] = (1.0, 0.5, 0.15, 0.05)  # × LOD0's triangles (lod_budget.py)
     max_iterations: int = 200                  # playback-check refinement rounds
     linear_schedule_scale: float = 4.0         # LINEAR: the walk's threshold × this (see decimate)
 
@@ -90,11 +89,13 @@ class LodOptions:
             raise TreegenError(f"--interpolation {self.interpolation!r}: use 'linear' or 'step'")
         if not (self.aspect > 0 and self.max_iterations >= 1 and self.linear_schedule_scale >= 1):
             raise TreegenError("LOD aspect must be > 0 and max_iterations >= 1")
-        if (min(self.leaf_quality) <= 0 or max(self.leaf_quality) > 1
-                or min(self.joint_fraction) <= 0 or max(self.joint_fraction) > 1
-                or min(self.drop_levels) < 0 or min(min(s) for s in self.sides) < 3):
-            raise TreegenError("LOD tables: leaf_quality and joint_fraction in (0, 1], "
-                               "drop_levels >= 0, sides >= 3")
+        if (min(self.joint_fraction) <= 0 or max(self.joint_fraction) > 1
+                or min(min(s) for s in self.sides) < 3):
+            raise TreegenError("LOD tables: joint_fraction in (0, 1], sides >= 3")
+        t = self.triangles
+        if not t or any(not (math.isfinite(x) and 0.0 < x <= 1.0) for x in t):
+            raise TreegenError(f"--lod-triangles {','.join(f'{x:g}' for x in t) or '(none)'}: "
+                               "give fractions of LOD0's triangles, each in (0, 1]")
 
 
 LOD_DEFAULTS = LodOptions()
@@ -356,49 +357,7 @@ def measure_error_px(skeleton: Skeleton, primitives: list[Primitive], dense: Cli
 
 # ---------------------------------------------------------------------------- geometric LODs
 
-def lod_levels(params_levels: int, index: int, options: LodOptions = LOD_DEFAULTS) -> int | None:
-    """Stem levels grown for LOD `index` (None: the species' own); never fewer than 2."""
-    drop = _at(options.drop_levels, index)
-    if drop <= 0 or params_levels <= 2:
-        return None
-    return max(2, params_levels - drop)
-
-
-def lod_stage_options(params, index: int, generate_options, rig_options, mesh_options,
-                      options: LodOptions = LOD_DEFAULTS):
-    """(Params, GenerateOptions, RigOptions, MeshOptions) of LOD `index`: LeafQuality and the
-    joint budget scaled down, fewer sides, the finest levels dropped. When a level is dropped the
-    leaves move to the new finest level, and `Leaves` is scaled by the generator's own count
-    estimate so the leaf count still follows LeafQuality (sizes 1/√quality, as Weber–Penn).
-    LOD0 with factors 1 is unchanged."""
-    from .generate import estimate_counts
-
-    q = _at(options.leaf_quality, index)
-    gen = generate_options
-    quality = (params.leaf_quality if gen.leaf_quality is None else gen.leaf_quality) * q
-    if q < 1.0:
-        gen = replace(gen, leaf_quality=quality)
-    levels = lod_levels(params.levels, index, options)
-    if levels is not None:
-        gen = replace(gen, levels=levels)
-        _, full = estimate_counts(params, leaf_quality=quality)
-        _, fewer = estimate_counts(params, leaf_quality=quality, levels=levels)
-        if fewer > 0 and full > 0:
-            params = replace(params, leaves=params.leaves * full / fewer)
-    frac = _at(options.joint_fraction, index)
-    rig = replace(rig_options, max_joints=max(1, int(round(rig_options.max_joints * frac)))) \
-        if frac < 1.0 else rig_options
-    mesh = mesh_options if index == 0 else replace(mesh_options, sides=_at(options.sides, index))
-    return params, gen, rig, mesh
-
-
-def match_leaf_area(tree, target_area: float):
-    """The tree with every leaf scaled by one factor so the total leaf area is `target_area`
-    (dropping a stem level changes the leaf count; LeafQuality alone keeps the area)."""
-    area = float(np.sum(tree.leaf_area))
-    if tree.n_leaves == 0 or area <= 0 or target_area <= 0:
-        return tree
-    return replace(tree, leaf_size=tree.leaf_size * math.sqrt(target_area / area))
+# Geometric LODs are cut from LOD0's tree within triangle budgets: lod_budget.py, lod_leaves.py.
 
 
 # ---------------------------------------------------------------------------- the paper's table

@@ -10,9 +10,10 @@ from dataclasses import dataclass, field, replace
 
 from . import __version__
 from .asset import Asset, Lod
-from .generate import DEFAULTS as GENERATE_DEFAULTS, GenerateOptions, generate, regrow_leaves
+from .generate import DEFAULTS as GENERATE_DEFAULTS, GenerateOptions, generate
 from .limits import LIMITS_DEFAULTS, Limits, check_keys, check_mesh
-from .lod import LOD_DEFAULTS, LodOptions, decimate, lod_stage_options, match_leaf_area, screen_coverage
+from .lod import LOD_DEFAULTS, LodOptions, decimate, screen_coverage
+from .lod_budget import lod_tree
 from .materials import MATERIAL_DEFAULTS, MaterialOptions, build_materials
 from .mesh import MESH_DEFAULTS, MeshOptions, build_mesh
 from .params import Params
@@ -70,20 +71,18 @@ def build_lod(tree: Tree, options: MakeOptions, seed: int, timings: Timings) -> 
 
 def build_lods(params: Params, tree: Tree, options: MakeOptions, seed: int,
                timings: Timings) -> list[Lod]:
-    """One coarser tree per LOD distance (lod.lod_stage_options), each with its own rig, mesh,
-    dense wind (same wind options and seed, so the motion matches) and a clip decimated for its
-    distance (clip_name(k)). LOD0 reuses `tree`; lower LODs regrow it from the same seed."""
+    """One coarser tree per LOD distance, each with its own rig, mesh, dense wind (same wind
+    options and seed, so the motion matches) and a clip decimated for its distance
+    (clip_name(k)). LOD0 is `tree`; lower LODs are cut from it within their triangle budgets
+    (lod_budget.lod_tree: thin stems dropped, leaves thinned and scaled to keep the cover)."""
     lo = options.lod
-    area = float(tree.leaf_area.sum())
     height = tree_height(tree)
-    lods = []
+    lods: list[Lod] = []
     for k, distance in enumerate(lo.distances):
-        p, gen, rig, mesh = lod_stage_options(params, k, options.generate, options.rig,
-                                              options.mesh, lo)
-        t = tree if gen == options.generate and p == params else \
-            timings.run("generate", regrow_leaves, tree, p, gen)
-        if gen.levels is not None:
-            t = match_leaf_area(t, area)
+        t, rig, mesh = tree, options.rig, options.mesh
+        if k > 0:
+            t, rig, mesh = timings.run("generate", lod_tree, tree, k, lods[0], lods[-1], options.rig,
+                                       options.mesh, lo)
         lod = build_lod(t, replace(options, rig=rig, mesh=mesh), seed, timings)
         clips = [timings.run("lod", decimate, lod.skeleton, lod.primitives, c, distance, lo,
                              clip_name(k))[0] for c in lod.clips]

@@ -322,7 +322,10 @@ def joint_loads(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS) -> JointL
     lever = np.linalg.norm(s_sub, axis=1) / np.maximum(m_sub, 1e-12)     # load centre's lever
     spread = np.sqrt(3.0 * np.maximum(inertia / np.maximum(m_sub, 1e-12) - lever**2, 0.0))
     compliance = _span_compliance(tree, rig, carrier, bearing, lever, spread)
-    stiffness = options.stiffness * options.elastic_modulus / np.maximum(compliance, 1e-300)
+    # a joint whose span has no length (a LOD's joint on a kept stem's base, where its parent's
+    # sits) is rigid: as stiff as a billionth of the most compliant joint, not infinitely
+    floor = max(float(compliance.max(initial=0.0)) * 1e-9, 1e-300)
+    stiffness = options.stiffness * options.elastic_modulus / np.maximum(compliance, floor)
     stiffness = np.maximum(stiffness, 1e-9)   # a massless zero-radius joint must not divide by zero
     return JointLoads(pivot, direction, own_area, own_moment, m_sub, inertia, s_sub, S_sub,
                       radius, stiffness, span, as_sub, aS_sub)

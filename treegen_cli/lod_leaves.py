@@ -1,0 +1,117 @@
+"""Coverage-true leaf LODs: fewer leaves that cover the crown as the full set did.
+
+A far LOD used to regrow the tree with fewer, larger leaves on fewer stem levels; with the twigs
+gone, its leaves sat in rows along the bare main branches ("fern fronds") and the crown lost a
+fifth of its cover. Here a LOD is cut from LOD0's own tree instead:
+
+  * `prune_stems`: stems not kept are removed, and their leaves stay where they were, re-parented
+    to the node where their nearest kept ancestor carries them (so they sway with it, skinned
+    to a joint that exists in the LOD's rig);
+  * `thin_leaves`: a spatially stratified subset of the leaves — every cell of a grid over the
+    crown keeps its share, so the kept leaves fill the crown volume as the full set did — each
+    kept leaf scaled so the LOD's projected leaf area matches LOD0's (`area_factor`).
+
+    lod = thin_leaves(prune_stems(tree, keep), n_keep=len // 4, area_factor=...)
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from .tree import Tree
+
+LENGTH_SHARE = 0.25       # of a kept leaf's growth in area (log), the share taken in length:
+                          # blades widen more than they lengthen, so the crown's reach stays
+GRID = 24                 # cells per side of the stratification grid over the leaves' bounds
+
+
+def stem_closure(tree: Tree, keep: np.ndarray) -> np.ndarray:
+    """`keep` (S,) with every stem whose ancestor is dropped dropped too (trunks kept)."""
+    keep = np.asarray(keep, dtype=bool).copy()
+    keep[tree.stem_level == 0] = True
+    parent = tree.stem_parent
+    has = parent >= 0
+    while True:                                # one pass per generation (levels, clone chains)
+        nxt = keep & np.where(has, keep[np.maximum(parent, 0)], True)
+        if np.array_equal(nxt, keep):
+            return keep
+        keep = nxt
+
+
+def prune_stems(tree: Tree, keep: np.ndarray) -> Tree:
+    """The tree without the stems `keep` (S,) drops (and their descendants); leaves of dropped
+    stems keep their place and frame and hang from the node where their nearest kept ancestor
+    carries the dropped branch (its `stem_parent_node`)."""
+    keep = stem_closure(tree, keep)
+    if keep.all():
+        return tree
+    new_stem = np.cumsum(keep) - 1
+    node_keep = keep[tree.node_stem]
+    new_node = np.cumsum(node_keep) - 1
+    # leaves: climb dropped stems to the attach node on a kept one
+    stem = tree.leaf_stem.astype(np.int64)
+    node = tree.leaf_node.astype(np.int64)
+    while (up := ~keep[stem]).any():
+        node = np.where(up, tree.stem_parent_node[stem], node)
+        stem = np.where(up, tree.stem_parent[stem], stem)
+    s = np.flatnonzero(keep)
+    parent = tree.stem_parent[s]
+    pnode = tree.stem_parent_node[s]
+    return replace(
+        tree,
+        stem_level=tree.stem_level[s],
+        stem_parent=np.where(parent >= 0, new_stem[np.maximum(parent, 0)], -1).astype(np.int32),
+        stem_parent_node=np.where(pnode >= 0, new_node[np.maximum(pnode, 0)], -1).astype(np.int32),
+        stem_offset=tree.stem_offset[s], stem_length=tree.stem_length[s],
+        stem_radius=tree.stem_radius[s], stem_clone=tree.stem_clone[s],
+        stem_node_start=new_node[tree.stem_node_start[s]].astype(np.int32),
+        stem_node_count=tree.stem_node_count[s],
+        node_stem=new_stem[tree.node_stem[node_keep]].astype(np.int32),
+        node_pos=tree.node_pos[node_keep], node_frame=tree.node_frame[node_keep],
+        node_radius=tree.node_radius[node_keep], node_z=tree.node_z[node_keep],
+        leaf_stem=new_stem[stem].astype(np.int32), leaf_node=new_node[node].astype(np.int32))
+
+
+def stratified_pick(points: np.ndarray, n_keep: int, seed: int) -> np.ndarray:
+    """Sorted indices of `n_keep` of `points` (n, 3) spread like all of them: each cell of a
+    GRID³ grid over their bounds keeps its share (n_keep/n of its points, rounded by a seeded
+    phase per cell so the total is unbiased), then the total is trimmed or topped up at random."""
+    n = points.shape[0]
+    if n_keep >= n:
+        return np.arange(n)
+    if n_keep <= 0:
+        return np.zeros(0, dtype=np.int64)
+    rng = np.random.default_rng([int(seed), 0x57EA7, n_keep])
+    lo, hi = points.min(0), points.max(0)
+    cell = np.floor((points - lo) / np.maximum(hi - lo, 1e-12) * (GRID - 1e-9)).astype(np.int64)
+    cid = (cell[:, 0] * GRID + cell[:, 1]) * GRID + cell[:, 2]
+    order = np.lexsort((rng.random(n), cid))              # by cell, random within a cell
+    sc = cid[order]
+    start = np.flatnonzero(np.r_[True, sc[1:] != sc[:-1]])
+    rank = np.arange(n) - np.repeat(start, np.diff(np.r_[start, n]))
+    phase = rng.random(start.size)[np.repeat(np.arange(start.size), np.diff(np.r_[start, n]))]
+    q = n_keep / n
+    take = np.floor((rank + 1) * q + phase) - np.floor(rank * q + phase) > 0
+    picked = order[take]
+    if picked.size > n_keep:
+        picked = rng.choice(picked, n_keep, replace=False)
+    elif picked.size < n_keep:
+        rest = np.setdiff1d(np.arange(n), picked)
+        picked = np.concatenate([picked, rng.choice(rest, n_keep - picked.size, replace=False)])
+    return np.sort(picked)
+
+
+def thin_leaves(tree: Tree, n_keep: int, area_factor: float, seed: int = 0) -> Tree:
+    """`n_keep` stratified leaves of `tree`, each blade scaled by `area_factor` in area
+    (length × area_factor^LENGTH_SHARE, width × the rest)."""
+    if tree.n_leaves == 0:
+        return tree
+    pick = stratified_pick(tree.leaf_pos, n_keep, tree.seed if seed == 0 else seed)
+    f = max(area_factor, 0.0)
+    grow = np.array([f ** LENGTH_SHARE, f ** (1.0 - LENGTH_SHARE)])   # (length, width) factors
+    size, frame = tree.leaf_size[pick], tree.leaf_frame[pick]
+    # grown about the blade's middle, not its base: the leaf stays where it was
+    pos = tree.leaf_pos[pick] - (0.5 * (grow[0] - 1.0) * size[:, 0])[:, None] * frame[:, :, 1]
+    return replace(tree, leaf_stem=tree.leaf_stem[pick], leaf_node=tree.leaf_node[pick],
+                   leaf_pos=pos, leaf_frame=frame, leaf_size=size * grow)
