@@ -371,8 +371,6 @@ def lod_stage_options(params, index: int, generate_options, rig_options, mesh_op
     leaves move to the new finest level, and `Leaves` is scaled by the generator's own count
     estimate so the leaf count still follows LeafQuality (sizes 1/√quality, as Weber–Penn).
     LOD0 with factors 1 is unchanged."""
-    from .generate import estimate_counts
-
     q = _at(options.leaf_quality, index)
     gen = generate_options
     quality = (params.leaf_quality if gen.leaf_quality is None else gen.leaf_quality) * q
@@ -381,15 +379,33 @@ def lod_stage_options(params, index: int, generate_options, rig_options, mesh_op
     levels = lod_levels(params.levels, index, options)
     if levels is not None:
         gen = replace(gen, levels=levels)
-        _, full = estimate_counts(params, leaf_quality=quality)
-        _, fewer = estimate_counts(params, leaf_quality=quality, levels=levels)
-        if fewer > 0 and full > 0:
-            params = replace(params, leaves=params.leaves * full / fewer)
+        params = keep_leaf_count(params, levels, quality)
     frac = _at(options.joint_fraction, index)
     rig = replace(rig_options, max_joints=max(1, int(round(rig_options.max_joints * frac)))) \
         if frac < 1.0 else rig_options
-    mesh = mesh_options if index == 0 else replace(mesh_options, sides=_at(options.sides, index))
+    mesh = mesh_options if index == 0 else replace(
+        mesh_options, sides=finer_never(_at(options.sides, index), mesh_options.sides))
     return params, gen, rig, mesh
+
+
+def finer_never(sides: tuple[int, ...], lod0: tuple[int, ...]) -> tuple[int, ...]:
+    """A LOD's sides per level, never more than LOD0's (`--sides` or a triangle budget may have
+    made LOD0 coarser than the LOD table); the last value of each repeats, as in MeshOptions."""
+    n = max(len(sides), len(lod0))
+    return tuple(min(_at(sides, i), _at(lod0, i)) for i in range(n))
+
+
+def keep_leaf_count(params, levels: int, quality: float):
+    """`params` with `Leaves` scaled so a tree grown with `levels` stem levels (leaves moved to
+    the new finest level) has about as many leaves as the full tree at LeafQuality `quality`,
+    by the generator's own count estimate."""
+    from .generate import estimate_counts
+
+    _, full = estimate_counts(params, leaf_quality=quality)
+    _, fewer = estimate_counts(params, leaf_quality=quality, levels=levels)
+    if fewer > 0 and full > 0:
+        params = replace(params, leaves=params.leaves * full / fewer)
+    return params
 
 
 def match_leaf_area(tree, target_area: float):
