@@ -93,6 +93,11 @@ def test_refusal_names_the_minimum_and_the_minimum_builds(tmp_path):
     assert 300 < minimum < 5_000
     triangles, _ = budget_build("quaking_aspen", minimum)
     assert 0.9 * minimum <= triangles <= minimum
+    # `info --triangles` prints the same plan (and the same refusal) without building
+    info = run_treegen("info", species_path("quaking_aspen"), "--triangles", minimum, "--json")
+    assert json.loads(info.stdout)["triangles"]["budget"]["triangles"] == triangles
+    r = run_treegen("info", species_path("quaking_aspen"), "--triangles", "300")
+    assert r.returncode == 2 and r.stderr.strip() == line
 
 
 def _make_json(*args) -> dict:
