@@ -57,15 +57,23 @@ DEFAULTS: dict[str, object] = {
     "up_axis": None,
     "max_vertices": 20_000_000,
     "max_keys": 5_000_000,
+    "triangles": None,
+    "joints": None,
+    "profile": None,
 }
 INTS = ("seed", "max_stems", "max_leaves", "max_joints", "width", "max_vertices", "max_keys",
         "texture_size")
+OPTIONAL_INTS = ("triangles", "joints")      # None: no budget / --max-joints decides
+# Options added after assets were first keyed: left out of identity hashes while unset, so a
+# catalogue built before they existed keeps its keys (batch.py).
+UNSET_FREE = ("triangles", "joints", "profile")
 PATHS = ("leaf_texture", "bark_texture")
 FLOATS = ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "fov", "error_px",
           "stiffness")
 FLAGS = ("no_wind", "no_lod", "lod_files", "no_textures")
 CHOICES = {"leaf_geometry": ("card", "shape"), "error_form": ("exact", "paper"),
-           "interpolation": ("linear", "step"), "up_axis": (None, "y", "z")}
+           "interpolation": ("linear", "step"), "up_axis": (None, "y", "z"),
+           "profile": (None, "mobile", "web", "desktop", "hero")}
 LISTS = ("joint_levels", "sides", "lod_distances", "lod_triangles")
 
 
@@ -123,7 +131,9 @@ def _scalar(key: str, value, label: Callable[[str], str]):
         if not isinstance(value, bool):
             raise TreegenError(f"{label(key)} {value!r}: expected true or false")
         return value
-    if key in INTS:
+    if key in OPTIONAL_INTS and value is None:
+        return None
+    if key in INTS or key in OPTIONAL_INTS:
         if isinstance(value, bool) or not isinstance(value, int):
             raise TreegenError(f"{label(key)} {value!r}: expected a whole number")
         return value
@@ -159,9 +169,14 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
     from .wind import WindOptions
     from .exchange import STATIC
 
+    from .budget import BudgetOptions
+    from .profiles import apply_profile
+
     unknown = sorted(set(options) - set(DEFAULTS))
     if unknown:
         raise TreegenError(f"unknown make option '{unknown[0]}'; allowed: {', '.join(DEFAULTS)}")
+    options = _joints_alias(options, label)
+    options = apply_profile(options, label) if options.get("profile") is not None else options
     v = {k: _scalar(k, options.get(k, d), label) for k, d in DEFAULTS.items()}
     v["joint_levels"] = _number_list("joint_levels", v["joint_levels"], int, label)
     v["sides"] = _number_list("sides", v["sides"], int, label)
@@ -179,6 +194,9 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
         if not t or any(not (math.isfinite(x) and 0.0 < x <= 1.0) for x in t):
             raise TreegenError(f"{label('lod_triangles')} '{_text(t)}': give LOD1, LOD2, … "
                                "triangles as fractions of LOD0's, each in (0, 1], e.g. 0.5,0.15,0.05")
+    if v["triangles"] is not None and not 1 <= v["triangles"] <= 100_000_000:
+        raise TreegenError(f"{label('triangles')} {v['triangles']}: the LOD0 triangle budget "
+                           "must be in [1, 100000000]")
     if v["max_joints"] < 1:
         raise TreegenError(f"{label('max_joints')} {v['max_joints']}: the joint budget must be at least 1")
     mesh = replace(MESH_DEFAULTS, leaf_geometry=v["leaf_geometry"])
@@ -202,10 +220,22 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
         mesh=mesh, wind=wind, lod=lod,
         limits=Limits(max_vertices=v["max_vertices"], max_keys=v["max_keys"]),
         materials=MaterialOptions(textures=not v["no_textures"], texture_size=v["texture_size"],
-                                  leaf_texture=v["leaf_texture"], bark_texture=v["bark_texture"]))
+                                  leaf_texture=v["leaf_texture"], bark_texture=v["bark_texture"]),
+        budget=BudgetOptions(triangles=v["triangles"], fixed_sides=v["sides"] is not None))
     values = {k: list(x) if isinstance(x, tuple) else str(x) if isinstance(x, Path) else x
               for k, x in v.items()}
     return Resolved(seed=v["seed"], options=make_options, values=values)
+
+
+def _joints_alias(options: dict, label: Callable[[str], str]) -> dict:
+    """`joints` is `max_joints` by a shorter name: merged into it (both given must agree)."""
+    joints = _scalar("joints", options.get("joints"), label)
+    if joints is None:
+        return options
+    if options.get("max_joints", joints) != joints:
+        raise TreegenError(f"{label('joints')} {joints} and {label('max_joints')} "
+                           f"{options['max_joints']}: the same joint budget; give one of them")
+    return {**{k: x for k, x in options.items() if k != "joints"}, "max_joints": joints}
 
 
 def check_output(output: str | os.PathLike, up_axis: str | None = None) -> Path:

@@ -240,7 +240,8 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
                 msg = str(e)
                 raise TreegenError(msg if msg.startswith(("entries[", "defaults."))
                                    else f"{where}: {msg}") from None
-            values = {k: v for k, v in base_job.values.items() if k != "seed"}
+            values = {k: v for k, v in base_job.values.items() if k != "seed"
+                      and not (k in api.UNSET_FREE and v is None)}
             for seed in seeds:
                 task = _digest({"species": digest, "seed": seed, "options": values,
                                 "treegen": __version__})
@@ -352,7 +353,9 @@ def _sha_of(cat: Catalogue, job: Job) -> str:
 
 
 def _options_sha(values: dict) -> str:
-    return _digest({k: v for k, v in values.items() if k != "seed"})
+    from . import api
+    return _digest({k: v for k, v in values.items() if k != "seed"
+                    and not (k in api.UNSET_FREE and v is None)})
 
 
 # ----------------------------------------------------------------------------- run

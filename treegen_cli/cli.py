@@ -60,6 +60,16 @@ def _load(species: Path):
     return load_params(species)
 
 
+def _given(values: dict) -> dict:
+    """The options the user gave (not click defaults), so a --profile fills only the rest:
+    resolve() applies the profile, then the defaults, to what is missing."""
+    from click.core import ParameterSource
+
+    ctx = click.get_current_context()
+    return {k: v for k, v in values.items()
+            if ctx.get_parameter_source(k) not in (ParameterSource.DEFAULT, None)}
+
+
 @click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
 @click.version_option(__version__, prog_name="treegen")
 def cli():
@@ -80,8 +90,11 @@ def cli():
 @click.option("--wind-speed", type=float, default=4.0, show_default=True, help="Mean wind speed, m/s.")
 @click.option("--stiffness", type=float, default=1.0, show_default=True,
               help="Multiplier on every joint's stiffness (frequencies scale with its square root).")
+@click.option("--triangles", type=int, default=None, metavar="N",
+              help="Also plan a LOD0 triangle budget as `make --triangles N` would, and print "
+                   "the levers it picks and the triangles it will build.")
 def info(species, seed, max_stems, max_leaves, as_json, with_lod, lod_distances, fov, width,
-         error_px, error_form, interpolation, with_wind, wind_speed, stiffness):
+         error_px, error_form, interpolation, with_wind, wind_speed, stiffness, triangles):
     """Grow SPECIES (a Weber–Penn text or Arbaro XML file) and report on the tree:
     stems per level, leaves, leaf area (m²), height and crown width (m), nodes, seconds.
     With --lod: the analogue of the paper's Table 3, one row per LOD distance.
@@ -98,6 +111,8 @@ def info(species, seed, max_stems, max_leaves, as_json, with_lod, lod_distances,
     current_reporter().detail(f"  generate  {seconds:8.3f} s  ({tree.n_stems:,} stems, "
                               f"{tree.n_nodes:,} nodes, {tree.n_leaves:,} leaves)")
     stats = tree_stats(tree) | {"generate_s": round(seconds, 4), "file": str(species)}
+    stats["triangles"] = _triangle_rows(species, params, seed, tree, triangles,
+                                        GenerateOptions(max_stems=max_stems, max_leaves=max_leaves))
     if with_lod:
         stats["lods"] = _lod_rows(species, params, seed, tree,
                                   GenerateOptions(max_stems=max_stems, max_leaves=max_leaves),
@@ -122,7 +137,13 @@ def info(species, seed, max_stems, max_leaves, as_json, with_lod, lod_distances,
         ("crown width", f"{stats['crown_width_m']:.2f} m"),
         ("trunk radius", f"{stats['trunk_radius_m'] * 100:.1f} cm"),
         ("generation", f"{seconds:.3f} s"),
+        ("triangles", f"{stats['triangles']['lod0']:,} at LOD0 ({stats['triangles']['bark']:,} "
+                      f"bark, {stats['triangles']['leaves']:,} leaves)"),
     ]
+    if "budget" in stats["triangles"]:
+        b = stats["triangles"]["budget"]
+        rows.append(("budget", f"--triangles {triangles:,}: {b['plan']}; the fewest it "
+                               f"reaches: {b['minimum']:,}"))
     for name, value in rows:
         click.echo(f"  {name:<13}{value}")
     if with_lod:
@@ -145,6 +166,28 @@ def info(species, seed, max_stems, max_leaves, as_json, with_lod, lod_distances,
                        f"{w['top_sway_rms_m']:.2f} m RMS; largest joint turn {w['max_joint_deg']:.1f}°")
 
 
+def _triangle_rows(species, params, seed, tree, triangles, generate_options) -> dict:
+    """LOD0 triangles as `make` builds the grown tree (exact, from its stems and leaves), and
+    with a budget the plan `make --triangles` would build."""
+    from .budget import BudgetOptions, plan_budget
+    from .limits import estimate_triangles
+    from .mesh import MESH_DEFAULTS
+
+    bark, leaves = estimate_triangles(tree, MESH_DEFAULTS)
+    out: dict = {"lod0": bark + leaves, "bark": bark, "leaves": leaves}
+    if triangles is not None:
+        plan = _in_file(species, plan_budget, params, seed, MESH_DEFAULTS,
+                        BudgetOptions(triangles=triangles), generate_options)
+        out["budget"] = {"triangles": plan.triangles, "bark": plan.bark, "leaves": plan.leaves,
+                         "levels": plan.levels, "curve_scale": plan.curve_scale,
+                         "sides": list(plan.mesh.sides),
+                         "rings_per_segment": list(plan.mesh.rings_per_segment),
+                         "leaf_quality_factor": round(plan.leaf_factor, 6),
+                         "minimum": plan.minimum, "maximum": plan.maximum,
+                         "plan": plan.describe()}
+    return out
+
+
 def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> list[dict]:
     """The Table-3 rows: the default make pipeline with these LOD options, on the tree `info`
     already grew, measured per LOD."""
@@ -165,6 +208,15 @@ def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> lis
 @click.option("--max-joints", type=int, default=256, show_default=True,
               help="Joint budget of the skeleton (>= 1); chains coarsen and the finest levels "
                    "lose their joints first.")
+@click.option("--joints", type=int, default=None, metavar="N",
+              help="Joint budget: --max-joints by a shorter name.")
+@click.option("--triangles", type=int, default=None, metavar="N",
+              help="LOD0 triangle budget, met from 10 % under to N by the generator's own levers (fewer, "
+                   "larger leaves of the same area; fewer sides, segments and stem levels), or "
+                   "refused naming the fewest the species reaches [default: the species as is].")
+@click.option("--profile", type=click.Choice(["mobile", "web", "desktop", "hero"]), default=None,
+              help="Preset triangles, joints, texture size, clip length, fps and LOD distances "
+                   "for a platform (README table); options you give win over it.")
 @click.option("--joint-levels", default=None, metavar="0,1,2",
               help="Stem levels allowed to own joints [default: all].")
 @click.option("--sides", default=None, metavar="16,8,6,4,3",
@@ -217,7 +269,8 @@ def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> lis
               help="Refuse wind clips with more joint-keys (joints × keys) than this.")
 @click.option("--json", "as_json", is_flag=True,
               help="Print a machine-readable summary (files, bytes, counts, seconds per stage).")
-def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels, sides,
+def make(species, output, seed, max_stems, max_leaves, max_joints, joints, triangles, profile,
+         joint_levels, sides,
          leaf_geometry, texture_size, leaf_texture, bark_texture, no_textures, wind_speed,
          wind_dir, gust, turbulence, duration, fps, stiffness, no_wind, up_axis, lod_distances,
          fov, width, error_px, error_form, interpolation, lod_triangles, no_lod, lod_files,
@@ -230,8 +283,9 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
 
     t0 = time.perf_counter()
     check_output(output, up_axis)
-    job = resolve(dict(seed=seed, max_stems=max_stems, max_leaves=max_leaves,
-                       max_joints=max_joints, joint_levels=joint_levels, sides=sides,
+    job = resolve(_given(dict(seed=seed, max_stems=max_stems, max_leaves=max_leaves,
+                       max_joints=max_joints, joints=joints, triangles=triangles,
+                       profile=profile, joint_levels=joint_levels, sides=sides,
                        leaf_geometry=leaf_geometry, texture_size=texture_size,
                        leaf_texture=leaf_texture, bark_texture=bark_texture,
                        no_textures=no_textures, wind_speed=wind_speed, wind_dir=wind_dir,
@@ -240,7 +294,7 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
                        fov=fov, width=width, error_px=error_px, error_form=error_form,
                        interpolation=interpolation, lod_triangles=lod_triangles,
                        no_lod=no_lod, lod_files=lod_files,
-                       up_axis=up_axis, max_vertices=max_vertices, max_keys=max_keys),
+                       up_axis=up_axis, max_vertices=max_vertices, max_keys=max_keys)),
                   output=output)
     options = job.options
     static = output.suffix.lower() in STATIC

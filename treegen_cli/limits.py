@@ -31,10 +31,8 @@ class Limits:
 LIMITS_DEFAULTS = Limits()
 
 
-def estimate_vertices(tree, options) -> tuple[int, int]:
-    """(bark, leaf) vertex counts mesh.build_mesh will emit for `tree` with MeshOptions
-    `options`: exact, or slightly over where flare rings merge with node rings. Bark: rings × (sides + 1) per stem plus one apex; leaves: outline points each."""
-    from .leafshapes import OUTLINES, outline
+def _rings_sides(tree, options) -> tuple[np.ndarray, np.ndarray]:
+    """Rings each stem's bark tube emits and its sides (S,), as mesh._bark makes them."""
     from .mesh import _per_level, pointed_tips, stem_sides
 
     level = tree.stem_level.astype(np.int64)
@@ -44,14 +42,37 @@ def estimate_vertices(tree, options) -> tuple[int, int]:
     if p.flare > 0 and options.flare_rings > 0:
         rings = rings + np.where((level == 0) & ~tree.stem_clone.astype(bool),
                                  options.flare_rings, 0)
-    sides = stem_sides(tree, options)
-    pointed = pointed_tips(tree, options)
-    rings = rings - pointed                 # a pointed tip closes on its apex, without a ring
+    rings = rings - pointed_tips(tree, options)   # a pointed tip closes on its apex, no ring
+    return rings, stem_sides(tree, options)
+
+
+def leaf_outline(tree, options):
+    """The outline mesh.build_mesh stamps on every leaf (a card, or the LeafShape)."""
+    from .leafshapes import OUTLINES, outline
+
+    return OUTLINES[4] if options.leaf_geometry == "card" else outline(tree.params.leaf_shape)
+
+
+def estimate_vertices(tree, options) -> tuple[int, int]:
+    """(bark, leaf) vertex counts mesh.build_mesh will emit for `tree` with MeshOptions
+    `options`: exact, or slightly over where flare rings merge with node rings. Bark: rings × (sides + 1) per stem plus one apex; leaves: outline points each."""
+    rings, sides = _rings_sides(tree, options)
     bark = int(np.sum(rings * (sides + 1)) + tree.n_stems)
     leaves = 0
     if options.leaves and tree.n_leaves:
-        shape = OUTLINES[4] if options.leaf_geometry == "card" else outline(p.leaf_shape)
-        leaves = tree.n_leaves * len(shape.points)
+        leaves = tree.n_leaves * len(leaf_outline(tree, options).points)
+    return bark, leaves
+
+
+def estimate_triangles(tree, options) -> tuple[int, int]:
+    """(bark, leaf) triangle counts mesh.build_mesh will emit, exact in the same sense as
+    estimate_vertices: two per side between consecutive rings plus a fan of `sides` to the
+    apex per stem; the outline's triangles per leaf."""
+    rings, sides = _rings_sides(tree, options)
+    bark = int(np.sum((2 * (rings - 1) + 1) * sides))
+    leaves = 0
+    if options.leaves and tree.n_leaves:
+        leaves = tree.n_leaves * len(leaf_outline(tree, options).triangles)
     return bark, leaves
 
 

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field, replace
 
 from . import __version__
 from .asset import Asset, Lod
+from .budget import DEFAULTS as BUDGET_DEFAULTS, BudgetOptions, plan_budget
 from .generate import DEFAULTS as GENERATE_DEFAULTS, GenerateOptions, generate
 from .limits import LIMITS_DEFAULTS, Limits, check_keys, check_mesh
 from .lod import LOD_DEFAULTS, LodOptions, decimate, screen_coverage
@@ -33,6 +34,7 @@ class MakeOptions:
     lod: LodOptions | None = LOD_DEFAULTS   # None: one LOD with the dense clip
     limits: Limits = LIMITS_DEFAULTS        # refuse oversized meshes / clips before building
     materials: MaterialOptions = MATERIAL_DEFAULTS   # textures (generated or an artist's) or colours
+    budget: BudgetOptions = BUDGET_DEFAULTS # LOD0 triangle budget, met before the tree grows
 
 
 @dataclass
@@ -102,6 +104,10 @@ def build_asset(params: Params, seed: int = 0, options: MakeOptions = MakeOption
     # --leaf-texture fails before anything is grown; the textures are drawn meanwhile.
     mats = timings.run("materials", build_materials, params, options.materials)
     options = replace(options, mesh=replace(options.mesh, leaf_cells=mats.leaf_cells))
+    if options.budget.triangles is not None:    # the species and mesh that meet the budget
+        plan = timings.run("budget", plan_budget, params, seed, options.mesh, options.budget,
+                           options.generate)
+        params, options, tree = plan.params, replace(options, mesh=plan.mesh), None
     if tree is None:
         tree = timings.run("generate", generate, params, seed, options.generate)
     lods = [build_lod(tree, options, seed, timings)] if options.lod is None else \

@@ -1,0 +1,170 @@
+"""Triangle budgets (`--triangles`, budget.py), the `--joints` alias and `--profile` presets
+(profiles.py): counts are those of real built meshes, refusals one line with exit code 2."""
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from functools import lru_cache
+
+import pytest
+
+from conftest import PAPER_SPECIES, ROOT, SPECIES, grown, run_treegen, species_path
+
+BUDGET = 20_000
+
+
+@lru_cache(maxsize=None)
+def budget_build(name: str, triangles: int):
+    """LOD0 of the species built through the real pipeline with a triangle budget (no wind,
+    no LODs, colour materials: only the mesh is measured); a TreegenError is returned."""
+    from treegen_cli.budget import BudgetOptions
+    from treegen_cli.errors import TreegenError
+    from treegen_cli.materials import MaterialOptions
+    from treegen_cli.params import load_params
+    from treegen_cli.pipeline import MakeOptions, build_asset
+
+    options = MakeOptions(wind=None, lod=None, materials=MaterialOptions(textures=False),
+                          budget=BudgetOptions(triangles=triangles))
+    try:
+        asset, tree = build_asset(load_params(species_path(name)), 0, options)
+    except TreegenError as e:
+        return e
+    return sum(len(p.indices) // 3 for p in asset.lods[0].primitives), tree
+
+
+@pytest.mark.parametrize("name", ["quaking_aspen", "palm", "rush"])
+def test_triangle_estimate_is_the_mesh(name):
+    """limits.estimate_triangles, the budget's size model, counts what build_mesh emits."""
+    from treegen_cli.limits import estimate_triangles
+    from treegen_cli.mesh import MESH_DEFAULTS, build_mesh
+    from treegen_cli.rig import build_rig
+
+    tree = grown(name)
+    rig = build_rig(tree)
+    for mesh in (MESH_DEFAULTS, replace(MESH_DEFAULTS, sides=(5, 3), rings_per_segment=(1,)),
+                 replace(MESH_DEFAULTS, leaf_geometry="shape")):
+        built = [len(p.indices) // 3 for p in build_mesh(tree, rig, mesh)]
+        bark, leaves = estimate_triangles(tree, mesh)
+        assert built == ([bark, leaves] if leaves else [bark])
+
+
+@pytest.mark.parametrize("name", SPECIES)
+def test_every_species_meets_the_budget_or_names_its_minimum(name):
+    from treegen_cli.budget import BudgetOptions, plan_budget
+    from treegen_cli.errors import TreegenError
+    from treegen_cli.mesh import MESH_DEFAULTS
+    from treegen_cli.params import load_params
+
+    result = budget_build(name, BUDGET)
+    if isinstance(result, TreegenError):
+        assert "--triangles 20,000" in str(result)
+        minimum = int(str(result).rsplit("use --triangles ", 1)[1].split()[0])
+        assert minimum > BUDGET
+        return
+    triangles, tree = result
+    assert 0.9 * BUDGET <= triangles <= BUDGET, (name, triangles)
+    # the plan's count is the built count, so the estimate can be trusted before building
+    plan = plan_budget(load_params(species_path(name)), 0, MESH_DEFAULTS,
+                       BudgetOptions(triangles=BUDGET))
+    assert plan.triangles == triangles
+    assert tree.params == plan.params
+
+
+def test_budget_keeps_leaf_area_and_refines_small_trees():
+    """Coarsening keeps the species' leaf area (fewer, larger leaves); a tree under its budget
+    gets more, smaller leaves instead of staying short of it."""
+    full = float(grown("weeping_willow").leaf_area.sum())
+    triangles, tree = budget_build("weeping_willow", BUDGET)
+    assert tree.n_leaves < grown("weeping_willow").n_leaves / 20
+    assert float(tree.leaf_area.sum()) == pytest.approx(full, rel=0.02)
+    n, palm = budget_build("fan_palm", BUDGET)     # 8,360 triangles as the species is
+    assert palm.n_leaves > grown("fan_palm").n_leaves
+    assert float(palm.leaf_area.sum()) == pytest.approx(float(grown("fan_palm").leaf_area.sum()),
+                                                        rel=0.02)
+
+
+def test_refusal_names_the_minimum_and_the_minimum_builds(tmp_path):
+    out = tmp_path / "a.glb"
+    r = run_treegen("make", species_path("quaking_aspen"), "-o", out, "--triangles", "300")
+    assert r.returncode == 2 and not out.exists()
+    line = r.stderr.strip()
+    assert "\n" not in line and "--triangles 300" in line and "quaking_aspen" in line
+    minimum = int(line.rsplit("use --triangles ", 1)[1].split()[0])
+    assert 300 < minimum < 5_000
+    triangles, _ = budget_build("quaking_aspen", minimum)
+    assert 0.9 * minimum <= triangles <= minimum
+    # `info --triangles` prints the same plan (and the same refusal) without building
+    info = run_treegen("info", species_path("quaking_aspen"), "--triangles", minimum, "--json")
+    assert json.loads(info.stdout)["triangles"]["budget"]["triangles"] == triangles
+    r = run_treegen("info", species_path("quaking_aspen"), "--triangles", "300")
+    assert r.returncode == 2 and r.stderr.strip() == line
+
+
+def _make_json(*args) -> dict:
+    r = run_treegen("make", *args, "--json", "-q")
+    assert r.returncode == 0, r.stderr
+    return json.loads(r.stdout)
+
+
+@pytest.mark.parametrize("name", PAPER_SPECIES)
+def test_mobile_profile_on_the_paper_species(tmp_path, name):
+    from treegen_cli import api
+    from treegen_cli.profiles import PROFILES
+
+    s = api.make(species_path(name), tmp_path / "t.glb", profile="mobile")
+    mobile = PROFILES["mobile"]
+    assert 18_000 <= s["triangles"] <= 20_000 and s["joints"] <= 64   # all far larger as is
+    assert [r["distance_m"] for r in s["lods"]] == [0.0, 15.0, 50.0]
+    assert s["keys"] == mobile["duration"] * mobile["fps"] + 1
+    tris = [r["triangles"] for r in s["lods"]]
+    assert tris == sorted(tris, reverse=True), tris      # LODs never add triangles
+    assert all(r["joints"] <= 64 for r in s["lods"])
+
+
+def test_explicit_options_win_over_the_profile(tmp_path):
+    """--fps 30 is the click default, yet typed it beats the profile's 15 (parameter source)."""
+    s = _make_json(species_path("quaking_aspen"), "-o", tmp_path / "a.glb", "--profile",
+                   "mobile", "--fps", "30", "--joints", "12", "--lod-distances", "0,40",
+                   "--texture-size", "64")
+    assert s["keys"] == 6 * 30 + 1               # mobile's 6 s clip at the typed 30 fps
+    assert s["joints"] == 12
+    assert [r["distance_m"] for r in s["lods"]] == [0.0, 40.0]
+    assert s["triangles"] <= 20_000
+    from treegen_cli import api
+    v = api.resolve({"profile": "web", "triangles": 30_000, "max_joints": 256}).values
+    assert (v["triangles"], v["max_joints"], v["fps"]) == (30_000, 256, 24.0)
+
+
+def test_joints_is_max_joints():
+    from treegen_cli import api
+    from treegen_cli.errors import TreegenError
+
+    a = api.resolve({"joints": 40})
+    assert a.values["max_joints"] == 40 and a.options == api.resolve({"max_joints": 40}).options
+    with pytest.raises(TreegenError, match=r"^--joints 40 and --max-joints 30: .*give one of them$"):
+        api.resolve({"joints": 40, "max_joints": 30})
+    with pytest.raises(TreegenError, match=r"^--triangles 0: .*\[1, 100000000\]$"):
+        api.resolve({"triangles": 0})
+    with pytest.raises(TreegenError, match=r"^--profile 'phone': use one of"):
+        api.resolve({"profile": "phone"})
+
+
+def test_catalogue_accepts_a_profile(tmp_path):
+    from treegen_cli.batch import parse_catalogue
+    from treegen_cli.errors import TreegenError
+
+    data = {"defaults": {"profile": "mobile"},
+            "entries": [{"species": str(species_path("rush")), "fps": 10}]}
+    cat = parse_catalogue(data, tmp_path / "c.json")
+    (r,) = cat.resolved.values()
+    assert (r.values["triangles"], r.values["max_joints"], r.values["fps"]) == (20_000, 64, 10.0)
+    assert r.options.budget.triangles == 20_000
+    with pytest.raises(TreegenError, match=r"entries\[0\]\.profile"):
+        parse_catalogue({"entries": [{"species": str(species_path("rush")), "profile": "tv"}]},
+                        tmp_path / "c.json")
+
+
+def test_readme_profile_table_is_the_module():
+    from treegen_cli.profiles import markdown_table
+
+    assert markdown_table() in (ROOT / "README.md").read_text("utf-8")
