@@ -231,15 +231,17 @@ def write(asset, tree, output, timings, t0: float, job: Resolved | None = None) 
 
 
 def make(species: str | os.PathLike, output: str | os.PathLike, **options) -> dict:
-    """Grow `species` and write it to `output` (format from the suffix), as `treegen make`
-    does with the same options; returns what `treegen make --json` prints."""
+    """Grow `species` (a file, or a bundled name such as "quaking_aspen") and write it to
+    `output` (format from the suffix), as `treegen make` does with the same options; returns
+    what `treegen make --json` prints."""
+    from .bundled import resolve_species
     from .params import load_params
     from .pipeline import Timings
 
     t0 = time.perf_counter()
     output = check_output(output, options.get("up_axis"))
     job = resolve(options, output=output)
-    params = load_params(species)
+    params = load_params(resolve_species(species))
     timings = Timings()
     asset, tree = build(params, species, job, timings)
     return write(asset, tree, output, timings, t0, job)

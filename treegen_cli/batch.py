@@ -161,10 +161,13 @@ def render_name(template: str, fields: dict, grid: tuple, fmt: str, where: str) 
 
 
 def _species(base: Path, value: str, where: str, params: dict) -> tuple[Path, str]:
-    """Resolve and parse a species file once per catalogue; returns (path, sha256 of bytes)."""
+    """Resolve (a path relative to the catalogue wins, else a bundled name) and parse a
+    species file once per catalogue; returns (path, sha256 of bytes)."""
     from .params import parse_params_bytes
 
-    p = (base / value).resolve()
+    from .bundled import resolve_species
+
+    p = resolve_species(value, base, f"{where}: species file '{value}'").resolve()
     if p not in params:
         try:
             data = p.read_bytes()

@@ -15,7 +15,8 @@ from . import __version__
 from .errors import TreegenError, in_file as _in_file
 from .generate import GenerateOptions
 
-SPECIES = click.Path(dir_okay=False, path_type=Path)
+# a species file or a bundled name (bundled.resolve_species: an existing path wins)
+SPECIES = click.STRING
 
 
 def _generate_options(f):
@@ -55,6 +56,11 @@ def _lod_options_from(lod_distances, fov, width, error_px, error_form, interpola
                         error_form=error_form, interpolation=interpolation)).options.lod
 
 
+def _species(value: str) -> Path:
+    from .bundled import resolve_species
+    return resolve_species(value)
+
+
 def _load(species: Path):
     from .params import load_params
     return load_params(species)
@@ -82,13 +88,15 @@ def cli():
               help="Multiplier on every joint's stiffness (frequencies scale with its square root).")
 def info(species, seed, max_stems, max_leaves, as_json, with_lod, lod_distances, fov, width,
          error_px, error_form, interpolation, with_wind, wind_speed, stiffness):
-    """Grow SPECIES (a Weber–Penn text or Arbaro XML file) and report on the tree:
+    """Grow SPECIES (a Weber–Penn text or Arbaro XML file, or a bundled name such as
+    quaking_aspen: see `treegen species`) and report on the tree:
     stems per level, leaves, leaf area (m²), height and crown width (m), nodes, seconds.
     With --lod: the analogue of the paper's Table 3, one row per LOD distance.
     With --wind: the wind model's numbers, to tune --wind-speed, --gust and --stiffness."""
     from .generate import generate
     from .tree import tree_stats
 
+    species = _species(species)
     params = _load(species)
     t0 = time.perf_counter()
     tree = _in_file(species, generate, params, seed,
@@ -217,7 +225,8 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
          wind_dir, gust, turbulence, duration, fps, stiffness, no_wind, up_axis, lod_distances,
          fov, width, error_px, error_form, interpolation, no_lod, lod_files, max_vertices,
          max_keys, as_json):
-    """Grow SPECIES and write a skinned, wind-animated tree to OUTPUT."""
+    """Grow SPECIES (a species file, or a bundled name such as quaking_aspen: see `treegen
+    species`) and write a skinned, wind-animated tree to OUTPUT."""
     from .api import build, check_output, resolve, write
     from .exchange import STATIC
     from .progress import current_reporter
@@ -238,7 +247,7 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
                   output=output)
     options = job.options
     static = output.suffix.lower() in STATIC
-    params = _load(species)
+    params = _load(_species(species))
     rep = current_reporter()
     per_lod = 3 if options.wind is None else 5          # generate, rig, mesh (, wind, lod)
     timings = rep.timings(total=per_lod + 3 if options.lod is None else
