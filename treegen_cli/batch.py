@@ -34,6 +34,7 @@ from pathlib import Path, PurePosixPath
 
 from . import __version__
 from .errors import TreegenError
+from .generate import check_trunk
 from .forest.schema import check_schema, read_json_file
 
 SCHEMA_NAME = "catalogue.schema.json"
@@ -243,6 +244,10 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
                 msg = str(e)
                 raise TreegenError(msg if msg.startswith(("entries[", "defaults."))
                                    else f"{where}: {msg}") from None
+            try:        # an implausible Scale is a typo: refused now, not by a worker mid-run
+                check_trunk(loaded[sp][0], base_job.options.generate)
+            except TreegenError as e:
+                raise TreegenError(f"{where}.species: {e}") from None
             values = {k: v for k, v in base_job.values.items() if k != "seed"}
             for seed in seeds:
                 task = _digest({"species": digest, "seed": seed, "options": values,

@@ -20,6 +20,11 @@ SPECIES = click.STRING
 
 
 def _generate_options(f):
+    f = click.option("--max-size", type=float, default=GenerateOptions.max_size, show_default=True,
+                     metavar="METRES",
+                     help="Refuse trees taller, or with a crown wider, than this many metres: a "
+                          "plausibility bound that catches a mistyped Scale (the tallest living "
+                          "tree is about 116 m); raise it for giants on purpose.")(f)
     f = click.option("--max-leaves", type=int, default=GenerateOptions.max_leaves, show_default=True,
                      help="Refuse trees with more leaves than this (estimated before growing).")(f)
     f = click.option("--max-stems", type=int, default=GenerateOptions.max_stems, show_default=True,
@@ -86,36 +91,37 @@ def cli():
 @click.option("--wind-speed", type=float, default=4.0, show_default=True, help="Mean wind speed, m/s.")
 @click.option("--stiffness", type=float, default=1.0, show_default=True,
               help="Multiplier on every joint's stiffness (frequencies scale with its square root).")
-def info(species, seed, max_stems, max_leaves, as_json, with_lod, lod_distances, fov, width,
+def info(species, seed, max_stems, max_leaves, max_size, as_json, with_lod, lod_distances, fov, width,
          error_px, error_form, interpolation, with_wind, wind_speed, stiffness):
     """Grow SPECIES (a Weber–Penn text or Arbaro XML file, or a bundled name such as
     quaking_aspen: see `treegen species`) and report on the tree:
     stems per level, leaves, leaf area (m²), height and crown width (m), nodes, seconds.
     With --lod: the analogue of the paper's Table 3, one row per LOD distance.
     With --wind: the wind model's numbers, to tune --wind-speed, --gust and --stiffness."""
+    from .api import resolve
     from .generate import generate
     from .tree import tree_stats
 
+    generate_options = resolve(dict(seed=seed, max_stems=max_stems, max_leaves=max_leaves,
+                                    max_size=max_size)).options.generate
     species = _species(species)
     params = _load(species)
     t0 = time.perf_counter()
-    tree = _in_file(species, generate, params, seed,
-                    GenerateOptions(max_stems=max_stems, max_leaves=max_leaves))
+    tree = _in_file(species, generate, params, seed, generate_options)
     seconds = time.perf_counter() - t0
     from .progress import current_reporter
     current_reporter().detail(f"  generate  {seconds:8.3f} s  ({tree.n_stems:,} stems, "
                               f"{tree.n_nodes:,} nodes, {tree.n_leaves:,} leaves)")
     stats = tree_stats(tree) | {"generate_s": round(seconds, 4), "file": str(species)}
     if with_lod:
-        stats["lods"] = _lod_rows(species, params, seed, tree,
-                                  GenerateOptions(max_stems=max_stems, max_leaves=max_leaves),
+        stats["lods"] = _lod_rows(species, params, seed, tree, generate_options,
                                   _lod_options_from(lod_distances, fov, width, error_px,
                                                     error_form, interpolation))
     if with_wind:
         from .rig import build_rig
-        from .wind import WindOptions, wind_report
-        stats["wind"] = wind_report(tree, build_rig(tree),
-                                    WindOptions(speed=wind_speed, stiffness=stiffness), seed)
+        from .wind import wind_report
+        wind = resolve(dict(wind_speed=wind_speed, stiffness=stiffness)).options.wind
+        stats["wind"] = wind_report(tree, build_rig(tree), wind, seed)
     if as_json:
         click.echo(json.dumps(stats, indent=2))
         return
@@ -220,7 +226,7 @@ def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> lis
               help="Refuse wind clips with more joint-keys (joints × keys) than this.")
 @click.option("--json", "as_json", is_flag=True,
               help="Print a machine-readable summary (files, bytes, counts, seconds per stage).")
-def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels, sides,
+def make(species, output, seed, max_stems, max_leaves, max_size, max_joints, joint_levels, sides,
          leaf_geometry, texture_size, leaf_texture, bark_texture, no_textures, wind_speed,
          wind_dir, gust, turbulence, duration, fps, stiffness, no_wind, up_axis, lod_distances,
          fov, width, error_px, error_form, interpolation, no_lod, lod_files, max_vertices,
@@ -233,8 +239,8 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
     from .tree import tree_stats
 
     t0 = time.perf_counter()
-    check_output(output, up_axis)
-    job = resolve(dict(seed=seed, max_stems=max_stems, max_leaves=max_leaves,
+    check_output(output, up_axis, flag="-o")
+    job = resolve(dict(seed=seed, max_stems=max_stems, max_leaves=max_leaves, max_size=max_size,
                        max_joints=max_joints, joint_levels=joint_levels, sides=sides,
                        leaf_geometry=leaf_geometry, texture_size=texture_size,
                        leaf_texture=leaf_texture, bark_texture=bark_texture,

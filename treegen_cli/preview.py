@@ -158,9 +158,9 @@ def _size(text: str) -> tuple[int, int]:
 
 @click.command("preview")
 @click.argument("input_path", metavar="INPUT")
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("-o", "--output", type=click.Path(path_type=Path),
               help="Still image of the rest pose: .png (optimised) or .jpg.")
-@click.option("--animate", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--animate", type=click.Path(path_type=Path),
               help="Animated GIF of the whole wind loop (first frame = last frame), skinned on "
                    "the GPU from the file's joints and keys, like an engine.")
 @click.option("--azimuth", type=float, default=DEFAULTS.azimuth, show_default=True,
@@ -193,9 +193,9 @@ def preview_command(input_path, output, animate, azimuth, elevation, size, lod, 
     if output is None and animate is None:
         raise TreegenError("preview: give an image with -o out.png and/or --animate out.gif")
     if output is not None:                        # fail before anything is grown or rendered
-        exchange.check_suffix(output, exchange.STILLS, "image")
+        exchange.check_suffix(output, exchange.STILLS, "image", "-o")
     if animate is not None:
-        exchange.check_suffix(animate, exchange.LOOPS, "animation")
+        exchange.check_suffix(animate, exchange.LOOPS, "animation", "--animate")
     if not -89.0 <= elevation <= 89.0:
         raise TreegenError(f"--elevation {elevation:g}: allowed range -89..89 degrees")
     if not 0.5 <= fps <= 60.0:
