@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
-from .errors import TreegenError, in_file
+from .errors import OptionError, TreegenError, in_file
 from .generate import GenerateOptions
 
 # Every `make` option (CLI name with underscores) and its default. cli.py's click options carry
@@ -29,6 +29,7 @@ DEFAULTS: dict[str, object] = {
     "seed": 0,
     "max_stems": GenerateOptions.max_stems,
     "max_leaves": GenerateOptions.max_leaves,
+    "max_size": GenerateOptions.max_size,
     "max_joints": 256,
     "joint_levels": None,
     "sides": None,
@@ -68,13 +69,16 @@ OPTIONAL_INTS = ("triangles", "joints")      # None: no budget / --max-joints de
 # catalogue built before they existed keeps its keys (batch.py).
 UNSET_FREE = ("triangles", "joints", "profile")
 PATHS = ("leaf_texture", "bark_texture")
-FLOATS = ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "fov", "error_px",
+FLOATS = ("max_size", "wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "fov", "error_px",
           "stiffness")
 FLAGS = ("no_wind", "no_lod", "lod_files", "no_textures")
 CHOICES = {"leaf_geometry": ("card", "shape"), "error_form": ("exact", "paper"),
            "interpolation": ("linear", "step"), "up_axis": (None, "y", "z"),
            "profile": (None, "mobile", "web", "desktop", "hero")}
 LISTS = ("joint_levels", "sides", "lod_distances", "lod_triangles")
+# stage option fields (WindOptions, LodOptions) → the make option a user typed for them
+STAGE_FIELDS = {"speed": "wind_speed", "direction_deg": "wind_dir", "distances": "lod_distances",
+                "fov_deg": "fov"}
 
 
 def cli_name(key: str) -> str:
@@ -162,10 +166,11 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
     path for a catalogue entry. Every refusal is a TreegenError naming the option and range."""
     from .limits import Limits
     from .lod import LodOptions
-    from .materials import MaterialOptions
+    from .materials import TEXTURE_SIZES, MaterialOptions
     from .mesh import MESH_DEFAULTS
     from .pipeline import MakeOptions
-    from .rig import RigOptions
+    from .params import MAX_LEVELS
+    from .rig import MAX_JOINTS, RigOptions
     from .wind import WindOptions
     from .exchange import STATIC
 
@@ -205,17 +210,38 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
             raise TreegenError(f"{label('sides')} '{_text(options.get('sides'))}': "
                                "each value must be in [3, 64]")
         mesh = replace(mesh, sides=v["sides"])
+    if not 0 <= v["seed"] < 2**63:
+        raise TreegenError(f"{label('seed')} {v['seed']}: allowed range 0..{2**63 - 1}")
+    for key in ("max_stems", "max_leaves", "max_vertices", "max_keys"):
+        if v[key] < 1:
+            raise TreegenError(f"{label(key)} {v[key]}: the limit must be at least 1")
+    if not v["max_size"] > 0:
+        raise TreegenError(f"{label('max_size')} {v['max_size']:g}: the bound must be > 0 metres")
+    if v["joint_levels"] is not None and not all(0 <= n <= MAX_LEVELS for n in v["joint_levels"]):
+        raise TreegenError(f"{label('joint_levels')} '{_text(v['joint_levels'])}': each stem "
+                           f"level must be in 0..{MAX_LEVELS}")
+    if v["max_joints"] > MAX_JOINTS:
+        raise TreegenError(f"{label('max_joints')} {v['max_joints']}: the joint budget must be "
+                           f"in 1..{MAX_JOINTS}")
+    lo, hi = TEXTURE_SIZES
+    n = v["texture_size"]
+    if not (lo <= n <= hi and n & (n - 1) == 0):
+        raise TreegenError(f"{label('texture_size')} {n}: must be a power of two in [{lo}, {hi}]")
     static = output is not None and Path(output).suffix.lower() in STATIC
-    wind = None if v["no_wind"] or static else WindOptions(
-        speed=v["wind_speed"], direction_deg=v["wind_dir"], gust=v["gust"],
-        turbulence=v["turbulence"], duration=v["duration"], fps=v["fps"],
-        stiffness=v["stiffness"])
-    lod = None if v["no_lod"] or static else LodOptions(
-        distances=v["lod_distances"], fov_deg=v["fov"], width=v["width"], error_px=v["error_px"],
-        error_form=v["error_form"], interpolation=v["interpolation"].upper(),
-        triangles=(1.0, *v["lod_triangles"]))
+    try:        # a stage's range check names its own field: say what the user typed instead
+        wind = None if v["no_wind"] or static else WindOptions(
+            speed=v["wind_speed"], direction_deg=v["wind_dir"], gust=v["gust"],
+            turbulence=v["turbulence"], duration=v["duration"], fps=v["fps"],
+            stiffness=v["stiffness"])
+        lod = None if v["no_lod"] or static else LodOptions(
+            distances=v["lod_distances"], fov_deg=v["fov"], width=v["width"],
+            error_px=v["error_px"], error_form=v["error_form"],
+            interpolation=v["interpolation"].upper(), triangles=(1.0, *v["lod_triangles"]))
+    except OptionError as e:
+        raise TreegenError(e.worded(label(STAGE_FIELDS.get(e.field, e.field)))) from None
     make_options = MakeOptions(
-        generate=GenerateOptions(max_stems=v["max_stems"], max_leaves=v["max_leaves"]),
+        generate=GenerateOptions(max_stems=v["max_stems"], max_leaves=v["max_leaves"],
+                                 max_size=v["max_size"]),
         rig=RigOptions(max_joints=v["max_joints"], joint_levels=v["joint_levels"]),
         mesh=mesh, wind=wind, lod=lod,
         limits=Limits(max_vertices=v["max_vertices"], max_keys=v["max_keys"]),
@@ -238,12 +264,13 @@ def _joints_alias(options: dict, label: Callable[[str], str]) -> dict:
     return {**{k: x for k, x in options.items() if k != "joints"}, "max_joints": joints}
 
 
-def check_output(output: str | os.PathLike, up_axis: str | None = None) -> Path:
-    """Refuse an output name whose suffix no writer handles, or an up axis its format cannot
-    carry (before any work is done)."""
+def check_output(output: str | os.PathLike, up_axis: str | None = None,
+                 flag: str | None = None) -> Path:
+    """Refuse an output name whose suffix no writer handles (or a folder), or an up axis its
+    format cannot carry, before any work is done; `flag` ("-o") names the option in messages."""
     from .exchange import check_suffix, check_up_axis
 
-    path = check_suffix(output)
+    path = check_suffix(output, flag=flag)
     check_up_axis(path, up_axis)
     return path
 
@@ -270,15 +297,17 @@ def write(asset, tree, output, timings, t0: float, job: Resolved | None = None) 
 
 
 def make(species: str | os.PathLike, output: str | os.PathLike, **options) -> dict:
-    """Grow `species` and write it to `output` (format from the suffix), as `treegen make`
-    does with the same options; returns what `treegen make --json` prints."""
+    """Grow `species` (a file, or a bundled name such as "quaking_aspen") and write it to
+    `output` (format from the suffix), as `treegen make` does with the same options; returns
+    what `treegen make --json` prints."""
+    from .bundled import resolve_species
     from .params import load_params
     from .pipeline import Timings
 
     t0 = time.perf_counter()
     output = check_output(output, options.get("up_axis"))
     job = resolve(options, output=output)
-    params = load_params(species)
+    params = load_params(resolve_species(species))
     timings = Timings()
     asset, tree = build(params, species, job, timings)
     return write(asset, tree, output, timings, t0, job)

@@ -34,6 +34,7 @@ from pathlib import Path, PurePosixPath
 
 from . import __version__
 from .errors import TreegenError
+from .generate import check_trunk
 from .forest.schema import check_schema, read_json_file
 
 SCHEMA_NAME = "catalogue.schema.json"
@@ -161,10 +162,13 @@ def render_name(template: str, fields: dict, grid: tuple, fmt: str, where: str) 
 
 
 def _species(base: Path, value: str, where: str, params: dict) -> tuple[Path, str]:
-    """Resolve and parse a species file once per catalogue; returns (path, sha256 of bytes)."""
+    """Resolve (a path relative to the catalogue wins, else a bundled name) and parse a
+    species file once per catalogue; returns (path, sha256 of bytes)."""
     from .params import parse_params_bytes
 
-    p = (base / value).resolve()
+    from .bundled import resolve_species
+
+    p = resolve_species(value, base, f"{where}: species file '{value}'").resolve()
     if p not in params:
         try:
             data = p.read_bytes()
@@ -240,6 +244,10 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
                 msg = str(e)
                 raise TreegenError(msg if msg.startswith(("entries[", "defaults."))
                                    else f"{where}: {msg}") from None
+            try:        # an implausible Scale is a typo: refused now, not by a worker mid-run
+                check_trunk(loaded[sp][0], base_job.options.generate)
+            except TreegenError as e:
+                raise TreegenError(f"{where}.species: {e}") from None
             values = {k: v for k, v in base_job.values.items() if k != "seed"
                       and not (k in api.UNSET_FREE and v is None)}
             for seed in seeds:

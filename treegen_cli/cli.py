@@ -15,10 +15,16 @@ from . import __version__
 from .errors import TreegenError, in_file as _in_file
 from .generate import GenerateOptions
 
-SPECIES = click.Path(dir_okay=False, path_type=Path)
+# a species file or a bundled name (bundled.resolve_species: an existing path wins)
+SPECIES = click.STRING
 
 
 def _generate_options(f):
+    f = click.option("--max-size", type=float, default=GenerateOptions.max_size, show_default=True,
+                     metavar="METRES",
+                     help="Refuse trees taller, or with a crown wider, than this many metres: a "
+                          "plausibility bound that catches a mistyped Scale (the tallest living "
+                          "tree is about 116 m); raise it for giants on purpose.")(f)
     f = click.option("--max-leaves", type=int, default=GenerateOptions.max_leaves, show_default=True,
                      help="Refuse trees with more leaves than this (estimated before growing).")(f)
     f = click.option("--max-stems", type=int, default=GenerateOptions.max_stems, show_default=True,
@@ -53,6 +59,11 @@ def _lod_options_from(lod_distances, fov, width, error_px, error_form, interpola
 
     return resolve(dict(lod_distances=lod_distances, fov=fov, width=width, error_px=error_px,
                         error_form=error_form, interpolation=interpolation)).options.lod
+
+
+def _species(value: str) -> Path:
+    from .bundled import resolve_species
+    return resolve_species(value)
 
 
 def _load(species: Path):
@@ -93,36 +104,39 @@ def cli():
 @click.option("--triangles", type=int, default=None, metavar="N",
               help="Also plan a LOD0 triangle budget as `make --triangles N` would, and print "
                    "the levers it picks and the triangles it will build.")
-def info(species, seed, max_stems, max_leaves, as_json, with_lod, lod_distances, fov, width,
+def info(species, seed, max_stems, max_leaves, max_size, as_json, with_lod, lod_distances, fov, width,
          error_px, error_form, interpolation, with_wind, wind_speed, stiffness, triangles):
-    """Grow SPECIES (a Weber–Penn text or Arbaro XML file) and report on the tree:
+    """Grow SPECIES (a Weber–Penn text or Arbaro XML file, or a bundled name such as
+    quaking_aspen: see `treegen species`) and report on the tree:
     stems per level, leaves, leaf area (m²), height and crown width (m), nodes, seconds.
     With --lod: the analogue of the paper's Table 3, one row per LOD distance.
     With --wind: the wind model's numbers, to tune --wind-speed, --gust and --stiffness."""
+    from .api import resolve
     from .generate import generate
     from .tree import tree_stats
 
+    generate_options = resolve(dict(seed=seed, max_stems=max_stems, max_leaves=max_leaves,
+                                    max_size=max_size)).options.generate
+    species = _species(species)
     params = _load(species)
     t0 = time.perf_counter()
-    tree = _in_file(species, generate, params, seed,
-                    GenerateOptions(max_stems=max_stems, max_leaves=max_leaves))
+    tree = _in_file(species, generate, params, seed, generate_options)
     seconds = time.perf_counter() - t0
     from .progress import current_reporter
     current_reporter().detail(f"  generate  {seconds:8.3f} s  ({tree.n_stems:,} stems, "
                               f"{tree.n_nodes:,} nodes, {tree.n_leaves:,} leaves)")
     stats = tree_stats(tree) | {"generate_s": round(seconds, 4), "file": str(species)}
     stats["triangles"] = _triangle_rows(species, params, seed, tree, triangles,
-                                        GenerateOptions(max_stems=max_stems, max_leaves=max_leaves))
+                                        generate_options)
     if with_lod:
-        stats["lods"] = _lod_rows(species, params, seed, tree,
-                                  GenerateOptions(max_stems=max_stems, max_leaves=max_leaves),
+        stats["lods"] = _lod_rows(species, params, seed, tree, generate_options,
                                   _lod_options_from(lod_distances, fov, width, error_px,
                                                     error_form, interpolation))
     if with_wind:
         from .rig import build_rig
-        from .wind import WindOptions, wind_report
-        stats["wind"] = wind_report(tree, build_rig(tree),
-                                    WindOptions(speed=wind_speed, stiffness=stiffness), seed)
+        from .wind import wind_report
+        wind = resolve(dict(wind_speed=wind_speed, stiffness=stiffness)).options.wind
+        stats["wind"] = wind_report(tree, build_rig(tree), wind, seed)
     if as_json:
         click.echo(json.dumps(stats, indent=2))
         return
@@ -269,21 +283,22 @@ def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> lis
               help="Refuse wind clips with more joint-keys (joints × keys) than this.")
 @click.option("--json", "as_json", is_flag=True,
               help="Print a machine-readable summary (files, bytes, counts, seconds per stage).")
-def make(species, output, seed, max_stems, max_leaves, max_joints, joints, triangles, profile,
+def make(species, output, seed, max_stems, max_leaves, max_size, max_joints, joints, triangles, profile,
          joint_levels, sides,
          leaf_geometry, texture_size, leaf_texture, bark_texture, no_textures, wind_speed,
          wind_dir, gust, turbulence, duration, fps, stiffness, no_wind, up_axis, lod_distances,
          fov, width, error_px, error_form, interpolation, lod_triangles, no_lod, lod_files,
          max_vertices, max_keys, as_json):
-    """Grow SPECIES and write a skinned, wind-animated tree to OUTPUT."""
+    """Grow SPECIES (a species file, or a bundled name such as quaking_aspen: see `treegen
+    species`) and write a skinned, wind-animated tree to OUTPUT."""
     from .api import build, check_output, resolve, write
     from .exchange import STATIC
     from .progress import current_reporter
     from .tree import tree_stats
 
     t0 = time.perf_counter()
-    check_output(output, up_axis)
-    job = resolve(_given(dict(seed=seed, max_stems=max_stems, max_leaves=max_leaves,
+    check_output(output, up_axis, flag="-o")
+    job = resolve(_given(dict(seed=seed, max_stems=max_stems, max_leaves=max_leaves, max_size=max_size,
                        max_joints=max_joints, joints=joints, triangles=triangles,
                        profile=profile, joint_levels=joint_levels, sides=sides,
                        leaf_geometry=leaf_geometry, texture_size=texture_size,
@@ -298,7 +313,7 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joints, trian
                   output=output)
     options = job.options
     static = output.suffix.lower() in STATIC
-    params = _load(species)
+    params = _load(_species(species))
     rep = current_reporter()
     per_lod = 3 if options.wind is None else 5          # generate, rig, mesh (, wind, lod)
     timings = rep.timings(total=per_lod + 3 if options.lod is None else

@@ -19,7 +19,7 @@ from .errors import TreegenError
 
 
 @click.command()
-@click.argument("catalogue", type=click.Path(dir_okay=False, path_type=Path), required=False)
+@click.argument("catalogue", type=click.Path(path_type=Path), required=False)
 @click.option("-o", "--output", "out_dir", type=click.Path(path_type=Path), metavar="DIR",
               help="Output folder (created if missing); assets, manifest.json and manifest.csv go here.")
 @click.option("--workers", type=int, default=None,

@@ -11,7 +11,7 @@ from .limits import MAX_TREES
 
 
 @click.command()
-@click.argument("layout", type=click.Path(dir_okay=False, path_type=Path), required=False)
+@click.argument("layout", type=click.Path(path_type=Path), required=False)
 @click.option("-o", "--output", type=click.Path(path_type=Path),
               help="Output scene: .glb .gltf (one file, shared meshes/skins/animation data) or "
                    ".usda .usdc .usdz (prototypes once, instanceable references).")

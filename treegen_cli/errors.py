@@ -22,3 +22,18 @@ def in_file(path, fn, *args):
         if str(e).startswith(str(path)):
             raise
         raise TreegenError(f"{path}: {e}") from None
+
+
+class OptionError(TreegenError):
+    """A stage option out of its range. `field` is the options dataclass's field (`speed`),
+    `label` how the message names it when nobody re-words it; the front door (api.resolve)
+    re-words it with what the user typed (`--wind-speed`, `entries[0].wind_speed`), keeping
+    the value and the allowed range."""
+
+    def __init__(self, field: str, value, rule: str, label: str | None = None):
+        self.field, self.value, self.rule = field, value, rule
+        super().__init__(self.worded(label or field))
+
+    def worded(self, label: str) -> str:
+        value = f"{self.value:g}" if isinstance(self.value, float) else str(self.value)
+        return f"{label} {value}: {self.rule}"

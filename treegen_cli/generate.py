@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .errors import TreegenError
-from .params import Params
+from .params import MAX_LEVELS, Params
 from .shapes import ENVELOPE, flare_factor, shape_ratio, taper_radius
 from .tree import Tree
 
@@ -32,6 +32,8 @@ class GenerateOptions:
     leaf_quality: float | None = None
     levels: int | None = None
     prune_steps: int = 7          # bisection steps when fitting a stem into the envelope
+    max_size: float = 150.0       # metres of height or crown width (plausibility bound: the
+                                  # tallest living tree is ~116 m, the widest crowns ~80 m)
 
 
 DEFAULTS = GenerateOptions()
@@ -404,10 +406,51 @@ def estimate_counts(p: Params, leaf_quality: float | None = None, levels: int | 
     return int(round(stems)), int(round(leaves))
 
 
-def _refuse(kind: str, count: float, limit: int, flag: str, name: str):
+def _refuse(kind: str, count: float, limit: int, flag: str, p: Params, levels: int | None):
+    """Refuse an oversized tree, naming the key to lower: Levels when fewer levels would fit
+    (each level multiplies the count by its nBranches), else the count keys."""
+    fits = [n for n in range(p.levels) if estimate_counts(p, levels=n)[kind == "leaves"] <= limit]
+    if levels is None and fits and max(fits) < p.levels:
+        raise TreegenError(
+            f"Levels = {p.levels} would grow about {int(count):,} {kind}, over the {flag} limit "
+            f"of {limit:,}; Levels may be 0..{MAX_LEVELS} and at most {max(fits)} fits this "
+            f"species' nBranches (or raise {flag} N)")
     raise TreegenError(
-        f"species '{name}' would grow about {int(count):,} {kind}, over the limit of {limit:,}; "
+        f"species '{p.name}' would grow about {int(count):,} {kind}, over the limit of {limit:,}; "
         f"raise it with {flag} N (or lower the species' Branches/Leaves/LeafQuality)")
+
+
+def check_trunk(p: Params, options: GenerateOptions = DEFAULTS) -> None:
+    """Before growing: a trunk longer than the size bound makes an implausible tree (and
+    astronomically large Scale values would overflow the geometry)."""
+    lp0 = p.level[0]
+    trunk = (p.scale + p.scale_v) * (lp0.length + lp0.length_v)
+    if not trunk <= options.max_size:
+        raise TreegenError(
+            f"Scale = {p.scale:g} (ScaleV {p.scale_v:g}, 0Length {lp0.length:g}) makes a trunk up "
+            f"to {trunk:,.0f} m long, over the plausibility bound of {options.max_size:g} m; "
+            f"lower Scale, or raise the bound with --max-size METRES")
+
+
+def check_size(tree: Tree, max_size: float) -> None:
+    """After growing: the tree's height and crown width within `max_size` metres, else a
+    one-line refusal naming the keys that scale them (every length is ∝ Scale)."""
+    p = tree.params
+    pts = np.concatenate([tree.node_pos, tree.leaf_pos]) if tree.n_leaves else tree.node_pos
+    if not len(pts):
+        return
+    height = float(pts[:, 2].max())
+    width = float(np.max(np.ptp(pts[:, :2], axis=0)))
+    fix = "; lower {}, or raise the bound with --max-size METRES"
+    if not height <= max_size:
+        raise TreegenError(
+            f"Scale = {p.scale:g} grows a tree {height:,.1f} m tall (seed {tree.seed}), over the "
+            f"plausibility bound of {max_size:g} m" + fix.format("Scale or 0Length"))
+    if not width <= max_size:
+        raise TreegenError(
+            f"Scale = {p.scale:g} with 1Length = {p.level[1].length:g} grows a crown {width:,.1f} m "
+            f"wide (seed {tree.seed}), over the plausibility bound of {max_size:g} m"
+            + fix.format("Scale or 1Length"))
 
 
 def _prepare(p: Params, options: GenerateOptions) -> tuple[Params, int]:
@@ -417,9 +460,10 @@ def _prepare(p: Params, options: GenerateOptions) -> tuple[Params, int]:
     n_levels = p.levels if options.levels is None else max(0, min(options.levels, p.levels))
     est_stems, est_leaves = estimate_counts(p, levels=n_levels)
     if est_stems > options.max_stems:
-        _refuse("stems", est_stems, options.max_stems, "--max-stems", p.name)
+        _refuse("stems", est_stems, options.max_stems, "--max-stems", p, options.levels)
     if est_leaves > options.max_leaves:
-        _refuse("leaves", est_leaves, options.max_leaves, "--max-leaves", p.name)
+        _refuse("leaves", est_leaves, options.max_leaves, "--max-leaves", p, options.levels)
+    check_trunk(p, options)
     return p, n_levels
 
 
@@ -459,7 +503,7 @@ def generate(p: Params, seed: int = 0, options: GenerateOptions = DEFAULTS) -> T
         n_local = origin.shape[0]
         total_stems += n_local
         if total_stems > options.max_stems:
-            _refuse("stems", total_stems, options.max_stems, "--max-stems", p.name)
+            _refuse("stems", total_stems, options.max_stems, "--max-stems", p, options.levels)
 
         # global indices
         g0, n0 = out.n_stems, out.n_nodes
@@ -504,7 +548,7 @@ def generate(p: Params, seed: int = 0, options: GenerateOptions = DEFAULTS) -> T
                 leaves = _leaves(p, ctx, seed, n_levels, options, scale_tree)
             break
 
-    return Tree(
+    tree = Tree(
         params=p, seed=seed, scale=float(scale_tree),
         stem_level=out.cat("stem_level", np.int8), stem_parent=out.cat("stem_parent", np.int32),
         stem_parent_node=out.cat("stem_parent_node", np.int32),
@@ -516,6 +560,8 @@ def generate(p: Params, seed: int = 0, options: GenerateOptions = DEFAULTS) -> T
         node_frame=out.cat("node_frame", np.float64, (3, 3)),
         node_radius=out.cat("node_radius", np.float64), node_z=out.cat("node_z", np.float64),
         **_leaf_fields(leaves))
+    check_size(tree, options.max_size)
+    return tree
 
 
 def _leaf_fields(leaves: dict | None) -> dict:
@@ -648,7 +694,7 @@ def _children(p: Params, ctx: _LevelContext, seed: int, scale_tree: float,
     totals = np.maximum(totals, 0.0)
     expected = stems_so_far + totals.sum()
     if expected > options.max_stems:
-        _refuse("stems", expected, options.max_stems, "--max-stems", p.name)
+        _refuse("stems", expected, options.max_stems, "--max-stems", p, options.levels)
 
     n, orig, j, z = _placements(totals, base, L)
     z = _branch_dist(z, ctx.seg_len[orig], base[orig], lp.branch_dist)
@@ -699,7 +745,7 @@ def _leaves(p: Params, ctx: _LevelContext, seed: int, n_levels: int, options: Ge
         totals = abs(p.leaves) * shape_ratio(distrib, np.clip(rel, 0, 1)) * quality
         z_lo = np.minimum(p.base_size * scale_tree, L) if ctx.level == 0 else np.zeros_like(L)
     if totals.sum() > options.max_leaves:
-        _refuse("leaves", totals.sum(), options.max_leaves, "--max-leaves", p.name)
+        _refuse("leaves", totals.sum(), options.max_leaves, "--max-leaves", p, options.levels)
 
     if not fan and lp.rotate < 0:
         # whorls: groups of 360/(−Rotate) leaves share an offset, evenly around the stem
@@ -729,7 +775,7 @@ def _leaves(p: Params, ctx: _LevelContext, seed: int, n_levels: int, options: Ge
             stem = _assign_members(ctx, rng, orig, z)
     k = stem.shape[0]
     if k > options.max_leaves:
-        _refuse("leaves", k, options.max_leaves, "--max-leaves", p.name)
+        _refuse("leaves", k, options.max_leaves, "--max-leaves", p, options.levels)
     pos, pframe, _, pnode = ctx.attach(stem, np.minimum(z, ctx.length[stem] * (1 - 1e-9)))
     if fan:
         down = lp.down_angle * 2.0 * spread + _spread(rng, k, lp.down_angle_v)

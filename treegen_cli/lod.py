@@ -41,7 +41,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .asset import Clip, Lod, Primitive, Skeleton
-from .errors import TreegenError
+from .errors import OptionError, TreegenError
 from .clip import kept_mask, play_keys
 from .quat import angle as quat_angle, unit as unit_quat
 from .skeleton import pose_world
@@ -70,23 +70,28 @@ class LodOptions:
 
     def __post_init__(self) -> None:
         d = self.distances
+        shown = ",".join(f"{x:g}" for x in d) or "(none)"
         if not d or any(not math.isfinite(x) or x < 0 for x in d) or list(d) != sorted(d):
-            raise TreegenError(f"--lod-distances {','.join(f'{x:g}' for x in d) or '(none)'}: "
-                               "give one or more ascending distances in metres, each >= 0")
+            raise OptionError("distances", shown, "give one or more ascending distances in "
+                                                  "metres, each >= 0", "--lod-distances")
         if len(set(d)) != len(d):
-            raise TreegenError(f"--lod-distances {','.join(f'{x:g}' for x in d)}: distances repeat")
+            raise OptionError("distances", shown, "distances repeat", "--lod-distances")
         if not 0.0 < self.fov_deg < 180.0:
-            raise TreegenError(f"--fov {self.fov_deg:g}: the horizontal field of view must be in (0, 180) degrees")
+            raise OptionError("fov_deg", self.fov_deg, "the horizontal field of view must be in "
+                                                        "(0, 180) degrees", "--fov")
         if self.error_form == "paper" and self.fov_deg >= 90.0:
-            raise TreegenError(f"--fov {self.fov_deg:g}: the paper's tan(fov) form needs fov < 90 degrees")
+            raise OptionError("fov_deg", self.fov_deg, "the paper's tan(fov) form needs fov < 90 "
+                                                        "degrees", "--fov")
         if not 1 <= self.width <= 1_000_000:
-            raise TreegenError(f"--width {self.width}: screen width must be in 1..1000000 pixels")
+            raise OptionError("width", self.width, "screen width must be in 1..1000000 pixels",
+                              "--width")
         if not (math.isfinite(self.error_px) and 0.0 <= self.error_px <= 1000.0):
-            raise TreegenError(f"--error-px {self.error_px:g}: allowed range 0..1000 pixels")
+            raise OptionError("error_px", self.error_px, "allowed range 0..1000 pixels", "--error-px")
         if self.error_form not in ("exact", "paper"):
-            raise TreegenError(f"--error-form {self.error_form!r}: use 'exact' or 'paper'")
+            raise OptionError("error_form", self.error_form, "use 'exact' or 'paper'", "--error-form")
         if self.interpolation not in ("LINEAR", "STEP"):
-            raise TreegenError(f"--interpolation {self.interpolation!r}: use 'linear' or 'step'")
+            raise OptionError("interpolation", self.interpolation, "use 'linear' or 'step'",
+                              "--interpolation")
         if not (self.aspect > 0 and self.max_iterations >= 1 and self.linear_schedule_scale >= 1):
             raise TreegenError("LOD aspect must be > 0 and max_iterations >= 1")
         if (min(self.joint_fraction) <= 0 or max(self.joint_fraction) > 1

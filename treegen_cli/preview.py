@@ -22,6 +22,7 @@ import numpy as np
 from . import exchange
 from .clip import loop_times
 from .drawable import Drawable, from_asset
+from .bundled import LIST_HINT, bundled_species, not_found
 from .errors import TreegenError
 from .params import load_params
 from .pipeline import build_asset
@@ -51,8 +52,9 @@ DEFAULTS = PreviewOptions()
 # ------------------------------------------------------------------------------ front door
 
 def load_scene(path: str | os.PathLike, options: PreviewOptions = DEFAULTS) -> Drawable:
-    """A species file (grown here) or a written tree (read back by exchange) as a Drawable."""
-    path = exchange.check_input(path)
+    """A species file or bundled species name (grown here) or a written tree (read back by
+    exchange) as a Drawable."""
+    path = exchange.check_input(resolve_input(path))
     if not exchange.is_species(path):
         return exchange.read_drawable(path, options.lod)
     params = load_params(path)
@@ -61,6 +63,23 @@ def load_scene(path: str | os.PathLike, options: PreviewOptions = DEFAULTS) -> D
     except TreegenError as e:
         raise TreegenError(f"{path}: {e}") from None
     return from_asset(asset, options.lod, label=str(path))
+
+
+def resolve_input(value: str | os.PathLike) -> Path:
+    """INPUT as a file: an existing path wins, then a bundled species name (bundled.py)."""
+    text = os.fspath(value)
+    path = Path(text)
+    if path.is_dir():
+        raise TreegenError(f"{text} is a directory; expected a tree file (.glb .gltf .usd*), "
+                           f"a species file (.txt .xml) or a bundled species name ({LIST_HINT})")
+    if path.is_file():
+        return path
+    hit = bundled_species(text)
+    if hit is not None:
+        return hit
+    if path.suffix.lower() in exchange.SPECIES or not path.suffix:
+        raise not_found(f"species '{text}'", text)
+    return path                          # exchange.check_input names what is missing
 
 
 def framing_points(scene: Drawable, times: np.ndarray, max_points: int = 20000) -> np.ndarray:
@@ -138,10 +157,10 @@ def _size(text: str) -> tuple[int, int]:
 
 
 @click.command("preview")
-@click.argument("input_path", metavar="INPUT", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
+@click.argument("input_path", metavar="INPUT")
+@click.option("-o", "--output", type=click.Path(path_type=Path),
               help="Still image of the rest pose: .png (optimised) or .jpg.")
-@click.option("--animate", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--animate", type=click.Path(path_type=Path),
               help="Animated GIF of the whole wind loop (first frame = last frame), skinned on "
                    "the GPU from the file's joints and keys, like an engine.")
 @click.option("--azimuth", type=float, default=DEFAULTS.azimuth, show_default=True,
@@ -164,7 +183,8 @@ def _size(text: str) -> tuple[int, int]:
 def preview_command(input_path, output, animate, azimuth, elevation, size, lod, seed, fps,
                     png_colors, as_json):
     """Render INPUT headless (OpenGL on EGL; no display needed): a species file (.txt .xml,
-    grown in-process) or a tree written by `treegen make` (.glb .gltf .usda .usdc .usdz).
+    grown in-process) or bundled species name (`treegen species`), or a tree written by
+    `treegen make` (.glb .gltf .usda .usdc .usdz).
     Lit by a sun with shadows and sky light; bark and leaves as their materials say: colours,
     textures (cut-out leaves, casting cut-out shadows; bark with its normal map), framed
     automatically from the bounds of the whole animation."""
@@ -173,9 +193,9 @@ def preview_command(input_path, output, animate, azimuth, elevation, size, lod, 
     if output is None and animate is None:
         raise TreegenError("preview: give an image with -o out.png and/or --animate out.gif")
     if output is not None:                        # fail before anything is grown or rendered
-        exchange.check_suffix(output, exchange.STILLS, "image")
+        exchange.check_suffix(output, exchange.STILLS, "image", "-o")
     if animate is not None:
-        exchange.check_suffix(animate, exchange.LOOPS, "animation")
+        exchange.check_suffix(animate, exchange.LOOPS, "animation", "--animate")
     if not -89.0 <= elevation <= 89.0:
         raise TreegenError(f"--elevation {elevation:g}: allowed range -89..89 degrees")
     if not 0.5 <= fps <= 60.0:

@@ -46,7 +46,7 @@ class RigOptions:
 
 RIG_DEFAULTS = RigOptions()
 
-_MAX_JOINTS = 65535                      # skin joint indices are uint16
+MAX_JOINTS = 65535                       # skin joint indices are uint16
 _BASE_ONLY = np.iinfo(np.int32).max      # chain stride that keeps only a stem's base node
 
 
@@ -115,9 +115,9 @@ def joint_names(tree, joint_node: np.ndarray, joint_stem: np.ndarray) -> list[st
 
 def build_rig(tree, options: RigOptions = RIG_DEFAULTS) -> Rig:
     """Joints on stem nodes under `options.max_joints`, with node and leaf skin bindings."""
-    if not 1 <= options.max_joints <= _MAX_JOINTS:
+    if not 1 <= options.max_joints <= MAX_JOINTS:
         raise TreegenError(f"--max-joints {options.max_joints}: the joint budget must be in "
-                           f"1..{_MAX_JOINTS}")
+                           f"1..{MAX_JOINTS}")
     N = tree.n_nodes
     nid = np.arange(N)
     s = tree.node_stem

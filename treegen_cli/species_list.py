@@ -1,8 +1,9 @@
 """`treegen species`: the bundled species files, what each one is, and how big it grows.
 
-The species/ folder sits next to the treegen_cli package (project root). Each file's header
-comment names the tree on its first line and its origin on a "Source:" line; counts come from
-growing it at the default seed (tens of ms each, the willow about a second).
+The files are package data (treegen_cli/species/, see bundled.py); any command takes a name
+from this list in place of a species file. Each file's header comment names the tree on its
+first line and its origin on a "Source:" line; counts come from growing it at the default seed
+(tens of ms each, the willow about a second).
 """
 from __future__ import annotations
 
@@ -13,31 +14,17 @@ from pathlib import Path
 
 import click
 
-from .errors import TreegenError
+from .bundled import species_dir, species_files
 
 
 @dataclass(frozen=True)
 class SpeciesInfo:
-    name: str            # file stem, what `treegen make species/<name>.txt` takes
+    name: str            # file stem, what `treegen make <name>` takes
     path: str
     description: str     # one line: the tree's name and where its values come from
     stems: int           # at the default seed
     leaves: int
     height_m: float
-
-
-def species_dir() -> Path:
-    """The bundled species folder: <project root>/species beside treegen_cli/."""
-    here = Path(__file__).resolve().parent
-    for candidate in (here.parent / "species", here / "species"):
-        if candidate.is_dir():
-            return candidate
-    raise TreegenError(f"bundled species folder not found (looked in {here.parent / 'species'})")
-
-
-def species_files(folder: Path | None = None) -> list[Path]:
-    folder = folder or species_dir()
-    return sorted(p for p in folder.iterdir() if p.suffix.lower() in (".txt", ".xml"))
 
 
 def describe(path: Path) -> str:
@@ -89,15 +76,17 @@ def as_dicts(infos: list[SpeciesInfo]) -> list[dict]:
               help="Seed the counts are grown with.")
 @click.option("--json", "as_json", is_flag=True, help="Print the list as JSON.")
 def species_command(seed, as_json):
-    """List the bundled species: name, one-line description, and stems, leaves and height (m)
-    when grown at SEED. Use a name as `treegen make species/<name>.txt`."""
+    """List the bundled species: name, one-line description (the tree and where its values
+    come from), and stems, leaves and height (m) when grown at SEED. Any command takes a name
+    in place of a species file, from any folder: `treegen make quaking_aspen -o aspen.glb`."""
     infos = list_species(seed)
     if as_json:
         click.echo(json.dumps(as_dicts(infos), indent=2, ensure_ascii=False))
         return
     width = max(len(i.name) for i in infos) if infos else 4
+    click.echo(f"bundled species, from {species_dir()} (seed {seed}); a name works anywhere a "
+               f"species file does, e.g. treegen make {infos[0].name if infos else 'NAME'} -o tree.glb")
     click.echo(f"{'species':<{width}}  {'stems':>7}  {'leaves':>8}  {'height':>7}  description")
     for i in infos:
         click.echo(f"{i.name:<{width}}  {i.stems:>7,}  {i.leaves:>8,}  {i.height_m:>6.1f}m  "
                    f"{i.description}")
-    click.echo(f"({len(infos)} species in {species_dir()}, seed {seed})")

@@ -42,7 +42,7 @@ from scipy.spatial.transform import Rotation
 
 from .asset import Clip
 from .clip import loop_times
-from .errors import TreegenError
+from .errors import OptionError, TreegenError
 from .quat import mul as quat_mul, unit as quat_unit
 from .rig import Rig
 from .shapes import flare_factor
@@ -94,13 +94,15 @@ class WindOptions:
         for name, (lo, hi, unit) in _RANGES.items():
             value = getattr(self, name)
             if not (np.isfinite(value) and lo <= value <= hi):
-                raise TreegenError(
-                    f"wind option '{name}' = {value!r}: allowed range {lo:g}..{hi:g} {unit}".rstrip()
-                )
+                raise OptionError(name, value, f"allowed range {lo:g}..{hi:g} {unit}".rstrip(),
+                                  f"WindOptions.{name}")
         for name in ("duration", "fps", "elastic_modulus", "stiffness", "working_stress", "anchorage",
                      "max_angle_deg", "max_bend_deg", "gust_length", "turbulence_length"):
             if getattr(self, name) <= 0:
-                raise TreegenError(f"wind option '{name}' must be > 0, got {getattr(self, name)!r}")
+                lo, hi, unit = _RANGES.get(name, (0.0, np.inf, ""))
+                raise OptionError(name, getattr(self, name),
+                                  f"must be > 0; allowed range (0, {hi:g}] {unit}".rstrip(),
+                                  f"WindOptions.{name}")
         if len(self.origin) != 3 or not np.all(np.isfinite(self.origin)):
             raise TreegenError(f"wind option 'origin' must be three finite numbers, got {self.origin!r}")
 

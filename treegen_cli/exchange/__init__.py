@@ -71,13 +71,22 @@ def supported_suffixes(table: dict | tuple = WRITERS) -> list[str]:
     return sorted(table)
 
 
-def check_suffix(path: str | os.PathLike, table: dict | tuple = WRITERS, kind: str = "output") -> Path:
-    """`path` as a Path, or the one-line error naming the extensions `table` supports."""
+def check_suffix(path: str | os.PathLike, table: dict | tuple = WRITERS, kind: str = "output",
+                 flag: str | None = None) -> Path:
+    """`path` as a Path, or the one-line error naming the extensions `table` supports.
+    `flag` is how the user gave the path (`-o`, `--animate`), named first in the message."""
     path = Path(path)
     suffix = path.suffix.lower()
+    allowed = " ".join(supported_suffixes(table))
+    who = f"{flag} {path}" if flag else str(path)
+    if kind != "input" and path.is_dir():
+        raise TreegenError(f"{who}: is a directory; give a file name ending in one of {allowed} "
+                           f"(e.g. {path / ('tree' + next(iter(table)))})")
+    if not suffix:
+        raise TreegenError(f"{who}: no file extension; the extension picks the {kind} format, "
+                           f"one of {allowed}")
     if suffix not in table:
-        raise TreegenError(f"{path}: unknown {kind} extension '{suffix or '(none)'}'; "
-                           f"supported: {', '.join(supported_suffixes(table))}")
+        raise TreegenError(f"{who}: unknown {kind} extension '{suffix}'; allowed: {allowed}")
     return path
 
 

@@ -251,7 +251,7 @@ def run_forest(layout_path, output, all_lods: bool = True, error_px: float | Non
                max_trees: int = MAX_TREES, scheduler: str | None = None) -> dict:
     """The whole command: validate (nothing written on error), build, write, summarise."""
     t0 = time.perf_counter()
-    output = check_suffix(output, FOREST_WRITERS)
+    output = check_suffix(output, FOREST_WRITERS, flag="-o")
     if error_px is not None and not (math.isfinite(error_px) and 0 <= error_px <= 100):
         raise TreegenError(f"--error-px {error_px}: allowed range 0..100 pixels")
     layout = load_layout(layout_path, max_trees)

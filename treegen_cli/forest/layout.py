@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..bundled import resolve_species
 from ..errors import TreegenError
 from ..limits import MAX_TREES
 from ..params import load_params
@@ -87,16 +88,10 @@ def load_layout(path: str | os.PathLike, max_trees: int = MAX_TREES) -> Layout:
 
 
 def _species_file(base: Path, value: str, where: str, checked: dict) -> Path:
-    """The resolved species file; parsed once per layout so a bad file is reported at the
-    JSON path that names it (before anything is built or written)."""
-
-    try:
-        p = (base / value).resolve()
-        ok = p.is_file()
-    except (OSError, ValueError):
-        ok = False
-    if not ok:
-        raise TreegenError(f"{where}: species file '{show_value(value)[1:-1]}' not found")
+    """The species file `value` names (a path relative to the layout wins, else a bundled
+    name); parsed once per layout so a bad file is reported at the JSON path that names it
+    (before anything is built or written)."""
+    p = resolve_species(value, base, f"{where}: species file '{show_value(value)[1:-1]}'").resolve()
     if p not in checked:
         try:
             checked[p] = load_params(p)

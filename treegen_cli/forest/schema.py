@@ -23,6 +23,8 @@ def read_json_file(path: Path, kind: str):
         text = path.read_text("utf-8")
     except FileNotFoundError:
         raise TreegenError(f"{path}: no such {kind} file") from None
+    except IsADirectoryError:
+        raise TreegenError(f"{path}: is a directory; expected a {kind} file (JSON)") from None
     except (OSError, UnicodeDecodeError) as e:
         raise TreegenError(f"{path}: cannot read the {kind} ({e})") from None
     try:

@@ -1,0 +1,144 @@
+"""Input gaps a user hit (issue 16): each is one line on stderr, exit code 2, naming the flag or
+key as the user typed it and its allowed range, with nothing written.
+
+Covered: a directory where a file goes (species, layout, catalogue, -o, --animate), an output
+name without a known extension, `Levels` too deep for the stem limit (blamed on Levels, not on
+the count), implausibly tall or wide trees (`--max-size`), and option ranges worded with the
+CLI flag or catalogue JSON path instead of internal field names (`--wind-speed`, not 'speed')."""
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from treegen_cli.bundled import species_dir
+
+ROOT = Path(__file__).resolve().parent.parent
+ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(
+    [str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])}
+ASPEN = (species_dir() / "quaking_aspen.txt").read_text()
+
+
+def edited(**keys) -> str:
+    """The aspen's file with `Key value` lines replaced (`_1Length` for 1Length)."""
+    text = ASPEN
+    for key, value in keys.items():
+        key = key.lstrip("_")
+        text, n = re.subn(rf"^{key}\s.*$", f"{key} {value}", text, flags=re.M)
+        assert n == 1, key
+    return text
+
+
+INPUTS = {
+    "levels9.txt": edited(Levels=9),
+    "scale1300.txt": edited(Scale=1300),
+    "tall.txt": edited(Scale=130),                 # trunk ≤ 133 m, branches reach ~155 m
+    "wide.txt": edited(Scale=50, _1Length=2, _1DownAngle=90, _1DownAngleV=0),
+    "catalogue_fov.json": json.dumps({"entries": [{"species": "rush", "fov": 100, "error_form": "paper"}]}),
+    "catalogue_tex.json": json.dumps({"entries": [{"species": "rush", "texture_size": 100}]}),
+    "catalogue_size.json": json.dumps({"entries": [{"species": "scale1300.txt"}]}),
+    "forest.json": json.dumps({"camera": {"position": [0, -20, 2], "target": [0, 0, 2]},
+                               "instances": [{"species": "rush", "position": [0, 0]}]}),
+}
+
+CASES = [
+    # a directory where a file goes
+    (["make", ".", "-o", "x.glb"], ["'.' is a directory", "species file (.txt .xml)"]),
+    (["make", "rush", "-o", "sub"], ["-o sub: is a directory", ".glb", ".usdz"]),
+    (["preview", "rush", "-o", "sub"], ["-o sub: is a directory", ".png"]),
+    (["forest", "sub", "-o", "f.glb"], ["sub: is a directory; expected a layout file"]),
+    (["batch", "sub", "-o", "out"], ["sub: is a directory; expected a catalogue file"]),
+    # output names without a known extension
+    (["make", "rush", "-o", "x"], ["-o x: no file extension", ".glb .gltf .obj .ply .usda .usdc .usdz"]),
+    (["make", "rush", "-o", "x.fbx"], ["-o x.fbx: unknown output extension '.fbx'", ".glb"]),
+    (["forest", "forest.json", "-o", "f"], ["-o f: no file extension", ".glb"]),
+    (["preview", "rush", "--animate", "loop"], ["--animate loop: no file extension", ".gif"]),
+    # Levels too deep: the key and its range, not the stem count alone
+    (["make", "levels9.txt", "-o", "x.glb"], ["levels9.txt: Levels = 9", "--max-stems limit of 200,000",
+                                              "Levels may be 0..9", "at most 5 fits"]),
+    (["info", "levels9.txt"], ["Levels = 9", "0..9"]),
+    # plausibility bound on the tree's size
+    (["make", "scale1300.txt", "-o", "x.glb"], ["scale1300.txt: Scale = 1300", "1,303 m",
+                                                "bound of 150 m", "--max-size"]),
+    (["info", "tall.txt"], ["Scale = 130 grows a tree", "m tall", "bound of 150 m", "--max-size"]),
+    (["make", "wide.txt", "-o", "x.glb"], ["1Length = 2 grows a crown", "m wide", "bound of 150 m"]),
+    (["make", "rush", "-o", "x.glb", "--max-size", "0"], ["--max-size 0: the bound must be > 0"]),
+    (["batch", "catalogue_size.json", "-o", "out", "--dry-run"], ["entries[0].species", "Scale = 1300"]),
+    # option ranges say the flag or JSON path the user typed
+    (["make", "rush", "-o", "x.glb", "--wind-speed", "500"], ["--wind-speed 500: allowed range 0..100 m/s"]),
+    (["make", "rush", "-o", "x.glb", "--wind-dir", "400"], ["--wind-dir 400: allowed range -360..360"]),
+    (["make", "rush", "-o", "x.glb", "--fps", "0"], ["--fps 0: must be > 0; allowed range (0, 240]"]),
+    (["make", "rush", "-o", "x.glb", "--stiffness", "0"], ["--stiffness 0: must be > 0"]),
+    (["make", "rush", "-o", "x.glb", "--fov", "200"], ["--fov 200: ", "(0, 180) degrees"]),
+    (["make", "rush", "-o", "x.glb", "--max-joints", "70000"], ["--max-joints 70000", "1..65535"]),
+    (["make", "rush", "-o", "x.glb", "--seed", "-1"], ["--seed -1: allowed range 0.."]),
+    (["make", "rush", "-o", "x.glb", "--joint-levels", "12"], ["--joint-levels '12'", "0..9"]),
+    (["make", "rush", "-o", "x.glb", "--max-stems", "0"], ["--max-stems 0: the limit must be at least 1"]),
+    (["info", "rush", "--seed", "-1"], ["--seed -1: allowed range 0.."]),
+    (["info", "rush", "--wind", "--wind-speed", "300"], ["--wind-speed 300: allowed range 0..100"]),
+    (["batch", "catalogue_fov.json", "-o", "out", "--dry-run"], ["entries[0].fov 100: ", "fov < 90"]),
+    (["batch", "catalogue_tex.json", "-o", "out", "--dry-run"],
+     ["entries[0].texture_size 100: must be a power of two in [64, 2048]"]),
+]
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("gaps")
+    for name, text in INPUTS.items():
+        (root / name).write_text(text)
+    (root / "sub").mkdir()
+    return root
+
+
+@pytest.mark.parametrize("args, needles", CASES, ids=[" ".join(a) for a, _ in CASES])
+def test_input_gap_is_one_line_exit_2_naming_what_was_typed(folder, args, needles):
+    before = sorted(p.name for p in folder.rglob("*"))
+    proc = subprocess.run([sys.executable, "-m", "treegen_cli", *args], capture_output=True,
+                          text=True, env=ENV, cwd=folder)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("treegen: error: "), proc.stderr
+    assert proc.stdout == ""
+    for needle in needles:
+        assert needle in lines[0], lines[0]
+    assert sorted(p.name for p in folder.rglob("*")) == before          # nothing written
+
+
+def test_internal_field_names_never_reach_the_user(folder):
+    """Stage fields (speed, direction_deg, fov_deg, distances) are worded as flags."""
+    from treegen_cli import api
+    from treegen_cli.errors import TreegenError
+
+    for options, flag in [({"wind_speed": -1}, "--wind-speed"), ({"wind_dir": 999}, "--wind-dir"),
+                          ({"fov": 0}, "--fov"), ({"duration": 0}, "--duration"),
+                          ({"gust": 5}, "--gust"), ({"turbulence": -1}, "--turbulence")]:
+        with pytest.raises(TreegenError) as e:
+            api.resolve(options)
+        assert str(e.value).startswith(flag + " ") and "WindOptions" not in str(e.value)
+        with pytest.raises(TreegenError) as e:
+            api.resolve(options, label=lambda k: f"entries[3].{k}")
+        assert str(e.value).startswith(f"entries[3].{flag[2:].replace('-', '_')} ")
+
+
+def test_max_size_overrides_the_bound(folder):
+    """The refused tall tree grows with a larger bound, and its reported height is over 150 m."""
+    proc = subprocess.run([sys.executable, "-m", "treegen_cli", "info", "tall.txt", "--json",
+                           "--max-size", "400"], capture_output=True, text=True, env=ENV, cwd=folder)
+    assert proc.returncode == 0, proc.stderr
+    assert 150 < json.loads(proc.stdout)["height_m"] <= 400
+
+
+def test_every_bundled_species_fits_the_default_bound():
+    """The bound refuses typos, not the bundled trees (their tallest, the cottonwood, is ~40 m)."""
+    from conftest import SPECIES, grown
+    from treegen_cli.generate import DEFAULTS, check_size
+
+    assert len(SPECIES) >= 15
+    for name in SPECIES:
+        check_size(grown(name), DEFAULTS.max_size)          # raises TreegenError if not
