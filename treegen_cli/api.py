@@ -53,6 +53,7 @@ DEFAULTS: dict[str, object] = {
     "interpolation": "linear",
     "no_lod": False,
     "lod_files": False,
+    "impostor": False,
     "up_axis": None,
     "max_vertices": 20_000_000,
     "max_keys": 5_000_000,
@@ -62,7 +63,7 @@ INTS = ("seed", "max_stems", "max_leaves", "max_joints", "width", "max_vertices"
 PATHS = ("leaf_texture", "bark_texture")
 FLOATS = ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "fov", "error_px",
           "stiffness")
-FLAGS = ("no_wind", "no_lod", "lod_files", "no_textures")
+FLAGS = ("no_wind", "no_lod", "lod_files", "no_textures", "impostor")
 CHOICES = {"leaf_geometry": ("card", "shape"), "error_form": ("exact", "paper"),
            "interpolation": ("linear", "step"), "up_axis": (None, "y", "z")}
 LISTS = ("joint_levels", "sides", "lod_distances")
@@ -187,7 +188,10 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
     lod = None if v["no_lod"] or static else LodOptions(
         distances=v["lod_distances"], fov_deg=v["fov"], width=v["width"], error_px=v["error_px"],
         error_form=v["error_form"], interpolation=v["interpolation"].upper())
+    from .impostor import IMPOSTOR_DEFAULTS
+
     make_options = MakeOptions(
+        impostor=IMPOSTOR_DEFAULTS if v["impostor"] and lod is not None else None,
         generate=GenerateOptions(max_stems=v["max_stems"], max_leaves=v["max_leaves"]),
         rig=RigOptions(max_joints=v["max_joints"], joint_levels=v["joint_levels"]),
         mesh=mesh, wind=wind, lod=lod,

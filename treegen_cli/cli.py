@@ -205,6 +205,10 @@ def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> lis
 @click.option("--lod-files", is_flag=True,
               help="Write each LOD as its own complete file, NAME_LOD0.glb, NAME_LOD1.glb, … "
                    "(for engines that ignore MSFT_lod: Godot, Unity LODGroup, Unreal).")
+@click.option("--impostor/--no-impostor", default=False, show_default=True,
+              help="End the LODs with an impostor: crossed cards cut from a 16×16-view "
+                   "hemi-octahedral atlas (albedo, normals + depth; described in the file's "
+                   "extras and NAME.impostor.json), swaying with the trunk.")
 @click.option("--max-vertices", type=int, default=20_000_000, show_default=True,
               help="Refuse meshes with more vertices than this per LOD (counted from the grown "
                    "tree before the mesh is built).")
@@ -215,8 +219,8 @@ def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> lis
 def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels, sides,
          leaf_geometry, texture_size, leaf_texture, bark_texture, no_textures, wind_speed,
          wind_dir, gust, turbulence, duration, fps, stiffness, no_wind, up_axis, lod_distances,
-         fov, width, error_px, error_form, interpolation, no_lod, lod_files, max_vertices,
-         max_keys, as_json):
+         fov, width, error_px, error_form, interpolation, no_lod, lod_files, impostor,
+         max_vertices, max_keys, as_json):
     """Grow SPECIES and write a skinned, wind-animated tree to OUTPUT."""
     from .api import build, check_output, resolve, write
     from .exchange import STATIC
@@ -233,7 +237,7 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
                        gust=gust, turbulence=turbulence, duration=duration, fps=fps,
                        stiffness=stiffness, no_wind=no_wind, lod_distances=lod_distances,
                        fov=fov, width=width, error_px=error_px, error_form=error_form,
-                       interpolation=interpolation, no_lod=no_lod, lod_files=lod_files,
+                       interpolation=interpolation, no_lod=no_lod, lod_files=lod_files, impostor=impostor,
                        up_axis=up_axis, max_vertices=max_vertices, max_keys=max_keys),
                   output=output)
     options = job.options
@@ -242,7 +246,8 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
     rep = current_reporter()
     per_lod = 3 if options.wind is None else 5          # generate, rig, mesh (, wind, lod)
     timings = rep.timings(total=per_lod + 3 if options.lod is None else
-                          len(options.lod.distances) * per_lod + 3)   # (+ materials, prepare, write)
+                          len(options.lod.distances) * per_lod + 3   # (+ materials, prepare, write)
+                          + (options.impostor is not None))           # (+ impostor)
     with rep.live():
         asset, tree = build(params, species, job, timings)
         s = write(asset, tree, output, timings, t0, job)
