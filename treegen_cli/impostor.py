@@ -1,6 +1,6 @@
 """The impostor: the last LOD, a tree drawn as a few textured cards cut from a view atlas.
 
-    lod, material = build_impostor(coarse_lod, lod0, materials, height, lod_options, index=4)
+    lod, material = build_impostor(lod0, coarse_lod, materials, lod_options, distance, "wind_lod4_loop")
     # Result: a Lod of 2 crossed cards (4 triangles) skinned to one joint swaying like the
     # trunk, with `lod.impostor` holding the hemi-octahedral atlas (albedo + alpha, normals +
     # depth) for engines with impostor shaders; `material` ("impostor") samples the atlas.
@@ -252,12 +252,23 @@ def switch_distance(height: float, last: float, lod_options: LodOptions,
     return float(max(d, options.min_factor * last, 1e-3))
 
 
-def build_impostor(coarse: Lod, materials: list[Material], height: float,
+def atlas_source(full: Lod, coarse: Lod) -> Lod:
+    """What the atlas draws: the coarsest LOD's bark (few sides, the same stems) with the
+    full tree's leaves (thinned by render_views to max_leaf_cards, area kept), so the views
+    keep LOD0's crown coverage at the cost of a coarse LOD."""
+    bark = [p for p in coarse.primitives if p.material != "leaf"]
+    leaves = [p for p in full.primitives if p.material == "leaf"]
+    return replace(coarse, primitives=bark + leaves, clips=[])
+
+
+def build_impostor(full: Lod, coarse: Lod, materials: list[Material],
                    lod_options: LodOptions, distance: float, clip_name: str,
                    options: ImpostorOptions = IMPOSTOR_DEFAULTS) -> tuple[Lod, Material]:
-    """The impostor LOD (cards + atlas) from the coarsest geometric LOD, used from `distance`."""
-    centre, radius = sphere(coarse)
-    albedo, normal = render_views(coarse, materials, centre, radius, options)
+    """The impostor LOD (cards + atlas) of a tree whose full-detail LOD is `full` and coarsest
+    geometric LOD `coarse` (its skeleton and clip give the sway), used from `distance`."""
+    source = atlas_source(full, coarse)
+    centre, radius = sphere(source)
+    albedo, normal = render_views(source, materials, centre, radius, options)
     from .textures import png_bytes
 
     albedo_tex = Texture("impostor_albedo", png_bytes(albedo), wrap="CLAMP")
@@ -266,8 +277,8 @@ def build_impostor(coarse: Lod, materials: list[Material], height: float,
     skel, dense = trunk_sway(coarse, float(centre[2]))
     clips = [] if dense is None else \
         [decimate(skel, [prim], dense, distance, lod_options, clip_name)[0]]
-    lo = np.concatenate([p.positions for p in coarse.primitives]).min(0)
-    hi = np.concatenate([p.positions for p in coarse.primitives]).max(0)
+    lo = np.concatenate([p.positions for p in source.primitives]).min(0)
+    hi = np.concatenate([p.positions for p in source.primitives]).max(0)
     imp = Impostor(albedo=albedo_tex, normal_depth=normal_tex, grid=options.grid,
                    cell=options.cell, centre=centre, radius=radius,
                    bounds=(lo.astype(np.float64), hi.astype(np.float64)),
