@@ -129,7 +129,7 @@ def test_impostor_is_the_last_lod_within_budget_and_shows_the_tree(species):
     assert all(lod.impostor is None for lod in geo)
     tris0 = sum(len(p.indices) // 3 for p in asset.lods[0].primitives)
     tris = sum(len(p.indices) // 3 for p in imp.primitives)
-    assert tris == 4 and tris <= 0.05 * tris0
+    assert tris == 8 and tris <= 0.05 * tris0
     assert imp.distance > geo[-1].distance
     cover = [lod.screen_coverage for lod in asset.lods]
     assert cover == sorted(cover, reverse=True) and cover[-1] == 0.0
@@ -145,7 +145,7 @@ def test_impostor_is_the_last_lod_within_budget_and_shows_the_tree(species):
         assert (0.003 if species in ("rush", "shave_grass") else 0.02) < covered < 0.8, \
             (species, col, row, covered)
     mat = next(m for m in asset.materials if m.name == "impostor")
-    assert mat.double_sided and mat.alpha_cutoff == 0.5 and mat.base_texture is imp.impostor.albedo
+    assert not mat.double_sided and mat.alpha_cutoff == 0.5 and mat.base_texture is imp.impostor.albedo
     # the impostor's clip is decimated within the bound like any LOD's
     (clip,) = imp.clips
     assert clip.name == f"wind_lod{len(geo)}_loop"
@@ -224,7 +224,7 @@ def test_written_glb_validator_clean_sidecar_and_preview_at_distance(tmp_path):
     out = tmp_path / "palm.glb"
     s = api.make(species_path("palm"), out, duration=1.0, fps=10.0, impostor=True)
     assert [p.name for p in map(type(out), s["files"])] == ["palm.glb", "palm.impostor.json"]
-    assert len(s["lods"]) == 5 and s["lods"][-1]["triangles"] == 4
+    assert len(s["lods"]) == 5 and s["lods"][-1]["triangles"] == 8
     report = validate_gltf(out)
     assert report["issues"]["numErrors"] == 0 and report["issues"]["numWarnings"] == 0
     gltf, blob = read_gltf(out)

@@ -1,7 +1,7 @@
 """The impostor: the last LOD, a tree drawn as a few textured cards cut from a view atlas.
 
     lod, material = build_impostor(lod0, coarse_lod, materials, lod_options, distance, "wind_lod4_loop")
-    # Result: a Lod of 2 crossed cards (4 triangles) skinned to one joint swaying like the
+    # Result: a Lod of 2 crossed cards (8 triangles: a face each way) skinned to one joint swaying like the
     # trunk, with `lod.impostor` holding the hemi-octahedral atlas (albedo + alpha, normals +
     # depth) for engines with impostor shaders; `material` ("impostor") samples the atlas.
 
@@ -18,10 +18,9 @@ and a cell's centre (u, v) decodes back with p = (u − v, u + v − 1), d = nor
 1 − |p.x| − |p.y|). Inside a cell the view's right = normalize(up × d) and its up' = d × right;
 pixel (x, y) ∈ [−1, 1]² (y towards the top of the cell) shows centre + radius·(x·right + y·up').
 
-Cards: the two cells nearest the horizon along +a and +b (elevation 90°·1/grid... a few
-degrees), each a quad through the centre in its view's plane showing that cell: seen from
-behind, a card shows the mirror image, which is the true silhouette from there. The cards ride
-one joint at the trunk base whose rotation is the trunk's world rotation at the crown's height
+Cards: the two cells nearest the horizon along +a and +b (elevation about 90°/grid), each a
+quad through the centre in its view's plane showing that cell, one face each way: seen from
+behind, a card shows the mirror image, the true silhouette from there. The cards ride one joint at the trunk base whose rotation is the trunk's world rotation at the crown's height
 (decimated for the impostor's distance like any LOD clip), so the tree keeps swaying.
 """
 from __future__ import annotations
@@ -42,12 +41,12 @@ class ImpostorOptions:
     """Atlas size and when the impostor takes over.
 
     switch_px: the tree's height on screen (pixels of the LOD options' view, width / aspect
-    high) below which the impostor is used; at 2 × cell one atlas texel spans 2 pixels there.
+    high) below which the impostor is used; at 1.5 × cell an atlas texel spans 1.5 pixels there.
     The switch is never nearer than min_factor × the last geometric LOD's distance."""
 
     grid: int = 16                   # views per side of the atlas (engine plug-ins' 16 × 16)
     cell: int = 64                   # pixels per view: a 1024 × 1024 atlas
-    switch_px: float = 128.0
+    switch_px: float = 96.0
     min_factor: float = 1.5
     max_leaf_cards: int = 600        # leaves drawn into the atlas (coverage kept: larger cards)
     max_bark_triangles: int = 600    # the widest bark triangles drawn (twigs are < 0.2 px)
@@ -184,24 +183,36 @@ def card_cells(grid: int) -> list[tuple[int, int]]:
 
 
 def cards(centre: np.ndarray, radius: float, grid: int) -> Primitive:
-    """One quad per card cell in its view's plane, UVs on that cell (bottom-left origin)."""
+    """Per card cell, a quad in its view's plane through the centre, UVs on that cell (bottom-
+    left origin), twice: one face towards each side (the back face shows the mirror image,
+    the true silhouette from there). Single-sided twins instead of one double-sided quad, so
+    each face has its own normals, bent outwards over the card (0.6 facing + the corner's
+    sideways offset, level at the foot and up at the top), which light the crown like a
+    rounded mass in any engine instead of one flat shade per card (a flipped back-face normal
+    would be dark where the front is lit)."""
     corners = np.array([(-1, -1), (1, -1), (-1, 1), (1, 1)], np.float64)
-    pos, nrm, uv = [], [], []
+    pos: list[np.ndarray] = []
+    nrm: list[np.ndarray] = []
+    uv: list[np.ndarray] = []
+    idx: list[np.ndarray] = []
     for col, row in card_cells(grid):                    # two cards
         d = cell_direction(col, row, grid)
         right, up = view_basis(d)
-        pos.append(centre + radius * (corners[:, :1] * right + corners[:, 1:] * up))
-        nrm.append(np.broadcast_to(d, (4, 3)))
+        offset = corners[:, :1] * right + corners[:, 1:] * up
         u = (col + 0.5 + 0.5 * corners[:, 0]) / grid
         v_top = (row + 0.5 - 0.5 * corners[:, 1]) / grid
-        uv.append(np.stack([u, 1.0 - v_top], 1))
-    n = len(pos)
-    idx = (np.array([0, 1, 3, 0, 3, 2])[None] + 4 * np.arange(n)[:, None]).ravel()
-    V = 4 * n
+        for facing, tri in ((d, (0, 1, 3, 0, 3, 2)), (-d, (0, 3, 1, 0, 2, 3))):
+            idx.append(np.array(tri) + 4 * len(pos))
+            pos.append(centre + radius * offset)
+            n = 0.6 * facing + corners[:, :1] * right + (0.5 + 0.5 * corners[:, 1:]) * up
+            nrm.append(n / np.linalg.norm(n, axis=1, keepdims=True))
+            uv.append(np.stack([u, 1.0 - v_top], 1))
+    V = 4 * len(pos)
     return Primitive(name="impostor", material="impostor",
                      positions=np.concatenate(pos).astype(np.float32),
                      normals=np.concatenate(nrm).astype(np.float32),
-                     uvs=np.concatenate(uv).astype(np.float32), indices=idx.astype(np.uint32),
+                     uvs=np.concatenate(uv).astype(np.float32),
+                     indices=np.concatenate(idx).astype(np.uint32),
                      joints=np.zeros((V, 4), np.uint16),
                      weights=np.tile(np.array([1, 0, 0, 0], np.float32), (V, 1)))
 
@@ -284,7 +295,7 @@ def build_impostor(full: Lod, coarse: Lod, materials: list[Material],
                    bounds=(lo.astype(np.float64), hi.astype(np.float64)),
                    cards=tuple(card_cells(options.grid)), alpha_cutoff=options.alpha_cutoff)
     material = Material(name="impostor", base_color=(1.0, 1.0, 1.0, 1.0), roughness=0.95,
-                        double_sided=True, alpha_cutoff=options.alpha_cutoff,
+                        alpha_cutoff=options.alpha_cutoff,
                         base_texture=albedo_tex)
     return Lod(primitives=[prim], skeleton=skel, clips=clips, distance=distance,
                screen_coverage=0.0, impostor=imp), material

@@ -19,6 +19,12 @@ from .drawable import Drawable
 from .errors import TreegenError
 from .render import GL_SRGB8_ALPHA8, _context
 
+# A card faces the light as one surface; a crown's leaves face every way and shade each other.
+# Leaves' albedo is scaled by this so the cards, lit by an engine, match the coarsest LOD's
+# brightness at the switch (measured with the preview renderer: the aspen's cards came out
+# 2.1× brighter than its LOD3 without it, 0.9-1.1× with it).
+LEAF_SHADE = 0.4
+
 _ATLAS_VS = """
 #version 330
 uniform vec3 centre;
@@ -64,6 +70,8 @@ uniform sampler2D base_tex;
 uniform float alpha_cutoff;    // < 0: opaque
 uniform float opacity;
 uniform vec3 base_color;
+uniform bool leaf;
+uniform float leaf_shade;
 uniform vec3 crown_centre;
 uniform vec3 crown_radius;
 in vec3 v_normal;
@@ -78,10 +86,19 @@ void main() {
     if (texel.a * opacity < alpha_cutoff) discard;
     vec3 n = normalize(v_normal);
     if (!gl_FrontFacing) n = -n;
-    // inner crown darker (less sky reaches it), baked, as cards have no crown to shade them
+    // baked, as cards have no crown to shade them: the inner crown gets less sky (render.py's
+    // occlusion), and each leaf its own tint as the preview gives it (2 triangles a card)
     float r = length((v_rel - crown_centre) / crown_radius);
-    float ao = mix(0.6, 1.0, smoothstep(0.1, 1.0, r));
-    f_albedo = vec4(base_color * texel.rgb * ao, 1.0);     // linear; sRGB-encoded by the target
+    float ao = mix(0.45, 1.0, smoothstep(0.1, 1.0, r));
+    vec3 albedo = base_color * texel.rgb;
+    if (leaf) {
+        uint x = uint(gl_PrimitiveID) >> 1u;
+        x ^= x >> 16; x *= 0x7feb352du; x ^= x >> 15; x *= 0x846ca68bu; x ^= x >> 16;
+        float h = float(x) / 4294967295.0;
+        albedo *= 1.0 + 0.5 * (vec3(0.3 * h, 0.4 * h, 0.2 * h) - vec3(0.15, 0.2, 0.2));
+        albedo *= leaf_shade;
+    }
+    f_albedo = vec4(albedo * ao, 1.0);                      // linear; sRGB-encoded by the target
     f_normal = vec4(n * 0.5 + 0.5, v_depth);
 }
 """
@@ -137,6 +154,7 @@ def render_atlas(scene: Drawable, centre: np.ndarray, radius: float, grid: int,
         _set(prog, "centre", tuple(float(x) for x in c))
         _set(prog, "radius", float(radius))
         _set(prog, "grid", int(grid))
+        _set(prog, "leaf_shade", LEAF_SHADE)
         _set(prog, "crown_centre", tuple(float(x) for x in 0.5 * (clo + chi)))
         _set(prog, "crown_radius", tuple(float(x) for x in np.maximum(0.5 * (chi - clo), 0.05)))
         _set(prog, "base_tex", 0)
@@ -157,6 +175,7 @@ def render_atlas(scene: Drawable, centre: np.ndarray, radius: float, grid: int,
             _set(prog, "alpha_cutoff", float(cut))
             _set(prog, "opacity", float(p.opacity))
             _set(prog, "base_color", tuple(float(x) for x in p.color))
+            _set(prog, "leaf", bool(p.double_sided))
             vao.render(instances=grid * grid)
         out = []
         for k in range(2):
