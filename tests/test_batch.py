@@ -293,7 +293,7 @@ def test_ctrl_c_closes_the_cluster_and_leaves_no_partial_files(workspace):
         if p.name in built:                              # the file and its sibling textures
             mine = [q for q in out.iterdir() if q.name == p.name or (
                 p.suffix in (".usda", ".usdc", ".obj") and q.suffix == ".png"
-                and q.name.startswith(p.stem + "_"))]
+                and q.name.startswith(p.stem + "_")) or q.name == p.stem + ".impostor.json"]
             assert sum(q.stat().st_size for q in mine) == built[p.name]["bytes"]
 
 
@@ -394,7 +394,8 @@ def test_api_make_validates_like_the_cli(tmp_path):
     assert not list(tmp_path.iterdir())
     s = api.make(ROOT / "tests" / "fixtures" / "pair_small.txt", tmp_path / "p.glb", seed=2,
                  lod_distances=[0, 30], **{k: v for k, v in CLIP.items() if k != "lod_distances"})
-    assert s["file"] == str(tmp_path / "p.glb") and s["seed"] == 2 and len(s["lods"]) == 2
+    assert s["file"] == str(tmp_path / "p.glb") and s["seed"] == 2
+    assert len(s["lods"]) == 3 and s["lods"][-1]["triangles"] == 8      # + the impostor
 
 
 def test_staging_sweep_leaves_other_hosts_folders_alone(tmp_path):

@@ -276,3 +276,14 @@ def test_lod_files_and_usd_carry_the_impostor(tmp_path):
     assert json.loads(layer_meta["treegen_impostor"]) == {k: v for k, v in meta.items() if k != "file"}
     assert len(api.make(species_path("rush"), tmp_path / "n.glb", duration=1.0, fps=10.0,
                         impostor=False)["lods"]) == 4
+    # a .usdz packages both atlases (the normal map unreferenced) and stays AR Quick Look-clean
+    import arkit_check
+    from treegen_cli.exchange.usd import validate_usd
+
+    api.make(species_path("rush"), tmp_path / "z.usdz", duration=1.0, fps=10.0, impostor=True)
+    assert validate_usd(tmp_path / "z.usdz") == []
+    assert json.loads((tmp_path / "z.impostor.json").read_text())["images"] == {
+        "albedo": "textures/impostor_albedo.png", "normal_depth": "textures/impostor_normal.png"}
+    if arkit_check.available():
+        report = arkit_check.check(tmp_path / "z.usdz")
+        assert report["errors"] == [] and report["failed"] == [], report

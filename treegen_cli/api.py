@@ -53,7 +53,7 @@ DEFAULTS: dict[str, object] = {
     "interpolation": "linear",
     "no_lod": False,
     "lod_files": False,
-    "impostor": False,
+    "impostor": True,
     "up_axis": None,
     "max_vertices": 20_000_000,
     "max_keys": 5_000_000,

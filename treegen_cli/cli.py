@@ -205,7 +205,7 @@ def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> lis
 @click.option("--lod-files", is_flag=True,
               help="Write each LOD as its own complete file, NAME_LOD0.glb, NAME_LOD1.glb, … "
                    "(for engines that ignore MSFT_lod: Godot, Unity LODGroup, Unreal).")
-@click.option("--impostor/--no-impostor", default=False, show_default=True,
+@click.option("--impostor/--no-impostor", default=True, show_default=True,
               help="End the LODs with an impostor: crossed cards cut from a 16×16-view "
                    "hemi-octahedral atlas (albedo, normals + depth; described in the file's "
                    "extras and NAME.impostor.json), swaying with the trunk.")
