@@ -293,7 +293,7 @@ def test_ctrl_c_closes_the_cluster_and_leaves_no_partial_files(workspace):
         if p.name in built:                              # the file and its sibling textures
             mine = [q for q in out.iterdir() if q.name == p.name or (
                 p.suffix in (".usda", ".usdc", ".obj") and q.suffix == ".png"
-                and q.name.startswith(p.stem + "_")) or q.name == p.stem + ".impostor.json"]
+                and q.name.startswith(p.stem + "_")) or q.name == p.name + ".impostor.json"]
             assert sum(q.stat().st_size for q in mine) == built[p.name]["bytes"]
 
 

@@ -223,13 +223,13 @@ def test_written_glb_validator_clean_sidecar_and_preview_at_distance(tmp_path):
 
     out = tmp_path / "palm.glb"
     s = api.make(species_path("palm"), out, duration=1.0, fps=10.0, impostor=True)
-    assert [p.name for p in map(type(out), s["files"])] == ["palm.glb", "palm.impostor.json"]
+    assert [p.name for p in map(type(out), s["files"])] == ["palm.glb", "palm.glb.impostor.json"]
     assert len(s["lods"]) == 5 and s["lods"][-1]["triangles"] == 8
     report = validate_gltf(out)
     assert report["issues"]["numErrors"] == 0 and report["issues"]["numWarnings"] == 0
     gltf, blob = read_gltf(out)
     meta = gltf["asset"]["extras"]["treegen_impostor"]
-    side = json.loads((tmp_path / "palm.impostor.json").read_text())
+    side = json.loads((tmp_path / "palm.glb.impostor.json").read_text())
     assert side == meta | {"file": "palm.glb"}
     assert meta["grid"] == 16 and meta["hemisphere"] and meta["atlas_px"] == [1024, 1024]
     assert meta["axes"] == {"a": [1.0, 0.0, 0.0], "b": [0.0, 0.0, -1.0], "up": [0.0, 1.0, 0.0]}
@@ -263,9 +263,9 @@ def test_lod_files_and_usd_carry_the_impostor(tmp_path):
     s = api.make(species_path("rush"), tmp_path / "r.glb", duration=1.0, fps=10.0,
                  impostor=True, lod_files=True)
     names = sorted(p.rsplit("/", 1)[-1] for p in s["files"])
-    assert names == sorted([f"r_LOD{k}.glb" for k in range(5)] + ["r_LOD4.impostor.json"])
+    assert names == sorted([f"r_LOD{k}.glb" for k in range(5)] + ["r_LOD4.glb.impostor.json"])
     s = api.make(species_path("rush"), tmp_path / "u.usda", duration=1.0, fps=10.0, impostor=True)
-    meta = json.loads((tmp_path / "u.impostor.json").read_text())
+    meta = json.loads((tmp_path / "u.usda.impostor.json").read_text())
     assert meta["axes"]["up"] == [0.0, 0.0, 1.0]
     for f in meta["images"].values():
         assert (tmp_path / f).is_file()
@@ -282,7 +282,7 @@ def test_lod_files_and_usd_carry_the_impostor(tmp_path):
 
     api.make(species_path("rush"), tmp_path / "z.usdz", duration=1.0, fps=10.0, impostor=True)
     assert validate_usd(tmp_path / "z.usdz") == []
-    assert json.loads((tmp_path / "z.impostor.json").read_text())["images"] == {
+    assert json.loads((tmp_path / "z.usdz.impostor.json").read_text())["images"] == {
         "albedo": "textures/impostor_albedo.png", "normal_depth": "textures/impostor_normal.png"}
     if arkit_check.available():
         report = arkit_check.check(tmp_path / "z.usdz")

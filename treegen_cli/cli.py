@@ -208,7 +208,7 @@ def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> lis
 @click.option("--impostor/--no-impostor", default=True, show_default=True,
               help="End the LODs with an impostor: crossed cards cut from a 16×16-view "
                    "hemi-octahedral atlas (albedo, normals + depth; described in the file's "
-                   "extras and NAME.impostor.json), swaying with the trunk.")
+                   "extras and NAME.glb.impostor.json), swaying with the trunk.")
 @click.option("--max-vertices", type=int, default=20_000_000, show_default=True,
               help="Refuse meshes with more vertices than this per LOD (counted from the grown "
                    "tree before the mesh is built).")

@@ -1,5 +1,5 @@
 """How a written file describes its impostor atlas (glTF `asset.extras.treegen_impostor`, USD
-layer metadata, and the `<name>.impostor.json` sidecar): one dict, in the file's own axes.
+layer metadata, and the sidecar `tree.glb.impostor.json`): one dict, in the file's own axes.
 
 No glTF or USD convention for impostors exists, so the description says everything an impostor
 shader needs: the layout and its formula, the sphere each view frames, the frame the directions
@@ -70,8 +70,9 @@ def describe(asset: Asset, k: int, to_file: np.ndarray, images: dict) -> dict:
 
 
 def sidecar_path(path: Path) -> Path:
-    """`tree.glb` → `tree.impostor.json`."""
-    return path.with_name(path.stem + ".impostor.json")
+    """`tree.glb` → `tree.glb.impostor.json`: the format in the name, as a tree written as
+    .glb and .usdc into one folder has two different descriptions (axes, image references)."""
+    return path.with_name(path.name + ".impostor.json")
 
 
 def write_sidecar(meta: dict, path: Path) -> None:
