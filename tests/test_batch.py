@@ -160,8 +160,9 @@ def test_cluster_builds_every_job_byte_identical_despite_a_killed_worker(schedul
     assert sorted(rows) == sorted(OUTPUTS)
     r = rows["pair_small_4_wind_speed-8.glb"]
     assert r["entry"] == "entries[1]" and r["seed"] == 4 and r["grid"] == {"wind_speed": 8}
-    assert r["bytes"] == (out / r["path"]).stat().st_size and r["status"] == "built"
-    assert len(r["triangles"]) == len(r["joints"]) == len(r["keys"]) == 2
+    assert r["files"] == [r["path"], r["path"] + ".impostor.json"] and r["status"] == "built"
+    assert r["bytes"] == sum((out / f).stat().st_size for f in r["files"])
+    assert len(r["triangles"]) == len(r["joints"]) == len(r["keys"]) == 3    # 2 LODs + impostor
     assert r["worker"].startswith("tcp://127.0.0.1:") and r["seconds"] > 0
     assert len({r["worker"] for r in rows.values()}) >= 1
     csv_lines = (out / "manifest.csv").read_text().splitlines()
