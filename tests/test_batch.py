@@ -160,8 +160,9 @@ def test_cluster_builds_every_job_byte_identical_despite_a_killed_worker(schedul
     assert sorted(rows) == sorted(OUTPUTS)
     r = rows["pair_small_4_wind_speed-8.glb"]
     assert r["entry"] == "entries[1]" and r["seed"] == 4 and r["grid"] == {"wind_speed": 8}
-    assert r["bytes"] == (out / r["path"]).stat().st_size and r["status"] == "built"
-    assert len(r["triangles"]) == len(r["joints"]) == len(r["keys"]) == 2
+    assert r["files"] == [r["path"], r["path"] + ".impostor.json"] and r["status"] == "built"
+    assert r["bytes"] == sum((out / f).stat().st_size for f in r["files"])
+    assert len(r["triangles"]) == len(r["joints"]) == len(r["keys"]) == 3    # 2 LODs + impostor
     assert r["worker"].startswith("tcp://127.0.0.1:") and r["seconds"] > 0
     assert len({r["worker"] for r in rows.values()}) >= 1
     csv_lines = (out / "manifest.csv").read_text().splitlines()
@@ -293,7 +294,7 @@ def test_ctrl_c_closes_the_cluster_and_leaves_no_partial_files(workspace):
         if p.name in built:                              # the file and its sibling textures
             mine = [q for q in out.iterdir() if q.name == p.name or (
                 p.suffix in (".usda", ".usdc", ".obj") and q.suffix == ".png"
-                and q.name.startswith(p.stem + "_"))]
+                and q.name.startswith(p.stem + "_")) or q.name == p.name + ".impostor.json"]
             assert sum(q.stat().st_size for q in mine) == built[p.name]["bytes"]
 
 
@@ -394,7 +395,8 @@ def test_api_make_validates_like_the_cli(tmp_path):
     assert not list(tmp_path.iterdir())
     s = api.make(ROOT / "tests" / "fixtures" / "pair_small.txt", tmp_path / "p.glb", seed=2,
                  lod_distances=[0, 30], **{k: v for k, v in CLIP.items() if k != "lod_distances"})
-    assert s["file"] == str(tmp_path / "p.glb") and s["seed"] == 2 and len(s["lods"]) == 2
+    assert s["file"] == str(tmp_path / "p.glb") and s["seed"] == 2
+    assert len(s["lods"]) == 3 and s["lods"][-1]["triangles"] == 8      # + the impostor
 
 
 def test_staging_sweep_leaves_other_hosts_folders_alone(tmp_path):

@@ -60,7 +60,8 @@ def test_make_writes_a_valid_glb_and_the_same_bytes_twice(tmp_path):
     assert a.read_bytes() == b.read_bytes()
     issues = validate_gltf(a)["issues"]
     assert issues["numErrors"] == 0 and issues["numWarnings"] == 0
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.glb", "b.glb"]   # no temp files left
+    assert sorted(p.name for p in tmp_path.iterdir()) == [   # no temp files left
+        "a.glb", "a.glb.impostor.json", "b.glb", "b.glb.impostor.json"]
 
 
 def test_make_usdc_twice_is_byte_identical(tmp_path):

@@ -370,14 +370,16 @@ def test_make_json_summary_parses_and_matches_the_file(tmp_path):
                    "--fps", "10")
     assert proc.returncode == 0, proc.stderr
     s = json.loads(proc.stdout)
-    assert s["file"] == str(out) and s["bytes"] == out.stat().st_size
+    assert s["file"] == str(out) and s["files"] == [str(out), str(out) + ".impostor.json"]
+    assert s["bytes"] == sum(Path(f).stat().st_size for f in s["files"])
     assert set(s["stages_s"]) >= {"generate", "rig", "mesh", "wind", "write"}
     # stages are timed inside the whole run: together they cannot exceed it
     assert 0 < sum(s["stages_s"].values()) <= s["seconds"] + 1e-3
     assert s["keys"] == 6 and s["joint_keys"] == s["joints"] * 6        # 0.5 s × 10 fps + 1
     gltf, _ = read_gltf(out)
     assert s["joints"] == len(gltf["skins"][0]["joints"])
-    assert len(s["lods"]) == 4 and s["lods"][0]["vertices"] == s["vertices"]
+    assert len(s["lods"]) == 5 and s["lods"][0]["vertices"] == s["vertices"]   # 4 + the impostor
+    assert s["lods"][-1]["triangles"] == 8 and s["lods"][-1]["joints"] == 1
     assert s["triangles"] > 0 and s["vertices"] > s["triangles"] / 2
     # --json output survives --quiet: it was asked for explicitly.
     quiet = treegen("make", SPECIES / "quaking_aspen.txt", "-o", out, "--json", "-q", *FAST)

@@ -55,6 +55,7 @@ DEFAULTS: dict[str, object] = {
     "lod_triangles": "0.5,0.15,0.05",
     "no_lod": False,
     "lod_files": False,
+    "impostor": True,
     "up_axis": None,
     "max_vertices": 20_000_000,
     "max_keys": 5_000_000,
@@ -71,7 +72,7 @@ UNSET_FREE = ("triangles", "joints", "profile")
 PATHS = ("leaf_texture", "bark_texture")
 FLOATS = ("max_size", "wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "fov", "error_px",
           "stiffness")
-FLAGS = ("no_wind", "no_lod", "lod_files", "no_textures")
+FLAGS = ("no_wind", "no_lod", "lod_files", "no_textures", "impostor")
 CHOICES = {"leaf_geometry": ("card", "shape"), "error_form": ("exact", "paper"),
            "interpolation": ("linear", "step"), "up_axis": (None, "y", "z"),
            "profile": (None, "mobile", "web", "desktop", "hero")}
@@ -239,7 +240,10 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
             interpolation=v["interpolation"].upper(), triangles=(1.0, *v["lod_triangles"]))
     except OptionError as e:
         raise TreegenError(e.worded(label(STAGE_FIELDS.get(e.field, e.field)))) from None
+    from .impostor import IMPOSTOR_DEFAULTS
+
     make_options = MakeOptions(
+        impostor=IMPOSTOR_DEFAULTS if v["impostor"] and lod is not None else None,
         generate=GenerateOptions(max_stems=v["max_stems"], max_leaves=v["max_leaves"],
                                  max_size=v["max_size"]),
         rig=RigOptions(max_joints=v["max_joints"], joint_levels=v["joint_levels"]),

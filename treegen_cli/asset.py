@@ -101,6 +101,23 @@ class Clip:
 
 
 @dataclass(frozen=True, eq=False)
+class Impostor:
+    """The view atlas behind an impostor LOD (impostor.py): grid × grid orthographic views of
+    the sphere (centre, radius) on a hemi-octahedral layout, for engines with impostor shaders.
+    Generator space; the writers state it in their file's axes."""
+
+    albedo: Texture                        # sRGB + coverage alpha (also the cards' texture)
+    normal_depth: Texture                  # rgb: (a, b, up) normal · 0.5 + 0.5; a: depth
+    grid: int                              # views per side
+    cell: int                              # pixels per view
+    centre: np.ndarray                     # (3,) metres
+    radius: float
+    bounds: tuple[np.ndarray, np.ndarray]  # rest-pose (min, max) of the geometry rendered
+    cards: tuple[tuple[int, int], ...] = ()  # (column, row) of the cells the cards show
+    alpha_cutoff: float = 0.5
+
+
+@dataclass(frozen=True, eq=False)
 class Lod:
     primitives: list[Primitive]
     skeleton: Skeleton
@@ -110,6 +127,7 @@ class Lod:
     bounds: tuple[np.ndarray, np.ndarray] | None = None
                                            # prepared: (min, max) of the skinned geometry at rest
                                            # and at every key of every clip
+    impostor: Impostor | None = None       # set on an impostor LOD (cards cut from the atlas)
 
 
 @dataclass(frozen=True, eq=False)

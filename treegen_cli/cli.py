@@ -276,6 +276,10 @@ def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> lis
 @click.option("--lod-files", is_flag=True,
               help="Write each LOD as its own complete file, NAME_LOD0.glb, NAME_LOD1.glb, … "
                    "(for engines that ignore MSFT_lod: Godot, Unity LODGroup, Unreal).")
+@click.option("--impostor/--no-impostor", default=True, show_default=True,
+              help="End the LODs with an impostor: crossed cards cut from a 16×16-view "
+                   "hemi-octahedral atlas (albedo, normals + depth; described in the file's "
+                   "extras and NAME.glb.impostor.json), swaying with the trunk.")
 @click.option("--max-vertices", type=int, default=20_000_000, show_default=True,
               help="Refuse meshes with more vertices than this per LOD (counted from the grown "
                    "tree before the mesh is built).")
@@ -288,7 +292,7 @@ def make(species, output, seed, max_stems, max_leaves, max_size, max_joints, joi
          leaf_geometry, texture_size, leaf_texture, bark_texture, no_textures, wind_speed,
          wind_dir, gust, turbulence, duration, fps, stiffness, no_wind, up_axis, lod_distances,
          fov, width, error_px, error_form, interpolation, lod_triangles, no_lod, lod_files,
-         max_vertices, max_keys, as_json):
+         impostor, max_vertices, max_keys, as_json):
     """Grow SPECIES (a species file, or a bundled name such as quaking_aspen: see `treegen
     species`) and write a skinned, wind-animated tree to OUTPUT."""
     from .api import build, check_output, resolve, write
@@ -308,7 +312,7 @@ def make(species, output, seed, max_stems, max_leaves, max_size, max_joints, joi
                        stiffness=stiffness, no_wind=no_wind, lod_distances=lod_distances,
                        fov=fov, width=width, error_px=error_px, error_form=error_form,
                        interpolation=interpolation, lod_triangles=lod_triangles,
-                       no_lod=no_lod, lod_files=lod_files,
+                       no_lod=no_lod, lod_files=lod_files, impostor=impostor,
                        up_axis=up_axis, max_vertices=max_vertices, max_keys=max_keys)),
                   output=output)
     options = job.options
@@ -317,7 +321,8 @@ def make(species, output, seed, max_stems, max_leaves, max_size, max_joints, joi
     rep = current_reporter()
     per_lod = 3 if options.wind is None else 5          # generate, rig, mesh (, wind, lod)
     timings = rep.timings(total=per_lod + 3 if options.lod is None else
-                          len(options.lod.distances) * per_lod + 3)   # (+ materials, prepare, write)
+                          len(options.lod.distances) * per_lod + 3   # (+ materials, prepare, write)
+                          + (options.impostor is not None))           # (+ impostor)
     with rep.live():
         asset, tree = build(params, species, job, timings)
         s = write(asset, tree, output, timings, t0, job)

@@ -39,6 +39,12 @@ class Part:
     normal_wrap: tuple[str, str] = ("REPEAT", "REPEAT")  # normal map's (u, v)
 
     @property
+    def one_sided(self) -> bool:
+        """Single-sided cut-out cards (the impostor's back-to-back twins) get their back faces
+        culled, as engines do; closed, opaque bark is drawn both ways as always."""
+        return not self.double_sided and self.alpha_cutoff is not None
+
+    @property
     def textured(self) -> bool:
         return self.uvs is not None and self.texture is not None
 

@@ -12,6 +12,7 @@ from . import __version__
 from .asset import Asset, Lod
 from .budget import DEFAULTS as BUDGET_DEFAULTS, BudgetOptions, plan_budget
 from .generate import DEFAULTS as GENERATE_DEFAULTS, GenerateOptions, generate
+from .impostor import ImpostorOptions, build_impostor, switch_distance
 from .limits import LIMITS_DEFAULTS, Limits, check_keys, check_mesh
 from .lod import LOD_DEFAULTS, LodOptions, decimate, screen_coverage
 from .lod_budget import lod_tree
@@ -35,6 +36,8 @@ class MakeOptions:
     limits: Limits = LIMITS_DEFAULTS        # refuse oversized meshes / clips before building
     materials: MaterialOptions = MATERIAL_DEFAULTS   # textures (generated or an artist's) or colours
     budget: BudgetOptions = BUDGET_DEFAULTS # LOD0 triangle budget, met before the tree grows
+    impostor: ImpostorOptions | None = None # an impostor after the LODs (needs `lod`; `treegen
+                                            # make` turns it on: api.resolve); None: none
 
 
 @dataclass
@@ -95,6 +98,18 @@ def build_lods(params: Params, tree: Tree, options: MakeOptions, seed: int,
     return lods
 
 
+def add_impostor(lods: list[Lod], materials: list, tree: Tree,
+                 options: MakeOptions) -> tuple[list[Lod], list]:
+    """The impostor appended after the last geometric LOD (rendered from it), which now hands
+    over at the impostor's distance."""
+    lo, height = options.lod, tree_height(tree)
+    distance = switch_distance(height, lods[-1].distance, lo, options.impostor)
+    imp, material = build_impostor(lods[0], lods[-1], materials, lo, distance,
+                                   clip_name(len(lods)), options.impostor)
+    last = replace(lods[-1], screen_coverage=screen_coverage(height, distance, lo))
+    return [*lods[:-1], last, imp], [*materials, material]
+
+
 def build_asset(params: Params, seed: int = 0, options: MakeOptions = MakeOptions(),
                 timings: Timings | None = None, tree: Tree | None = None) -> tuple[Asset, Tree]:
     """Grow, rig, mesh and animate `params` with `seed`; returns the asset and its tree.
@@ -113,6 +128,8 @@ def build_asset(params: Params, seed: int = 0, options: MakeOptions = MakeOption
     lods = [build_lod(tree, options, seed, timings)] if options.lod is None else \
         build_lods(params, tree, options, seed, timings)
     materials = timings.run("textures", lambda: mats.materials)   # waits only if not done
+    if options.lod is not None and options.impostor is not None:
+        lods, materials = timings.run("impostor", add_impostor, lods, materials, tree, options)
     asset = Asset(name=params.name, materials=materials, lods=lods,
                   extras={"species": params.name, "seed": seed,
                           "generator": f"treegen {__version__}"})

@@ -638,7 +638,10 @@ class Renderer:
             self._set(self.tree_prog, "base_color", g.part.color)
             self._set(self.tree_prog, "leaf", g.part.double_sided)
             self._material(self.tree_prog, g)
+            if g.part.one_sided:          # an engine culls single-sided faces' backs
+                ctx.enable(ctx.CULL_FACE)
             g.vao.render()
+            ctx.disable(ctx.CULL_FACE)
 
         W, H = self.width * self.ss, self.height * self.ss
         data = np.frombuffer(self.fbo.read(components=3, alignment=1), dtype=np.uint8)

@@ -43,6 +43,7 @@ from .. import __version__
 from ..asset import Asset, Clip, Material, Primitive, Skeleton, Texture
 from ..axes import Z_UP_TO_Y_UP, matrix_to_y_up, quat_to_y_up, to_y_up  # noqa: F401  (re-exported)
 from ..quat import continuous as _continuous
+from .impostor_meta import describe, impostor_lod, write_sidecar
 
 # glTF enums
 FLOAT, UNSIGNED_BYTE, UNSIGNED_SHORT, UNSIGNED_INT = 5126, 5121, 5123, 5125
@@ -283,6 +284,7 @@ class Textures:
         self.textures: list[dict] = []
         self._tex: dict = {}
         self._sampler: dict = {}
+        self._image: dict = {}
 
     def index(self, t: Texture) -> int:
         if t not in self._tex:
@@ -290,11 +292,24 @@ class Textures:
                 self._sampler[t.wrap] = len(self.samplers)
                 self.samplers.append({"magFilter": LINEAR, "minFilter": LINEAR_MIPMAP_LINEAR,
                                       "wrapS": _WRAP[t.wrap], "wrapT": _WRAP[t.wrap]})
+            if t not in self._image:
+                view = self.buf.view(np.frombuffer(t.png, dtype=np.uint8), None)
+                self.images.append({"name": t.name, "bufferView": view, "mimeType": "image/png"})
+                self._image[t] = len(self.images) - 1
+            self._tex[t] = len(self.textures)
+            self.textures.append({"sampler": self._sampler[t.wrap], "source": self._image[t]})
+        return self._tex[t]
+
+    def image(self, t: Texture) -> int:
+        """Index of `t`'s image, written once; an image no material samples (the impostor's
+        normal + depth atlas) gets no texture."""
+        if t in self._tex:
+            return self.textures[self._tex[t]]["source"]
+        if t not in self._image:
             view = self.buf.view(np.frombuffer(t.png, dtype=np.uint8), None)
             self.images.append({"name": t.name, "bufferView": view, "mimeType": "image/png"})
-            self._tex[t] = len(self.textures)
-            self.textures.append({"sampler": self._sampler[t.wrap], "source": len(self.images) - 1})
-        return self._tex[t]
+            self._image[t] = len(self.images) - 1
+        return self._image[t]
 
     def fields(self, gltf: dict) -> None:
         if self.textures:
@@ -374,9 +389,15 @@ def _build(asset: Asset) -> tuple[dict, _Buffer]:
         "scenes": [{"name": asset.name, "nodes": [lod_nodes[0], *rig_nodes]}],
         "nodes": nodes, "meshes": meshes, "skins": skins, "materials": materials,
     }
+    k = impostor_lod(asset)
+    extras = dict(asset.extras)
+    if k is not None:
+        imp = asset.lods[k].impostor
+        extras["treegen_impostor"] = describe(asset, k, Z_UP_TO_Y_UP, {
+            "albedo": textures.image(imp.albedo), "normal_depth": textures.image(imp.normal_depth)})
     textures.fields(gltf)
-    if asset.extras:
-        gltf["asset"]["extras"] = asset.extras
+    if extras:
+        gltf["asset"]["extras"] = extras
     if animations:
         gltf["animations"] = animations
     if len(asset.lods) > 1:
@@ -438,6 +459,9 @@ def write_gltf(asset: Asset, path: str | os.PathLike, binary: bool | None = None
         binary = path.suffix.lower() != ".gltf"
     gltf, buf = _build(asset)
     write_document(gltf, buf, path, binary)
+    meta = gltf["asset"].get("extras", {}).get("treegen_impostor")
+    if meta is not None:                # for engines' impostor shaders: images are in the file
+        write_sidecar(meta | {"file": path.name}, path)
 
 
 def write_document(gltf: dict, buf: _Buffer, path: Path, binary: bool) -> None:

@@ -23,6 +23,7 @@ is the transpose of the Asset's.
 """
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import tempfile
@@ -34,6 +35,7 @@ from ..asset import Asset, Clip, Lod, Material, Primitive, Skeleton, Texture, lo
 from ..axes import matrix_to_y_up, quat_to_y_up, to_y_up
 from ..errors import TreegenError
 from ..quat import continuous, to_matrix
+from .impostor_meta import describe, impostor_lod, write_sidecar
 from .texture_files import TextureFiles
 
 SUFFIXES = (".usda", ".usdc", ".usdz")
@@ -54,7 +56,18 @@ def write_usd(asset: Asset, path) -> None:
     up = up_axis(asset.up_axis, suffix)
     textures = TextureFiles(path)
     stage = build_stage(asset, up, textures, lod_schemas=suffix != ".usdz")
+    k = impostor_lod(asset)
+    meta = None
+    if k is not None:               # the atlas beside (or in) the file, described in its axes
+        imp = asset.lods[k].impostor
+        meta = describe(asset, k, Axes(up).points(np.eye(3)).T, {
+            "albedo": textures.name(imp.albedo), "normal_depth": textures.name(imp.normal_depth)})
+        layer = stage.GetRootLayer()
+        layer.customLayerData = dict(layer.customLayerData) | {
+            "treegen_impostor": json.dumps(meta, sort_keys=True)}
     write_stage(stage, path, _identifier(asset.name) + ".usdc", textures.files)
+    if meta is not None:
+        write_sidecar(meta | {"file": path.name}, path)
 
 
 def up_axis(requested: str | None, suffix: str) -> str:

@@ -1,0 +1,289 @@
+"""The impostor LOD: the hemi-octahedral atlas (cells where the documented formula puts them,
+showing what it says), the cards cut from it, their sway, and the written files (validator,
+sidecar, preview at the impostor's distance)."""
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from functools import lru_cache
+
+import numpy as np
+import pytest
+
+from conftest import SPECIES, grown, species_path
+from treegen_cli.drawable import Part, decode_image
+from treegen_cli.impostor import (IMPOSTOR_DEFAULTS, card_cells, cell_direction, cell_of, encode,
+                                  view_basis)
+from treegen_cli.lod import LodOptions, measure_error_px, screen_coverage
+from treegen_cli.params import load_params
+from treegen_cli.pipeline import MakeOptions, build_asset
+from treegen_cli.render import egl_available
+from treegen_cli.rig import RigOptions
+from treegen_cli.skeleton import pose_world
+from treegen_cli.wind import WindOptions
+
+needs_gl = pytest.mark.skipif(not egl_available(), reason="no headless OpenGL (EGL) here")
+DISTANCES = (0.0, 30.0, 130.0)
+LOD_OPTIONS = LodOptions(distances=DISTANCES)
+
+
+@lru_cache(maxsize=None)
+def _asset(name: str):
+    opts = MakeOptions(rig=RigOptions(max_joints=48), wind=WindOptions(duration=1.0, fps=15.0),
+                       lod=LOD_OPTIONS, impostor=IMPOSTOR_DEFAULTS)
+    asset, _ = build_asset(load_params(species_path(name)), 0, opts, tree=grown(name))
+    return asset
+
+
+def _alpha(asset, col, row):
+    imp = asset.lods[-1].impostor
+    a = decode_image(imp.albedo.png, 4)[..., 3]
+    c = imp.cell
+    return a[row * c:(row + 1) * c, col * c:(col + 1) * c]
+
+
+# ------------------------------------------------------------------------ the mapping
+
+@pytest.mark.parametrize("grid", [2, 7, 16])
+def test_every_cell_centre_decodes_to_a_direction_that_encodes_back_to_it(grid):
+    cols, rows = np.meshgrid(np.arange(grid), np.arange(grid), indexing="ij")
+    d = cell_direction(cols, rows, grid)
+    assert np.allclose(np.linalg.norm(d, axis=-1), 1.0) and (d[..., 2] >= 0).all()
+    back = cell_of(d, grid)
+    assert np.array_equal(back[..., 0], cols) and np.array_equal(back[..., 1], rows)
+
+
+def test_documented_landmarks():
+    """Straight up is the atlas centre; the horizon along ±a, ±b are its four corners."""
+    assert np.allclose(encode(np.array([0.0, 0.0, 1.0])), [0.5, 0.5])
+    eps = np.array([0.0, 0.0, 1e-9])
+    assert np.allclose(encode(np.array([1.0, 0, 0]) + eps), [1, 0], atol=1e-6)    # +a: top right
+    assert np.allclose(encode(np.array([0, 1.0, 0]) + eps), [1, 1], atol=1e-6)    # +b: bottom right
+    assert np.allclose(encode(np.array([-1.0, 0, 0]) + eps), [0, 1], atol=1e-6)   # −a: bottom left
+    assert np.allclose(encode(np.array([0, -1.0, 0]) + eps), [0, 0], atol=1e-6)   # −b: top left
+    assert card_cells(16) == [(15, 0), (15, 15)]
+
+
+def _box(centre, half, color=(0.5, 0.5, 0.5)) -> Part:
+    """An axis-aligned box (12 triangles, outward normals per face), generator space."""
+    c, h = np.asarray(centre, float), np.asarray(half, float)
+    pos, nrm, idx = [], [], []
+    for axis in range(3):
+        for sign in (-1, 1):
+            n = np.zeros(3)
+            n[axis] = sign
+            u, v = np.eye(3)[(axis + 1) % 3], np.eye(3)[(axis + 2) % 3]
+            base = len(pos)
+            for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
+                pos.append(c + h * (n + a * u + b * v))
+                nrm.append(n)
+            idx += [base, base + 1, base + 2, base, base + 2, base + 3]
+    V = len(pos)
+    return Part("box", np.array(pos, np.float32), np.array(nrm, np.float32),
+                np.array(idx, np.uint32), np.zeros((V, 4), np.int64),
+                np.tile(np.array([1, 0, 0, 0], np.float32), (V, 1)), color)
+
+
+@needs_gl
+def test_a_direction_lands_in_the_cell_the_formula_gives_and_shows_that_view():
+    """A pole with a marker cube off to one side: for several view directions, the marker
+    appears in cell_of(d) exactly where the documented view basis projects it, and not at
+    the mirrored spot; its depth says it faces the viewer or not."""
+    from treegen_cli.drawable import Drawable
+    from treegen_cli.impostor_render import render_atlas
+
+    marker = np.array([1.2, 0.7, 2.6])
+    scene = Drawable([_box((0, 0, 1.5), (0.08, 0.08, 1.5)), _box(marker, (0.15, 0.15, 0.15))], 1)
+    centre, radius, grid, cell = np.array([0.0, 0.0, 1.5]), 2.4, 8, 48
+    albedo, normal = render_atlas(scene, centre, radius, grid, cell)
+    assert albedo.shape == normal.shape == (grid * cell, grid * cell, 4)
+    checked = 0
+    for d in ([0.3, 0.9, 0.4], [-0.8, 0.2, 0.5], [0.1, -0.6, 0.8], [0.9, -0.1, 0.1]):
+        d = np.array(d) / np.linalg.norm(d)
+        col, row = cell_of(d, grid)
+        dc = cell_direction(col, row, grid)
+        right, up = view_basis(dc)
+        x, y = (marker - centre) @ right / radius, (marker - centre) @ up / radius
+        if abs(x) < 0.2:
+            continue                       # mirror would overlap the marker itself
+        px = int(col * cell + (0.5 + 0.5 * x) * cell)
+        py = int(row * cell + (0.5 - 0.5 * y) * cell)
+        mx = int(col * cell + (0.5 - 0.5 * x) * cell)
+        assert albedo[py, px, 3] == 255, (d, col, row)
+        assert albedo[py, mx, 3] == 0, (d, col, row)
+        depth = normal[py, px, 3] / 255.0
+        expected = 0.5 + 0.5 * (marker - centre) @ dc / radius
+        assert abs(depth - expected) < 0.15 * 0.5 + 1 / 255, (depth, expected)
+        checked += 1
+    assert checked >= 3
+
+
+# ------------------------------------------------------------------------ the asset
+
+@needs_gl
+@pytest.mark.parametrize("species", SPECIES)
+def test_impostor_is_the_last_lod_within_budget_and_shows_the_tree(species):
+    asset = _asset(species)
+    geo, imp = asset.lods[:-1], asset.lods[-1]
+    assert len(geo) == len(DISTANCES) and imp.impostor is not None
+    assert all(lod.impostor is None for lod in geo)
+    tris0 = sum(len(p.indices) // 3 for p in asset.lods[0].primitives)
+    tris = sum(len(p.indices) // 3 for p in imp.primitives)
+    assert tris == 8 and tris <= 0.05 * tris0
+    assert imp.distance > geo[-1].distance
+    cover = [lod.screen_coverage for lod in asset.lods]
+    assert cover == sorted(cover, reverse=True) and cover[-1] == 0.0
+    height = float(np.asarray(asset.lods[0].primitives[0].positions)[:, 2].max())
+    # the tree is at most switch_px tall on screen where the impostor takes over
+    assert cover[-2] * LOD_OPTIONS.width / LOD_OPTIONS.aspect <= IMPOSTOR_DEFAULTS.switch_px * 1.2 \
+        or imp.distance == pytest.approx(1.5 * geo[-1].distance)
+    assert cover[-2] == pytest.approx(screen_coverage(height, imp.distance, LOD_OPTIONS), rel=0.25)
+    # the cards show the tree: their cells are covered, but not solid squares (rush and
+    # shave grass: culms a tenth of an atlas pixel wide, a few pixels are hit)
+    for col, row in imp.impostor.cards:
+        covered = (_alpha(asset, col, row) > 127).mean()
+        assert (0.003 if species in ("rush", "shave_grass") else 0.02) < covered < 0.8, \
+            (species, col, row, covered)
+    mat = next(m for m in asset.materials if m.name == "impostor")
+    assert not mat.double_sided and mat.alpha_cutoff == 0.5 and mat.base_texture is imp.impostor.albedo
+    # the impostor's clip is decimated within the bound like any LOD's
+    (clip,) = imp.clips
+    assert clip.name == f"wind_lod{len(geo)}_loop"
+    err = measure_error_px(imp.skeleton, imp.primitives, replace(clip, keys=None), clip, imp.distance)
+    assert err <= 1.0 + 1e-9
+
+
+@needs_gl
+def test_top_and_side_views_of_the_aspen():
+    """The atlas centre shows the crown from above, round and centred; the +a card cell shows
+    it from the side, taller than wide, standing on the trunk base."""
+    asset = _asset("quaking_aspen")
+    imp = asset.lods[-1].impostor
+    g, c = imp.grid, imp.cell
+    top = _alpha(asset, g // 2, g // 2) > 127
+    ys, xs = np.nonzero(top)
+    w, h = np.ptp(xs) + 1, np.ptp(ys) + 1
+    assert 0.7 < w / h < 1.4                              # round from above
+    d = cell_direction(g // 2, g // 2, g)
+    right, up = view_basis(d)
+    lo, hi = imp.bounds
+    crown = 0.5 * (lo + hi)
+    ex = (0.5 + 0.5 * (crown - imp.centre) @ right / imp.radius) * c
+    ey = (0.5 - 0.5 * (crown - imp.centre) @ up / imp.radius) * c
+    assert abs(xs.mean() - ex) < 0.1 * c and abs(ys.mean() - ey) < 0.1 * c
+    side = _alpha(asset, *imp.cards[0]) > 127
+    ys, xs = np.nonzero(side)
+    assert np.ptp(ys) > 1.3 * np.ptp(xs)                  # a tall, narrow aspen
+    dc = cell_direction(*imp.cards[0], g)
+    r2, u2 = view_basis(dc)
+    base_row = (0.5 - 0.5 * (np.array([0, 0, lo[2]]) - imp.centre) @ u2 / imp.radius) * c
+    assert abs(ys.max() - base_row) <= 2
+    # normals: the top view's face up, the side view's face the viewer (+a)
+    n = decode_image(imp.normal_depth.png, 4)[..., :3].astype(float) / 255 * 2 - 1
+    top_n = n[(g // 2) * c:(g // 2 + 1) * c, (g // 2) * c:(g // 2 + 1) * c][top]
+    col, row = imp.cards[0]
+    side_n = n[row * c:(row + 1) * c, col * c:(col + 1) * c][side]
+    assert top_n[:, 2].mean() > 0.3 and side_n[:, 0].mean() > 0.3
+
+
+@needs_gl
+def test_cards_ride_one_joint_that_sways_with_the_crown():
+    asset = _asset("quaking_aspen")
+    coarse, imp = asset.lods[-2], asset.lods[-1]
+    (cards,) = imp.primitives
+    assert imp.skeleton.names == ["trunk_0"] and len(imp.skeleton.parent) == 1
+    assert (cards.joints == 0).all() and (cards.weights[:, 0] == 1).all()
+    (clip,) = imp.clips
+    rot = np.asarray(clip.rotations)[:, 0]
+    assert np.ptp(rot, axis=0).max() > 1e-4                   # it moves
+    # the cards' centre follows the coarse tree's crown (mean leaf position) over the loop
+    W = pose_world(imp.skeleton, clip.rotations)
+    S = W @ np.linalg.inv(imp.skeleton.bind_world)
+    c = np.append(imp.impostor.centre, 1.0)
+    card_move = (S[:, 0] @ c)[:, :3] - imp.impostor.centre
+    leaves = coarse.primitives[-1]
+    Wc = pose_world(coarse.skeleton, coarse.clips[0].rotations)
+    Sc = Wc @ np.linalg.inv(coarse.skeleton.bind_world)
+    j = np.asarray(leaves.joints)[:, 0]
+    p = np.c_[np.asarray(leaves.positions, float), np.ones(len(leaves.positions))]
+    crown = np.einsum("kvij,vj->kvi", Sc[:, j], p)[..., :3].mean(1)
+    crown_move = crown - crown[0] + (card_move[0])
+    for axis in (0, 1):
+        assert np.corrcoef(card_move[:, axis], crown_move[:, axis])[0, 1] > 0.8
+
+
+# ------------------------------------------------------------------------ the files
+
+@needs_gl
+def test_written_glb_validator_clean_sidecar_and_preview_at_distance(tmp_path):
+    from treegen_cli import api, exchange
+    from treegen_cli.exchange.gltf import read_gltf
+    from treegen_cli.exchange.validate import validate_gltf
+    from treegen_cli.render import Camera, Renderer, direction
+
+    out = tmp_path / "palm.glb"
+    s = api.make(species_path("palm"), out, duration=1.0, fps=10.0, impostor=True)
+    assert [p.name for p in map(type(out), s["files"])] == ["palm.glb", "palm.glb.impostor.json"]
+    assert len(s["lods"]) == 5 and s["lods"][-1]["triangles"] == 8
+    report = validate_gltf(out)
+    assert report["issues"]["numErrors"] == 0 and report["issues"]["numWarnings"] == 0
+    gltf, blob = read_gltf(out)
+    meta = gltf["asset"]["extras"]["treegen_impostor"]
+    side = json.loads((tmp_path / "palm.glb.impostor.json").read_text())
+    assert side == meta | {"file": "palm.glb"}
+    assert meta["grid"] == 16 and meta["hemisphere"] and meta["atlas_px"] == [1024, 1024]
+    assert meta["axes"] == {"a": [1.0, 0.0, 0.0], "b": [0.0, 0.0, -1.0], "up": [0.0, 1.0, 0.0]}
+    for key in ("albedo", "normal_depth"):
+        view = gltf["bufferViews"][gltf["images"][meta["images"][key]]["bufferView"]]
+        png = blob[view.get("byteOffset", 0):view.get("byteOffset", 0) + view["byteLength"]]
+        assert decode_image(png, 4).shape == (1024, 1024, 4)
+    # the far LOD as a client draws it: the cards, at the impostor's distance, fill pixels
+    scene = exchange.read_drawable(out, lod=4)
+    assert [p.name for p in scene.parts] == ["impostor"]
+    pts = np.concatenate([p.positions for p in scene.parts])
+    target = 0.5 * (pts.min(0) + pts.max(0))
+    far = s["lods"][-1]["distance_m"]
+    height = meta["bounds_max"][1] - meta["bounds_min"][1]
+    fov = 2 * np.degrees(np.arctan(0.6 * height / far))     # the tree fills most of the view
+    cam = Camera(eye=target + direction(-60.0, 5.0) * far, target=target, near=1.0,
+                 far=4 * far, fov_deg=fov)
+    with Renderer(scene, 96, 96) as r:
+        img = r.render(cam).astype(int)
+        bg = r.render(cam, draw_tree=False).astype(int)
+    tree = np.abs(img - bg).sum(-1) > 30
+    assert tree.sum() > 0.03 * tree.size
+    ys, xs = np.nonzero(tree)
+    assert abs(xs.mean() - 48) < 15 and abs(ys.mean() - 48) < 25   # the tree, in the middle
+
+
+@needs_gl
+def test_lod_files_and_usd_carry_the_impostor(tmp_path):
+    from treegen_cli import api
+
+    s = api.make(species_path("rush"), tmp_path / "r.glb", duration=1.0, fps=10.0,
+                 impostor=True, lod_files=True)
+    names = sorted(p.rsplit("/", 1)[-1] for p in s["files"])
+    assert names == sorted([f"r_LOD{k}.glb" for k in range(5)] + ["r_LOD4.glb.impostor.json"])
+    s = api.make(species_path("rush"), tmp_path / "u.usda", duration=1.0, fps=10.0, impostor=True)
+    meta = json.loads((tmp_path / "u.usda.impostor.json").read_text())
+    assert meta["axes"]["up"] == [0.0, 0.0, 1.0]
+    for f in meta["images"].values():
+        assert (tmp_path / f).is_file()
+    from pxr import Usd
+
+    stage = Usd.Stage.Open(str(tmp_path / "u.usda"))
+    layer_meta = stage.GetRootLayer().customLayerData
+    assert json.loads(layer_meta["treegen_impostor"]) == {k: v for k, v in meta.items() if k != "file"}
+    assert len(api.make(species_path("rush"), tmp_path / "n.glb", duration=1.0, fps=10.0,
+                        impostor=False)["lods"]) == 4
+    # a .usdz packages both atlases (the normal map unreferenced) and stays AR Quick Look-clean
+    import arkit_check
+    from treegen_cli.exchange.usd import validate_usd
+
+    api.make(species_path("rush"), tmp_path / "z.usdz", duration=1.0, fps=10.0, impostor=True)
+    assert validate_usd(tmp_path / "z.usdz") == []
+    assert json.loads((tmp_path / "z.usdz.impostor.json").read_text())["images"] == {
+        "albedo": "textures/impostor_albedo.png", "normal_depth": "textures/impostor_normal.png"}
+    if arkit_check.available():
+        report = arkit_check.check(tmp_path / "z.usdz")
+        assert report["errors"] == [] and report["failed"] == [], report

@@ -1,0 +1,301 @@
+"""The impostor: the last LOD, a tree drawn as a few textured cards cut from a view atlas.
+
+    lod, material = build_impostor(lod0, coarse_lod, materials, lod_options, distance, "wind_lod4_loop")
+    # Result: a Lod of 2 crossed cards (8 triangles: a face each way) skinned to one joint swaying like the
+    # trunk, with `lod.impostor` holding the hemi-octahedral atlas (albedo + alpha, normals +
+    # depth) for engines with impostor shaders; `material` ("impostor") samples the atlas.
+
+The atlas (impostor_render.render_atlas, one batched GL pass) holds grid × grid orthographic
+views of the bounding sphere (centre, radius), one per cell. Views look at the centre from the
+upper hemisphere; a direction d (unit, from the centre towards the viewer, in the frame
+a, b, up = generator +X, +Y, +Z) lands in the cell given by the hemi-octahedral encoding:
+
+    s = |d.a| + |d.b| + d.up;  p = (d.a / s, d.b / s)
+    (u, v) = ((p.x + p.y) / 2 + 1/2,  (p.y − p.x) / 2 + 1/2)     # v from the image's top
+    cell = (floor(u · grid), floor(v · grid))                        # (column, row)
+
+and a cell's centre (u, v) decodes back with p = (u − v, u + v − 1), d = normalize(p.x, p.y,
+1 − |p.x| − |p.y|). Inside a cell the view's right = normalize(up × d) and its up' = d × right;
+pixel (x, y) ∈ [−1, 1]² (y towards the top of the cell) shows centre + radius·(x·right + y·up').
+
+Cards: the two cells nearest the horizon along +a and +b (elevation about 90°/grid), each a
+quad through the centre in its view's plane showing that cell, one face each way: seen from
+behind, a card shows the mirror image, the true silhouette from there. The cards ride one joint at the trunk base whose rotation is the trunk's world rotation at the crown's height
+(decimated for the impostor's distance like any LOD clip), so the tree keeps swaying.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .asset import Clip, Impostor, Lod, Material, Primitive, Skeleton, Texture
+from .errors import TreegenError
+from .lod import LodOptions, decimate
+from .quat import mul as quat_mul, unit as unit_quat
+
+
+@dataclass(frozen=True)
+class ImpostorOptions:
+    """Atlas size and when the impostor takes over.
+
+    switch_px: the tree's height on screen (pixels of the LOD options' view, width / aspect
+    high) below which the impostor is used; at 1.5 × cell an atlas texel spans 1.5 pixels there.
+    The switch is never nearer than min_factor × the last geometric LOD's distance."""
+
+    grid: int = 16                   # views per side of the atlas (engine plug-ins' 16 × 16)
+    cell: int = 64                   # pixels per view: a 1024 × 1024 atlas
+    switch_px: float = 96.0
+    min_factor: float = 1.5
+    max_leaf_cards: int = 600        # leaves drawn into the atlas (coverage kept: larger cards)
+    max_bark_triangles: int = 600    # the widest bark triangles drawn (twigs are < 0.2 px)
+    alpha_cutoff: float = 0.5
+
+    def __post_init__(self) -> None:
+        if not 2 <= self.grid <= 64 or not 8 <= self.cell <= 512 or self.grid * self.cell > 8192:
+            raise TreegenError(f"impostor atlas {self.grid}×{self.grid} views of {self.cell} px: "
+                               "grid in 2..64, cell in 8..512 px, at most 8192 px a side")
+        if not (self.switch_px > 0 and self.min_factor >= 1 and self.max_leaf_cards >= 1
+                and self.max_bark_triangles >= 1):
+            raise TreegenError("impostor: switch_px > 0, min_factor >= 1, max_leaf_cards and "
+                               "max_bark_triangles >= 1")
+
+
+IMPOSTOR_DEFAULTS = ImpostorOptions()
+
+
+# ------------------------------------------------------------------ hemi-octahedral mapping
+
+def encode(d: np.ndarray) -> np.ndarray:
+    """Unit directions (…, 3) in (a, b, up), up ≥ 0 → atlas (u, v) in [0, 1]², v from the top."""
+    d = np.asarray(d, np.float64)
+    s = np.abs(d[..., 0]) + np.abs(d[..., 1]) + d[..., 2]
+    px, py = d[..., 0] / s, d[..., 1] / s
+    return np.stack([0.5 * (px + py) + 0.5, 0.5 * (py - px) + 0.5], axis=-1)
+
+
+def cell_of(d: np.ndarray, grid: int) -> np.ndarray:
+    """(column, row) of the cell a direction lands in."""
+    return np.clip(np.floor(encode(d) * grid), 0, grid - 1).astype(np.int64)
+
+
+def cell_direction(col, row, grid: int) -> np.ndarray:
+    """Unit direction (…, 3) a cell's centre decodes to (the view rendered into it)."""
+    u = (np.asarray(col, np.float64) + 0.5) / grid
+    v = (np.asarray(row, np.float64) + 0.5) / grid
+    px, py = u - v, u + v - 1.0
+    d = np.stack([px, py, 1.0 - np.abs(px) - np.abs(py)], axis=-1)
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def view_basis(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(right, up') of the orthographic view looking at the centre from direction d."""
+    right = np.cross((0.0, 0.0, 1.0), d)
+    n = np.linalg.norm(right)
+    right = right / n if n > 1e-5 else np.array([0.0, 1.0, 0.0])
+    return right, np.cross(d, right)
+
+
+# --------------------------------------------------------------------------------- the atlas
+
+def sphere(lod: Lod) -> tuple[np.ndarray, float]:
+    """Centre (the rest-pose box centre) and radius (farthest vertex, +1 %) of a LOD."""
+    pts = np.concatenate([np.asarray(p.positions, np.float64) for p in lod.primitives if len(p.positions)])
+    centre = 0.5 * (pts.min(0) + pts.max(0))
+    return centre, max(float(np.sqrt(((pts - centre) ** 2).sum(1).max())) * 1.01, 1e-3)
+
+
+def _fewer_leaves(prim: Primitive, cap: int) -> Primitive:
+    """Every k-th leaf card of a 4-vertex-card primitive, scaled by √k about its centre (same
+    leaf area): what the atlas needs at its few pixels per leaf, k× cheaper to draw."""
+    V, T = len(prim.positions), len(prim.indices) // 3
+    n = V // 4
+    if V != 4 * n or T != 2 * n or n <= cap:
+        return prim
+    k = math.ceil(n / cap)
+    keep = np.arange(0, n, k)
+    verts = (4 * keep[:, None] + np.arange(4)).ravel()
+    quads = np.asarray(prim.positions, np.float64)[verts].reshape(-1, 4, 3)
+    mid = quads.mean(1, keepdims=True)
+    pos = (mid + (quads - mid) * math.sqrt(k)).reshape(-1, 3).astype(np.float32)
+    first = np.asarray(prim.indices[:6], np.int64)           # the cards' shared index pattern
+    idx = (first[None, :] + 4 * np.arange(len(keep))[:, None]).ravel().astype(np.uint32)
+    return replace(prim, positions=pos, normals=np.asarray(prim.normals)[verts],
+                   uvs=np.asarray(prim.uvs)[verts], indices=idx,
+                   joints=np.asarray(prim.joints)[verts], weights=np.asarray(prim.weights)[verts])
+
+
+def _widest_bark(prim: Primitive, cap: int) -> Primitive:
+    """The `cap` bark triangles with the longest shortest edge (a tube's is its side width):
+    trunk and limbs; twigs far below an atlas pixel are left out."""
+    tri = np.asarray(prim.indices, np.int64).reshape(-1, 3)
+    if len(tri) <= cap or prim.material != "bark":
+        return prim
+    p = np.asarray(prim.positions, np.float64)
+    edge = np.stack([np.linalg.norm(p[tri[:, i]] - p[tri[:, (i + 1) % 3]], axis=1) for i in range(3)], 1)
+    keep = np.sort(np.argsort(-edge.min(1), kind="stable")[:cap])
+    return replace(prim, indices=tri[keep].ravel().astype(np.uint32))
+
+
+def _dilate(rgba: np.ndarray, grid: int, cell: int) -> np.ndarray:
+    """Transparent texels take their cell's mean visible colour, so clients' mipmaps and
+    bilinear filtering do not darken the cut-out's edges."""
+    a = rgba.reshape(grid, cell, grid, cell, 4)
+    seen = a[..., 3:] > 0
+    total = np.where(seen, a[..., :3], 0).sum(axis=(1, 3), dtype=np.uint32)
+    count = np.maximum(seen.sum(axis=(1, 3), dtype=np.uint32), 1)
+    fill = ((total + count // 2) // count).astype(np.uint8)[:, None, :, None, :]
+    out = a.copy()
+    np.copyto(out[..., :3], np.broadcast_to(fill, a[..., :3].shape), where=~seen)
+    return out.reshape(rgba.shape)
+
+
+def _z_up(v: np.ndarray) -> np.ndarray:
+    """Y up (a Drawable's) back to generator space: (x, y, z) → (x, −z, y)."""
+    return np.stack([v[:, 0], -v[:, 2], v[:, 1]], 1).astype(np.float32)
+
+
+def render_views(lod: Lod, materials: list[Material], centre: np.ndarray, radius: float,
+                 options: ImpostorOptions) -> tuple[np.ndarray, np.ndarray]:
+    """The two atlases (albedo + alpha, normals + depth) of `lod`'s rest pose."""
+    from .drawable import from_asset
+    from .asset import Asset
+    from .impostor_render import render_atlas
+
+    prims = [_widest_bark(_fewer_leaves(p, options.max_leaf_cards), options.max_bark_triangles)
+             for p in lod.primitives]
+    scene = from_asset(Asset("atlas", materials, [replace(lod, primitives=prims, clips=[])]))
+    scene = replace(scene, parts=[replace(p, positions=_z_up(p.positions), normals=_z_up(p.normals))
+                                  for p in scene.parts])
+    albedo, normal = render_atlas(scene, centre, radius, options.grid, options.cell)
+    return _dilate(albedo, options.grid, options.cell), normal
+
+
+# --------------------------------------------------------------------------------- the cards
+
+CARD_AXES = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0))   # horizon views along +a and +b
+
+
+def card_cells(grid: int) -> list[tuple[int, int]]:
+    cells = [cell_of(np.array(a) + (0, 0, 1e-6), grid) for a in CARD_AXES]
+    return [(int(c[0]), int(c[1])) for c in cells]
+
+
+def cards(centre: np.ndarray, radius: float, grid: int) -> Primitive:
+    """Per card cell, a quad in its view's plane through the centre, UVs on that cell (bottom-
+    left origin), twice: one face towards each side (the back face shows the mirror image,
+    the true silhouette from there). Single-sided twins instead of one double-sided quad, so
+    each face has its own normals, bent outwards over the card (0.6 facing + the corner's
+    sideways offset, level at the foot and up at the top), which light the crown like a
+    rounded mass in any engine instead of one flat shade per card (a flipped back-face normal
+    would be dark where the front is lit)."""
+    corners = np.array([(-1, -1), (1, -1), (-1, 1), (1, 1)], np.float64)
+    pos: list[np.ndarray] = []
+    nrm: list[np.ndarray] = []
+    uv: list[np.ndarray] = []
+    idx: list[np.ndarray] = []
+    for col, row in card_cells(grid):                    # two cards
+        d = cell_direction(col, row, grid)
+        right, up = view_basis(d)
+        offset = corners[:, :1] * right + corners[:, 1:] * up
+        u = (col + 0.5 + 0.5 * corners[:, 0]) / grid
+        v_top = (row + 0.5 - 0.5 * corners[:, 1]) / grid
+        for facing, tri in ((d, (0, 1, 3, 0, 3, 2)), (-d, (0, 3, 1, 0, 2, 3))):
+            idx.append(np.array(tri) + 4 * len(pos))
+            pos.append(centre + radius * offset)
+            n = 0.6 * facing + corners[:, :1] * right + (0.5 + 0.5 * corners[:, 1:]) * up
+            nrm.append(n / np.linalg.norm(n, axis=1, keepdims=True))
+            uv.append(np.stack([u, 1.0 - v_top], 1))
+    V = 4 * len(pos)
+    return Primitive(name="impostor", material="impostor",
+                     positions=np.concatenate(pos).astype(np.float32),
+                     normals=np.concatenate(nrm).astype(np.float32),
+                     uvs=np.concatenate(uv).astype(np.float32),
+                     indices=np.concatenate(idx).astype(np.uint32),
+                     joints=np.zeros((V, 4), np.uint16),
+                     weights=np.tile(np.array([1, 0, 0, 0], np.float32), (V, 1)))
+
+
+# ----------------------------------------------------------------------------------- the sway
+
+def trunk_sway(lod: Lod, height: float) -> tuple[Skeleton, Clip | None]:
+    """One joint at the trunk base (LOD `lod`'s root) whose rotation is the world rotation,
+    relative to rest, of the highest trunk joint at or below `height` (the crown's centre)."""
+    sk = lod.skeleton
+    chain = [0]                                           # the trunk: trunk_* joints from the root
+    names, parent = sk.names, np.asarray(sk.parent)
+    while True:
+        kids = [j for j in np.flatnonzero(parent == chain[-1]) if names[j].startswith("trunk")]
+        if not kids:
+            break
+        chain.append(int(kids[0]))
+    z = np.asarray(sk.bind_world)[chain, 2, 3]
+    top = chain[int(np.flatnonzero(z <= height)[-1])] if (z <= height).any() else 0
+    path = chain[:chain.index(top) + 1]
+    one = Skeleton(names=[names[0]], parent=np.array([-1], np.int32),
+                   rest_translation=np.asarray(sk.rest_translation)[:1].copy(),
+                   rest_rotation=np.asarray(sk.rest_rotation)[:1].copy(),
+                   bind_world=np.asarray(sk.bind_world)[:1].copy())
+    if not lod.clips:
+        return one, None
+    clip = lod.clips[0]
+    rot = np.asarray(clip.rotations, np.float64)
+    world, rest = rot[:, path[0]], np.asarray(sk.rest_rotation, np.float64)[path[0]]
+    for j in path[1:]:                                    # world rotation = product down the chain
+        world = quat_mul(world, rot[:, j])
+        rest = quat_mul(rest, np.asarray(sk.rest_rotation, np.float64)[j])
+    inv_rest = rest * np.array([-1, -1, -1, 1.0])
+    delta = quat_mul(world, inv_rest[None])               # world swing relative to rest
+    local = unit_quat(quat_mul(delta, np.asarray(sk.rest_rotation, np.float64)[0][None]))
+    return one, Clip(name=clip.name, times=np.asarray(clip.times), rotations=local[:, None, :],
+                     interpolation=clip.interpolation)
+
+
+# ----------------------------------------------------------------------------------- the stage
+
+def switch_distance(height: float, last: float, lod_options: LodOptions,
+                    options: ImpostorOptions) -> float:
+    """Metres from which the tree is at most switch_px tall on screen (and ≥ min_factor × last)."""
+    screen_h = lod_options.width / lod_options.aspect
+    tan_half_v = math.tan(0.5 * math.radians(lod_options.fov_deg)) / lod_options.aspect
+    d = height * screen_h / (2.0 * tan_half_v * options.switch_px)
+    return float(max(d, options.min_factor * last, 1e-3))
+
+
+def atlas_source(full: Lod, coarse: Lod) -> Lod:
+    """What the atlas draws: the coarsest LOD's bark (few sides, the same stems) with the
+    full tree's leaves (thinned by render_views to max_leaf_cards, area kept), so the views
+    keep LOD0's crown coverage at the cost of a coarse LOD."""
+    bark = [p for p in coarse.primitives if p.material != "leaf"]
+    leaves = [p for p in full.primitives if p.material == "leaf"]
+    return replace(coarse, primitives=bark + leaves, clips=[])
+
+
+def build_impostor(full: Lod, coarse: Lod, materials: list[Material],
+                   lod_options: LodOptions, distance: float, clip_name: str,
+                   options: ImpostorOptions = IMPOSTOR_DEFAULTS) -> tuple[Lod, Material]:
+    """The impostor LOD (cards + atlas) of a tree whose full-detail LOD is `full` and coarsest
+    geometric LOD `coarse` (its skeleton and clip give the sway), used from `distance`."""
+    source = atlas_source(full, coarse)
+    centre, radius = sphere(source)
+    albedo, normal = render_views(source, materials, centre, radius, options)
+    from .textures import png_bytes
+
+    albedo_tex = Texture("impostor_albedo", png_bytes(albedo), wrap="CLAMP")
+    normal_tex = Texture("impostor_normal", png_bytes(normal), wrap="CLAMP", srgb=False)
+    prim = cards(centre, radius, options.grid)
+    skel, dense = trunk_sway(coarse, float(centre[2]))
+    clips = [] if dense is None else \
+        [decimate(skel, [prim], dense, distance, lod_options, clip_name)[0]]
+    lo = np.concatenate([p.positions for p in source.primitives]).min(0)
+    hi = np.concatenate([p.positions for p in source.primitives]).max(0)
+    imp = Impostor(albedo=albedo_tex, normal_depth=normal_tex, grid=options.grid,
+                   cell=options.cell, centre=centre, radius=radius,
+                   bounds=(lo.astype(np.float64), hi.astype(np.float64)),
+                   cards=tuple(card_cells(options.grid)), alpha_cutoff=options.alpha_cutoff)
+    material = Material(name="impostor", base_color=(1.0, 1.0, 1.0, 1.0), roughness=0.95,
+                        alpha_cutoff=options.alpha_cutoff,
+                        base_texture=albedo_tex)
+    return Lod(primitives=[prim], skeleton=skel, clips=clips, distance=distance,
+               screen_coverage=0.0, impostor=imp), material
