@@ -45,12 +45,12 @@ DEFAULTS: dict[str, object] = {
     "fps": 30.0,
     "stiffness": 1.0,
     "no_wind": False,
-    "lod_distances": "0,10,30,130",
+    "lod_screen": "0.5,0.25,0.1",
+    "lod_distances": None,
     "fov": 60.0,
     "width": 1920,
     "error_px": 1.0,
-    "error_form": "exact",
-    "interpolation": "linear",
+    "schedule": "bounded",
     "no_lod": False,
     "lod_files": False,
     "up_axis": None,
@@ -63,9 +63,9 @@ PATHS = ("leaf_texture", "bark_texture")
 FLOATS = ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "fov", "error_px",
           "stiffness")
 FLAGS = ("no_wind", "no_lod", "lod_files", "no_textures")
-CHOICES = {"leaf_geometry": ("card", "shape"), "error_form": ("exact", "paper"),
-           "interpolation": ("linear", "step"), "up_axis": (None, "y", "z")}
-LISTS = ("joint_levels", "sides", "lod_distances")
+CHOICES = {"leaf_geometry": ("card", "shape"), "schedule": ("bounded", "bounded-step", "paper"),
+           "up_axis": (None, "y", "z")}
+LISTS = ("joint_levels", "sides", "lod_screen", "lod_distances")
 
 
 def cli_name(key: str) -> str:
@@ -97,8 +97,8 @@ def _number_list(key: str, value, kind: type, label: Callable[[str], str]) -> tu
         try:
             values = tuple(kind(v) for v in value.split(",") if v.strip() != "")
         except ValueError:
-            example = "0,10,30,130" if kind is float else "0,1,2"
-            what = "metres" if kind is float else "whole numbers"
+            example = "0.5,0.25,0.1" if key == "lod_screen" else "0,10,30,130" if kind is float else "0,1,2"
+            what = "fractions" if key == "lod_screen" else "metres" if kind is float else "whole numbers"
             raise TreegenError(f"{label(key)} '{value}': expected comma-separated {what}, "
                                f"e.g. {example}") from None
     elif isinstance(value, (list, tuple)) and all(
@@ -163,9 +163,14 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
     v["joint_levels"] = _number_list("joint_levels", v["joint_levels"], int, label)
     v["sides"] = _number_list("sides", v["sides"], int, label)
     v["lod_distances"] = _number_list("lod_distances", v["lod_distances"], float, label)
+    v["lod_screen"] = _number_list("lod_screen", v["lod_screen"], float, label)
 
-    d = v["lod_distances"]
-    if not v["no_lod"]:
+    d, sc = v["lod_distances"], v["lod_screen"]
+    if not v["no_lod"] and (not sc or any(not (math.isfinite(x) and 0 < x <= 100) for x in sc)
+                            or list(sc) != sorted(set(sc), reverse=True)):
+        raise TreegenError(f"{label('lod_screen')} {_text(sc) or '(none)'}: give descending "
+                           "fractions of the screen height, each in (0, 100], e.g. 0.5,0.25,0.1")
+    if not v["no_lod"] and d is not None:
         if not d or any(not math.isfinite(x) or x < 0 for x in d) or list(d) != sorted(d):
             raise TreegenError(f"{label('lod_distances')} {_text(d) or '(none)'}: "
                                "give one or more ascending distances in metres, each >= 0")
@@ -185,8 +190,8 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
         turbulence=v["turbulence"], duration=v["duration"], fps=v["fps"],
         stiffness=v["stiffness"])
     lod = None if v["no_lod"] or static else LodOptions(
-        distances=v["lod_distances"], fov_deg=v["fov"], width=v["width"], error_px=v["error_px"],
-        error_form=v["error_form"], interpolation=v["interpolation"].upper())
+        distances=d, screen=sc, fov_deg=v["fov"], width=v["width"], error_px=v["error_px"],
+        schedule=v["schedule"])
     make_options = MakeOptions(
         generate=GenerateOptions(max_stems=v["max_stems"], max_leaves=v["max_leaves"]),
         rig=RigOptions(max_joints=v["max_joints"], joint_levels=v["joint_levels"]),

@@ -12,7 +12,8 @@ from . import __version__
 from .asset import Asset, Lod
 from .generate import DEFAULTS as GENERATE_DEFAULTS, GenerateOptions, generate, regrow_leaves
 from .limits import LIMITS_DEFAULTS, Limits, check_keys, check_mesh
-from .lod import LOD_DEFAULTS, LodOptions, decimate, lod_stage_options, match_leaf_area, screen_coverage
+from .lod import (LOD_DEFAULTS, LodOptions, decimate, lod_stage_options, match_leaf_area,
+                  screen_coverage, switch_distances)
 from .materials import MATERIAL_DEFAULTS, MaterialOptions, build_materials
 from .mesh import MESH_DEFAULTS, MeshOptions, build_mesh
 from .params import Params
@@ -70,14 +71,16 @@ def build_lod(tree: Tree, options: MakeOptions, seed: int, timings: Timings) -> 
 
 def build_lods(params: Params, tree: Tree, options: MakeOptions, seed: int,
                timings: Timings) -> list[Lod]:
-    """One coarser tree per LOD distance (lod.lod_stage_options), each with its own rig, mesh,
-    dense wind (same wind options and seed, so the motion matches) and a clip decimated for its
-    distance (clip_name(k)). LOD0 reuses `tree`; lower LODs regrow it from the same seed."""
+    """One coarser tree per LOD (lod.lod_stage_options), each with its own rig, mesh, dense
+    wind (same wind options and seed, so the motion matches) and a clip decimated for the
+    distance it is used from (clip_name(k)); distances follow the tree's height on screen
+    (lod.switch_distances). LOD0 reuses `tree`; lower LODs regrow it from the same seed."""
     lo = options.lod
     area = float(tree.leaf_area.sum())
     height = tree_height(tree)
+    distances = switch_distances(height, lo)
     lods = []
-    for k, distance in enumerate(lo.distances):
+    for k, distance in enumerate(distances):
         p, gen, rig, mesh = lod_stage_options(params, k, options.generate, options.rig,
                                               options.mesh, lo)
         t = tree if gen == options.generate and p == params else \
@@ -89,7 +92,7 @@ def build_lods(params: Params, tree: Tree, options: MakeOptions, seed: int,
                              clip_name(k))[0] for c in lod.clips]
         # MSFT_screencoverage: LOD k is shown while the tree covers more than the coverage at
         # which LOD k+1 takes over; the last LOD is never culled.
-        coverage = screen_coverage(height, lo.distances[k + 1], lo) if k + 1 < len(lo.distances) else 0.0
+        coverage = screen_coverage(height, distances[k + 1], lo) if k + 1 < len(distances) else 0.0
         lods.append(replace(lod, clips=clips, distance=float(distance), screen_coverage=coverage))
     return lods
 
