@@ -1,6 +1,6 @@
 """LOD keys and cost on the four Weber–Penn paper species (the paper's Table 3, honestly).
 
-    python bench/lod_bench.py [--durations 4,10,30] [--species quaking_aspen,...]
+    python bench/lod_bench.py [--durations 4,10,30] [--species quaking_aspen,...] [--tables 1,2]
 
 Table 1, per species at the paper's 30 m and 130 m (fov 60°, width 1920, i = error_px = 1, the
 full LOD0 tree and its default 10 s / 30 fps wind): the default bounded schedule and the
@@ -32,10 +32,19 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--durations", default="4,10,30")
     ap.add_argument("--species", default=",".join(SPECIES))
+    ap.add_argument("--tables", default="1,2", help="which tables to print")
     args = ap.parse_args()
+    tables = args.tables.split(",")
     species = args.species.split(",")
     durations = [float(x) for x in args.durations.split(",")]
 
+    if "1" in tables:
+        schedules(species)
+    if "2" in tables:
+        stage_seconds(species, durations)
+
+
+def schedules(species: list[str]) -> None:
     print(f"{'species':<16}{'dist m':>7}  {'schedule':<9}{'keys kept':>17}{'anim bytes':>19}"
           f"{'max err px':>11}{'updates/frame':>15}{'seconds':>9}")
     for name in species:
@@ -47,8 +56,10 @@ def main() -> None:
                   f"{r['keys_kept_pct']:>6.1f}%{r['animation_bytes']:>11,} {pct:>6.1f}%"
                   f"{r['max_error_px']:>11.3f}{r['leaf_vertex_updates_per_frame']:>15,.0f}"
                   f"{r['seconds']:>9.2f}")
-
     print()
+
+
+def stage_seconds(species: list[str], durations: list[float]) -> None:
     print(f"{'species':<16}{'clip s':>7}{'make s':>8}{'lod s':>7}{'lod/make':>9}{'lod s/clip s':>13}"
           f"  switch m / triangles per LOD")
     with tempfile.TemporaryDirectory() as tmp:
