@@ -1,55 +1,76 @@
-"""Keyframe decimation on the four Weber–Penn paper species at 30 m and 130 m.
+"""LOD keys and cost on the four Weber–Penn paper species (the paper's Table 3, honestly).
 
-    python bench/lod_bench.py [--runs 5] [--interpolation linear|step]
+    python bench/lod_bench.py [--durations 4,10,30] [--species quaking_aspen,...] [--tables 1,2]
 
-Per species and distance (fov 60°, width 1920, i = error_px = 1, exact pixel form, the default
-4 s / 30 fps wind on the full LOD0 tree): keys kept (% of dense), max measured error (px), and
-decimation seconds (median of --runs, probes included). Target: at 130 m ≤ 10% of keys kept
-with max error ≤ 1 px; decimation < 1 s per tree.
+Table 1, per species at the paper's 30 m and 130 m (fov 60°, width 1920, i = error_px = 1, the
+full LOD0 tree and its default 10 s / 30 fps wind): the default bounded schedule and the
+paper's rule side by side — keys kept (% of dense), animation bytes (% of dense), max error
+measured perspective-true (any camera at that distance from the centre of the tree's bounds;
+`lod.measure_error_px`), leaf-vertex updates per frame, decimation seconds.
 
-Measured (2-core box, LINEAR, --runs 3): keys kept at 30 m / 130 m — aspen 18.0% / 6.1%,
-tupelo 25.1% / 8.6%, willow 8.0% / 3.2%, oak 4.6% / 2.0%; max error ≤ 1.000 px everywhere;
-decimation 0.26–0.55 s per tree.
+Table 2, per species and clip length: the default `treegen make` (GLB, in-process through
+`api.make`): whole make seconds, LOD stage seconds and its share, LOD seconds per clip second
+(flat = linear in clip length), switch distances (from the tree's height on screen) and
+triangles per LOD. Seconds are wall-clock on a shared box: read ratios, not absolutes.
 """
 from __future__ import annotations
 
 import argparse
-import statistics
-import time
+import tempfile
 from pathlib import Path
 
-from treegen_cli.lod import LodOptions, decimate, measure_error_px
+from treegen_cli import api
+from treegen_cli.lod import LOD_DEFAULTS, PAPER_DISTANCES, schedule_rows
 from treegen_cli.params import load_params
 from treegen_cli.pipeline import MakeOptions, build_asset
 
 ROOT = Path(__file__).resolve().parent.parent
 SPECIES = ("quaking_aspen", "black_tupelo", "weeping_willow", "ca_black_oak")
-DISTANCES = (30.0, 130.0)
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--runs", type=int, default=5)
-    ap.add_argument("--interpolation", choices=("linear", "step"), default="linear")
+    ap.add_argument("--durations", default="4,10,30")
+    ap.add_argument("--species", default=",".join(SPECIES))
+    ap.add_argument("--tables", default="1,2", help="which tables to print")
     args = ap.parse_args()
-    opts = LodOptions(fov_deg=60.0, width=1920, error_px=1.0, interpolation=args.interpolation.upper())
-    print(f"{'species':<16}{'joints':>7}{'dist m':>8}{'keys kept':>18}{'max err px':>12}"
-          f"{'decimate s':>12}")
-    for name in SPECIES:
+    tables = args.tables.split(",")
+    species = args.species.split(",")
+    durations = [float(x) for x in args.durations.split(",")]
+
+    if "1" in tables:
+        schedules(species)
+    if "2" in tables:
+        stage_seconds(species, durations)
+
+
+def schedules(species: list[str]) -> None:
+    print(f"{'species':<16}{'dist m':>7}  {'schedule':<9}{'keys kept':>17}{'anim bytes':>19}"
+          f"{'max err px':>11}{'updates/frame':>15}{'seconds':>9}")
+    for name in species:
         asset, _ = build_asset(load_params(ROOT / "species" / f"{name}.txt"), 0,
                                MakeOptions(lod=None))
-        lod = asset.lods[0]
-        dense = lod.clips[0]
-        for d in DISTANCES:
-            seconds = []
-            for _ in range(args.runs):
-                t0 = time.perf_counter()
-                clip, rep = decimate(lod.skeleton, lod.primitives, dense, d, opts)
-                seconds.append(time.perf_counter() - t0)
-            err = measure_error_px(lod.skeleton, lod.primitives, dense, clip, d, opts)
-            print(f"{name:<16}{len(lod.skeleton.names):>7}{d:>8g}"
-                  f"{rep.keys_kept:>9,} {100 * rep.kept_fraction:>6.1f}%  {err:>10.3f}"
-                  f"{statistics.median(seconds):>12.3f}")
+        for r in schedule_rows(asset.lods[0], PAPER_DISTANCES, LOD_DEFAULTS):
+            pct = 100.0 * r["animation_bytes"] / r["animation_bytes_dense"]
+            print(f"{name:<16}{r['distance_m']:>7g}  {r['schedule']:<9}{r['keys_kept']:>9,} "
+                  f"{r['keys_kept_pct']:>6.1f}%{r['animation_bytes']:>11,} {pct:>6.1f}%"
+                  f"{r['max_error_px']:>11.3f}{r['leaf_vertex_updates_per_frame']:>15,.0f}"
+                  f"{r['seconds']:>9.2f}")
+    print()
+
+
+def stage_seconds(species: list[str], durations: list[float]) -> None:
+    print(f"{'species':<16}{'clip s':>7}{'make s':>8}{'lod s':>7}{'lod/make':>9}{'lod s/clip s':>13}"
+          f"  switch m / triangles per LOD")
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in species:
+            for duration in durations:
+                s = api.make(ROOT / "species" / f"{name}.txt", Path(tmp) / f"{name}.glb",
+                             duration=duration)
+                lod_s = s["stages_s"].get("lod", 0.0)
+                lods = " ".join(f"{r['distance_m']:.0f}:{r['triangles']:,}" for r in s["lods"])
+                print(f"{name:<16}{duration:>7g}{s['seconds']:>8.2f}{lod_s:>7.2f}"
+                      f"{lod_s / s['seconds']:>9.2f}{lod_s / duration:>13.3f}  {lods}")
 
 
 if __name__ == "__main__":

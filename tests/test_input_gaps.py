@@ -39,7 +39,7 @@ INPUTS = {
     "scale1300.txt": edited(Scale=1300),
     "tall.txt": edited(Scale=130),                 # trunk ≤ 133 m, branches reach ~155 m
     "wide.txt": edited(Scale=50, _1Length=2, _1DownAngle=90, _1DownAngleV=0),
-    "catalogue_fov.json": json.dumps({"entries": [{"species": "rush", "fov": 100, "error_form": "paper"}]}),
+    "catalogue_fov.json": json.dumps({"entries": [{"species": "rush", "fov": 100, "schedule": "paper"}]}),
     "catalogue_tex.json": json.dumps({"entries": [{"species": "rush", "texture_size": 100}]}),
     "catalogue_size.json": json.dumps({"entries": [{"species": "scale1300.txt"}]}),
     "forest.json": json.dumps({"camera": {"position": [0, -20, 2], "target": [0, 0, 2]},

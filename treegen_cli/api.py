@@ -46,12 +46,12 @@ DEFAULTS: dict[str, object] = {
     "fps": 30.0,
     "stiffness": 1.0,
     "no_wind": False,
-    "lod_distances": "0,10,30,130",
+    "lod_screen": "0.5,0.25,0.1",
+    "lod_distances": None,
     "fov": 60.0,
     "width": 1920,
     "error_px": 1.0,
-    "error_form": "exact",
-    "interpolation": "linear",
+    "schedule": "bounded",
     "lod_triangles": "0.5,0.15,0.05",
     "no_lod": False,
     "lod_files": False,
@@ -73,13 +73,12 @@ PATHS = ("leaf_texture", "bark_texture")
 FLOATS = ("max_size", "wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "fov", "error_px",
           "stiffness")
 FLAGS = ("no_wind", "no_lod", "lod_files", "no_textures", "impostor")
-CHOICES = {"leaf_geometry": ("card", "shape"), "error_form": ("exact", "paper"),
-           "interpolation": ("linear", "step"), "up_axis": (None, "y", "z"),
-           "profile": (None, "mobile", "web", "desktop", "hero")}
-LISTS = ("joint_levels", "sides", "lod_distances", "lod_triangles")
+CHOICES = {"leaf_geometry": ("card", "shape"), "schedule": ("bounded", "bounded-step", "paper"),
+           "up_axis": (None, "y", "z"), "profile": (None, "mobile", "web", "desktop", "hero")}
+LISTS = ("joint_levels", "sides", "lod_screen", "lod_distances", "lod_triangles")
 # stage option fields (WindOptions, LodOptions) → the make option a user typed for them
 STAGE_FIELDS = {"speed": "wind_speed", "direction_deg": "wind_dir", "distances": "lod_distances",
-                "fov_deg": "fov"}
+                "fov_deg": "fov", "screen": "lod_screen"}
 
 
 def cli_name(key: str) -> str:
@@ -115,6 +114,8 @@ def _number_list(key: str, value, kind: type, label: Callable[[str], str]) -> tu
             what = "metres" if kind is float else "whole numbers"
             if key == "lod_triangles":
                 example, what = "0.5,0.15,0.05", "fractions"
+            if key == "lod_screen":
+                example, what = "0.5,0.25,0.1", "fractions"
             raise TreegenError(f"{label(key)} '{value}': expected comma-separated {what}, "
                                f"e.g. {example}") from None
     elif isinstance(value, (list, tuple)) and all(
@@ -188,14 +189,20 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
     v["sides"] = _number_list("sides", v["sides"], int, label)
     v["lod_distances"] = _number_list("lod_distances", v["lod_distances"], float, label)
     v["lod_triangles"] = _number_list("lod_triangles", v["lod_triangles"], float, label)
+    v["lod_screen"] = _number_list("lod_screen", v["lod_screen"], float, label)
 
-    d = v["lod_distances"]
-    if not v["no_lod"]:
+    d, sc = v["lod_distances"], v["lod_screen"]
+    if not v["no_lod"] and (not sc or any(not (math.isfinite(x) and 0 < x <= 100) for x in sc)
+                            or list(sc) != sorted(set(sc), reverse=True)):
+        raise TreegenError(f"{label('lod_screen')} {_text(sc) or '(none)'}: give descending "
+                           "fractions of the screen height, each in (0, 100], e.g. 0.5,0.25,0.1")
+    if not v["no_lod"] and d is not None:
         if not d or any(not math.isfinite(x) or x < 0 for x in d) or list(d) != sorted(d):
             raise TreegenError(f"{label('lod_distances')} {_text(d) or '(none)'}: "
                                "give one or more ascending distances in metres, each >= 0")
         if len(set(d)) != len(d):
             raise TreegenError(f"{label('lod_distances')} {_text(d)}: distances repeat")
+    if not v["no_lod"]:
         t = v["lod_triangles"]
         if not t or any(not (math.isfinite(x) and 0.0 < x <= 1.0) for x in t):
             raise TreegenError(f"{label('lod_triangles')} '{_text(t)}': give LOD1, LOD2, … "
@@ -235,9 +242,8 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
             turbulence=v["turbulence"], duration=v["duration"], fps=v["fps"],
             stiffness=v["stiffness"])
         lod = None if v["no_lod"] or static else LodOptions(
-            distances=v["lod_distances"], fov_deg=v["fov"], width=v["width"],
-            error_px=v["error_px"], error_form=v["error_form"],
-            interpolation=v["interpolation"].upper(), triangles=(1.0, *v["lod_triangles"]))
+            distances=d, screen=sc, fov_deg=v["fov"], width=v["width"], error_px=v["error_px"],
+            schedule=v["schedule"], triangles=(1.0, *v["lod_triangles"]))
     except OptionError as e:
         raise TreegenError(e.worded(label(STAGE_FIELDS.get(e.field, e.field)))) from None
     from .impostor import IMPOSTOR_DEFAULTS

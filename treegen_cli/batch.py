@@ -347,7 +347,7 @@ def estimate(cat: Catalogue, plan: Plan) -> dict[str, tuple[float, float, str]]:
             out[job.output] = (sum(b for b, _ in m) / len(m), sum(s for _, s in m) / len(m), "measured")
             continue
         stems, leaves = estimate_counts(cat.params[job.species])
-        lods = 1 if r.options.lod is None else len(r.options.lod.distances)
+        lods = 1 if r.options.lod is None else r.options.lod.count
         frames = 0 if r.options.wind is None else r.options.wind.duration * r.options.wind.fps + 1
         verts = (leaves * 4 + stems * 60) * (1.0 if lods == 1 else 1.9)
         size = verts * 27 + r.options.rig.max_joints * frames * 16 * min(lods, 2)

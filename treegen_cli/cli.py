@@ -35,30 +35,37 @@ def _generate_options(f):
 
 
 def _lod_options(f):
-    """--lod-distances, --fov, --width, --error-px, --error-form, --interpolation (lod.py)."""
-    f = click.option("--interpolation", type=click.Choice(["linear", "step"]), default="linear",
-                     show_default=True, help="How engines play the decimated keys: slerp between "
-                     "kept keys, or hold each until the next (the paper's update behaviour).")(f)
-    f = click.option("--error-form", type=click.Choice(["exact", "paper"]), default="exact",
-                     show_default=True, help="Pixel size at distance d: exact 2·d·tan(fov/2)/width, "
-                     "or the paper's d·tan(fov)/width.")(f)
+    """--lod-screen, --lod-distances, --fov, --width, --error-px, --schedule (lod.py)."""
+    f = click.option("--schedule", type=click.Choice(["bounded", "bounded-step", "paper"]),
+                     default="bounded", show_default=True,
+                     help="Key schedule per LOD. bounded: slerp between kept keys, every vertex "
+                     "within --error-px on a perspective screen seen from any direction at the "
+                     "LOD's switch distance; bounded-step: the same bound with keys held; paper: "
+                     "the paper's accumulate-and-reset rule as written (P/d > i·tan(fov)/width, "
+                     "held), unchecked.")(f)
     f = click.option("--error-px", type=float, default=1.0, show_default=True,
                      help="Allowed on-screen error in pixels (the paper's i); 0 keeps every key.")(f)
     f = click.option("--width", type=int, default=1920, show_default=True,
                      help="Screen width in pixels.")(f)
     f = click.option("--fov", type=float, default=60.0, show_default=True,
-                     help="Horizontal field of view, degrees.")(f)
-    f = click.option("--lod-distances", default="0,10,30,130", show_default=True, metavar="0,10,30,130",
-                     help="Metres from which each LOD is used (LOD0 first; at 0 it keeps the dense clip).")(f)
+                     help="Horizontal field of view, degrees (16:9 screen).")(f)
+    f = click.option("--lod-distances", default=None, metavar="0,10,30,130",
+                     help="Force the metres from which each LOD is used, from the centre of the "
+                     "tree's bounds (LOD0 first; at 0 it keeps the dense clip). Replaces "
+                     "--lod-screen.")(f)
+    f = click.option("--lod-screen", default="0.5,0.25,0.1", show_default=True, metavar="0.5,0.25,0.1",
+                     help="LOD1, LOD2, … take over when the tree's height falls below these "
+                     "fractions of the screen height (distances per tree from its height and "
+                     "--fov).")(f)
     return f
 
 
-def _lod_options_from(lod_distances, fov, width, error_px, error_form, interpolation):
+def _lod_options_from(lod_screen, lod_distances, fov, width, error_px, schedule):
     """LodOptions from the LOD flags, validated as `make` validates them (api.resolve)."""
     from .api import resolve
 
-    return resolve(dict(lod_distances=lod_distances, fov=fov, width=width, error_px=error_px,
-                        error_form=error_form, interpolation=interpolation)).options.lod
+    return resolve(dict(lod_screen=lod_screen, lod_distances=lod_distances, fov=fov, width=width,
+                        error_px=error_px, schedule=schedule)).options.lod
 
 
 def _species(value: str) -> Path:
@@ -104,12 +111,13 @@ def cli():
 @click.option("--triangles", type=int, default=None, metavar="N",
               help="Also plan a LOD0 triangle budget as `make --triangles N` would, and print "
                    "the levers it picks and the triangles it will build.")
-def info(species, seed, max_stems, max_leaves, max_size, as_json, with_lod, lod_distances, fov, width,
-         error_px, error_form, interpolation, with_wind, wind_speed, stiffness, triangles):
+def info(species, seed, max_stems, max_leaves, max_size, as_json, with_lod, lod_screen,
+         lod_distances, fov, width, error_px, schedule, with_wind, wind_speed, stiffness, triangles):
     """Grow SPECIES (a Weber–Penn text or Arbaro XML file, or a bundled name such as
     quaking_aspen: see `treegen species`) and report on the tree:
     stems per level, leaves, leaf area (m²), height and crown width (m), nodes, seconds.
-    With --lod: the analogue of the paper's Table 3, one row per LOD distance.
+    With --lod: one row per LOD, and the analogue of the paper's Table 3: the full tree's
+    clip at the paper's 30 m and 130 m under the bounded and the paper's schedule, side by side.
     With --wind: the wind model's numbers, to tune --wind-speed, --gust and --stiffness."""
     from .api import resolve
     from .generate import generate
@@ -129,9 +137,10 @@ def info(species, seed, max_stems, max_leaves, max_size, as_json, with_lod, lod_
     stats["triangles"] = _triangle_rows(species, params, seed, tree, triangles,
                                         generate_options)
     if with_lod:
-        stats["lods"] = _lod_rows(species, params, seed, tree, generate_options,
-                                  _lod_options_from(lod_distances, fov, width, error_px,
-                                                    error_form, interpolation))
+        lod_options = _lod_options_from(lod_screen, lod_distances, fov, width, error_px, schedule)
+        stats["lods"], stats["schedules"] = _lod_rows(
+            species, params, seed, tree, generate_options,
+            lod_options)
     if with_wind:
         from .rig import build_rig
         from .wind import wind_report
@@ -161,14 +170,22 @@ def info(species, seed, max_stems, max_leaves, max_size, as_json, with_lod, lod_
     for name, value in rows:
         click.echo(f"  {name:<13}{value}")
     if with_lod:
-        click.echo(f"  LODs (fov {fov:g}°, {width} px, error {error_px:g} px, {error_form}, "
-                   f"{interpolation}): leaf-vertex updates per frame, LOD method vs all-GPU")
+        click.echo(f"  LODs (fov {fov:g}°, {width} px, error {error_px:g} px, {schedule}): "
+                   "leaf-vertex updates per frame, LOD method vs all-GPU")
         click.echo(f"    {'LOD':<4}{'dist m':>8}{'keys kept':>16}{'max err px':>11}"
                    f"{'updates/frame':>15}{'leaf verts':>12}{'joints':>8}{'triangles':>11}")
         for k, r in enumerate(stats["lods"]):
             click.echo(f"    {k:<4}{r['distance_m']:>8g}{r['keys_kept']:>9,} {r['keys_kept_pct']:>5.1f}%"
                        f"{r['max_error_px']:>11.3f}{r['leaf_vertex_updates_per_frame']:>15,.0f}"
                        f"{r['leaf_vertices']:>12,}{r['joints']:>8}{r['triangles']:>11,}")
+        click.echo("  schedules on the full tree (the paper's Table 3; error: perspective-true, "
+                   "measured on every vertex's bound)")
+        click.echo(f"    {'dist m':>6}  {'schedule':<9}{'keys kept':>16}{'anim bytes':>12}"
+                   f"{'max err px':>11}{'updates/frame':>15}")
+        for r in stats["schedules"]:
+            click.echo(f"    {r['distance_m']:>6g}  {r['schedule']:<9}{r['keys_kept']:>9,} "
+                       f"{r['keys_kept_pct']:>5.1f}%{r['animation_bytes']:>12,}"
+                       f"{r['max_error_px']:>11.3f}{r['leaf_vertex_updates_per_frame']:>15,.0f}")
     if with_wind:
         w = stats["wind"]
         click.echo(f"  wind ({wind_speed:g} m/s, stiffness ×{stiffness:g}):")
@@ -202,15 +219,16 @@ def _triangle_rows(species, params, seed, tree, triangles, generate_options) -> 
     return out
 
 
-def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> list[dict]:
-    """The Table-3 rows: the default make pipeline with these LOD options, on the tree `info`
-    already grew, measured per LOD."""
-    from .lod import lod_table_row
+def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> tuple[list, list]:
+    """Rows per LOD (the make pipeline with these LOD options, on the tree `info` already grew,
+    measured per LOD), and the full tree's schedules side by side at the paper's distances."""
+    from .lod import PAPER_DISTANCES, lod_table_row, schedule_rows
     from .pipeline import MakeOptions, Timings, build_asset
 
     options = MakeOptions(generate=generate_options, lod=lod_options)
     asset, _tree = _in_file(species, build_asset, params, seed, options, Timings(), tree)
-    return [lod_table_row(lod, lod_options) for lod in asset.lods]
+    return ([lod_table_row(lod, lod_options) for lod in asset.lods],
+            schedule_rows(asset.lods[0], PAPER_DISTANCES, lod_options))
 
 
 @cli.command()
@@ -290,8 +308,8 @@ def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> lis
 def make(species, output, seed, max_stems, max_leaves, max_size, max_joints, joints, triangles, profile,
          joint_levels, sides,
          leaf_geometry, texture_size, leaf_texture, bark_texture, no_textures, wind_speed,
-         wind_dir, gust, turbulence, duration, fps, stiffness, no_wind, up_axis, lod_distances,
-         fov, width, error_px, error_form, interpolation, lod_triangles, no_lod, lod_files,
+         wind_dir, gust, turbulence, duration, fps, stiffness, no_wind, up_axis, lod_screen,
+         lod_distances, fov, width, error_px, schedule, lod_triangles, no_lod, lod_files,
          impostor, max_vertices, max_keys, as_json):
     """Grow SPECIES (a species file, or a bundled name such as quaking_aspen: see `treegen
     species`) and write a skinned, wind-animated tree to OUTPUT."""
@@ -309,9 +327,9 @@ def make(species, output, seed, max_stems, max_leaves, max_size, max_joints, joi
                        leaf_texture=leaf_texture, bark_texture=bark_texture,
                        no_textures=no_textures, wind_speed=wind_speed, wind_dir=wind_dir,
                        gust=gust, turbulence=turbulence, duration=duration, fps=fps,
-                       stiffness=stiffness, no_wind=no_wind, lod_distances=lod_distances,
-                       fov=fov, width=width, error_px=error_px, error_form=error_form,
-                       interpolation=interpolation, lod_triangles=lod_triangles,
+                       stiffness=stiffness, no_wind=no_wind, lod_screen=lod_screen,
+                       lod_distances=lod_distances, fov=fov, width=width, error_px=error_px,
+                       schedule=schedule, lod_triangles=lod_triangles,
                        no_lod=no_lod, lod_files=lod_files, impostor=impostor,
                        up_axis=up_axis, max_vertices=max_vertices, max_keys=max_keys)),
                   output=output)
@@ -321,7 +339,7 @@ def make(species, output, seed, max_stems, max_leaves, max_size, max_joints, joi
     rep = current_reporter()
     per_lod = 3 if options.wind is None else 5          # generate, rig, mesh (, wind, lod)
     timings = rep.timings(total=per_lod + 3 if options.lod is None else
-                          len(options.lod.distances) * per_lod + 3   # (+ materials, prepare, write)
+                          options.lod.count * per_lod + 3   # (+ materials, prepare, write)
                           + (options.impostor is not None))           # (+ impostor)
     with rep.live():
         asset, tree = build(params, species, job, timings)

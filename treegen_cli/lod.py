@@ -1,32 +1,29 @@
-"""LOD: leaf update schedules as keyframe decimation per view distance, and geometric LODs.
+"""LOD: when each LOD takes over, its leaf update schedule as keyframe decimation, and the
+geometric LODs.
 
-The paper (Kondo et al.) updates a branch's leaves only when their accumulated on-screen
-movement would be visible. Baked into a clip, that schedule is a per-joint set of kept keys:
+**Switches.** By default a tree's LODs switch on its height on screen, as engines' LOD groups
+do: LOD k+1 takes over when the tree's height falls below `screen[k]` of the screen height
+(0.5 / 0.25 / 0.1), i.e. from distance height / (screen[k] · 2·tan(fov_y/2)) of the centre of
+its bounds (`switch_distances`); `distances` forces metres instead.
 
-    clip, report = decimate(skeleton, primitives, dense, distance=130.0)
-    # Result: dense (121 keys × J joints) → clip.keys[j] ⊂ 0..120, first and last always kept;
-    # played back (LINEAR slerp or STEP hold) it stays within error_px pixels of the dense clip
-    # at 130 m (report.max_error_px <= error_px).
+**Schedules.** The paper (Kondo et al.) updates a branch's leaves only when their accumulated
+on-screen movement would be visible. Baked into a clip, a schedule is a per-joint set of kept
+keys (first and last always kept, so the clip loops):
 
-Thresholds (metres of movement that make one pixel at distance d, times error_px = i):
-  * "exact" (default): one pixel at distance d spans 2·d·tan(fov/2)/width;
-  * "paper": the paper's P/d > i·tan(fov_x)/width, i.e. d·tan(fov)/width (×1.5 looser at 60°).
-
-Two steps per distance:
-  1. Schedule (the paper's rule): walk the dense clip; per joint accumulate P, the movement its
-     own rotation gives the geometry it carries (its leaves and bark and the branches riding on
-     it: angular step × the farthest carried point), keep a key when P crosses the threshold,
-     reset P. Ancestors' rotations are rigid and preserve lengths, so a child's P does not count
-     its parents' motion twice.
-  2. Playback check: reconstruct the decimated clip as an engine would (LINEAR: slerp between a
-     joint's kept keys; STEP: hold the last kept key), compose the hierarchy (skeleton.pose_world)
-     and measure each joint's probes — the corners of a principal-axes box around everything
-     it moves, whose error bounds every skinned vertex's (see `probes`) — against the dense
-     clip, in pixels at d, on every frame. Where the
-     bound is exceeded, the ancestor contributing most to that point's error at that frame gets
-     a key there (per joint, the worst frame between two of its kept keys); repeat until the
-     bound holds (parents' keys move children). Under LINEAR step 1 runs against
-     linear_schedule_scale × the threshold, since slerp errs far less than holding.
+  * "bounded" (default): slerp (LINEAR) between kept keys, with a perspective-true bound.
+    Every skinned vertex, played back and composed through the hierarchy, stays within
+    error_px pixels of the dense clip on every frame, seen by a pinhole camera (fov, width)
+    anywhere at the LOD's switch distance d from the centre of the tree's bounds, looking at
+    that centre, in any direction. With R the farthest any vertex gets from that centre over
+    the clip, a point is at depth ≥ d − R and at most atan(R/√(d² − R²)) off axis, so a
+    movement δ shows as at most f·δ·d / ((d − R)·√(d² − R²)) pixels, f = width/2 / tan(fov/2)
+    (`near_pixel_size`). Keys are found Douglas–Peucker style on the composed hierarchy
+    (`decimate`); the camera inside that sphere (d ≤ R) keeps every key.
+  * "bounded-step": the same bound with keys held (STEP), as the paper's engine plays them,
+    against the dense clip played the same way (every frame held until the next).
+  * "paper": the paper's rule as written, unchecked: per joint accumulate P, the movement its
+    own rotation gives the geometry it carries; keep a key when P/d > i·tan(fov_x)/width
+    (i = error_px), reset P; STEP. Its measured error is reported, not bounded.
 
 Geometric LODs (lod_budget.py): per LOD index a coarser tree cut from LOD0's within
 `triangles` × LOD0's triangles — fewer sides, thin stems dropped, a stratified subset of the
@@ -44,42 +41,52 @@ from .asset import Clip, Lod, Primitive, Skeleton
 from .errors import OptionError, TreegenError
 from .clip import kept_mask, play_keys
 from .quat import angle as quat_angle, unit as unit_quat
-from .skeleton import pose_world
+from .skeleton import depth_levels, pose_world, trs
+
+SCHEDULES = ("bounded", "bounded-step", "paper")
 
 
 @dataclass(frozen=True)
 class LodOptions:
     """View and error model, and the per-LOD coarsening tables (index = LOD; last repeats).
 
-    distances: metres from which each LOD is used, ascending; LOD0 is the first (0 → its clip is
-    dense). fov_deg is horizontal, width in pixels; aspect (width/height) only feeds the screen
-    coverage hint."""
+    screen: tree height / screen height below which LOD1, LOD2, … take over (descending);
+    distances: metres from the centre of the tree's bounds from which each LOD is used,
+    ascending, LOD0 first (0 → its clip is dense); when given it replaces `screen`. fov_deg is
+    horizontal, width in pixels, aspect = width/height (the vertical fov for `screen`)."""
 
-    distances: tuple[float, ...] = (0.0, 10.0, 30.0, 130.0)
+    distances: tuple[float, ...] | None = None
+    screen: tuple[float, ...] = (0.5, 0.25, 0.1)
     fov_deg: float = 60.0
     width: int = 1920
     error_px: float = 1.0
-    error_form: str = "exact"                  # "exact" 2·d·tan(fov/2)/width, or "paper" d·tan(fov)/width
-    interpolation: str = "LINEAR"              # "LINEAR" (slerp) or "STEP" (the paper's hold)
+    schedule: str = "bounded"                  # see the module doc
     aspect: float = 16.0 / 9.0
     sides: tuple[tuple[int, ...], ...] = ((16, 8, 6, 4, 3), (8, 6, 4, 3), (6, 4, 3), (4, 3))
     joint_fraction: tuple[float, ...] = (1.0, 0.5, 0.25, 0.125)  # × the joint budget
+    drop_levels: tuple[int, ...] = (0, 0, 1, 1)  # finest stem levels dropped (≥ 2 levels remain)
     triangles: tuple[float, ...] = (1.0, 0.5, 0.15, 0.05)  # × LOD0's triangles (lod_budget.py)
-    max_iterations: int = 200                  # playback-check refinement rounds
-    linear_schedule_scale: float = 4.0         # LINEAR: the walk's threshold × this (see decimate)
+    max_iterations: int = 200                  # playback-check refinement rounds per level
 
     def __post_init__(self) -> None:
         d = self.distances
-        shown = ",".join(f"{x:g}" for x in d) or "(none)"
-        if not d or any(not math.isfinite(x) or x < 0 for x in d) or list(d) != sorted(d):
-            raise OptionError("distances", shown, "give one or more ascending distances in "
-                                                  "metres, each >= 0", "--lod-distances")
-        if len(set(d)) != len(d):
-            raise OptionError("distances", shown, "distances repeat", "--lod-distances")
+        if d is not None:
+            shown = ",".join(f"{x:g}" for x in d) or "(none)"
+            if not d or any(not math.isfinite(x) or x < 0 for x in d) or list(d) != sorted(d):
+                raise OptionError("distances", shown, "give one or more ascending distances in "
+                                                      "metres, each >= 0", "--lod-distances")
+            if len(set(d)) != len(d):
+                raise OptionError("distances", shown, "distances repeat", "--lod-distances")
+        s = self.screen
+        if (d is None and not s) or any(not (math.isfinite(x) and 0.0 < x <= 100.0) for x in s) \
+                or list(s) != sorted(s, reverse=True) or len(set(s)) != len(s):
+            raise OptionError("screen", ",".join(f"{x:g}" for x in s) or "(none)",
+                              "give descending fractions of the screen height, each in (0, 100]",
+                              "--lod-screen")
         if not 0.0 < self.fov_deg < 180.0:
             raise OptionError("fov_deg", self.fov_deg, "the horizontal field of view must be in "
                                                         "(0, 180) degrees", "--fov")
-        if self.error_form == "paper" and self.fov_deg >= 90.0:
+        if self.schedule == "paper" and self.fov_deg >= 90.0:
             raise OptionError("fov_deg", self.fov_deg, "the paper's tan(fov) form needs fov < 90 "
                                                         "degrees", "--fov")
         if not 1 <= self.width <= 1_000_000:
@@ -87,12 +94,9 @@ class LodOptions:
                               "--width")
         if not (math.isfinite(self.error_px) and 0.0 <= self.error_px <= 1000.0):
             raise OptionError("error_px", self.error_px, "allowed range 0..1000 pixels", "--error-px")
-        if self.error_form not in ("exact", "paper"):
-            raise OptionError("error_form", self.error_form, "use 'exact' or 'paper'", "--error-form")
-        if self.interpolation not in ("LINEAR", "STEP"):
-            raise OptionError("interpolation", self.interpolation, "use 'linear' or 'step'",
-                              "--interpolation")
-        if not (self.aspect > 0 and self.max_iterations >= 1 and self.linear_schedule_scale >= 1):
+        if self.schedule not in SCHEDULES:
+            raise OptionError("schedule", self.schedule, f"use one of {', '.join(SCHEDULES)}", "--schedule")
+        if not (self.aspect > 0 and self.max_iterations >= 1):
             raise TreegenError("LOD aspect must be > 0 and max_iterations >= 1")
         if (min(self.joint_fraction) <= 0 or max(self.joint_fraction) > 1
                 or min(min(s) for s in self.sides) < 3):
@@ -102,6 +106,16 @@ class LodOptions:
             raise TreegenError(f"--lod-triangles {','.join(f'{x:g}' for x in t) or '(none)'}: "
                                "give fractions of LOD0's triangles, each in (0, 1]")
 
+    @property
+    def interpolation(self) -> str:
+        """How the kept keys are played: slerp for "bounded", held for the others."""
+        return "LINEAR" if self.schedule == "bounded" else "STEP"
+
+    @property
+    def count(self) -> int:
+        """Number of LODs."""
+        return len(self.distances) if self.distances is not None else len(self.screen) + 1
+
 
 LOD_DEFAULTS = LodOptions()
 
@@ -110,12 +124,43 @@ def _at(table: tuple, index: int):
     return table[min(index, len(table) - 1)]
 
 
+def _tan_half_fov_y(options: LodOptions) -> float:
+    return math.tan(0.5 * math.radians(options.fov_deg)) / options.aspect
+
+
+def switch_distances(height: float, options: LodOptions = LOD_DEFAULTS) -> tuple[float, ...]:
+    """Metres from which each LOD is used for a tree `height` metres tall: `distances` as
+    given, else 0 and, per screen fraction s, the distance at which the tree's height fills s
+    of the screen height: height / (s · 2·tan(fov_y/2)).
+
+    Result (height 13 m, fov 60°, 16:9, screen 0.5/0.25/0.1): (0, 40.0, 80.1, 200.1) m."""
+    if options.distances is not None:
+        return tuple(float(x) for x in options.distances)
+    view = 2.0 * _tan_half_fov_y(options)
+    return (0.0,) + tuple(float(height / (s * view)) for s in options.screen)
+
+
 def pixel_size(distance: float, options: LodOptions = LOD_DEFAULTS) -> float:
-    """Metres spanned by one pixel at `distance` (the threshold before error_px)."""
-    fov = math.radians(options.fov_deg)
-    if options.error_form == "paper":
-        return distance * math.tan(fov) / options.width
-    return 2.0 * distance * math.tan(0.5 * fov) / options.width
+    """Metres spanned by one pixel at the centre of the screen at `distance`: 2·d·tan(fov/2)/width."""
+    return 2.0 * distance * math.tan(0.5 * math.radians(options.fov_deg)) / options.width
+
+
+def paper_pixel_size(distance: float, options: LodOptions = LOD_DEFAULTS) -> float:
+    """The paper's threshold per unit i: P/d > i·tan(fov_x)/width, i.e. d·tan(fov)/width
+    (1.5× the exact pixel at 60°)."""
+    return distance * math.tan(math.radians(options.fov_deg)) / options.width
+
+
+def near_pixel_size(distance: float, radius: float, options: LodOptions = LOD_DEFAULTS) -> float:
+    """Metres of movement that show as at most one pixel for every point within `radius` of a
+    centre, seen by a pinhole camera at `distance` from that centre looking at it, from any
+    direction (see the module doc): (d − R)·√(d² − R²) / (d·f). 0 when d ≤ R (the camera may be
+    inside: no finite bound)."""
+    d, r = float(distance), float(radius)
+    if d <= r:
+        return 0.0
+    f = 0.5 * options.width / math.tan(0.5 * math.radians(options.fov_deg))
+    return (d - r) * math.sqrt(d * d - r * r) / (d * f)
 
 
 def screen_coverage(height: float, distance: float, options: LodOptions = LOD_DEFAULTS) -> float:
@@ -124,8 +169,7 @@ def screen_coverage(height: float, distance: float, options: LodOptions = LOD_DE
     LODs at the same distances as USD's distance heuristic)."""
     if distance <= 0:
         return 1.0
-    view_height = 2.0 * distance * math.tan(0.5 * math.radians(options.fov_deg)) / options.aspect
-    return float(height / view_height)
+    return float(height / (2.0 * distance * _tan_half_fov_y(options)))
 
 
 # ---------------------------------------------------------------------------- geometry probes
@@ -223,8 +267,7 @@ def probes(skeleton: Skeleton, primitives: list[Primitive], exact: bool = False)
         joint_of, corners = _box_corners(x, owner, J)
         x = np.concatenate([x, corners.astype(np.float32)])
         owner = np.concatenate([owner, joint_of])
-        pick = np.concatenate([np.arange(J + int(np.count_nonzero(parent >= 0))),
-                               x.shape[0] - corners.shape[0] + np.arange(corners.shape[0])])
+        pick = x.shape[0] - corners.shape[0] + np.arange(corners.shape[0])   # 8 per joint
     joint, rest = owner[pick], x[pick].astype(np.float64)
     inv = skeleton.inverse_bind()[joint]
     local = np.einsum("pij,pj->pi", inv[:, :3, :3], rest) + inv[:, :3, 3]
@@ -250,114 +293,295 @@ def probe_world(world: np.ndarray, pr: Probes) -> np.ndarray:
 @dataclass(frozen=True)
 class DecimationReport:
     distance: float
-    threshold_m: float           # movement that counts as error_px pixels at this distance
+    threshold_m: float           # movement allowed per point (error_px on the nearest screen)
     keys_dense: int              # K × J
     keys_kept: int               # Σ_j |keys[j]|
-    max_error_px: float          # bound on composed poses (box-corner probes) vs the dense clip
-    iterations: int              # playback-check rounds that added keys
+    max_error_px: float          # perspective-true, on box corners bounding every vertex
+    iterations: int              # playback-check rounds that added keys (all levels)
     seconds: float
+    radius_m: float = 0.0        # farthest any vertex gets from the centre over the clip
+    schedule: str = "bounded"
+    work: int = 0                # joint-frames posed and checked, all rounds and levels
 
     @property
     def kept_fraction(self) -> float:
         return self.keys_kept / max(self.keys_dense, 1)
 
 
-def _schedule(rotations: np.ndarray, reach: np.ndarray, threshold: float) -> np.ndarray:
-    """The paper's walk: bool (K, J) kept keys. Loops over frames, vectorised over joints."""
-    K, J = rotations.shape[:2]
-    step = quat_angle(rotations[1:], rotations[:-1]) * reach[None]    # (K−1, J) metres
+def _chain(nxt: np.ndarray) -> np.ndarray:
+    """Bool (K, J): frame 0 and its successors under the per-joint map nxt (K, J) (nxt > row,
+    nxt[K−1] = K−1), found by pointer doubling: log2 K gathers, no loop over keys."""
+    K, J = nxt.shape
+    pos = np.zeros((K, J), dtype=np.int64)                       # pos[t]: the t-th kept key
+    t, cols = np.arange(K), np.arange(J)[None, :]
+    table, bit = nxt, 0
+    while (1 << bit) < K:                                        # nxt^t(0) = Π nxt^(2^bit)
+        rows = ((t >> bit) & 1).astype(bool)
+        pos[rows] = table[pos[rows], cols]
+        table = table[table, cols]
+        bit += 1
     kept = np.zeros((K, J), dtype=bool)
+    np.put_along_axis(kept, pos, True, axis=0)
     kept[0] = kept[-1] = True
-    P = np.zeros(J)
-    for k in range(1, K - 1):
-        P += step[k - 1]
-        hit = P > threshold
-        kept[k] = hit
-        P[hit] = 0.0
     return kept
 
 
-def _errors(skeleton, pr, rotations, kept, interpolation, dense_x):
-    rec = play_keys(rotations, kept, interpolation)
-    x = probe_world(pose_world(skeleton, rec), pr)
-    return rec, np.linalg.norm(x - dense_x, axis=2)                    # (K, P) metres
+def _walk(step: np.ndarray, threshold: float) -> np.ndarray:
+    """The paper's accumulate-and-reset walk as bool (K, J) kept keys, without a loop over keys.
+
+    step (K−1, J): each joint's movement between consecutive frames. From a kept key a the
+    movement accumulates as S[m] − S[a] (S = cumulative sum); the next kept key is the first
+    m with S[m] − S[a] > threshold (one searchsorted over all joints' S laid side by side),
+    and the kept keys are frame 0 and its successors (`_chain`)."""
+    K, J = step.shape[0] + 1, step.shape[1]
+    S = np.zeros((K, J))
+    np.cumsum(step, axis=0, out=S[1:])
+    span = float(S[-1].max()) + threshold + 1.0
+    off = np.arange(J) * span                                    # joints side by side, sorted
+    nxt = np.searchsorted((S + off).T.ravel(), (S + threshold + off).T.ravel(),
+                          side="right").reshape(J, K).T
+    return _chain(np.minimum(nxt - np.arange(J) * K, K - 1))     # no later key: the last frame
+
+
+def _schedule(rotations: np.ndarray, reach: np.ndarray, threshold: float) -> np.ndarray:
+    """The paper's rule: per joint accumulate P, the movement its own rotation gives the
+    geometry it carries (angular step × reach), keep a key when P > threshold, reset P."""
+    step = quat_angle(rotations[1:], rotations[:-1]) * reach[None]    # (K−1, J) metres
+    return _walk(step, threshold)
+
+
+def _corner_errors(world: np.ndarray, dense_world: np.ndarray, hom: np.ndarray) -> np.ndarray:
+    """Largest squared distance (K, n) between a joint's 8 box corners posed by joint world
+    matrices `world` and by the dense clip's `dense_world` (both (K, n, 4, 4)); hom (n, 4, 8)
+    homogeneous corners in the joints' bind frames: one 3×4 @ 4×8 product per joint and frame."""
+    diff = np.matmul((world - dense_world)[..., :3, :], hom)
+    return np.einsum("kjac,kjac->kjc", diff, diff).max(axis=2)
+
+
+def _ancestors(parent: np.ndarray) -> np.ndarray:
+    """(J, D) table: column 0 the joint itself, then its parent, grandparent, … (the root
+    repeats once reached); D = depth of the deepest joint + 1."""
+    chain = [np.arange(parent.shape[0])]
+    while True:
+        up = parent[chain[-1]]
+        nxt = np.where(up >= 0, up, chain[-1])
+        if np.array_equal(nxt, chain[-1]):
+            return np.stack(chain, axis=1)
+        chain.append(nxt)
+
+
+@dataclass(frozen=True, eq=False)
+class _Model:
+    """What the playback check needs of one LOD: skeleton tables, the probes' corners as
+    homogeneous bind-frame points hom (J, 4, 8), ancestors (J, D) and lever[j, a], the
+    farthest corner of joint j from the pivot of its a-th ancestor (rest pose)."""
+
+    skeleton: Skeleton
+    parent: np.ndarray
+    levels: list
+    hom: np.ndarray
+    anc: np.ndarray
+    lever: np.ndarray
+
+    @classmethod
+    def of(cls, skeleton: Skeleton, pr: Probes) -> "_Model":
+        J = len(skeleton.names)
+        parent = np.asarray(skeleton.parent, dtype=np.int64)
+        hom = np.concatenate([pr.local.reshape(J, 8, 3).transpose(0, 2, 1), np.ones((J, 1, 8))],
+                             axis=1)
+        anc = _ancestors(parent)
+        pivot = np.asarray(skeleton.bind_world)[:, :3, 3]
+        corners = pr.rest.reshape(J, 8, 3)
+        lever = np.sqrt(((corners[:, None] - pivot[anc][:, :, None]) ** 2).sum(-1)).max(axis=2)
+        return cls(skeleton, parent, depth_levels(parent), hom, anc, lever)
+
+
+class _Playback:
+    """The decimated clip as an engine plays it, kept up to date as keys are added: local
+    rotations, composed world matrices and the corner errors (squared, (K, J)). Adding keys to
+    some joints re-plays those joints and re-poses only them and their descendants."""
+
+    def __init__(self, m: _Model, rot: np.ndarray, kept: np.ndarray, interpolation: str,
+                 dense_world: np.ndarray, work: int = 0):
+        self.m, self.rot, self.kept, self.interp, self.dense_world = m, rot, kept, interpolation, dense_world
+        self.rec = play_keys(rot, kept, interpolation)
+        self.world = pose_world(m.skeleton, self.rec)
+        self.err2 = _corner_errors(self.world, dense_world, m.hom)
+        self.work = work + self.err2.size
+
+    def update(self, nk: np.ndarray, nj: np.ndarray, prev: np.ndarray, nxt: np.ndarray) -> None:
+        """New kept keys at frames nk of joints nj (already set in `kept`), each between kept
+        keys prev and nxt: their playback changes only inside (prev, nxt), and so do the poses
+        of their descendants there. Re-play those joints, re-pose and re-check only those
+        (frame, joint) pairs — work proportional to what changed, not to the clip."""
+        m = self.m
+        K, J = self.err2.shape
+        changed = np.unique(nj)
+        self.rec[:, changed] = play_keys(self.rot[:, changed], self.kept[:, changed], self.interp)
+        span = np.zeros((K + 1, J), dtype=np.int32)
+        np.add.at(span, (prev + 1, nj), 1)
+        np.add.at(span, (nxt, nj), -1)
+        mask = np.cumsum(span[:K], axis=0) > 0                    # (K, J) pairs to redo
+        for level in m.levels[1:]:                                # children follow parents
+            mask[:, level] |= mask[:, m.parent[level]]
+        rest_t = np.asarray(m.skeleton.rest_translation)
+        for level in m.levels:
+            kk, col = np.nonzero(mask[:, level])
+            if not kk.size:
+                continue
+            j = level[col]
+            local = trs(rest_t[j], self.rec[kk, j])
+            p = m.parent[j]
+            root = p < 0
+            self.world[kk[root], j[root]] = local[root]
+            self.world[kk[~root], j[~root]] = self.world[kk[~root], p[~root]] @ local[~root]
+        kk, jj = np.nonzero(mask)
+        diff = np.matmul((self.world[kk, jj] - self.dense_world[kk, jj])[:, :3, :], m.hom[jj])
+        self.err2[kk, jj] = np.einsum("nac,nac->nc", diff, diff).max(axis=1)
+        self.work += len(kk)
+
+
+def _refine(m: _Model, rot: np.ndarray, dense_world: np.ndarray, kept: np.ndarray,
+            limit: float, interpolation: str, max_iterations: int) -> tuple[np.ndarray, int, int]:
+    """Add keys to `kept` (bool (K, J), modified) until every corner on every frame is within
+    `limit` metres of the dense pose: each round, every failing frame blames the ancestor whose
+    own rotation error moves the failing joint's corners most, and per blamed joint only the
+    worst frame between two of its kept keys gets a key (Douglas–Peucker; under LINEAR one key
+    fixes its neighbours too). Returns (squared errors (K, J), rounds, joint-frames checked)."""
+    K, J = kept.shape
+    limit2 = (limit * (1.0 - 1e-9)) ** 2
+    play = _Playback(m, rot, kept, interpolation, dense_world)
+    rounds = 0
+    while (play.err2 > limit2).any():
+        if rounds >= max_iterations:              # give up gracefully: key the frames fully
+            kept[np.flatnonzero((play.err2 > limit2).any(axis=1))] = True
+            play = _Playback(m, rot, kept, interpolation, dense_world, play.work)
+        else:
+            kk, jj = np.nonzero(play.err2 > limit2)
+            a = m.anc[jj]                                               # (n, D)
+            blame = quat_angle(play.rec[kk[:, None], a], rot[kk[:, None], a]) * m.lever[jj]
+            pick = blame.argmax(axis=1)
+            rows = np.arange(len(jj))
+            best, best_c = a[rows, pick], blame[rows, pick]
+            cols, col = np.unique(best, return_inverse=True)      # only the blamed joints
+            sub = kept[:, cols]
+            seg = np.cumsum(sub, axis=0)[kk, col]
+            group = col.astype(np.int64) * (K + 1) + seg
+            order = np.lexsort((-best_c, group))
+            first = order[np.r_[True, group[order][1:] != group[order][:-1]]]
+            nk, nj, nc = kk[first], best[first], col[first]
+            if kept[nk, nj].all():               # nothing left to blame (rounding): key frames
+                kept[np.unique(kk)] = True
+                play = _Playback(m, rot, kept, interpolation, dense_world, play.work)
+                rounds += 1
+                continue
+            k = np.arange(K)[:, None]                  # the new keys' neighbouring kept keys
+            prev = np.maximum.accumulate(np.where(sub, k, 0), axis=0)[nk, nc]
+            nxt = np.minimum.accumulate(np.where(sub, k, K - 1)[::-1], axis=0)[::-1][nk, nc]
+            kept[nk, nj] = True
+            play.update(nk, nj, prev, nxt)
+        rounds += 1
+    return play.err2, rounds, play.work
+
+
+def _bounded(m: _Model, rot: np.ndarray, dense_world: np.ndarray, limit: float,
+             interpolation: str, max_iterations: int) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """Kept keys (K, J) whose playback keeps every corner within `limit` metres, coarse to fine:
+    the keys found on every other frame seed the check on all frames, recursively, so each
+    level needs a few rounds and the total cost is about twice one pass over the clip — linear
+    in its length (starting from the end keys alone needs log2 K rounds over all frames)."""
+    K, J = rot.shape[:2]
+    kept = np.zeros((K, J), dtype=bool)
+    kept[0] = kept[-1] = True
+    rounds = work = 0
+    if K > 33:
+        sub = np.unique(np.r_[np.arange(0, K, 2), K - 1])
+        sub_kept, _, rounds, work = _bounded(m, rot[sub], dense_world[sub], limit, interpolation,
+                                             max_iterations)
+        kept[sub] = sub_kept
+    err2, r, w = _refine(m, rot, dense_world, kept, limit, interpolation, max_iterations)
+    return kept, err2, rounds + r, work + w
+
+
+def _view_radius(primitives: list[Primitive], world: np.ndarray, hom: np.ndarray) -> float:
+    """Farthest distance (m) from the centre of the rest bounds of `primitives` to any box
+    corner posed by joint world matrices `world` (K, J, 4, 4): it bounds every skinned vertex
+    (a linear blend of points inside the joints' boxes), over the whole clip."""
+    pts = [np.asarray(p.positions, np.float64) for p in primitives if len(p.positions)]
+    if not pts:
+        return 0.0
+    allp = np.concatenate(pts)
+    centre = 0.5 * (allp.min(0) + allp.max(0))
+    x = np.matmul(world[..., :3, :], hom) - centre[:, None]                # (K, J, 3, 8)
+    return float(np.sqrt(np.einsum("kjac,kjac->kjc", x, x).max()))
 
 
 def decimate(skeleton: Skeleton, primitives: list[Primitive], dense: Clip, distance: float,
              options: LodOptions = LOD_DEFAULTS, name: str | None = None,
              pr: Probes | None = None) -> tuple[Clip, DecimationReport]:
-    """The dense clip with a per-joint key schedule for `distance` whose playback stays within
-    options.error_px pixels (see the module doc). distance 0 or error_px 0 keep every key."""
+    """The dense clip with a per-joint key schedule for a LOD used from `distance` (see the
+    module doc for the schedules). "bounded*": the playback stays within options.error_px
+    pixels on every vertex and frame, perspective-true; distance 0, error_px 0 or a camera
+    that can be inside the tree keep every key. "paper": the paper's walk, unchecked.
+
+    Cost: each playback-check round is a few numpy passes over (K, J) arrays (pose, one 3×4 @
+    4×8 product per joint and frame), run coarse to fine (`_bounded`): linear in clip length."""
     t0 = time.perf_counter()
     rot = unit_quat(np.asarray(dense.rotations, dtype=np.float64))
     K, J = rot.shape[:2]
-    px = pixel_size(distance, options)
-    threshold = options.error_px * px
     name = dense.name if name is None else name
-    if threshold <= 0.0 or K <= 2:
-        clip = replace(dense, name=name, interpolation=options.interpolation, keys=None)
+    interp = options.interpolation
+
+    def dense_clip(radius: float = 0.0, threshold: float = 0.0):
+        clip = replace(dense, name=name, interpolation=interp, keys=None)
         return clip, DecimationReport(distance, threshold, K * J, K * J, 0.0, 0,
-                                      time.perf_counter() - t0)
+                                      time.perf_counter() - t0, radius, options.schedule)
+
+    if distance <= 0.0 or options.error_px <= 0.0 or K <= 2:
+        return dense_clip()
     pr = probes(skeleton, primitives) if pr is None else pr
-    dense_x = probe_world(pose_world(skeleton, rot), pr)
-    # The paper's rule bounds the hold (STEP) error. Slerp's chord error over the same key
-    # spacing is far smaller, so under LINEAR the walk runs against a looser threshold and the
-    # playback check below adds the keys the bound still needs (fewer keys in total).
-    scale = options.linear_schedule_scale if options.interpolation == "LINEAR" else 1.0
-    kept = _schedule(rot, pr.reach, threshold * scale)
-
-    parent = np.asarray(skeleton.parent, dtype=np.int64)
-    pivot = np.asarray(skeleton.bind_world)[:, :3, 3]
-    limit = threshold * (1.0 - 1e-9)
-    iterations = 0
-    rec, err = _errors(skeleton, pr, rot, kept, options.interpolation, dense_x)
-    while (err > limit).any():
-        if iterations >= options.max_iterations:   # give up gracefully: key the frames fully
-            bad_k = np.flatnonzero((err > limit).any(axis=1))
-            kept[bad_k] = True
-        else:
-            kk, pp = np.nonzero(err > limit)
-            ang = quat_angle(rec, rot)                                  # (K, J) local error
-            cur = pr.joint[pp].copy()
-            best, best_c = cur.copy(), np.full(cur.shape, -1.0)
-            alive = np.ones(cur.shape, dtype=bool)
-            while alive.any():                                          # one pass per depth
-                c = ang[kk, cur] * np.linalg.norm(pr.rest[pp] - pivot[cur], axis=1)
-                better = alive & (c > best_c)
-                best[better], best_c[better] = cur[better], c[better]
-                alive &= parent[cur] >= 0
-                cur = np.where(alive, parent[cur], cur)
-            # Douglas–Peucker style: per joint, only the worst frame between two of its kept
-            # keys gets a key this round (one key fixes its neighbours too under LINEAR).
-            seg = np.cumsum(kept, axis=0)[kk, best]
-            group = best.astype(np.int64) * (K + 1) + seg
-            order = np.lexsort((-best_c, group))
-            first = order[np.r_[True, group[order][1:] != group[order][:-1]]]
-            kept[kk[first], best[first]] = True
-        iterations += 1
-        rec, err = _errors(skeleton, pr, rot, kept, options.interpolation, dense_x)
-
+    m = _Model.of(skeleton, pr)
+    dense_world = pose_world(skeleton, rot)
+    # the decimated pose strays by at most the centre-pixel threshold (≥ the near one)
+    radius = _view_radius(primitives, dense_world, m.hom) + options.error_px * pixel_size(distance, options)
+    near = near_pixel_size(distance, radius, options)
+    if options.schedule == "paper":
+        threshold = options.error_px * paper_pixel_size(distance, options)
+        kept = _schedule(rot, pr.reach, threshold)
+        err2 = _Playback(m, rot, kept, interp, dense_world).err2
+        rounds, work = 0, err2.size
+    else:
+        threshold = options.error_px * near
+        if threshold <= 0.0:
+            return dense_clip(radius)
+        kept, err2, rounds, work = _bounded(m, rot, dense_world, threshold, interp,
+                                            options.max_iterations)
     keys = [np.flatnonzero(kept[:, j]) for j in range(J)]
-    clip = replace(dense, name=name, interpolation=options.interpolation, keys=keys)
-    report = DecimationReport(distance, threshold, K * J, int(kept.sum()),
-                              float(err.max() / px) if px > 0 else 0.0, iterations,
-                              time.perf_counter() - t0)
-    return clip, report
+    clip = replace(dense, name=name, interpolation=interp, keys=keys)
+    error = float(np.sqrt(err2.max()) / near) if near > 0 else math.inf
+    return clip, DecimationReport(distance, threshold, K * J, int(kept.sum()), error, rounds,
+                                  time.perf_counter() - t0, radius, options.schedule, work)
 
 
 def measure_error_px(skeleton: Skeleton, primitives: list[Primitive], dense: Clip, clip: Clip,
                      distance: float, options: LodOptions = LOD_DEFAULTS) -> float:
-    """Max on-screen error (pixels at `distance`) of `clip`'s playback against `dense`, measured
-    on the probes of composed poses — an independent check of a decimated clip."""
-    rot = unit_quat(np.asarray(dense.rotations, dtype=np.float64))
+    """Max on-screen error (pixels, perspective-true as in the module doc: any camera at
+    `distance` from the centre of the rest bounds) of `clip`'s playback against `dense`, on the
+    corners of each joint's convex hull (the exact maximum of the world error) — an
+    independent check of a decimated clip. inf when the camera can be inside the tree."""
     if clip.keys is None:
         return 0.0
-    kept = kept_mask(clip)
+    rot = unit_quat(np.asarray(dense.rotations, dtype=np.float64))
     pr = probes(skeleton, primitives, exact=True)
     dense_x = probe_world(pose_world(skeleton, rot), pr)
-    _, err = _errors(skeleton, pr, rot, kept, clip.interpolation, dense_x)
-    px = pixel_size(distance, options)
-    return float(err.max() / px) if px > 0 else 0.0
+    x = probe_world(pose_world(skeleton, play_keys(rot, kept_mask(clip), clip.interpolation)), pr)
+    pts = np.concatenate([np.asarray(p.positions, np.float64) for p in primitives])
+    centre = 0.5 * (pts.min(0) + pts.max(0))
+    radius = float(max(np.linalg.norm(dense_x - centre, axis=2).max(),
+                       np.linalg.norm(x - centre, axis=2).max()))
+    near = near_pixel_size(distance, radius, options)
+    err = float(np.linalg.norm(x - dense_x, axis=2).max())
+    return err / near if near > 0 else math.inf
 
 
 # ---------------------------------------------------------------------------- geometric LODs
@@ -397,6 +621,47 @@ def leaf_updates(lod: Lod) -> tuple[int, float]:
     return int(per_joint.sum()), float(np.sum(kept * per_joint) / K)
 
 
+PAPER_DISTANCES = (30.0, 130.0)     # the paper's Table 3
+
+
+def animation_bytes(clip: Clip | None, n_joints: int) -> int:
+    """Bytes the glTF writer stores for the clip's rotation keys: float32 xyzw per kept key
+    and joint, plus one float32 time accessor per distinct key set (tracks with the same
+    schedule share it); every joint counted as moving."""
+    if clip is None:
+        return 0
+    K = len(clip.times)
+    if clip.keys is None:
+        return 16 * K * n_joints + 4 * K
+    sets = {np.asarray(k, np.int64).tobytes(): len(k) for k in clip.keys}
+    return int(16 * sum(len(k) for k in clip.keys) + 4 * sum(sets.values()))
+
+
+def schedule_rows(lod: Lod, distances=PAPER_DISTANCES, options: LodOptions = LOD_DEFAULTS) -> list[dict]:
+    """The paper's Table 3 for one LOD's dense clip: per distance, the bounded schedule and
+    the paper's rule side by side — keys kept, animation bytes, measured max error
+    (perspective-true, `measure_error_px`) and leaf-vertex updates per frame."""
+    dense = replace(lod.clips[0], keys=None)
+    pr = probes(lod.skeleton, lod.primitives)
+    J = len(lod.skeleton.names)
+    rows = []
+    for d in distances:
+        for schedule in ("bounded", "paper"):
+            opts = replace(options, schedule=schedule)
+            clip, rep = decimate(lod.skeleton, lod.primitives, dense, d, opts, pr=pr)
+            err = measure_error_px(lod.skeleton, lod.primitives, dense, clip, d, opts)
+            _, updates = leaf_updates(replace(lod, clips=[clip]))
+            rows.append({"distance_m": float(d), "schedule": schedule,
+                         "keys_kept": rep.keys_kept, "keys_dense": rep.keys_dense,
+                         "keys_kept_pct": round(100.0 * rep.kept_fraction, 2),
+                         "animation_bytes": animation_bytes(clip, J),
+                         "animation_bytes_dense": animation_bytes(dense, J),
+                         "max_error_px": round(err, 4),
+                         "leaf_vertex_updates_per_frame": round(updates, 1),
+                         "seconds": round(rep.seconds, 4)})
+    return rows
+
+
 def lod_table_row(lod: Lod, options: LodOptions = LOD_DEFAULTS) -> dict:
     """One row of the Table-3 analogue: keys kept, max error (measured here, on the LOD's own
     clip against its dense rotations), the CPU method's leaf-vertex updates per frame
@@ -417,6 +682,7 @@ def lod_table_row(lod: Lod, options: LodOptions = LOD_DEFAULTS) -> dict:
         "keys_kept": int(kept.sum()),
         "keys_dense": int(K * J),
         "keys_kept_pct": round(float(100.0 * kept.sum() / max(K * J, 1)), 2),
+        "animation_bytes": animation_bytes(clip, J),
         "max_error_px": round(error, 4),
         "leaf_vertex_updates_per_frame": round(updates, 1),
         "leaf_vertices": leaf_vertices,

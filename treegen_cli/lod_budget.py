@@ -190,7 +190,7 @@ def lod_tree(tree: Tree, k: int, lod0, previous, rig_options, mesh_options, opti
         if frac < 1.0 else rig_options
     from .lod import pixel_size
 
-    px = 2.0 * pixel_size(options.distances[k], replace(options, error_form="exact")) / 2.0
+    px = pixel_size(options.distances[k], options)
     plan = plan_lod(tree, _triangles(lod0, "bark"), _triangles(lod0, "leaves"),
                     lod_budget(k, lod0, previous, options), mesh, MIN_RADIUS_PX * px)
     return plan.tree, rig, plan.mesh or mesh

@@ -14,7 +14,7 @@ from .budget import DEFAULTS as BUDGET_DEFAULTS, BudgetOptions, plan_budget
 from .generate import DEFAULTS as GENERATE_DEFAULTS, GenerateOptions, generate
 from .impostor import ImpostorOptions, build_impostor, switch_distance
 from .limits import LIMITS_DEFAULTS, Limits, check_keys, check_mesh
-from .lod import LOD_DEFAULTS, LodOptions, decimate, screen_coverage
+from .lod import LOD_DEFAULTS, LodOptions, decimate, screen_coverage, switch_distances
 from .lod_budget import lod_tree
 from .materials import MATERIAL_DEFAULTS, MaterialOptions, build_materials
 from .mesh import MESH_DEFAULTS, MeshOptions, build_mesh
@@ -76,24 +76,27 @@ def build_lod(tree: Tree, options: MakeOptions, seed: int, timings: Timings) -> 
 
 def build_lods(params: Params, tree: Tree, options: MakeOptions, seed: int,
                timings: Timings) -> list[Lod]:
-    """One coarser tree per LOD distance, each with its own rig, mesh, dense wind (same wind
+    """One coarser tree per LOD, each with its own rig, mesh, dense wind (same wind
     options and seed, so the motion matches) and a clip decimated for its distance
-    (clip_name(k)). LOD0 is `tree`; lower LODs are cut from it within their triangle budgets
+    (clip_name(k)); distances follow the tree's height on screen (lod.switch_distances).
+    LOD0 is `tree`; lower LODs are cut from it within their triangle budgets
     (lod_budget.lod_tree: thin stems dropped, leaves thinned and scaled to keep the cover)."""
     lo = options.lod
     height = tree_height(tree)
+    distances = switch_distances(height, lo)
+    at = replace(lo, distances=tuple(distances))     # lod_tree sizes stems by the switch distance
     lods: list[Lod] = []
-    for k, distance in enumerate(lo.distances):
+    for k, distance in enumerate(distances):
         t, rig, mesh = tree, options.rig, options.mesh
         if k > 0:
             t, rig, mesh = timings.run("generate", lod_tree, tree, k, lods[0], lods[-1], options.rig,
-                                       options.mesh, lo)
+                                       options.mesh, at)
         lod = build_lod(t, replace(options, rig=rig, mesh=mesh), seed, timings)
         clips = [timings.run("lod", decimate, lod.skeleton, lod.primitives, c, distance, lo,
                              clip_name(k))[0] for c in lod.clips]
         # MSFT_screencoverage: LOD k is shown while the tree covers more than the coverage at
         # which LOD k+1 takes over; the last LOD is never culled.
-        coverage = screen_coverage(height, lo.distances[k + 1], lo) if k + 1 < len(lo.distances) else 0.0
+        coverage = screen_coverage(height, distances[k + 1], lo) if k + 1 < len(distances) else 0.0
         lods.append(replace(lod, clips=clips, distance=float(distance), screen_coverage=coverage))
     return lods
 
