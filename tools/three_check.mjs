@@ -2,17 +2,27 @@
 // skeletons, meshes, materials (texture references), animation clips played through an
 // AnimationMixer (do bones move between two times? does the loop close?) and every console message
 // three.js printed while loading and playing.
-// Usage: node tools/three_check.mjs FILE.glb
+// EXT_meshopt_compression is decoded by three's own MeshoptDecoder (examples/jsm/libs), as a web
+// page would set it up; KHR_mesh_quantization needs nothing.
+// Usage: node tools/three_check.mjs [--poses K] FILE.glb
+// --poses K: per clip, the world position of every scene node (traversal order) at K evenly
+// spaced times (animations[i].poses: K × nodes × 3), to compare two encodings of one tree.
 // Exit 0 when a report was printed (whatever it says), 2 on bad usage or an unreadable file.
 import { readFile } from "node:fs/promises";
 import path from "node:path";
 import * as THREE from "three";
 import { GLTFLoader } from "three/examples/jsm/loaders/GLTFLoader.js";
+import { MeshoptDecoder } from "three/examples/jsm/libs/meshopt_decoder.module.js";
 
 const EPS = 1e-4;
 const args = process.argv.slice(2);
-if (args.length !== 1) {
-  console.error("usage: node three_check.mjs FILE.glb");
+let poses = 0;
+if (args[0] === "--poses") {
+  poses = Number(args[1]);
+  args.splice(0, 2);
+}
+if (args.length !== 1 || !(poses >= 0)) {
+  console.error("usage: node three_check.mjs [--poses K] FILE.glb");
   process.exit(2);
 }
 const file = path.resolve(args[0]);
@@ -122,7 +132,10 @@ try {
   const bytes = await readFile(file);
   const buffer = bytes.buffer.slice(bytes.byteOffset, bytes.byteOffset + bytes.byteLength);
   const loader = new GLTFLoader();
+  loader.setMeshoptDecoder(MeshoptDecoder);
   loader.register((parser) => new StubTextures(parser));
+  report.extensions_required = JSON.parse(new TextDecoder().decode(
+    bytes.subarray(20, 20 + bytes.readUInt32LE(12)))).extensionsRequired ?? [];
   const t0 = performance.now();
   const gltf = await loader.parseAsync(buffer, "");
   report.load_ms = Math.round(performance.now() - t0);
@@ -139,8 +152,11 @@ try {
     const g = o.geometry;
     const mats = Array.isArray(o.material) ? o.material : [o.material];
     for (const m of mats) if (!materials.has(m.uuid)) materials.set(m.uuid, materialInfo(m));
+    const box = new THREE.Box3().setFromBufferAttribute(g.attributes.position);
     meshes.push({
       name: o.name,
+      position_box: [...box.min.toArray(), ...box.max.toArray()].map(round),
+      position_array: g.attributes.position.array.constructor.name,
       type: o.type,
       skinned: !!o.isSkinnedMesh,
       vertices: g.attributes.position ? g.attributes.position.count : 0,
@@ -187,6 +203,16 @@ try {
     info.loop_max_diff = Math.max(lp.local, lp.world);
     info.loop_closes = lp.local <= EPS && lp.world <= EPS;
     info.messages_while_playing = messages.length - before;
+    if (poses > 0) {
+      const first = [];
+      scene.traverse((o) => first.push(o));
+      info.poses = [];
+      for (let k = 0; k < poses; k++) {
+        mixer.setTime((clip.duration * k) / poses);
+        scene.updateMatrixWorld(true);
+        info.poses.push(first.map((b) => new THREE.Vector3().setFromMatrixPosition(b.matrixWorld).toArray().map(round)));
+      }
+    }
     action.stop();
     mixer.uncacheClip(clip);
     report.animations.push(info);

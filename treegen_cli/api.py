@@ -54,6 +54,7 @@ DEFAULTS: dict[str, object] = {
     "no_lod": False,
     "lod_files": False,
     "up_axis": None,
+    "compress": "none",
     "max_vertices": 20_000_000,
     "max_keys": 5_000_000,
 }
@@ -64,7 +65,8 @@ FLOATS = ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "fo
           "stiffness")
 FLAGS = ("no_wind", "no_lod", "lod_files", "no_textures")
 CHOICES = {"leaf_geometry": ("card", "shape"), "error_form": ("exact", "paper"),
-           "interpolation": ("linear", "step"), "up_axis": (None, "y", "z")}
+           "interpolation": ("linear", "step"), "up_axis": (None, "y", "z"),
+           "compress": ("none", "quantize", "meshopt")}
 LISTS = ("joint_levels", "sides", "lod_distances")
 
 
@@ -148,13 +150,13 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
     `label(key)` names an option in messages: `--max-joints` for the CLI and the API, a JSON
     path for a catalogue entry. Every refusal is a TreegenError naming the option and range."""
     from .limits import Limits
-    from .lod import LodOptions
+    from .lod import LodOptions, pixel_size
     from .materials import MaterialOptions
     from .mesh import MESH_DEFAULTS
     from .pipeline import MakeOptions
     from .rig import RigOptions
     from .wind import WindOptions
-    from .exchange import STATIC
+    from .exchange import STATIC, GltfOptions, check_compress
 
     unknown = sorted(set(options) - set(DEFAULTS))
     if unknown:
@@ -180,6 +182,8 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
                                "each value must be in [3, 64]")
         mesh = replace(mesh, sides=v["sides"])
     static = output is not None and Path(output).suffix.lower() in STATIC
+    if output is not None:
+        check_compress(output, v["compress"], label("compress"))
     wind = None if v["no_wind"] or static else WindOptions(
         speed=v["wind_speed"], direction_deg=v["wind_dir"], gust=v["gust"],
         turbulence=v["turbulence"], duration=v["duration"], fps=v["fps"],
@@ -193,7 +197,9 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
         mesh=mesh, wind=wind, lod=lod,
         limits=Limits(max_vertices=v["max_vertices"], max_keys=v["max_keys"]),
         materials=MaterialOptions(textures=not v["no_textures"], texture_size=v["texture_size"],
-                                  leaf_texture=v["leaf_texture"], bark_texture=v["bark_texture"]))
+                                  leaf_texture=v["leaf_texture"], bark_texture=v["bark_texture"]),
+        gltf=GltfOptions(compress=v["compress"], pixel_size=pixel_size(1.0, lod)
+                         if lod is not None and v["compress"] == "meshopt" else 0.0))
     values = {k: list(x) if isinstance(x, tuple) else str(x) if isinstance(x, Path) else x
               for k, x in v.items()}
     return Resolved(seed=v["seed"], options=make_options, values=values)
@@ -223,10 +229,13 @@ def write(asset, tree, output, timings, t0: float, job: Resolved | None = None) 
     from .exchange import export, export_parts
     from .prepare import split_lods
 
+    from .exchange import GLTF_DEFAULTS
+
     values = job.values if job is not None else DEFAULTS
+    gltf = job.options.gltf if job is not None else GLTF_DEFAULTS
     asset = replace(asset, up_axis=values["up_axis"])
-    written = timings.run("write", export_parts, split_lods(asset), output) if values["lod_files"] \
-        else timings.run("write", export, asset, output)
+    written = timings.run("write", export_parts, split_lods(asset), output, gltf) \
+        if values["lod_files"] else timings.run("write", export, asset, output, gltf)
     return make_summary(asset, tree, written, timings.stages, time.perf_counter() - t0)
 
 

@@ -205,6 +205,12 @@ def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> lis
 @click.option("--lod-files", is_flag=True,
               help="Write each LOD as its own complete file, NAME_LOD0.glb, NAME_LOD1.glb, … "
                    "(for engines that ignore MSFT_lod: Godot, Unity LODGroup, Unreal).")
+@click.option("--compress", type=click.Choice(["none", "quantize", "meshopt"]), default="none",
+              show_default=True,
+              help="glTF only: quantize = KHR_mesh_quantization (integer positions, normals, "
+                   "UVs, rotations); meshopt = that plus EXT_meshopt_compression (needs the "
+                   "client's meshopt decoder). Both are required extensions; none is read by "
+                   "every importer.")
 @click.option("--max-vertices", type=int, default=20_000_000, show_default=True,
               help="Refuse meshes with more vertices than this per LOD (counted from the grown "
                    "tree before the mesh is built).")
@@ -215,8 +221,8 @@ def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> lis
 def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels, sides,
          leaf_geometry, texture_size, leaf_texture, bark_texture, no_textures, wind_speed,
          wind_dir, gust, turbulence, duration, fps, stiffness, no_wind, up_axis, lod_distances,
-         fov, width, error_px, error_form, interpolation, no_lod, lod_files, max_vertices,
-         max_keys, as_json):
+         fov, width, error_px, error_form, interpolation, no_lod, lod_files, compress,
+         max_vertices, max_keys, as_json):
     """Grow SPECIES and write a skinned, wind-animated tree to OUTPUT."""
     from .api import build, check_output, resolve, write
     from .exchange import STATIC
@@ -234,7 +240,8 @@ def make(species, output, seed, max_stems, max_leaves, max_joints, joint_levels,
                        stiffness=stiffness, no_wind=no_wind, lod_distances=lod_distances,
                        fov=fov, width=width, error_px=error_px, error_form=error_form,
                        interpolation=interpolation, no_lod=no_lod, lod_files=lod_files,
-                       up_axis=up_axis, max_vertices=max_vertices, max_keys=max_keys),
+                       up_axis=up_axis, compress=compress, max_vertices=max_vertices,
+                       max_keys=max_keys),
                   output=output)
     options = job.options
     static = output.suffix.lower() in STATIC

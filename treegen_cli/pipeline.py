@@ -11,6 +11,7 @@ from dataclasses import dataclass, field, replace
 from . import __version__
 from .asset import Asset, Lod
 from .generate import DEFAULTS as GENERATE_DEFAULTS, GenerateOptions, generate, regrow_leaves
+from .exchange.compress import GLTF_DEFAULTS, GltfOptions
 from .limits import LIMITS_DEFAULTS, Limits, check_keys, check_mesh
 from .lod import LOD_DEFAULTS, LodOptions, decimate, lod_stage_options, match_leaf_area, screen_coverage
 from .materials import MATERIAL_DEFAULTS, MaterialOptions, build_materials
@@ -32,6 +33,7 @@ class MakeOptions:
     lod: LodOptions | None = LOD_DEFAULTS   # None: one LOD with the dense clip
     limits: Limits = LIMITS_DEFAULTS        # refuse oversized meshes / clips before building
     materials: MaterialOptions = MATERIAL_DEFAULTS   # textures (generated or an artist's) or colours
+    gltf: GltfOptions = GLTF_DEFAULTS       # --compress: how the glTF writer encodes (not the build)
 
 
 @dataclass
