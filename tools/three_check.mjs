@@ -4,7 +4,8 @@
 // three.js printed while loading and playing.
 // EXT_meshopt_compression is decoded by three's own MeshoptDecoder (examples/jsm/libs), as a web
 // page would set it up; KHR_mesh_quantization needs nothing.
-// Usage: node tools/three_check.mjs [--poses K] FILE.glb
+// --positions: each mesh's POSITION values as three.js decoded them (meshes[i].positions, flat).
+// Usage: node tools/three_check.mjs [--poses K] [--positions] FILE.glb
 // --poses K: per clip, the world position of every scene node (traversal order) at K evenly
 // spaced times (animations[i].poses: K × nodes × 3), to compare two encodings of one tree.
 // Exit 0 when a report was printed (whatever it says), 2 on bad usage or an unreadable file.
@@ -21,8 +22,10 @@ if (args[0] === "--poses") {
   poses = Number(args[1]);
   args.splice(0, 2);
 }
+const withPositions = args[0] === "--positions";
+if (withPositions) args.shift();
 if (args.length !== 1 || !(poses >= 0)) {
-  console.error("usage: node three_check.mjs [--poses K] FILE.glb");
+  console.error("usage: node three_check.mjs [--poses K] [--positions] FILE.glb");
   process.exit(2);
 }
 const file = path.resolve(args[0]);
@@ -76,6 +79,16 @@ function uvRange(attr) {
     if (v > hi[1]) hi[1] = v;
   }
   return { min: lo.map(round), max: hi.map(round), normalized: attr.normalized, array: attr.array.constructor.name };
+}
+
+function positionsOf(attr) {
+  const out = new Array(attr.count * 3);
+  for (let i = 0; i < attr.count; i++) {
+    out[3 * i] = attr.getX(i);
+    out[3 * i + 1] = attr.getY(i);
+    out[3 * i + 2] = attr.getZ(i);
+  }
+  return out;
 }
 
 function textureRef(tex) {
@@ -157,6 +170,7 @@ try {
       name: o.name,
       position_box: [...box.min.toArray(), ...box.max.toArray()].map(round),
       position_array: g.attributes.position.array.constructor.name,
+      ...(withPositions ? { positions: positionsOf(g.attributes.position) } : {}),
       type: o.type,
       skinned: !!o.isSkinnedMesh,
       vertices: g.attributes.position ? g.attributes.position.count : 0,
@@ -171,7 +185,12 @@ try {
     }
   });
   report.nodes = nodes;
-  report.skeletons = [...skeletons.values()].map(({ bones, meshes }) => ({ bones, meshes }));
+  // bone_inverse_0: the first joint's inverse bind matrix (column-major), as the loader decoded it
+  report.skeletons = [...skeletons.values()].map(({ bones, meshes, skeleton }) => ({
+    bones,
+    meshes,
+    bone_inverse_0: skeleton.boneInverses[0].elements.slice(),
+  }));
   report.meshes = meshes;
   report.materials = [...materials.values()];
 

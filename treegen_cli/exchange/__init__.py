@@ -23,7 +23,7 @@ import numpy as np
 from ..asset import Asset, Forest
 from ..errors import TreegenError
 from . import gltf, image, read_gltf
-from .compress import COMPRESS, GLTF_DEFAULTS, GltfOptions  # noqa: F401  (re-exported)
+from .compress import COMPRESS, GLTF_DEFAULTS, GltfOptions, check_encoder  # noqa: F401  (re-exported)
 from .forest_gltf import write_forest_gltf
 from .staging import staged, sweep, written  # noqa: F401  (re-exported)
 
@@ -104,6 +104,8 @@ def check_compress(path: str | os.PathLike, compress: str, flag: str = "--compre
             else f"{suffix} has no such encoding"
         raise TreegenError(f"{path}: {flag} {compress} is for .glb/.gltf only ({why}); "
                            f"use {flag} none")
+    if compress == "meshopt":
+        check_encoder()
 
 
 def _writer(path: Path, options: GltfOptions) -> Callable[[Asset, Path], None]:

@@ -165,11 +165,20 @@ class MeshoptView:
 
 
 def _node() -> str:
-    node = os.environ.get("TREEGEN_NODE") or shutil.which("node")
+    given = os.environ.get("TREEGEN_NODE")
+    node = shutil.which(given) if given else shutil.which("node")
     if not node:
-        raise TreegenError("--compress meshopt needs Node.js (`node` is not on PATH; set "
-                           "TREEGEN_NODE to its path) to run meshoptimizer's encoder")
+        where = f"TREEGEN_NODE={given} is not an executable" if given else \
+            "`node` is not on PATH; set TREEGEN_NODE to its path"
+        raise TreegenError(f"--compress meshopt needs Node.js ({where}) to run "
+                           "meshoptimizer's encoder")
     return node
+
+
+def check_encoder() -> None:
+    """Refuse --compress meshopt up front when node or the npm package is missing."""
+    _node()
+    _tools()
 
 
 def _tools() -> str:

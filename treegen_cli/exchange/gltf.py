@@ -43,8 +43,9 @@ from .. import __version__
 from ..asset import Asset, Clip, Material, Primitive, Skeleton, Texture
 from ..axes import Z_UP_TO_Y_UP, matrix_to_y_up, quat_to_y_up, to_y_up  # noqa: F401  (re-exported)
 from ..quat import continuous as _continuous
-from . import compress as _c
-from .compress import GLTF_DEFAULTS, GltfOptions, MeshoptView
+from .compress import (GLTF_DEFAULTS, MESHOPT, QUANTIZATION, TEXTURE_TRANSFORM, GltfOptions, Grid,
+                       MeshoptView, UvRange, encode, meshopt_step, position_grid,
+                       quantize_positions, quantize_uvs, snorm8, snorm16, uv_range)
 
 # glTF enums
 FLOAT, UNSIGNED_BYTE, UNSIGNED_SHORT, UNSIGNED_INT = 5126, 5121, 5123, 5125
@@ -222,7 +223,7 @@ class Quantization:
     """--compress quantize/meshopt state of one LOD: its skin's position grid and each
     material's UV box (shared by every LOD, as the material is)."""
 
-    def __init__(self, grid: _c.Grid, uvs: dict[str, _c.UvRange]):
+    def __init__(self, grid: Grid, uvs: dict[str, UvRange]):
         self.grid, self.uvs = grid, uvs
 
 
@@ -257,21 +258,21 @@ def _quantized_primitive(buf: _Buffer, p: Primitive, n_joints: int, material: in
                          quant: Quantization) -> dict:
     """KHR_mesh_quantization (compress.py): grid positions, int8 normals and tangents,
     uint16 UVs in the material's box; joints, weights and indices as in `_primitive`."""
-    pos = _c.quantize_positions(_y_up32(p.positions), quant.grid)
+    pos = quantize_positions(_y_up32(p.positions), quant.grid)
     nrm = _unit(_y_up32(p.normals).astype(np.float64))
-    uv = _c.quantize_uvs(_gltf_uvs(p), quant.uvs[p.material])
+    uv = quantize_uvs(_gltf_uvs(p), quant.uvs[p.material])
     joints, weights = _weights(p.joints, p.weights, np.uint8)
     joints = joints.astype(np.uint8 if n_joints <= 256 else np.uint16, copy=False)
     V = len(p.positions)
     indices = np.asarray(p.indices).astype(np.uint16 if V < 65535 else np.uint32, copy=False)
     attrs = {"POSITION": buf.accessor(pos, ARRAY_BUFFER, bounds=True, padded=True),
-             "NORMAL": buf.accessor(_c.snorm8(nrm, pad=True), ARRAY_BUFFER, normalized=True,
+             "NORMAL": buf.accessor(snorm8(nrm, pad=True), ARRAY_BUFFER, normalized=True,
                                     padded=True, filter="OCTAHEDRAL", source=_pad4(nrm, 0.0)),
              "TEXCOORD_0": buf.accessor(uv, ARRAY_BUFFER, normalized=True)}
     if p.tangents is not None:
         t = np.asarray(p.tangents, dtype=np.float64)
         tan = np.column_stack([_unit(to_y_up(t[:, :3])), np.sign(t[:, 3]) + (t[:, 3] == 0)])
-        attrs["TANGENT"] = buf.accessor(_c.snorm8(tan, pad=False), ARRAY_BUFFER, normalized=True,
+        attrs["TANGENT"] = buf.accessor(snorm8(tan, pad=False), ARRAY_BUFFER, normalized=True,
                                         filter="OCTAHEDRAL", source=tan.astype(np.float32))
     attrs |= {"JOINTS_0": buf.accessor(joints, ARRAY_BUFFER),
               "WEIGHTS_0": buf.accessor(weights, ARRAY_BUFFER, normalized=True)}
@@ -293,9 +294,9 @@ def quantization(asset: Asset, lod_index: int, min_step: float = 0.0) -> Quantiz
     for lod in asset.lods:
         for p in lod.primitives:
             by_material.setdefault(p.material, []).append(_gltf_uvs(p))
-    grid = _c.position_grid([_y_up32(p.positions) for p in asset.lods[lod_index].primitives],
+    grid = position_grid([_y_up32(p.positions) for p in asset.lods[lod_index].primitives],
                             min_step)
-    return Quantization(grid, {m: _c.uv_range(u) for m, u in by_material.items()})
+    return Quantization(grid, {m: uv_range(u) for m, u in by_material.items()})
 
 
 def _tangent(buf: _Buffer, p: Primitive) -> dict:
@@ -331,7 +332,7 @@ def rotation_samplers(buf: _Buffer, clip: Clip, joints: np.ndarray,
         if ident not in inputs:
             inputs[ident] = buf.accessor(times[keys], bounds=True)
         q = _continuous(rot[keys, j])
-        output = buf.accessor(_c.snorm16(q), normalized=True, filter="QUATERNION",
+        output = buf.accessor(snorm16(q), normalized=True, filter="QUATERNION",
                               source=q.astype(np.float32)) if quantized \
             else buf.accessor(q.astype(np.float32))
         sampler = {"input": inputs[ident], "output": output}
@@ -377,7 +378,7 @@ def _short(x) -> float:
     return float(str(np.float32(x)))
 
 
-def inverse_bind_accessor(buf: _Buffer, skeleton: Skeleton, grid: _c.Grid | None = None) -> int:
+def inverse_bind_accessor(buf: _Buffer, skeleton: Skeleton, grid: Grid | None = None) -> int:
     """Accessor of the skin's inverse bind matrices (Y up, column-major float32); with a
     quantization `grid`, each times the grid's dequantization (a skinned mesh's node transform
     is ignored, so this is where integer positions become metres)."""
@@ -438,7 +439,7 @@ class Textures:
             gltf |= {"images": self.images, "samplers": self.samplers, "textures": self.textures}
 
 
-def material_dict(m: Material, textures: Textures, uvs: _c.UvRange | None = None) -> dict:
+def material_dict(m: Material, textures: Textures, uvs: UvRange | None = None) -> dict:
     """A Material as a glTF metallic-roughness material: base colour (and texture), normal map,
     MASK with its cutoff for alpha-tested leaves, double-sided leaves. `uvs`: the box of
     quantized UVs, undone by KHR_texture_transform on each texture reference."""
@@ -463,7 +464,7 @@ def _build(asset: Asset, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, _B
     buf = _Buffer(meshopt=options.compress == "meshopt")
     textures = Textures(buf)
     mat_index = {m.name: i for i, m in enumerate(asset.materials)}
-    steps = [_c.meshopt_step(options, lod.distance) if options.compress == "meshopt" else 0.0
+    steps = [meshopt_step(options, lod.distance) if options.compress == "meshopt" else 0.0
              for lod in asset.lods]
     quants = [quantization(asset, k, steps[k]) for k in range(len(asset.lods))] if options.quantized \
         else [None] * len(asset.lods)
@@ -533,11 +534,11 @@ def _build(asset: Asset, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, _B
     gltf["bufferViews"] = buf.views
     gltf["buffers"] = [{"byteLength": buf.size + len(buf.padding())}]
     if options.quantized:
-        used = [_c.QUANTIZATION]
+        used = [QUANTIZATION]
         if any(not box.identity for box in uv_boxes.values()):
-            used.append(_c.TEXTURE_TRANSFORM)
+            used.append(TEXTURE_TRANSFORM)
         if buf.meshopt is not None:
-            used.append(_c.MESHOPT)
+            used.append(MESHOPT)
             buf = _meshopt(gltf, buf)
         gltf["extensionsUsed"] = sorted(gltf.get("extensionsUsed", []) + used)
         gltf["extensionsRequired"] = sorted(used)
@@ -552,7 +553,7 @@ def _meshopt(gltf: dict, buf: _Buffer) -> _Buffer:
     order = sorted(buf.meshopt)
     slot = {v: k for k, v in enumerate(order)}
     groups = [(slot[i], [slot[v] for v in vs]) for i, vs in buf.groups]
-    encoded = dict(zip(order, _c.encode([(buf.meshopt[i], buf.view_parts[i]) for i in order],
+    encoded = dict(zip(order, encode([(buf.meshopt[i], buf.view_parts[i]) for i in order],
                                         groups)))
     out = _Buffer()
     for i, view in enumerate(buf.views):
@@ -565,12 +566,12 @@ def _meshopt(gltf: dict, buf: _Buffer) -> _Buffer:
         offset = out.size + (-out.size % 4)
         out.view(np.frombuffer(data, dtype=np.uint8), None)
         view["buffer"] = 1
-        view["extensions"] = {_c.MESHOPT: {
+        view["extensions"] = {MESHOPT: {
             "buffer": 0, "byteOffset": offset, "byteLength": len(data), "byteStride": spec.stride,
             "count": spec.count, "mode": spec.mode,
             **({"filter": spec.filter} if spec.filter != "NONE" else {})}}
     out.views, out.accessors = buf.views, buf.accessors
-    fallback = {"byteLength": buf.size + len(buf.padding()), "extensions": {_c.MESHOPT: {"fallback": True}}}
+    fallback = {"byteLength": buf.size + len(buf.padding()), "extensions": {MESHOPT: {"fallback": True}}}
     gltf["buffers"] = [{"byteLength": out.size + len(out.padding())}, fallback]
     return out
 
