@@ -147,8 +147,9 @@ try {
   const loader = new GLTFLoader();
   loader.setMeshoptDecoder(MeshoptDecoder);
   loader.register((parser) => new StubTextures(parser));
-  report.extensions_required = JSON.parse(new TextDecoder().decode(
-    bytes.subarray(20, 20 + bytes.readUInt32LE(12)))).extensionsRequired ?? [];
+  const isGlb = bytes.subarray(0, 4).toString("latin1") === "glTF";
+  const json = isGlb ? bytes.subarray(20, 20 + bytes.readUInt32LE(12)) : bytes;
+  report.extensions_required = JSON.parse(new TextDecoder().decode(json)).extensionsRequired ?? [];
   const t0 = performance.now();
   const gltf = await loader.parseAsync(buffer, "");
   report.load_ms = Math.round(performance.now() - t0);
