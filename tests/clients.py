@@ -286,7 +286,7 @@ def _node_client(script: str, package: str, what: str, glb_path, extra, timeout)
     return report
 
 
-def three_load(glb_path, timeout: float = 120) -> dict:
+def three_load(glb_path, timeout: float = 120, poses: int = 0, positions: bool = False) -> dict:
     """three.js r187 GLTFLoader.parse in Node (textures are stubbed: references, not pixels).
 
     -> {"client": "three.js", "version", "loaded", "error"?, "load_ms", "seconds", "nodes",
@@ -295,9 +295,13 @@ def three_load(glb_path, timeout: float = 120) -> dict:
         base_color_texture, normal_texture, color, transparent, alpha_test, double_sided,
         flat_shading}], "animations": [{name, duration, tracks, sample_times, bones_moved,
         max_local_change, max_world_change, loop_max_diff, loop_closes, messages_while_playing}],
-        "messages": [{level, text}] (all console output), "warnings": [text] (warn + error)}
+        "messages": [{level, text}] (all console output), "warnings": [text] (warn + error),
+        "extensions_required"}; EXT_meshopt_compression through three's MeshoptDecoder.
+    poses=K: animations[i].poses, every scene node's world position at K times (K × nodes × 3);
+    positions: meshes[i].positions, the decoded POSITION values (flat), mesh space.
     """
-    return _node_client("three_check.mjs", "three", "three.js", glb_path, [], timeout)
+    extra = (["--poses", str(poses)] if poses else []) + (["--positions"] if positions else [])
+    return _node_client("three_check.mjs", "three", "three.js", glb_path, extra, timeout)
 
 
 def babylon_load(glb_path, timeout: float = 120, container: bool = False) -> dict:

@@ -3,6 +3,9 @@
 // sampled at two frames (do bones move? does the loop close?), MSFT_lod levels the loader went
 // through, and every console message Babylon printed (Logger writes to console), including the ones
 // printed while the scene is made ready and rendered once (e.g. "Normals have been created").
+// EXT_meshopt_compression: Babylon's MeshoptCompression loads its decoder as a <script> from
+// MeshoptCompression.Configuration.decoder.url (a CDN by default), which Node cannot do; here its
+// default instance is the meshoptimizer npm package's own decoder (synchronous, no workers).
 // Usage: node tools/babylon_check.mjs [--container] FILE.glb
 // Exit 0 when a report was printed (whatever it says), 2 on bad usage.
 import { readFile } from "node:fs/promises";
@@ -25,6 +28,16 @@ for (const level of ["log", "info", "warn", "error", "debug"]) {
 
 const BABYLON = await import("@babylonjs/core");
 await import("@babylonjs/loaders/glTF/index.js");
+const { MeshoptDecoder } = await import("meshoptimizer/decoder");
+await MeshoptDecoder.ready;
+BABYLON.MeshoptCompression._Default = {
+  decodeGltfBufferAsync: async (source, count, stride, mode, filter) => {
+    const target = new Uint8Array(count * stride);
+    MeshoptDecoder.decodeGltfBuffer(target, count, stride, source, mode, filter);
+    return target;
+  },
+  dispose() {},
+};
 
 function round(x) {
   return Math.round(x * 1e6) / 1e6;

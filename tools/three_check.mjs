@@ -2,17 +2,30 @@
 // skeletons, meshes, materials (texture references), animation clips played through an
 // AnimationMixer (do bones move between two times? does the loop close?) and every console message
 // three.js printed while loading and playing.
-// Usage: node tools/three_check.mjs FILE.glb
+// EXT_meshopt_compression is decoded by three's own MeshoptDecoder (examples/jsm/libs), as a web
+// page would set it up; KHR_mesh_quantization needs nothing.
+// --positions: each mesh's POSITION values as three.js decoded them (meshes[i].positions, flat).
+// Usage: node tools/three_check.mjs [--poses K] [--positions] FILE.glb
+// --poses K: per clip, the world position of every scene node (traversal order) at K evenly
+// spaced times (animations[i].poses: K × nodes × 3), to compare two encodings of one tree.
 // Exit 0 when a report was printed (whatever it says), 2 on bad usage or an unreadable file.
 import { readFile } from "node:fs/promises";
 import path from "node:path";
 import * as THREE from "three";
 import { GLTFLoader } from "three/examples/jsm/loaders/GLTFLoader.js";
+import { MeshoptDecoder } from "three/examples/jsm/libs/meshopt_decoder.module.js";
 
 const EPS = 1e-4;
 const args = process.argv.slice(2);
-if (args.length !== 1) {
-  console.error("usage: node three_check.mjs FILE.glb");
+let poses = 0;
+if (args[0] === "--poses") {
+  poses = Number(args[1]);
+  args.splice(0, 2);
+}
+const withPositions = args[0] === "--positions";
+if (withPositions) args.shift();
+if (args.length !== 1 || !(poses >= 0)) {
+  console.error("usage: node three_check.mjs [--poses K] [--positions] FILE.glb");
   process.exit(2);
 }
 const file = path.resolve(args[0]);
@@ -66,6 +79,16 @@ function uvRange(attr) {
     if (v > hi[1]) hi[1] = v;
   }
   return { min: lo.map(round), max: hi.map(round), normalized: attr.normalized, array: attr.array.constructor.name };
+}
+
+function positionsOf(attr) {
+  const out = new Array(attr.count * 3);
+  for (let i = 0; i < attr.count; i++) {
+    out[3 * i] = attr.getX(i);
+    out[3 * i + 1] = attr.getY(i);
+    out[3 * i + 2] = attr.getZ(i);
+  }
+  return out;
 }
 
 function textureRef(tex) {
@@ -122,7 +145,11 @@ try {
   const bytes = await readFile(file);
   const buffer = bytes.buffer.slice(bytes.byteOffset, bytes.byteOffset + bytes.byteLength);
   const loader = new GLTFLoader();
+  loader.setMeshoptDecoder(MeshoptDecoder);
   loader.register((parser) => new StubTextures(parser));
+  const isGlb = bytes.subarray(0, 4).toString("latin1") === "glTF";
+  const json = isGlb ? bytes.subarray(20, 20 + bytes.readUInt32LE(12)) : bytes;
+  report.extensions_required = JSON.parse(new TextDecoder().decode(json)).extensionsRequired ?? [];
   const t0 = performance.now();
   const gltf = await loader.parseAsync(buffer, "");
   report.load_ms = Math.round(performance.now() - t0);
@@ -139,8 +166,12 @@ try {
     const g = o.geometry;
     const mats = Array.isArray(o.material) ? o.material : [o.material];
     for (const m of mats) if (!materials.has(m.uuid)) materials.set(m.uuid, materialInfo(m));
+    const box = new THREE.Box3().setFromBufferAttribute(g.attributes.position);
     meshes.push({
       name: o.name,
+      position_box: [...box.min.toArray(), ...box.max.toArray()].map(round),
+      position_array: g.attributes.position.array.constructor.name,
+      ...(withPositions ? { positions: positionsOf(g.attributes.position) } : {}),
       type: o.type,
       skinned: !!o.isSkinnedMesh,
       vertices: g.attributes.position ? g.attributes.position.count : 0,
@@ -155,7 +186,12 @@ try {
     }
   });
   report.nodes = nodes;
-  report.skeletons = [...skeletons.values()].map(({ bones, meshes }) => ({ bones, meshes }));
+  // bone_inverse_0: the first joint's inverse bind matrix (column-major), as the loader decoded it
+  report.skeletons = [...skeletons.values()].map(({ bones, meshes, skeleton }) => ({
+    bones,
+    meshes,
+    bone_inverse_0: skeleton.boneInverses[0].elements.slice(),
+  }));
   report.meshes = meshes;
   report.materials = [...materials.values()];
 
@@ -187,6 +223,16 @@ try {
     info.loop_max_diff = Math.max(lp.local, lp.world);
     info.loop_closes = lp.local <= EPS && lp.world <= EPS;
     info.messages_while_playing = messages.length - before;
+    if (poses > 0) {
+      const first = [];
+      scene.traverse((o) => first.push(o));
+      info.poses = [];
+      for (let k = 0; k < poses; k++) {
+        mixer.setTime((clip.duration * k) / poses);
+        scene.updateMatrixWorld(true);
+        info.poses.push(first.map((b) => new THREE.Vector3().setFromMatrixPosition(b.matrixWorld).toArray().map(round)));
+      }
+    }
     action.stop();
     mixer.uncacheClip(clip);
     report.animations.push(info);

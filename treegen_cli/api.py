@@ -57,6 +57,7 @@ DEFAULTS: dict[str, object] = {
     "lod_files": False,
     "impostor": True,
     "up_axis": None,
+    "compress": "none",
     "max_vertices": 20_000_000,
     "max_keys": 5_000_000,
     "triangles": None,
@@ -74,7 +75,8 @@ FLOATS = ("max_size", "wind_speed", "wind_dir", "gust", "turbulence", "duration"
           "stiffness")
 FLAGS = ("no_wind", "no_lod", "lod_files", "no_textures", "impostor")
 CHOICES = {"leaf_geometry": ("card", "shape"), "schedule": ("bounded", "bounded-step", "paper"),
-           "up_axis": (None, "y", "z"), "profile": (None, "mobile", "web", "desktop", "hero")}
+           "up_axis": (None, "y", "z"), "profile": (None, "mobile", "web", "desktop", "hero"),
+           "compress": ("none", "quantize", "meshopt")}
 LISTS = ("joint_levels", "sides", "lod_screen", "lod_distances", "lod_triangles")
 # stage option fields (WindOptions, LodOptions) → the make option a user typed for them
 STAGE_FIELDS = {"speed": "wind_speed", "direction_deg": "wind_dir", "distances": "lod_distances",
@@ -167,14 +169,14 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
     `label(key)` names an option in messages: `--max-joints` for the CLI and the API, a JSON
     path for a catalogue entry. Every refusal is a TreegenError naming the option and range."""
     from .limits import Limits
-    from .lod import LodOptions
+    from .lod import LodOptions, pixel_size
     from .materials import TEXTURE_SIZES, MaterialOptions
     from .mesh import MESH_DEFAULTS
     from .pipeline import MakeOptions
     from .params import MAX_LEVELS
     from .rig import MAX_JOINTS, RigOptions
     from .wind import WindOptions
-    from .exchange import STATIC
+    from .exchange import STATIC, GltfOptions, check_compress
 
     from .budget import BudgetOptions
     from .profiles import apply_profile
@@ -236,6 +238,8 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
     if not (lo <= n <= hi and n & (n - 1) == 0):
         raise TreegenError(f"{label('texture_size')} {n}: must be a power of two in [{lo}, {hi}]")
     static = output is not None and Path(output).suffix.lower() in STATIC
+    if output is not None:
+        check_compress(output, v["compress"], label("compress"))
     try:        # a stage's range check names its own field: say what the user typed instead
         wind = None if v["no_wind"] or static else WindOptions(
             speed=v["wind_speed"], direction_deg=v["wind_dir"], gust=v["gust"],
@@ -257,7 +261,10 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
         limits=Limits(max_vertices=v["max_vertices"], max_keys=v["max_keys"]),
         materials=MaterialOptions(textures=not v["no_textures"], texture_size=v["texture_size"],
                                   leaf_texture=v["leaf_texture"], bark_texture=v["bark_texture"]),
-        budget=BudgetOptions(triangles=v["triangles"], fixed_sides=v["sides"] is not None))
+        budget=BudgetOptions(triangles=v["triangles"], fixed_sides=v["sides"] is not None),
+        gltf=GltfOptions(compress=v["compress"], pixel_size=pixel_size(1.0, lod)
+                         if lod is not None and v["compress"] == "meshopt" else 0.0))
+
     values = {k: list(x) if isinstance(x, tuple) else str(x) if isinstance(x, Path) else x
               for k, x in v.items()}
     return Resolved(seed=v["seed"], options=make_options, values=values)
@@ -299,10 +306,13 @@ def write(asset, tree, output, timings, t0: float, job: Resolved | None = None) 
     from .exchange import export, export_parts
     from .prepare import split_lods
 
+    from .exchange import GLTF_DEFAULTS
+
     values = job.values if job is not None else DEFAULTS
+    gltf = job.options.gltf if job is not None else GLTF_DEFAULTS
     asset = replace(asset, up_axis=values["up_axis"])
-    written = timings.run("write", export_parts, split_lods(asset), output) if values["lod_files"] \
-        else timings.run("write", export, asset, output)
+    written = timings.run("write", export_parts, split_lods(asset), output, gltf) \
+        if values["lod_files"] else timings.run("write", export, asset, output, gltf)
     return make_summary(asset, tree, written, timings.stages, time.perf_counter() - t0)
 
 

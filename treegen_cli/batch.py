@@ -244,6 +244,15 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
                 msg = str(e)
                 raise TreegenError(msg if msg.startswith(("entries[", "defaults."))
                                    else f"{where}: {msg}") from None
+            if base_job.values["compress"] == "meshopt":
+                from .exchange.compress import check_encoder
+                check_encoder()
+            if base_job.values["compress"] != "none":
+                for k, f in enumerate(formats):
+                    if f not in ("glb", "gltf"):
+                        raise TreegenError(
+                            f"{label('compress')}: {base_job.values['compress']} is for glb/gltf "
+                            f"only, but {fwhere}[{k}] is {json.dumps(f)} (USD has no such encoding)")
             try:        # an implausible Scale is a typo: refused now, not by a worker mid-run
                 check_trunk(loaded[sp][0], base_job.options.generate)
             except TreegenError as e:

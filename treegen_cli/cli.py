@@ -298,6 +298,12 @@ def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> tup
               help="End the LODs with an impostor: crossed cards cut from a 16×16-view "
                    "hemi-octahedral atlas (albedo, normals + depth; described in the file's "
                    "extras and NAME.glb.impostor.json), swaying with the trunk.")
+@click.option("--compress", type=click.Choice(["none", "quantize", "meshopt"]), default="none",
+              show_default=True,
+              help="glTF only: quantize = KHR_mesh_quantization (integer positions, normals, "
+                   "UVs, rotations); meshopt = that plus EXT_meshopt_compression (needs the "
+                   "client's meshopt decoder). Both are required extensions; none is read by "
+                   "every importer.")
 @click.option("--max-vertices", type=int, default=20_000_000, show_default=True,
               help="Refuse meshes with more vertices than this per LOD (counted from the grown "
                    "tree before the mesh is built).")
@@ -310,7 +316,7 @@ def make(species, output, seed, max_stems, max_leaves, max_size, max_joints, joi
          leaf_geometry, texture_size, leaf_texture, bark_texture, no_textures, wind_speed,
          wind_dir, gust, turbulence, duration, fps, stiffness, no_wind, up_axis, lod_screen,
          lod_distances, fov, width, error_px, schedule, lod_triangles, no_lod, lod_files,
-         impostor, max_vertices, max_keys, as_json):
+         impostor, compress, max_vertices, max_keys, as_json):
     """Grow SPECIES (a species file, or a bundled name such as quaking_aspen: see `treegen
     species`) and write a skinned, wind-animated tree to OUTPUT."""
     from .api import build, check_output, resolve, write
@@ -330,7 +336,7 @@ def make(species, output, seed, max_stems, max_leaves, max_size, max_joints, joi
                        stiffness=stiffness, no_wind=no_wind, lod_screen=lod_screen,
                        lod_distances=lod_distances, fov=fov, width=width, error_px=error_px,
                        schedule=schedule, lod_triangles=lod_triangles,
-                       no_lod=no_lod, lod_files=lod_files, impostor=impostor,
+                       no_lod=no_lod, lod_files=lod_files, impostor=impostor, compress=compress,
                        up_axis=up_axis, max_vertices=max_vertices, max_keys=max_keys)),
                   output=output)
     options = job.options

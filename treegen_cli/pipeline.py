@@ -13,6 +13,7 @@ from .asset import Asset, Lod
 from .budget import DEFAULTS as BUDGET_DEFAULTS, BudgetOptions, plan_budget
 from .generate import DEFAULTS as GENERATE_DEFAULTS, GenerateOptions, generate
 from .impostor import ImpostorOptions, build_impostor, switch_distance
+from .exchange.compress import GLTF_DEFAULTS, GltfOptions
 from .limits import LIMITS_DEFAULTS, Limits, check_keys, check_mesh
 from .lod import LOD_DEFAULTS, LodOptions, decimate, screen_coverage, switch_distances
 from .lod_budget import lod_tree
@@ -38,6 +39,7 @@ class MakeOptions:
     budget: BudgetOptions = BUDGET_DEFAULTS # LOD0 triangle budget, met before the tree grows
     impostor: ImpostorOptions | None = None # an impostor after the LODs (needs `lod`; `treegen
                                             # make` turns it on: api.resolve); None: none
+    gltf: GltfOptions = GLTF_DEFAULTS       # --compress: how the glTF writer encodes (not the build)
 
 
 @dataclass

@@ -2,6 +2,7 @@
 keyed by suffix, and the only place a suffix is checked.
 
     export(asset, "tree.glb")            # a prepared Asset   → .glb .gltf .usda .usdc .usdz .obj .ply
+    export(asset, "tree.glb", GltfOptions(compress="meshopt"))   # glTF only: compress.py
     export_parts(split_lods(asset), "tree.glb")   # → tree_LOD0.glb, tree_LOD1.glb, …
     export_forest(forest, "forest.usdc") # a prepared Forest  → .glb .gltf .usda .usdc .usdz
     save_still(pixels, "tree.png")       # an RGB image       → .png .jpg .jpeg;  save_loop → .gif
@@ -23,6 +24,7 @@ from ..asset import Asset, Forest
 from ..errors import TreegenError
 from ..prepare import with_bounds
 from . import gltf, image, read_gltf
+from .compress import COMPRESS, GLTF_DEFAULTS, GltfOptions, check_encoder  # noqa: F401  (re-exported)
 from .forest_gltf import write_forest_gltf
 from .staging import staged, sweep, written  # noqa: F401  (re-exported)
 
@@ -102,18 +104,42 @@ def check_up_axis(path: str | os.PathLike, up: str | None) -> None:
         raise TreegenError(f"{path}: glTF is always Y up; up axis {up} needs one of {others}")
 
 
+def check_compress(path: str | os.PathLike, compress: str, flag: str = "--compress") -> None:
+    """The one-line error for a compression the output format cannot carry (glTF only)."""
+    if compress not in COMPRESS:
+        raise TreegenError(f"{flag} {compress!r}: use one of {', '.join(COMPRESS)}")
+    suffix = Path(path).suffix.lower()
+    if compress != "none" and suffix not in FIXED_UP_AXIS:
+        why = "USD has no such encoding; .usdc is already compact" if suffix.startswith(".usd") \
+            else f"{suffix} has no such encoding"
+        raise TreegenError(f"{path}: {flag} {compress} is for .glb/.gltf only ({why}); "
+                           f"use {flag} none")
+    if compress == "meshopt":
+        check_encoder()
+
+
+def _writer(path: Path, options: GltfOptions) -> Callable[[Asset, Path], None]:
+    """The table's writer for `path`; glTF writers get the encoding options."""
+    check_compress(path, options.compress)
+    writer = WRITERS[path.suffix.lower()]
+    if options == GLTF_DEFAULTS:
+        return writer
+    return lambda asset, target: gltf.write_gltf(asset, target, options=options)
+
+
 def _write(writer: Callable[[Path], None], path: Path) -> list[Path]:
     with staged(path) as tmp:
         writer(tmp)
         return written(tmp, path)
 
 
-def export(asset: Asset, path: str | os.PathLike) -> list[Path]:
+def export(asset: Asset, path: str | os.PathLike,
+           options: GltfOptions = GLTF_DEFAULTS) -> list[Path]:
     """Write a prepared `asset` in the format `path`'s suffix names, atomically. Returns the
     files written, main file first (a .gltf also writes its .bin)."""
     path = check_suffix(path, WRITERS)
     check_up_axis(path, asset.up_axis)
-    writer = WRITERS[path.suffix.lower()]
+    writer = _writer(path, options)
     return _write(lambda tmp: writer(asset, tmp), path)
 
 
@@ -124,11 +150,12 @@ def lod_file_paths(path: str | os.PathLike, count: int) -> list[Path]:
     return [path.with_name(f"{path.stem}_LOD{k}{path.suffix}") for k in range(count)]
 
 
-def export_parts(parts: list[Asset], path: str | os.PathLike) -> list[Path]:
+def export_parts(parts: list[Asset], path: str | os.PathLike,
+                 options: GltfOptions = GLTF_DEFAULTS) -> list[Path]:
     """Each asset of `parts` to its own file (lod_file_paths), all or nothing: every part is
     staged in one folder and moved into place only when all were written."""
     path = check_suffix(path, WRITERS)
-    writer = WRITERS[path.suffix.lower()]
+    writer = _writer(path, options)
     targets = lod_file_paths(path, len(parts))
 
     def write_all(tmp: Path) -> None:

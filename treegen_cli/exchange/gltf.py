@@ -44,12 +44,17 @@ from ..asset import Asset, Clip, Material, Primitive, Skeleton, Texture
 from ..axes import Z_UP_TO_Y_UP, matrix_to_y_up, quat_to_y_up, to_y_up  # noqa: F401  (re-exported)
 from ..quat import continuous as _continuous
 from .impostor_meta import describe, impostor_lod, write_sidecar
+from .compress import (GLTF_DEFAULTS, MESHOPT, QUANTIZATION, TEXTURE_TRANSFORM, GltfOptions, Grid,
+                       MeshoptView, UvRange, encode, meshopt_step, position_grid,
+                       quantize_positions, quantize_uvs, snorm8, snorm16, uv_range)
 
 # glTF enums
 FLOAT, UNSIGNED_BYTE, UNSIGNED_SHORT, UNSIGNED_INT = 5126, 5121, 5123, 5125
+BYTE, SHORT = 5120, 5122
 ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
 _COMPONENT = {np.dtype(np.float32): FLOAT, np.dtype(np.uint8): UNSIGNED_BYTE,
-              np.dtype(np.uint16): UNSIGNED_SHORT, np.dtype(np.uint32): UNSIGNED_INT}
+              np.dtype(np.uint16): UNSIGNED_SHORT, np.dtype(np.uint32): UNSIGNED_INT,
+              np.dtype(np.int8): BYTE, np.dtype(np.int16): SHORT}
 _TYPE = {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4", 16: "MAT4"}
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -63,11 +68,18 @@ class _Buffer:
     Parts are kept as byte views of the arrays themselves (no tobytes copy); `write_to` streams
     them into a file, so a 300 MB buffer is never joined in memory on the way to disk."""
 
-    def __init__(self) -> None:
+    def __init__(self, meshopt: bool = False) -> None:
         self.parts: list[memoryview] = []
         self.size = 0
         self.views: list[dict] = []
         self.accessors: list[dict] = []
+        self.view_parts: list[memoryview] = []
+        # --compress meshopt: how each accessor's view is encoded (compress.meshopt_views)
+        self.meshopt: dict[int, MeshoptView] | None = {} if meshopt else None
+        self.groups: list[tuple[int, list[int]]] = []    # (index view, vertex views) per primitive
+        # meshopt: skin and key data pooled into one view per (element type, filter), so the
+        # codec sees long streams instead of hundreds of 301-key tracks (as gltfpack does)
+        self.pools: dict[tuple, list[tuple[dict, np.ndarray, np.ndarray | None]]] = {}
 
     def view(self, data, target: int | None) -> int:
         data = memoryview(data).cast("B")
@@ -79,26 +91,68 @@ class _Buffer:
         if target is not None:
             v["target"] = target
         self.parts.append(data)
+        self.view_parts.append(data)
         self.size += data.nbytes
         self.views.append(v)
         return len(self.views) - 1
 
     def accessor(self, a: np.ndarray, target: int | None = None, bounds: bool = False,
-                 normalized: bool = False) -> int:
+                 normalized: bool = False, padded: bool = False, filter: str = "NONE",
+                 source: np.ndarray | None = None) -> int:
+        """`padded`: a's last component is alignment padding, not data (the view's byteStride
+        keeps it, the accessor type drops it). `filter`/`source`: the meshopt filter for this
+        view and the float32 (count, 4) data it encodes."""
         a = np.ascontiguousarray(a)
         a = a.astype(a.dtype.newbyteorder("<"), copy=False)    # no copy on little-endian hosts
-        comps = 1 if a.ndim == 1 else math.prod(a.shape[1:])
-        acc = {"bufferView": self.view(a.reshape(-1).view(np.uint8), target),
-               "componentType": _COMPONENT[a.dtype.newbyteorder("=")],
+        stored = 1 if a.ndim == 1 else math.prod(a.shape[1:])
+        comps = stored - 1 if padded else stored
+        if self.meshopt is not None and target is None:
+            acc = self._fields(a, comps, stored, normalized, bounds)
+            self.pools.setdefault((a.dtype.str, stored, filter), []).append((acc, a, source))
+            self.accessors.append(acc)
+            return len(self.accessors) - 1
+        view = self.view(a.reshape(-1).view(np.uint8), target)
+        if padded:
+            self.views[view]["byteStride"] = stored * a.itemsize
+        if self.meshopt is not None:
+            self.meshopt[view] = MeshoptView(
+                mode="TRIANGLES" if target == ELEMENT_ARRAY_BUFFER else "ATTRIBUTES",
+                stride=stored * a.itemsize, count=int(a.size // stored), filter=filter,
+                source=source)
+        acc = {"bufferView": view, **self._fields(a, comps, stored, normalized, bounds)}
+        self.accessors.append(acc)
+        return len(self.accessors) - 1
+
+    @staticmethod
+    def _fields(a: np.ndarray, comps: int, stored: int, normalized: bool, bounds: bool) -> dict:
+        acc = {"componentType": _COMPONENT[a.dtype.newbyteorder("=")],
                "count": int(a.shape[0]), "type": _TYPE[comps]}
         if normalized:
             acc["normalized"] = True
         if bounds:    # column by column: numpy's axis-0 reduce over (V, 3) is 20× slower
-            flat = a.reshape(len(a), comps)
+            flat = a.reshape(len(a), stored)
             acc["min"] = [_num(flat[:, c].min()) for c in range(comps)]
             acc["max"] = [_num(flat[:, c].max()) for c in range(comps)]
-        self.accessors.append(acc)
-        return len(self.accessors) - 1
+        return acc
+
+    def flush_pools(self) -> None:
+        """One view per meshopt pool, each accessor at its offset in it."""
+        assert self.meshopt is not None
+        for (_, stored, filter), members in self.pools.items():
+            data = np.concatenate([a.reshape(-1).view(np.uint8) for _, a, _ in members])
+            view = self.view(data, None)
+            offset = 0
+            for acc, a, _ in members:
+                acc["bufferView"] = view
+                if offset:
+                    acc["byteOffset"] = offset
+                offset += a.nbytes
+            size = members[0][1].itemsize * stored
+            sources = [src for _, _, src in members]
+            self.meshopt[view] = MeshoptView(
+                mode="ATTRIBUTES", stride=size, count=len(data) // size, filter=filter,
+                source=np.concatenate(sources) if filter != "NONE" else None)
+        self.pools = {}
 
     def padding(self) -> bytes:
         return b"\0" * (-self.size % 4)
@@ -116,13 +170,15 @@ def _num(x) -> int | float:
     return int(x) if np.issubdtype(type(x), np.integer) else float(x)
 
 
-def _weights(joints: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _weights(joints: np.ndarray, weights: np.ndarray,
+             blended: type = np.uint16) -> tuple[np.ndarray, np.ndarray]:
     """Normalised integer weights whose rows sum exactly to the type's maximum; zero-weight
     slots index joint 0.
 
     Rigid rows (every weight 0 or 1, like leaves on their carrier) are exact as UNSIGNED_BYTE;
     blended rows (bark) take UNSIGNED_SHORT, steps of 1/65535, the rounding residual put on
     each row's largest weight. Result: [.7, .3, 0, 0] → [45875, 19660, 0, 0] (sum 65535).
+    `blended=np.uint8` (--compress): bark in steps of 1/255 too, as gltfpack stores weights.
     Row sums and maxima go column by column: numpy's axis-1 reductions over (V, 4) are slow."""
     w = np.asarray(weights)
     if w.dtype != np.float64:
@@ -132,15 +188,16 @@ def _weights(joints: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.nd
     if bool(np.all((flat == 0) | (flat == 1))) and bool(np.all(sum(w[:, k] for k in cols) == 1)):
         q = w.astype(np.uint8) * np.uint8(255)
     else:
+        full = int(np.iinfo(blended).max)
         w = w.astype(np.float64)
         s = sum(w[:, k] for k in cols)
-        w *= (65535.0 / np.where(s > 0, s, 1.0))[:, None]
+        w *= (full / np.where(s > 0, s, 1.0))[:, None]
         top = np.zeros(len(w), dtype=np.int64)
         for k in cols[1:]:
             top[w[:, k] > w[np.arange(len(w)), top]] = k
         qi = np.rint(w).astype(np.int64)
-        qi[np.arange(len(qi)), top] += 65535 - sum(qi[:, k] for k in cols)
-        q = qi.astype(np.uint16)
+        qi[np.arange(len(qi)), top] += full - sum(qi[:, k] for k in cols)
+        q = qi.astype(blended)
     j = np.where(q > 0, joints, 0)
     return j, q
 
@@ -156,12 +213,29 @@ def _y_up32(v: np.ndarray) -> np.ndarray:
     return out
 
 
-def _primitive(buf: _Buffer, p: Primitive, n_joints: int, material: int) -> dict:
-    pos = _y_up32(p.positions)
-    # Asset UVs have their origin bottom-left (OpenGL/USD); glTF's is top-left. Always float:
-    # Godot 3.2 ignores `normalized` on integer UVs, and every client reads float32.
+def _gltf_uvs(p: Primitive) -> np.ndarray:
+    """Asset UVs have their origin bottom-left (OpenGL/USD); glTF's is top-left."""
     uv = np.array(p.uvs, dtype=np.float32)
     np.subtract(np.float32(1.0), uv[:, 1], out=uv[:, 1])
+    return uv
+
+
+class Quantization:
+    """--compress quantize/meshopt state of one LOD: its skin's position grid and each
+    material's UV box (shared by every LOD, as the material is)."""
+
+    def __init__(self, grid: Grid, uvs: dict[str, UvRange]):
+        self.grid, self.uvs = grid, uvs
+
+
+def _primitive(buf: _Buffer, p: Primitive, n_joints: int, material: int,
+               quant: Quantization | None = None) -> dict:
+    if quant is not None:
+        return _quantized_primitive(buf, p, n_joints, material, quant)
+    pos = _y_up32(p.positions)
+    # Always float UVs here: Godot 3.2 ignores `normalized` on integer UVs, and every client
+    # reads float32.
+    uv = _gltf_uvs(p)
     joints, weights = _weights(p.joints, p.weights)
     joints = joints.astype(np.uint8 if n_joints <= 256 else np.uint16, copy=False)
     V = len(p.positions)
@@ -179,6 +253,51 @@ def _primitive(buf: _Buffer, p: Primitive, n_joints: int, material: int) -> dict
              "WEIGHTS_0": buf.accessor(weights, ARRAY_BUFFER, normalized=True)}
     return {"attributes": attrs, "indices": buf.accessor(indices, ELEMENT_ARRAY_BUFFER),
             "material": material, "mode": 4}
+
+
+def _quantized_primitive(buf: _Buffer, p: Primitive, n_joints: int, material: int,
+                         quant: Quantization) -> dict:
+    """KHR_mesh_quantization (compress.py): grid positions, int8 normals and tangents,
+    uint16 UVs in the material's box; joints, weights and indices as in `_primitive`."""
+    pos = quantize_positions(_y_up32(p.positions), quant.grid)
+    nrm = _unit(_y_up32(p.normals).astype(np.float64))
+    uv = quantize_uvs(_gltf_uvs(p), quant.uvs[p.material])
+    joints, weights = _weights(p.joints, p.weights, np.uint8)
+    joints = joints.astype(np.uint8 if n_joints <= 256 else np.uint16, copy=False)
+    V = len(p.positions)
+    indices = np.asarray(p.indices).astype(np.uint16 if V < 65535 else np.uint32, copy=False)
+    attrs = {"POSITION": buf.accessor(pos, ARRAY_BUFFER, bounds=True, padded=True),
+             "NORMAL": buf.accessor(snorm8(nrm, pad=True), ARRAY_BUFFER, normalized=True,
+                                    padded=True, filter="OCTAHEDRAL", source=_pad4(nrm, 0.0)),
+             "TEXCOORD_0": buf.accessor(uv, ARRAY_BUFFER, normalized=True)}
+    if p.tangents is not None:
+        t = np.asarray(p.tangents, dtype=np.float64)
+        tan = np.column_stack([_unit(to_y_up(t[:, :3])), np.sign(t[:, 3]) + (t[:, 3] == 0)])
+        attrs["TANGENT"] = buf.accessor(snorm8(tan, pad=False), ARRAY_BUFFER, normalized=True,
+                                        filter="OCTAHEDRAL", source=tan.astype(np.float32))
+    attrs |= {"JOINTS_0": buf.accessor(joints, ARRAY_BUFFER),
+              "WEIGHTS_0": buf.accessor(weights, ARRAY_BUFFER, normalized=True)}
+    prim = {"attributes": attrs, "indices": buf.accessor(indices, ELEMENT_ARRAY_BUFFER),
+            "material": material, "mode": 4}
+    if buf.meshopt is not None:     # one vertex order for all of the primitive's views
+        buf.groups.append((buf.accessors[prim["indices"]]["bufferView"],
+                           [buf.accessors[a]["bufferView"] for a in attrs.values()]))
+    return prim
+
+
+def _pad4(v: np.ndarray, w: float) -> np.ndarray:
+    return np.column_stack([v, np.full(len(v), w)]).astype(np.float32)
+
+
+def quantization(asset: Asset, lod_index: int, min_step: float = 0.0) -> Quantization:
+    """The grid of one LOD's skin and every material's UV box over all LODs."""
+    by_material: dict[str, list[np.ndarray]] = {}
+    for lod in asset.lods:
+        for p in lod.primitives:
+            by_material.setdefault(p.material, []).append(_gltf_uvs(p))
+    grid = position_grid([_y_up32(p.positions) for p in asset.lods[lod_index].primitives],
+                            min_step)
+    return Quantization(grid, {m: uv_range(u) for m, u in by_material.items()})
 
 
 def _tangent(buf: _Buffer, p: Primitive) -> dict:
@@ -199,10 +318,11 @@ def moving_joints(clip: Clip) -> np.ndarray:
 
 
 def rotation_samplers(buf: _Buffer, clip: Clip, joints: np.ndarray,
-                      inputs: dict) -> list[tuple[int, dict]]:
+                      inputs: dict, quantized: bool = False) -> list[tuple[int, dict]]:
     """[(joint, sampler)] for the rotation tracks of `joints`, each with only its kept keys
     (Y up, sign-continuous). `inputs` caches input accessors by (times, key set), so tracks
-    with the same schedule share one."""
+    with the same schedule share one. `quantized`: outputs as normalized int16 (core glTF),
+    QUATERNION-filtered under meshopt."""
     K = len(clip.times)
     rot = _unit(quat_to_y_up(clip.rotations))
     times = np.asarray(clip.times, dtype=np.float32)
@@ -212,43 +332,61 @@ def rotation_samplers(buf: _Buffer, clip: Clip, joints: np.ndarray,
         ident = (times.tobytes(), keys.tobytes())
         if ident not in inputs:
             inputs[ident] = buf.accessor(times[keys], bounds=True)
-        output = buf.accessor(_continuous(rot[keys, j]).astype(np.float32))
-        out.append((int(j), {"input": inputs[ident], "output": output,
-                             "interpolation": clip.interpolation}))
+        q = _continuous(rot[keys, j])
+        output = buf.accessor(snorm16(q), normalized=True, filter="QUATERNION",
+                              source=q.astype(np.float32)) if quantized \
+            else buf.accessor(q.astype(np.float32))
+        sampler = {"input": inputs[ident], "output": output}
+        if not (quantized and clip.interpolation == "LINEAR"):   # (LINEAR is glTF's default)
+            sampler["interpolation"] = clip.interpolation
+        out.append((int(j), sampler))
     return out
 
 
-def _animation(buf: _Buffer, clip: Clip, skeleton: Skeleton, joint_nodes: np.ndarray) -> dict | None:
+def _animation(buf: _Buffer, clip: Clip, skeleton: Skeleton, joint_nodes: np.ndarray,
+               quantized: bool = False) -> dict | None:
     joints = moving_joints(clip)
     if len(joints) == 0:
         return None
     samplers, channels = [], []
-    for j, sampler in rotation_samplers(buf, clip, joints, {}):
+    for j, sampler in rotation_samplers(buf, clip, joints, {}, quantized):
         samplers.append(sampler)
         channels.append({"sampler": len(samplers) - 1,
                          "target": {"node": int(joint_nodes[j]), "path": "rotation"}})
     return {"name": clip.name, "samplers": samplers, "channels": channels}
 
 
-def joint_fields(skeleton: Skeleton) -> list[dict]:
-    """Per joint, its glTF node's rest TRS fields (Y up; defaults left out)."""
+def joint_fields(skeleton: Skeleton, short: bool = False) -> list[dict]:
+    """Per joint, its glTF node's rest TRS fields (Y up; defaults left out). `short`
+    (--compress): each number as the shortest text of its float32, which every client reads
+    it as anyway (a third of the JSON of full float64 digits)."""
     t = to_y_up(np.asarray(skeleton.rest_translation, dtype=np.float64))
     q = _unit(quat_to_y_up(skeleton.rest_rotation))
+    num = _short if short else float
     out = []
     for j in range(len(skeleton.names)):   # one JSON node per joint
         n = {}
         if not _is_default(t[j], [0, 0, 0]):
-            n["translation"] = [float(x) for x in t[j]]
+            n["translation"] = [num(x) for x in t[j]]
         if not _is_default(q[j], [0, 0, 0, 1]):
-            n["rotation"] = [float(x) for x in q[j]]
+            n["rotation"] = [num(x) for x in q[j]]
         out.append(n)
     return out
 
 
-def inverse_bind_accessor(buf: _Buffer, skeleton: Skeleton) -> int:
-    """Accessor of the skin's inverse bind matrices (Y up, column-major float32)."""
+def _short(x) -> float:
+    """The float64 whose shortest text is float32(x)'s: 0.1 for 0.10000000149011612."""
+    return float(str(np.float32(x)))
+
+
+def inverse_bind_accessor(buf: _Buffer, skeleton: Skeleton, grid: Grid | None = None) -> int:
+    """Accessor of the skin's inverse bind matrices (Y up, column-major float32); with a
+    quantization `grid`, each times the grid's dequantization (a skinned mesh's node transform
+    is ignored, so this is where integer positions become metres)."""
     ibm = matrix_to_y_up(skeleton.inverse_bind())
     ibm[:, 3, :] = (0.0, 0.0, 0.0, 1.0)
+    if grid is not None:
+        ibm = ibm @ grid.dequantize()
     return buf.accessor(ibm.transpose(0, 2, 1).reshape(len(ibm), 16).astype(np.float32))
 
 
@@ -263,9 +401,9 @@ def _is_default(v: np.ndarray, default) -> bool:
     return bool(np.array_equal(v, default))
 
 
-def build(asset: Asset) -> tuple[dict, bytes]:
+def build(asset: Asset, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, bytes]:
     """Asset → (glTF JSON dict without buffer uri, binary buffer)."""
-    gltf, buf = _build(asset)
+    gltf, buf = _build(asset, options)
     return gltf, buf.blob()
 
 
@@ -316,16 +454,18 @@ class Textures:
             gltf |= {"images": self.images, "samplers": self.samplers, "textures": self.textures}
 
 
-def material_dict(m: Material, textures: Textures) -> dict:
+def material_dict(m: Material, textures: Textures, uvs: UvRange | None = None) -> dict:
     """A Material as a glTF metallic-roughness material: base colour (and texture), normal map,
-    MASK with its cutoff for alpha-tested leaves, double-sided leaves."""
+    MASK with its cutoff for alpha-tested leaves, double-sided leaves. `uvs`: the box of
+    quantized UVs, undone by KHR_texture_transform on each texture reference."""
     pbr: dict = {"baseColorFactor": [float(c) for c in m.base_color],
                  "metallicFactor": float(m.metallic), "roughnessFactor": float(m.roughness)}
     d: dict = {"name": m.name, "pbrMetallicRoughness": pbr}
+    ext = {} if uvs is None or uvs.identity else {"extensions": uvs.transform()}
     if m.base_texture is not None:
-        pbr["baseColorTexture"] = {"index": textures.index(m.base_texture)}
+        pbr["baseColorTexture"] = {"index": textures.index(m.base_texture), **ext}
     if m.normal_texture is not None:
-        d["normalTexture"] = {"index": textures.index(m.normal_texture)}
+        d["normalTexture"] = {"index": textures.index(m.normal_texture), **ext}
     if m.double_sided:
         d["doubleSided"] = True
     if m.alpha_cutoff is not None:
@@ -334,12 +474,17 @@ def material_dict(m: Material, textures: Textures) -> dict:
     return d
 
 
-def _build(asset: Asset) -> tuple[dict, _Buffer]:
+def _build(asset: Asset, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, _Buffer]:
     """Asset → (glTF JSON dict without buffer uri, the unjoined buffer)."""
-    buf = _Buffer()
+    buf = _Buffer(meshopt=options.compress == "meshopt")
     textures = Textures(buf)
     mat_index = {m.name: i for i, m in enumerate(asset.materials)}
-    materials = [material_dict(m, textures) for m in asset.materials]
+    steps = [meshopt_step(options, lod.distance) if options.compress == "meshopt" else 0.0
+             for lod in asset.lods]
+    quants = [quantization(asset, k, steps[k]) for k in range(len(asset.lods))] if options.quantized \
+        else [None] * len(asset.lods)
+    uv_boxes = quants[0].uvs if quants and quants[0] is not None else {}
+    materials = [material_dict(m, textures, uv_boxes.get(m.name)) for m in asset.materials]
 
     nodes: list[dict] = []
     meshes, skins, animations, lod_nodes, rig_nodes = [], [], [], [], []
@@ -355,7 +500,7 @@ def _build(asset: Asset) -> tuple[dict, _Buffer]:
         roots = np.flatnonzero(parent < 0)
         rig_nodes.append(rig_node)
         nodes.append({"name": f"{asset.name}_LOD{asset.extras.get('lod_index', k)}_rig", "children": [int(x) for x in joint_nodes[roots]]})
-        for j, fields in enumerate(joint_fields(sk)):
+        for j, fields in enumerate(joint_fields(sk, options.quantized)):
             n = {"name": sk.names[j], **fields}
             kids = np.flatnonzero(parent == j)
             if len(kids):
@@ -363,20 +508,21 @@ def _build(asset: Asset) -> tuple[dict, _Buffer]:
             nodes.append(n)
         skin = {"name": f"{asset.name}_LOD{asset.extras.get('lod_index', k)}_skin",
                 "joints": [int(x) for x in joint_nodes],
-                "inverseBindMatrices": inverse_bind_accessor(buf, sk)}
+                "inverseBindMatrices": inverse_bind_accessor(
+                    buf, sk, quants[k].grid if quants[k] is not None else None)}
         if len(roots) == 1:
             skin["skeleton"] = int(joint_nodes[roots[0]])
         skins.append(skin)
         missing = {p.material for p in lod.primitives} - set(mat_index)
         if missing:
             raise ValueError(f"primitives use materials {sorted(missing)} not in asset.materials")
-        prims = [_primitive(buf, p, J, mat_index[p.material]) for p in lod.primitives]
+        prims = [_primitive(buf, p, J, mat_index[p.material], quants[k]) for p in lod.primitives]
         name = f"{asset.name}_LOD{asset.extras.get('lod_index', k)}"
         meshes.append({"name": name, "primitives": prims})
         nodes[mesh_node] = {"name": name, "mesh": len(meshes) - 1, "skin": len(skins) - 1,
                             "extras": lod_extras(asset, k)}
         for clip in lod.clips:
-            anim = _animation(buf, clip, sk, joint_nodes)
+            anim = _animation(buf, clip, sk, joint_nodes, options.quantized)
             if anim is not None:
                 animations.append(anim)
 
@@ -403,10 +549,52 @@ def _build(asset: Asset) -> tuple[dict, _Buffer]:
     if len(asset.lods) > 1:
         set_msft_lod(nodes[lod_nodes[0]], lod_nodes[1:], asset.lods)
         gltf["extensionsUsed"] = ["MSFT_lod"]
+    if buf.meshopt is not None:
+        buf.flush_pools()
     gltf["accessors"] = buf.accessors
     gltf["bufferViews"] = buf.views
     gltf["buffers"] = [{"byteLength": buf.size + len(buf.padding())}]
+    if options.quantized:
+        used = [QUANTIZATION]
+        if any(not box.identity for box in uv_boxes.values()):
+            used.append(TEXTURE_TRANSFORM)
+        if buf.meshopt is not None:
+            used.append(MESHOPT)
+            buf = _meshopt(gltf, buf)
+        gltf["extensionsUsed"] = sorted(gltf.get("extensionsUsed", []) + used)
+        gltf["extensionsRequired"] = sorted(used)
     return gltf, buf
+
+
+def _meshopt(gltf: dict, buf: _Buffer) -> _Buffer:
+    """EXT_meshopt_compression: every view with an encoding (buf.meshopt) is encoded by
+    meshoptimizer into buffer 0; its uncompressed layout moves to buffer 1, a fallback buffer
+    with no data (the extension is required, so no client reads it). Images stay as they are."""
+    assert buf.meshopt is not None
+    order = sorted(buf.meshopt)
+    slot = {v: k for k, v in enumerate(order)}
+    groups = [(slot[i], [slot[v] for v in vs]) for i, vs in buf.groups]
+    encoded = dict(zip(order, encode([(buf.meshopt[i], buf.view_parts[i]) for i in order],
+                                        groups)))
+    out = _Buffer()
+    for i, view in enumerate(buf.views):
+        if i not in encoded:
+            view["byteOffset"] = out.size + (-out.size % 4)
+            out.view(buf.view_parts[i], None)
+            continue
+        spec = buf.meshopt[i]
+        data = encoded[i]
+        offset = out.size + (-out.size % 4)
+        out.view(np.frombuffer(data, dtype=np.uint8), None)
+        view["buffer"] = 1
+        view["extensions"] = {MESHOPT: {
+            "buffer": 0, "byteOffset": offset, "byteLength": len(data), "byteStride": spec.stride,
+            "count": spec.count, "mode": spec.mode,
+            **({"filter": spec.filter} if spec.filter != "NONE" else {})}}
+    out.views, out.accessors = buf.views, buf.accessors
+    fallback = {"byteLength": buf.size + len(buf.padding()), "extensions": {MESHOPT: {"fallback": True}}}
+    gltf["buffers"] = [{"byteLength": out.size + len(out.padding())}, fallback]
+    return out
 
 
 def lod_extras(asset: Asset, k: int) -> dict:
@@ -451,13 +639,14 @@ def glb_bytes(gltf: dict, blob: bytes) -> bytes:
     return _glb_head(gltf, len(blob)) + blob
 
 
-def write_gltf(asset: Asset, path: str | os.PathLike, binary: bool | None = None) -> None:
+def write_gltf(asset: Asset, path: str | os.PathLike, binary: bool | None = None,
+               options: GltfOptions = GLTF_DEFAULTS) -> None:
     """Write straight to `path` (and `<stem>.bin` beside a .gltf); not atomic on its own —
     `exchange.export` stages it."""
     path = Path(path)
     if binary is None:
         binary = path.suffix.lower() != ".gltf"
-    gltf, buf = _build(asset)
+    gltf, buf = _build(asset, options)
     write_document(gltf, buf, path, binary)
     meta = gltf["asset"].get("extras", {}).get("treegen_impostor")
     if meta is not None:                # for engines' impostor shaders: images are in the file
@@ -483,7 +672,7 @@ def write_document(gltf: dict, buf: _Buffer, path: Path, binary: bool) -> None:
 # ---- reading back (tests, `treegen preview`, cross-format checks) ----
 
 _DTYPE = {FLOAT: np.float32, UNSIGNED_BYTE: np.uint8, UNSIGNED_SHORT: np.uint16,
-          UNSIGNED_INT: np.uint32}
+          UNSIGNED_INT: np.uint32, BYTE: np.int8, SHORT: np.int16}
 _NCOMP = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
 
 

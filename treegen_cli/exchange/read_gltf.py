@@ -50,7 +50,10 @@ def read_drawable(path: Path, lod: int = 0) -> Drawable:
     """A .glb/.gltf (ours, or any triangle glTF with at most one skin per LOD node)."""
     try:
         gltf, blob = read_gltf(path)
-        return _gltf_scene(gltf, blob, read_accessor, lod, path)
+        if "EXT_meshopt_compression" in gltf.get("extensionsRequired", []):
+            raise TreegenError(f"{path}: EXT_meshopt_compression data cannot be read here "
+                               "(write it with --compress quantize or none to preview it)")
+        return _gltf_scene(gltf, blob, _accessor, lod, path)
     except TreegenError:
         raise
     except (OSError, ValueError, KeyError, IndexError, TypeError, struct.error) as e:
@@ -179,12 +182,15 @@ def _texture(gltf: dict, ref: dict, images: _Images, channels: int):
     return images.get(source, channels), wrap
 
 
-def _texcoords(gltf: dict, blob: bytes, attributes: dict, n: int) -> np.ndarray | None:
+def _texcoords(gltf: dict, blob: bytes, attributes: dict, n: int,
+               transform: dict | None = None) -> np.ndarray | None:
     """TEXCOORD_n as float32 with the bottom-left origin (glTF's v runs down: v → 1 − v)."""
     key = f"TEXCOORD_{n}"
     if key not in attributes:
         return None
     uv = _accessor(gltf, blob, attributes[key]).astype(np.float32)
+    if transform:           # KHR_texture_transform offset and scale (what --compress writes)
+        uv = uv * np.float32(transform.get("scale", [1, 1])) + np.float32(transform.get("offset", [0, 0]))
     uv[:, 1] = 1.0 - uv[:, 1]
     return uv
 
@@ -198,12 +204,13 @@ def _accessor(gltf: dict, blob: bytes, index: int) -> np.ndarray:
                       5126: "<f4"}[acc["componentType"]])
     ncomp = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}.get(acc["type"])
     if not stride or ncomp is None or stride == ncomp * dtype.itemsize:
-        return read_accessor(gltf, blob, index)
+        a = read_accessor(gltf, blob, index)
+        return np.maximum(a, -1.0) if acc.get("normalized") and dtype.kind == "i" else a
     start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
     a = np.ndarray((acc["count"], ncomp), dtype, buffer=blob, offset=start,
                    strides=(stride, dtype.itemsize)).copy()
-    if acc.get("normalized"):
-        a = a / float(np.iinfo(dtype).max)
+    if acc.get("normalized"):     # signed: c / max, at least -1 (glTF's rule)
+        a = np.maximum(a / float(np.iinfo(dtype).max), -1.0)
     return a
 
 
@@ -212,7 +219,8 @@ def _surface(gltf: dict, blob: bytes, attributes: dict, mat: dict, images: _Imag
     pbr = mat.get("pbrMetallicRoughness", {})
     base, normal = pbr.get("baseColorTexture"), mat.get("normalTexture")
     uv_set = (base or normal or {}).get("texCoord", 0)
-    out: dict = {"uvs": _texcoords(gltf, blob, attributes, uv_set)}
+    transform = (base or normal or {}).get("extensions", {}).get("KHR_texture_transform")
+    out: dict = {"uvs": _texcoords(gltf, blob, attributes, uv_set, transform)}
     mode = mat.get("alphaMode", "OPAQUE")
     if mode in ("MASK", "BLEND"):
         out["alpha_cutoff"] = float(mat.get("alphaCutoff", 0.5)) if mode == "MASK" else 0.5

@@ -1,0 +1,85 @@
+"""File sizes of `--compress none / quantize / meshopt` against gltfpack on the same input.
+
+    python bench/size_bench.py [--species quaking_aspen,black_tupelo] [--sets default]
+
+For the four Weber–Penn paper species × each option set (OPTION_SETS; `--profile NAME` rows
+appear when `treegen make` has that option): LOD0 triangles and joints, the GLB's bytes
+without compression, with `quantize` and `meshopt`, and gltfpack's (npm `gltfpack`, pinned in
+tools/) on the uncompressed file: its default (quantized) and `-cc -af 0` (meshopt, keys
+kept), with the ratios ours / gltfpack. Targets: quantize ≤ gltfpack default, meshopt ≤
+gltfpack -cc -af 0. Each tree is built once and written three ways.
+"""
+from __future__ import annotations
+
+import argparse
+import subprocess
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+from treegen_cli import api
+from treegen_cli.exchange import export
+from treegen_cli.params import load_params
+from treegen_cli.pipeline import Timings
+
+ROOT = Path(__file__).resolve().parent.parent
+SPECIES = ("quaking_aspen", "black_tupelo", "weeping_willow", "ca_black_oak")
+GLTFPACK = ROOT / "tools" / "node_modules" / ".bin" / "gltfpack"
+# name → make options; profiles join when `--profile` exists (api.DEFAULTS["profile"])
+OPTION_SETS: dict[str, dict] = {"default": {}}
+for _profile in ("mobile", "web"):
+    if "profile" in api.DEFAULTS:
+        OPTION_SETS[_profile] = {"profile": _profile}
+
+
+def gltfpack(src: Path, dst: Path, *flags: str) -> int:
+    subprocess.run([str(GLTFPACK), "-i", str(src), "-o", str(dst), *flags], check=True,
+                   capture_output=True)
+    return dst.stat().st_size
+
+
+def row(name: str, set_name: str, options: dict, tmp: Path) -> dict:
+    params = load_params(ROOT / "species" / f"{name}.txt")
+    base = api.resolve({**options, "compress": "none"}, output="x.glb")
+    asset, tree = api.build(params, name, base, Timings())
+    asset = replace(asset, up_axis=base.values["up_axis"])
+    out: dict = {"species": name, "set": set_name,
+                 "triangles": sum(len(p.indices) // 3 for p in asset.lods[0].primitives),
+                 "joints": len(asset.lods[0].skeleton.names)}
+    for compress in ("none", "quantize", "meshopt"):
+        job = api.resolve({**options, "compress": compress}, output="x.glb")
+        path = tmp / f"{name}_{set_name}_{compress}.glb"
+        t0 = time.perf_counter()
+        export(asset, path, job.options.gltf)
+        out[compress] = path.stat().st_size
+        out[f"{compress}_s"] = time.perf_counter() - t0
+    src = tmp / f"{name}_{set_name}_none.glb"
+    out["gp"] = gltfpack(src, tmp / "gp.glb")
+    out["gp_cc"] = gltfpack(src, tmp / "gp_cc.glb", "-cc", "-af", "0")
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--species", default=",".join(SPECIES))
+    ap.add_argument("--sets", default=",".join(OPTION_SETS))
+    args = ap.parse_args()
+    if not GLTFPACK.exists():
+        raise SystemExit(f"{GLTFPACK} missing: run make install (cd tools && npm ci)")
+    mb = 1e6
+    print(f"{'species':<16}{'set':<9}{'tris':>9}{'joints':>7}{'none MB':>9}{'quant MB':>9}"
+          f"{'gp MB':>8}{'q/gp':>6}{'meshopt':>9}{'gp -cc':>8}{'m/gp':>6}{'none/m':>7}")
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in args.species.split(","):
+            for set_name in args.sets.split(","):
+                r = row(name, set_name, OPTION_SETS[set_name], Path(tmp))
+                print(f"{name:<16}{set_name:<9}{r['triangles']:>9,}{r['joints']:>7}"
+                      f"{r['none'] / mb:>9.2f}{r['quantize'] / mb:>9.2f}{r['gp'] / mb:>8.2f}"
+                      f"{r['quantize'] / r['gp']:>6.2f}{r['meshopt'] / mb:>9.2f}"
+                      f"{r['gp_cc'] / mb:>8.2f}{r['meshopt'] / r['gp_cc']:>6.2f}"
+                      f"{r['none'] / r['meshopt']:>7.1f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,261 @@
+"""`--compress quantize|meshopt`: what the integers decode to, against the float file.
+
+One real tree (quaking aspen, a short clip) is built once and written three ways. quantize is
+decoded here (grid positions through the skin's inverse bind matrices, int8 normals, uint16
+UVs through KHR_texture_transform, int16 rotations); meshopt is decoded by three.js's own
+MeshoptDecoder (tests/clients.py), the only reader of it we trust.
+"""
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+import clients
+from conftest import run_treegen, species_path
+from treegen_cli import api
+from treegen_cli.exchange import GltfOptions, export, export_parts
+from treegen_cli.exchange.gltf import read_accessor, read_gltf
+from treegen_cli.exchange.read_gltf import _accessor
+from treegen_cli.exchange.validate import summary, validate_gltf
+from treegen_cli.params import load_params
+from treegen_cli.pipeline import Timings
+from treegen_cli.prepare import split_lods
+
+SPECIES = "quaking_aspen"
+CLIP = {"duration": 2.0, "fps": 10.0}
+MM = 1e-3
+
+
+def _job(compress: str) -> api.Resolved:
+    return api.resolve({**CLIP, "compress": compress}, output="x.glb")
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    """{compress: path} for none / quantize / meshopt of one built aspen, plus the asset."""
+    d = tmp_path_factory.mktemp("compress")
+    job = _job("none")
+    asset, _ = api.build(load_params(species_path(SPECIES)), SPECIES, job, Timings())
+    out = {"asset": asset}
+    for c in ("none", "quantize", "meshopt"):
+        out[c] = d / f"{c}.glb"
+        export(asset, out[c], _job(c).options.gltf)
+    return out
+
+
+def _mesh_node(gltf: dict, lod: int) -> dict:
+    root = gltf["nodes"][gltf["scenes"][0]["nodes"][0]]
+    ids = [gltf["scenes"][0]["nodes"][0], *root.get("extensions", {}).get("MSFT_lod", {}).get("ids", [])]
+    return gltf["nodes"][ids[lod]]
+
+
+def _dequantize(none, quant, lod: int) -> tuple[np.ndarray, np.ndarray]:
+    """(D, spread): the grid's dequantization recovered per joint as IBM_none⁻¹ · IBM_quant
+    (their median) and how far the joints disagree (one grid per skin: float32 rounding only)."""
+    (g0, b0), (g1, b1) = none, quant
+    s0, s1 = (g["skins"][_mesh_node(g, lod)["skin"]] for g in (g0, g1))
+    ibm0 = read_accessor(g0, b0, s0["inverseBindMatrices"]).astype(np.float64)
+    ibm1 = read_accessor(g1, b1, s1["inverseBindMatrices"]).astype(np.float64)
+    d = np.linalg.inv(ibm0) @ ibm1
+    return np.median(d, axis=0), float(np.abs(d - np.median(d, axis=0)).max())
+
+
+def test_extensions_declared_and_required(files):
+    for c, extra in (("quantize", set()), ("meshopt", {"EXT_meshopt_compression"})):
+        gltf, _ = read_gltf(files[c])
+        need = {"KHR_mesh_quantization", "KHR_texture_transform"} | extra
+        assert set(gltf["extensionsRequired"]) == need
+        assert need | {"MSFT_lod"} == set(gltf["extensionsUsed"])
+    assert "extensionsRequired" not in read_gltf(files["none"])[0]
+
+
+@pytest.mark.parametrize("compress", ["quantize", "meshopt"])
+def test_validator_clean(files, compress):
+    report = validate_gltf(files[compress])
+    assert report["issues"]["numErrors"] == 0, summary(report)
+    assert report["issues"]["numWarnings"] == 0, summary(report)
+
+
+def test_quantized_geometry_decodes_within_tolerance(files):
+    """LOD0 positions within 1 mm (16-bit grid: ≤ extent/131070 per axis), every LOD within
+    its grid's half step; normals within 1°, tangents' handedness kept, UVs through the
+    texture transform within half a step of the material's range, weights rows summing to 1."""
+    none, quant = read_gltf(files["none"]), read_gltf(files["quantize"])
+    for lod in range(len(files["asset"].lods)):
+        d, spread = _dequantize(none, quant, lod)
+        step = d[0, 0]
+        assert np.allclose(d[:3, :3], np.eye(3) * step, atol=1e-9) and spread < 1e-5
+        prims0 = none[0]["meshes"][_mesh_node(none[0], lod)["mesh"]]["primitives"]
+        prims1 = quant[0]["meshes"][_mesh_node(quant[0], lod)["mesh"]]["primitives"]
+        for p0, p1 in zip(prims0, prims1):
+            a0, a1 = p0["attributes"], p1["attributes"]
+            pos = read_accessor(*none, a0["POSITION"]).astype(np.float64)
+            q = _accessor(*quant, a1["POSITION"]).astype(np.float64)
+            assert quant[0]["accessors"][a1["POSITION"]]["componentType"] == 5123   # uint16
+            err = np.linalg.norm(q @ d[:3, :3].T + d[:3, 3] - pos, axis=1).max()
+            assert err <= np.sqrt(3) * step / 2 * 1.001
+            if lod == 0:
+                assert err <= 1 * MM
+            n0 = read_accessor(*none, a0["NORMAL"]).astype(np.float64)
+            n1 = _accessor(*quant, a1["NORMAL"])
+            n1 /= np.linalg.norm(n1, axis=1, keepdims=True)
+            assert np.degrees(np.arccos(np.clip((n0 * n1).sum(1), -1, 1))).max() < 1.0
+            if "TANGENT" in a0:
+                t0 = read_accessor(*none, a0["TANGENT"])
+                t1 = _accessor(*quant, a1["TANGENT"])
+                assert np.array_equal(np.sign(t0[:, 3]), t1[:, 3])
+            material = quant[0]["materials"][p1["material"]]
+            ref = material["pbrMetallicRoughness"].get("baseColorTexture", {})
+            tt = ref.get("extensions", {}).get("KHR_texture_transform", {})
+            scale, offset = np.array(tt.get("scale", [1, 1])), np.array(tt.get("offset", [0, 0]))
+            uv0 = read_accessor(*none, a0["TEXCOORD_0"]).astype(np.float64)
+            uv1 = _accessor(*quant, a1["TEXCOORD_0"]) * scale + offset
+            assert np.abs(uv1 - uv0).max() <= scale.max() / 65535 / 2 * 1.001
+            w = _accessor(*quant, a1["WEIGHTS_0"])
+            assert quant[0]["accessors"][a1["WEIGHTS_0"]]["componentType"] == 5121
+            assert np.allclose(w.sum(1), 1.0, atol=1e-6)
+    bark = next(m for m in quant[0]["materials"] if m["name"] == "bark")
+    assert "KHR_texture_transform" in bark["pbrMetallicRoughness"]["baseColorTexture"]["extensions"]
+
+
+def test_quantized_rotations_are_int16_within_one_step(files):
+    none, quant = read_gltf(files["none"]), read_gltf(files["quantize"])
+    a0, a1 = none[0]["animations"][0], quant[0]["animations"][0]
+    for s0, s1 in zip(a0["samplers"], a1["samplers"]):
+        assert quant[0]["accessors"][s1["output"]]["componentType"] == 5122
+        r0 = read_accessor(*none, s0["output"])
+        r1 = _accessor(*quant, s1["output"])
+        assert np.abs(r1 - r0).max() <= 0.5 / 32767 + 1e-7
+
+
+def test_quantized_file_previews_like_the_float_one(files):
+    """treegen's own reader (preview) skins the quantized file like the float one, mid-clip."""
+    from treegen_cli.exchange import read_drawable
+
+    def skinned(drawable, part, t=0.7):
+        s = drawable.pose(t)[0]                                  # (J, 4, 4)
+        p = np.column_stack([part.positions, np.ones(len(part.positions))])
+        m = np.einsum("vk,vkij->vij", part.weights, s[part.joints])
+        return np.einsum("vij,vj->vi", m, p)[:, :3]
+
+    a, b = read_drawable(files["none"]), read_drawable(files["quantize"])
+    assert len(a.parts) == len(b.parts) == 2
+    for pa, pb in zip(a.parts, b.parts):
+        assert np.linalg.norm(skinned(a, pa) - skinned(b, pb), axis=1).max() <= 1 * MM
+
+
+def _three(path, **kw):
+    try:
+        return clients.three_load(path, timeout=300, **kw)
+    except clients.ClientMissing as exc:
+        pytest.skip(str(exc))
+
+
+def test_meshopt_decodes_to_the_grid(files):
+    """three.js's MeshoptDecoder gives back exactly the grid coordinates of the float file's
+    positions, on a grid of ≤ 1.15 mm at LOD0: every position within 1 mm."""
+    r = _three(files["meshopt"], positions=True)
+    assert r["loaded"], r.get("error")
+    none = read_gltf(files["none"])
+    skin = none[0]["skins"][_mesh_node(none[0], 0)["skin"]]
+    ibm0 = read_accessor(*none, skin["inverseBindMatrices"])[0].astype(np.float64)
+    ibm1 = np.asarray(r["skeletons"][0]["bone_inverse_0"], dtype=np.float64).reshape(4, 4).T
+    d = np.linalg.inv(ibm0) @ ibm1
+    step = d[0, 0]
+    assert np.allclose(d[:3, :3], np.eye(3) * step, atol=1e-9)
+    assert np.sqrt(3) * step / 2 <= 1 * MM
+    prims = none[0]["meshes"][_mesh_node(none[0], 0)["mesh"]]["primitives"]
+    for prim, mesh in zip(prims, r["meshes"]):
+        pos = read_accessor(*none, prim["attributes"]["POSITION"]).astype(np.float64)
+        got = np.asarray(mesh["positions"], dtype=np.float64).reshape(-1, 3) * step + d[:3, 3]
+        assert len(got) == len(pos)
+        # every decoded vertex is within 1 mm of a float one and every float one of a decoded
+        # one (the encoder reordered them)
+        assert cKDTree(pos).query(got)[0].max() <= 1 * MM
+        assert cKDTree(got).query(pos)[0].max() <= 1 * MM
+
+
+def test_animation_error_within_the_lod_bound(files):
+    """Every node's world position over each clip, three.js playing each file: int16 rotations
+    (quantize; meshopt's 16-bit quaternion filter) keep them within 1 mm of the float file
+    for LOD0's clip on a 19 m tree, and within a quarter pixel at each lower LOD's distance
+    (default 60°, 1920 px view), on top of the LOD's own error_px."""
+    from treegen_cli.lod import pixel_size
+    base = _three(files["none"], poses=8)
+    bound = [max(1 * MM, pixel_size(lod.distance) / 4) for lod in files["asset"].lods]
+    for c in ("quantize", "meshopt"):
+        r = _three(files[c], poses=8)
+        assert r["loaded"] and not r["warnings"], (r.get("error"), r["warnings"])
+        for k, (a0, a1) in enumerate(zip(base["animations"], r["animations"])):
+            # int16 quaternions are unit only to ~1e-5 and three.js normalizes them on some
+            # paths only: first and last frame agree to a fraction of a millimetre, not 1e-4
+            assert a1["loop_max_diff"] <= 0.5 * MM and abs(a1["bones_moved"] - a0["bones_moved"]) <= 0.05 * a0["bones_moved"]
+            err = np.abs(np.asarray(a1["poses"]) - np.asarray(a0["poses"])).max()
+            assert err <= bound[k], (c, a0["name"], err)
+
+
+def test_meshopt_is_deterministic_and_smaller(files, tmp_path):
+    again = tmp_path / "again.glb"
+    export(files["asset"], again, _job("meshopt").options.gltf)
+    assert again.read_bytes() == files["meshopt"].read_bytes()
+    sizes = [files[c].stat().st_size for c in ("none", "quantize", "meshopt")]
+    assert sizes[0] > 1.5 * sizes[1] > 1.5 * 2 * sizes[2], sizes
+
+
+def test_lod_files_compress_each_part(files, tmp_path):
+    parts = export_parts(split_lods(files["asset"]), tmp_path / "t.glb",
+                         _job("meshopt").options.gltf)
+    assert [p.name for p in parts] == [f"t_LOD{k}.glb" for k in range(len(files["asset"].lods))]
+    for p in parts:
+        gltf, _ = read_gltf(p)
+        assert "EXT_meshopt_compression" in gltf["extensionsRequired"]
+        assert validate_gltf(p)["issues"]["numErrors"] == 0
+
+
+# ---- refusals: one line, exit 2, nothing written ----
+
+@pytest.mark.parametrize("suffix", [".usdc", ".usdz", ".obj"])
+def test_compress_refused_outside_gltf(tmp_path, suffix):
+    out = tmp_path / f"t{suffix}"
+    proc = run_treegen("make", species_path("rush"), "-o", out, "--compress", "quantize")
+    assert proc.returncode == 2
+    assert proc.stderr.count("\n") == 1 and "--compress quantize is for .glb/.gltf only" in proc.stderr
+    assert not any(tmp_path.iterdir())
+
+
+def test_meshopt_without_node_is_one_line(tmp_path):
+    out = tmp_path / "t.glb"
+    env = {**os.environ, "TREEGEN_NODE": str(tmp_path / "no-node")}
+    import subprocess
+    import sys
+    proc = subprocess.run([sys.executable, "-m", "treegen_cli", "make", str(species_path("rush")),
+                           "-o", str(out), "--compress", "meshopt", "--no-lod", "--no-wind"],
+                          capture_output=True, text=True, env=env)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.count("\n") == 1 and "needs Node.js" in proc.stderr
+    assert not any(tmp_path.iterdir())
+
+
+def test_catalogue_compress_refuses_usd_formats(tmp_path):
+    from treegen_cli.batch import load_catalogue
+    from treegen_cli.errors import TreegenError
+    cat = tmp_path / "c.json"
+    cat.write_text(json.dumps({"entries": [{"species": str(species_path("rush")),
+                                            "formats": ["glb", "usdc"], "compress": "meshopt"}]}))
+    with pytest.raises(TreegenError, match=r"entries\[0\]\.compress: meshopt is for glb/gltf only, "
+                                           r"but entries\[0\]\.formats\[1\] is \"usdc\""):
+        load_catalogue(cat)
+    cat.write_text(json.dumps({"entries": [{"species": str(species_path("rush")),
+                                            "compress": "zip"}]}))
+    with pytest.raises(TreegenError, match=r"entries\[0\]\.compress 'zip': use one of none, quantize, meshopt"):
+        load_catalogue(cat)
+
+
+def test_default_options_leave_the_writer_alone():
+    assert _job("none").options.gltf == GltfOptions()
+    assert replace(_job("meshopt").options.gltf, compress="none", pixel_size=0.0) == GltfOptions()
