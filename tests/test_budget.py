@@ -114,7 +114,11 @@ def test_mobile_profile_on_the_paper_species(tmp_path, name):
     s = api.make(species_path(name), tmp_path / "t.glb", profile="mobile")
     mobile = PROFILES["mobile"]
     assert 18_000 <= s["triangles"] <= 20_000 and s["joints"] <= 64   # all far larger as is
-    assert [r["distance_m"] for r in s["lods"]] == [0.0, 15.0, 50.0]
+    screen = [float(x) for x in str(mobile["lod_screen"]).split(",")]
+    assert len(s["lods"]) == len(screen) + 2            # LOD0, one per switch, the impostor
+    assert s["lods"][-1]["triangles"] == 8              # the impostor's crossed cards
+    distances = [r["distance_m"] for r in s["lods"]]
+    assert distances[0] == 0.0 and distances == sorted(distances)
     assert s["keys"] == mobile["duration"] * mobile["fps"] + 1
     tris = [r["triangles"] for r in s["lods"]]
     assert tris == sorted(tris, reverse=True), tris      # LODs never add triangles
@@ -128,7 +132,8 @@ def test_explicit_options_win_over_the_profile(tmp_path):
                    "--texture-size", "64")
     assert s["keys"] == 6 * 30 + 1               # mobile's 6 s clip at the typed 30 fps
     assert s["joints"] == 12
-    assert [r["distance_m"] for r in s["lods"]] == [0.0, 40.0]
+    assert [r["distance_m"] for r in s["lods"]][:2] == [0.0, 40.0]   # then the impostor
+    assert len(s["lods"]) == 3
     assert s["triangles"] <= 20_000
     from treegen_cli import api
     v = api.resolve({"profile": "web", "triangles": 30_000, "max_joints": 256}).values

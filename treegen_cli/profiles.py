@@ -15,17 +15,23 @@ from typing import Callable
 
 from .errors import TreegenError
 
-# What each row is for, then the options it sets. LOD distances are the switch distances in
-# metres (LOD0 first); triangles is the LOD0 budget (budget.py).
+# The options each row sets. lod_screen: the tree's height on screen below which LOD1, LOD2, …
+# take over (lod.switch_distances); lod_triangles: their budgets as fractions of LOD0's
+# (lod_budget.py); triangles: the LOD0 budget (budget.py); compress: the glTF encoding (web
+# pages decode meshopt; game engines' importers mostly read only plain files: README).
 PROFILES: dict[str, dict[str, object]] = {
     "mobile": {"triangles": 20_000, "max_joints": 64, "texture_size": 256,
-               "duration": 6.0, "fps": 15.0, "lod_distances": "0,15,50"},
+               "duration": 6.0, "fps": 15.0, "lod_screen": "0.3,0.1", "lod_triangles": "0.4,0.1",
+               "compress": "none"},
     "web": {"triangles": 50_000, "max_joints": 128, "texture_size": 512,
-            "duration": 8.0, "fps": 24.0, "lod_distances": "0,15,40,120"},
+            "duration": 8.0, "fps": 24.0, "lod_screen": "0.4,0.2,0.08",
+            "lod_triangles": "0.5,0.15,0.05", "compress": "meshopt"},
     "desktop": {"triangles": 150_000, "max_joints": 256, "texture_size": 1024,
-                "duration": 10.0, "fps": 30.0, "lod_distances": "0,10,30,130"},
+                "duration": 10.0, "fps": 30.0, "lod_screen": "0.5,0.25,0.1",
+                "lod_triangles": "0.5,0.15,0.05", "compress": "none"},
     "hero": {"triangles": 500_000, "max_joints": 512, "texture_size": 2048,
-             "duration": 20.0, "fps": 30.0, "lod_distances": "0,20,60,200"},
+             "duration": 20.0, "fps": 30.0, "lod_screen": "0.6,0.3,0.12",
+             "lod_triangles": "0.5,0.2,0.05", "compress": "none"},
 }
 PURPOSE = {
     "mobile": "phones and tablets; many trees on screen",
