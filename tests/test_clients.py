@@ -98,7 +98,7 @@ def test_godot_imports_each_lod_file(godot, files, species):
         _godot_checks(godot[str(p)], 1, sways=k == 0, impostor=int(k == 4))
 
 
-def _web_checks(r, n_skinned_lods=1, far=False, loop_tol=None):
+def _web_checks(r, n_skinned_lods=1, far: bool | None = False, loop_tol=None):
     """`far`: the impostor's file, whose one joint's sway is decimated for ~300 m (a handful of
     keys, ~1 px of motion): it moves, but may be still at the client's sample time. `loop_tol`:
     int16 keys (compressed files), unit quaternions to ~1e-5, which three.js renormalizes on
@@ -124,7 +124,8 @@ def _web_checks(r, n_skinned_lods=1, far=False, loop_tol=None):
                 assert m["transparency_mode"] == 1 and m["back_face_culling"], m
     anims = {a["name"]: a for a in r["animations"]}
     wind = anims["wind_loop"]
-    assert wind["max_local_change"] > 0 if far else wind["bones_moved"] > 0
+    if far is not None:     # None: a lower LOD of a short clip, which may hold its end keys only
+        assert wind["max_local_change"] > 0 if far else wind["bones_moved"] > 0
     if loop_tol is None:
         assert wind["loop_closes"]
     else:
@@ -154,8 +155,11 @@ def test_three_and_babylon_load_and_play(web, files, species):
 def test_lod_files_load_in_three_and_babylon(web, files):
     for k, p in enumerate(files["quaking_aspen"][1]):
         three, babylon = web[str(p)]
-        _web_checks(three, far=k == 4)
-        _web_checks(babylon, far=k == 4)
+        # LOD0 sways; LOD1-3 (57-287 m) and the impostor (430 m) of this short clip may keep
+        # only their end keys (the impostor's sway: test_impostor)
+        far = False if k == 0 else None
+        _web_checks(three, far=far)
+        _web_checks(babylon, far=far)
         assert len(three["skeletons"]) == 1 and len(three["animations"]) == 1
 
 
@@ -213,7 +217,7 @@ def test_compressed_files_load_and_play(compressed, compressed_web, species, com
     _web_checks(babylon, loop_tol=1e-3)
     assert "KHR_mesh_quantization" in three["extensions_required"]
     assert ("EXT_meshopt_compression" in three["extensions_required"]) == (compress == "meshopt")
-    assert babylon["msft_lod_levels_loaded"] == [0, 1, 2, 3]
+    assert babylon["msft_lod_levels_loaded"] == [0, 1, 2, 3, 4]     # 4 LODs + the impostor
     assert all(m["vertices"] > 0 for m in three["meshes"] + babylon["meshes"])
     report = validate_gltf(path)
     assert report["issues"]["numErrors"] == 0, summary(report)
@@ -221,7 +225,7 @@ def test_compressed_files_load_and_play(compressed, compressed_web, species, com
 
 def test_compressed_lod_files_load_and_play(compressed, compressed_web):
     parts = compressed["quaking_aspen", "meshopt-parts"]
-    assert [p.stem for p in parts] == [f"quaking_aspen_LOD{k}" for k in range(4)]
+    assert [p.stem for p in parts] == [f"quaking_aspen_LOD{k}" for k in range(5)]
     for p in parts:
         three, babylon = compressed_web[str(p)]
         assert three["loaded"] and babylon["loaded"], (three.get("error"), babylon.get("error"))

@@ -67,7 +67,7 @@ def test_wheel_installs_into_a_fresh_venv_and_makes_a_tree_by_name(tmp_path):
     assert int(count) == len(list((ROOT / "treegen_cli" / "species").glob("*.txt")))
 
     _run([venv / "bin" / "treegen", "make", "quaking_aspen", "-o", "x.glb", "-q"], env=env, cwd=empty)
-    assert sorted(p.name for p in empty.iterdir()) == ["x.glb"]
+    assert sorted(p.name for p in empty.iterdir()) == ["x.glb", "x.glb.impostor.json"]
     doc, bin_len = _glb_chunks(empty / "x.glb")
     assert doc["asset"]["version"] == "2.0" and doc["buffers"][0]["byteLength"] <= bin_len
     assert doc["skins"] and doc["animations"][0]["name"] == "wind_loop"

@@ -325,8 +325,11 @@ def joint_loads(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS) -> JointL
     spread = np.sqrt(3.0 * np.maximum(inertia / np.maximum(m_sub, 1e-12) - lever**2, 0.0))
     compliance = _span_compliance(tree, rig, carrier, bearing, lever, spread)
     # a joint whose span has no length (a LOD's joint on a kept stem's base, where its parent's
-    # sits) is rigid: as stiff as a billionth of the most compliant joint, not infinitely
-    floor = max(float(compliance.max(initial=0.0)) * 1e-9, 1e-300)
+    # sits) is rigid: a thousand times as stiff as the stiffest real joint, not infinitely (a
+    # floor relative to the most compliant joint reached the willow's trunk: its strands are
+    # hair-thin, and the trunk swayed at 0.1 Hz)
+    positive = compliance[compliance > 0]
+    floor = float(positive.min()) * 1e-3 if positive.size else 1e-300
     stiffness = options.stiffness * options.elastic_modulus / np.maximum(compliance, floor)
     stiffness = np.maximum(stiffness, 1e-9)   # a massless zero-radius joint must not divide by zero
     return JointLoads(pivot, direction, own_area, own_moment, m_sub, inertia, s_sub, S_sub,
