@@ -64,12 +64,17 @@ def estimate_vertices(tree, options) -> tuple[int, int]:
     return bark, leaves
 
 
+def bark_triangles(tree, options) -> np.ndarray:
+    """Per stem (S,), the bark triangles mesh.build_mesh emits: two per side between
+    consecutive rings plus a fan of `sides` to the apex."""
+    rings, sides = _rings_sides(tree, options)
+    return (2 * (rings - 1) + 1) * sides
+
+
 def estimate_triangles(tree, options) -> tuple[int, int]:
     """(bark, leaf) triangle counts mesh.build_mesh will emit, exact in the same sense as
-    estimate_vertices: two per side between consecutive rings plus a fan of `sides` to the
-    apex per stem; the outline's triangles per leaf."""
-    rings, sides = _rings_sides(tree, options)
-    bark = int(np.sum((2 * (rings - 1) + 1) * sides))
+    estimate_vertices: bark_triangles summed; the outline's triangles per leaf."""
+    bark = int(np.sum(bark_triangles(tree, options)))
     leaves = 0
     if options.leaves and tree.n_leaves:
         leaves = tree.n_leaves * len(leaf_outline(tree, options).triangles)

@@ -19,8 +19,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .limits import bark_triangles
 from .lod_leaves import prune_stems, stem_closure, thin_leaves
-from .mesh import MeshOptions, _per_level, pointed_tips, stem_sides
+from .mesh import MeshOptions
 from .tree import Tree
 
 
@@ -42,18 +43,6 @@ def capped_sides(table: tuple[int, ...], cap: tuple[int, ...]) -> tuple[int, ...
     """Per level the smaller of two side tables (each one's last entry repeats)."""
     n = max(len(table), len(cap))
     return tuple(min(table[min(i, len(table) - 1)], cap[min(i, len(cap) - 1)]) for i in range(n))
-
-
-def bark_triangles(tree: Tree, mesh: MeshOptions) -> np.ndarray:
-    """Per stem (S,), the bark triangles mesh.py draws: sides × 2 per ring pair plus the tip's
-    fan (an upper bound: a pointed tip drops its last ring, flare rings may merge)."""
-    sides = stem_sides(tree, mesh).astype(np.int64)
-    m = _per_level(mesh.rings_per_segment, tree.stem_level.astype(np.int64)).astype(np.int64)
-    rings = (tree.stem_node_count.astype(np.int64) - 1) * m + 1
-    if tree.params.flare > 0 and mesh.flare_rings > 0:
-        rings = rings + np.where((tree.stem_level == 0) & ~tree.stem_clone, mesh.flare_rings, 0)
-    rings = rings - pointed_tips(tree, mesh)
-    return sides * (2 * (rings - 1) + 1)
 
 
 def keep_stems(tree: Tree, per_stem: np.ndarray, budget: float, min_radius: float = 0.0) -> np.ndarray:
