@@ -64,7 +64,6 @@ class LodOptions:
     aspect: float = 16.0 / 9.0
     sides: tuple[tuple[int, ...], ...] = ((16, 8, 6, 4, 3), (8, 6, 4, 3), (6, 4, 3), (4, 3))
     joint_fraction: tuple[float, ...] = (1.0, 0.5, 0.25, 0.125)  # × the joint budget
-    drop_levels: tuple[int, ...] = (0, 0, 1, 1)  # finest stem levels dropped (≥ 2 levels remain)
     triangles: tuple[float, ...] = (1.0, 0.5, 0.15, 0.05)  # × LOD0's triangles (lod_budget.py)
     max_iterations: int = 200                  # playback-check refinement rounds per level
 
