@@ -263,9 +263,7 @@ def test_static_wind_solves_the_coupled_system(tree_rig):
     opts = WindOptions(speed=5.0, gust=0.0, turbulence=0.0, stem_drag_coefficient=0.0, **FAST)
     theta = wind_angles(tree, rig, opts, seed=0)
     assert np.allclose(theta, theta[:, :1], atol=1e-15)              # steady: constant in time
-    loads = joint_loads(tree, rig, opts)
-    dyn = dynamics(tree, rig, opts, loads)
-    parent = rig.skeleton.parent.astype(np.int64)
+    loads, dyn, parent = _model(tree, rig, opts)
     # hand: drag of every leaf about every ancestor joint of its carrier
     centre = tree.leaf_pos + 0.5 * tree.leaf_size[:, :1] * tree.leaf_frame[:, :, 1]
     soften = (1.0 + (5.0 / opts.reconfig_speed) ** 2) ** (0.5 * opts.vogel_exponent)
@@ -299,13 +297,17 @@ def _mass_points(tree, rig, opts):
     return x, np.concatenate([wood, leaf]), rod, u, owner
 
 
+def _model(tree, rig, opts):
+    """(loads, dynamics, parent) of the coupled model, as the energy tests need them."""
+    loads = joint_loads(tree, rig, opts)
+    return loads, dynamics(tree, rig, opts, loads), rig.skeleton.parent.astype(np.int64)
+
+
 def test_mass_matrix_is_the_kinetic_energy(tree_rig):
     """½ θ̇ᵀ M θ̇ equals ½ Σ m |v|² (+ rods' spin) of every mass point moving with the joints."""
     tree, rig = tree_rig
     opts = WindOptions()
-    loads = joint_loads(tree, rig, opts)
-    dyn = dynamics(tree, rig, opts, loads)
-    parent = rig.skeleton.parent.astype(np.int64)
+    loads, dyn, parent = _model(tree, rig, opts)
     x, m, rod, u, owner = _mass_points(tree, rig, opts)
     rng = np.random.default_rng(3)
     for _ in range(3):
@@ -329,9 +331,7 @@ def test_gravity_stiffness_is_the_potential_energy_curvature(tree_rig):
 
     tree, rig = tree_rig
     opts = WindOptions()
-    loads = joint_loads(tree, rig, opts)
-    dyn = dynamics(tree, rig, opts, loads)
-    parent = rig.skeleton.parent.astype(np.int64)
+    loads, dyn, parent = _model(tree, rig, opts)
     free = np.arange(parent.shape[0])
     x, m, _, _, owner = _mass_points(tree, rig, opts)
 
