@@ -78,14 +78,19 @@ def test_still_has_tree_pixels_with_bark_and_leaf_colours(tmp_path, capsys):
 
 @needs_egl
 def test_preview_of_written_glb_and_usd_matches_in_process_render(written, tmp_path, capsys):
-    for name in ("palm.glb", "palm.usdc"):
-        code, out, err = run(["preview", written / name, "-o", tmp_path / f"{name}.png",
+    # the species itself too: grown in-process at LOD 0 it skips the LOD chain (preview.py),
+    # and must still be the tree `make` wrote
+    for name, src in (("palm.glb", written / "palm.glb"), ("palm.usdc", written / "palm.usdc"),
+                      ("species", SMALL)):
+        code, out, err = run(["preview", src, "-o", tmp_path / f"{name}.png",
                               "--size", "64", "--azimuth", "30", "--elevation", "20"], capsys)
         assert code == 0, err
     a, b = _rgb(tmp_path / "palm.glb.png"), _rgb(tmp_path / "palm.usdc.png")
+    c = _rgb(tmp_path / "species.png")
     assert a.shape == (64, 64, 3)
     # float32 files, one skinning path: the pictures agree but for a few edge pixels
     assert (np.abs(a.astype(int) - b.astype(int)).sum(-1) > 30).mean() < 0.02
+    assert (np.abs(a.astype(int) - c.astype(int)).sum(-1) > 30).mean() < 0.02
 
 
 @needs_egl

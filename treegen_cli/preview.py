@@ -25,7 +25,7 @@ from .drawable import Drawable, from_asset
 from .bundled import LIST_HINT, bundled_species, not_found
 from .errors import TreegenError
 from .params import load_params
-from .pipeline import build_asset
+from .pipeline import MakeOptions, build_asset
 from .render import frame_points, skin_points
 
 
@@ -58,8 +58,10 @@ def load_scene(path: str | os.PathLike, options: PreviewOptions = DEFAULTS) -> D
     if not exchange.is_species(path):
         return exchange.read_drawable(path, options.lod)
     params = load_params(path)
+    # LOD 0 alone needs no LOD chain: skip building (and cutting leaves for) the others
+    make = replace(MakeOptions(), lod=None) if options.lod == 0 else MakeOptions()
     try:
-        asset, _ = build_asset(params, options.seed)
+        asset, _ = build_asset(params, options.seed, make)
     except TreegenError as e:
         raise TreegenError(f"{path}: {e}") from None
     return from_asset(asset, options.lod, label=str(path))
