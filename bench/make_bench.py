@@ -3,7 +3,8 @@ each run as its own `treegen make` process (python -c ... cli.main()) (imports, 
 interpreter exit all count). Prints seconds (median of --repeat runs), peak resident MB (the
 child's ru_maxrss, median) and the file size. Target: weeping willow under 4 s and under 1 GB.
 
-    python bench/make_bench.py [--repeat 3] [--seed 0] [--root DIR] [species ...] [-- make options]
+    python bench/make_bench.py [--repeat 3] [--seed 0] [--root DIR] [--against=OPTIONS] [species ...]
+                               [-- make options]
 
 e.g. `python bench/make_bench.py weeping_willow -- --no-lod --leaf-geometry shape`.
 
@@ -17,6 +18,15 @@ single-LOD tree as before); "default" adds the 4 LODs that `make` now writes by 
     black_tupelo     1.10 s  191 MB  28 MB   0.71 s  121 MB  13 MB   1.42 s  149 MB  27 MB
     weeping_willow   6.66 s 1267 MB 331 MB   2.50 s  499 MB  96 MB   4.55 s  661 MB 187 MB
     ca_black_oak     1.24 s  246 MB  42 MB   0.95 s  128 MB  15 MB   1.28 s  153 MB  27 MB
+
+Textures' cost (issue 12: at most +20 %), `--against=--no-textures`, median of 3, CPU seconds of
+the whole process (user + system; the box ran at load 15-19, so wall seconds mean little):
+
+    species          textures  --no-textures  ratio   file MB (ratio)
+    quaking_aspen      2.21       2.12        1.04    13.83 / 13.37 (1.03)
+    black_tupelo       2.72       2.36        1.15    33.77 / 33.31 (1.01)
+    weeping_willow    15.06      14.89        1.01   256.19 / 255.67 (1.00)
+    ca_black_oak       2.71       2.54        1.07    40.97 / 40.71 (1.01)
 """
 from __future__ import annotations
 
