@@ -549,21 +549,28 @@ def _build(asset: Asset, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, _B
     if len(asset.lods) > 1:
         set_msft_lod(nodes[lod_nodes[0]], lod_nodes[1:], asset.lods)
         gltf["extensionsUsed"] = ["MSFT_lod"]
+    return gltf, finish(gltf, buf, options.quantized, uv_boxes.values())
+
+
+def finish(gltf: dict, buf: _Buffer, quantized: bool, uv_boxes) -> _Buffer:
+    """Accessors, views and buffers into `gltf`; with --compress, the extensions it uses
+    (KHR_texture_transform when a material's UV box is not the identity) and the meshopt
+    encoding. Returns the buffer to write (tree and forest writers alike)."""
     if buf.meshopt is not None:
         buf.flush_pools()
     gltf["accessors"] = buf.accessors
     gltf["bufferViews"] = buf.views
     gltf["buffers"] = [{"byteLength": buf.size + len(buf.padding())}]
-    if options.quantized:
+    if quantized:
         used = [QUANTIZATION]
-        if any(not box.identity for box in uv_boxes.values()):
+        if any(not box.identity for box in uv_boxes):
             used.append(TEXTURE_TRANSFORM)
         if buf.meshopt is not None:
             used.append(MESHOPT)
             buf = _meshopt(gltf, buf)
         gltf["extensionsUsed"] = sorted(gltf.get("extensionsUsed", []) + used)
         gltf["extensionsRequired"] = sorted(used)
-    return gltf, buf
+    return buf
 
 
 def _meshopt(gltf: dict, buf: _Buffer) -> _Buffer:
