@@ -336,10 +336,37 @@ def plan_jobs(cat: Catalogue, out_dir: str | os.PathLike, force: bool = False) -
     return Plan(build=build, skip=skip, previous=previous)
 
 
-def estimate(cat: Catalogue, plan: Plan) -> dict[str, tuple[float, float, str]]:
+def plan_trees(cat: Catalogue, jobs: list[Job]) -> dict[str, list[dict] | str]:
+    """Per task of `jobs`: what its build will have per LOD (pipeline.plan_asset: triangles,
+    vertices, joints, switch distance; budgets, profiles and joint limits applied as the build
+    applies them), or the one-line error the build would fail with. Grown here, one tree at a
+    time, without wind, textures or the impostor atlas."""
+    from .pipeline import plan_asset
+
+    out: dict[str, list[dict] | str] = {}
+    for job in jobs:
+        if job.task in out:
+            continue
+        r = cat.resolved[job.task]
+        try:
+            out[job.task] = plan_asset(cat.params[job.species], r.seed, r.options)
+        except TreegenError as e:
+            out[job.task] = str(e)
+    return out
+
+
+# bytes per vertex (float32 position, normal, UV; joints, weights, tangents on bark) and per
+# triangle (indices), and the share of that --compress keeps (README: ~60 %, ~a fifth)
+_VERTEX_BYTES, _TRIANGLE_BYTES = 48, 8
+_COMPRESSED = {"none": 1.0, "quantize": 0.6, "meshopt": 0.2}
+
+
+def estimate(cat: Catalogue, plan: Plan,
+             shapes: dict[str, list[dict] | str] | None = None) -> dict[str, tuple[float, float, str]]:
     """Per output path: (bytes, seconds, how). Measured when an earlier run built the same
-    species, format and options (any seed); otherwise a rough model from the leaf and stem
-    counts the species predicts (generate.estimate_counts) and the clip length."""
+    species, format and options (any seed); otherwise a model of the clip length and either
+    the planned LODs (`shapes`, plan_trees: "plan") or the leaf and stem counts the species
+    predicts (generate.estimate_counts: "model")."""
     from .generate import estimate_counts
 
     measured: dict[tuple, list] = {}
@@ -355,13 +382,23 @@ def estimate(cat: Catalogue, plan: Plan) -> dict[str, tuple[float, float, str]]:
         if m:
             out[job.output] = (sum(b for b, _ in m) / len(m), sum(s for _, s in m) / len(m), "measured")
             continue
-        stems, leaves = estimate_counts(cat.params[job.species])
-        lods = 1 if r.options.lod is None else r.options.lod.count
         frames = 0 if r.options.wind is None else r.options.wind.duration * r.options.wind.fps + 1
-        verts = (leaves * 4 + stems * 60) * (1.0 if lods == 1 else 1.9)
-        size = verts * 27 + r.options.rig.max_joints * frames * 16 * min(lods, 2)
+        shape = shapes.get(job.task) if shapes is not None else None
+        if isinstance(shape, list):
+            lods = len(shape)
+            verts = sum(row["vertices"] for row in shape)
+            size = _COMPRESSED[r.values["compress"]] * sum(
+                row["vertices"] * _VERTEX_BYTES + row["triangles"] * _TRIANGLE_BYTES
+                for row in shape) + shape[0]["joints"] * frames * 16 * min(lods, 2)
+            how = "plan"
+        else:
+            stems, leaves = estimate_counts(cat.params[job.species])
+            lods = 1 if r.options.lod is None else r.options.lod.count
+            verts = (leaves * 4 + stems * 60) * (1.0 if lods == 1 else 1.9)
+            size = verts * 27 + r.options.rig.max_joints * frames * 16 * min(lods, 2)
+            how = "model"
         secs = 0.03 + verts * 0.9e-6 + (lods > 1) * 0.1 + frames * 5e-4
-        out[job.output] = (size, secs, "model")
+        out[job.output] = (size, secs, how)
     return out
 
 
