@@ -149,7 +149,7 @@ def build_forest(scene: Forest, options: GltfOptions = GLTF_DEFAULTS) -> tuple[d
 
 def _build_forest(scene: Forest, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, _Buffer]:
     """Scene → (glTF JSON dict without buffer uri, the unjoined buffer)."""
-    buf = _Buffer(meshopt=options.compress == "meshopt")
+    buf = _Buffer(meshopt=options.compress == "meshopt", pooled=options.quantized)
     sh = _Shared(scene, buf, options)
     nodes: list[dict] = []
     skins: list[dict] = []
