@@ -361,10 +361,43 @@ def test_dry_run_prints_the_table_and_an_estimate_and_writes_nothing(workspace):
     lines = proc.stdout.splitlines()
     assert len(lines) == 14 and "est MB" in lines[0] and "rush_8.glb" in lines[12]
     assert "12 jobs: 12 to build (10 trees)" in lines[-1] and "on 2 worker(s)" in lines[-1]
-    assert not out.exists()
-    plan = json.loads(treegen("batch", workspace / "catalogue.json", "-o", out, "--dry-run",
-                              "--json").stdout)
-    assert plan["build"] == 12 and plan["estimated_bytes"] > 0 and not out.exists()
+    assert not out.exists()       # (--json: test_dry_run_plans_what_the_run_builds_…)
+
+
+def test_dry_run_plans_what_the_run_builds_with_budgets_and_profiles(workspace):
+    """--dry-run applies --profile, --triangles and --joints as the build does: per job the
+    LOD count, triangles, joints and switch distances it prints are the manifest's after the
+    real run, and a budget the species cannot meet is the same failure in both."""
+    cat = workspace / "budgets.json"
+    cat.write_text(json.dumps({"defaults": {"duration": 1, "fps": 10}, "entries": [
+        {"species": "species/rush.txt", "seeds": [1], "profile": "mobile"},
+        {"species": "species/pair_small.txt", "seeds": [2], "triangles": 1500, "joints": 6,
+         "formats": ["glb", "usda"]},
+        {"species": "species/rush.txt", "seeds": [3], "triangles": 10, "name": "tiny.{ext}"}]}))
+    out = workspace / "budgets"
+    dry = treegen("batch", cat, "-o", out, "--dry-run", "--json")
+    assert dry.returncode == 1 and not out.exists()
+    assert dry.stderr.count("\n") == 1 and "would fail: entries[2] seed 3 (tiny.glb)" in dry.stderr
+    doc = json.loads(dry.stdout)
+    assert doc["build"] == 4 and doc["trees"] == 3 and doc["failing"] == 1
+    assert doc["estimated_bytes"] > 0 and "plan" in doc["estimate"]
+    planned = {j["path"]: j for j in doc["jobs"]}
+    assert "use --triangles" in planned["tiny.glb"]["error"]
+    rush, pair = planned["rush_1.glb"], planned["pair_small_2.glb"]
+    assert rush["triangles"][0] <= 20_000 and max(rush["joints"]) <= 64      # the mobile row
+    assert len(rush["triangles"]) == 4                      # 0.3,0.1 switches + the impostor
+    assert 1350 <= pair["triangles"][0] <= 1500 and pair["joints"][0] <= 6
+    run = treegen("batch", cat, "-o", out, "--workers", "1")
+    assert run.returncode == 1, run.stderr
+    rows = {r["path"]: r for r in json.loads((out / "manifest.json").read_text())["assets"]}
+    assert rows["tiny.glb"]["status"] == "failed"
+    for path, job in planned.items():
+        if path == "tiny.glb":
+            continue
+        row = rows[path]
+        assert row["status"] == "built"
+        for key in ("triangles", "joints", "lod_distances_m"):
+            assert job[key] == row[key], (path, key)
 
 
 def test_schema_and_defaults_agree_with_make():

@@ -70,6 +70,28 @@ def test_every_species_meets_the_budget_or_names_its_minimum(name):
     assert tree.params == plan.params
 
 
+@pytest.mark.parametrize("triangles", [1500, 3000])
+def test_a_tree_whose_leaves_round_away_still_counts_them(triangles):
+    """pair_small has so few leaves that at the lowest LeafQuality factor none is grown: the
+    plan counts them at factor 1 instead of taking the tree for leafless, so the build (which
+    grows them) stays within [0.9 N, N] (it built 1,506 for --triangles 1500) and the plan's
+    count is the built count."""
+    from treegen_cli.budget import BudgetOptions, plan_budget
+    from treegen_cli.materials import MaterialOptions
+    from treegen_cli.mesh import MESH_DEFAULTS
+    from treegen_cli.params import load_params
+    from treegen_cli.pipeline import MakeOptions, build_asset
+
+    params = load_params(ROOT / "tests" / "fixtures" / "pair_small.txt")
+    budget = BudgetOptions(triangles=triangles)
+    options = MakeOptions(wind=None, lod=None, materials=MaterialOptions(textures=False),
+                          budget=budget)
+    asset, tree = build_asset(params, 2, options)
+    built = sum(len(p.indices) // 3 for p in asset.lods[0].primitives)
+    assert tree.n_leaves > 0 and 0.9 * triangles <= built <= triangles, built
+    assert plan_budget(params, 2, MESH_DEFAULTS, budget).triangles == built
+
+
 def test_budget_keeps_leaf_area_and_refines_small_trees():
     """Coarsening keeps the species' leaf area (fewer, larger leaves); a tree under its budget
     gets more, smaller leaves instead of staying short of it."""

@@ -574,6 +574,68 @@ def test_walk_forest_is_validator_clean_and_loads_in_godot_and_three(walk):
     assert clip["bones_moved"] > 0 and clip["loop_closes"]
 
 
+def _geometry_bytes(path: Path) -> int:
+    """The file's bytes less its embedded PNGs (stored alike by every --compress)."""
+    gltf, _ = read_gltf(path)
+    return path.stat().st_size - sum(gltf["bufferViews"][i["bufferView"]]["byteLength"]
+                                     for i in gltf.get("images", []))
+
+
+def test_compressed_walk_forest_is_validator_clean_and_plays_in_three(walk, tmp_path):
+    """`--compress quantize|meshopt` on the all-LOD forest: extensions required, validator
+    clean, three.js (MeshoptDecoder for meshopt) loads every tree and plays the clip with every
+    node within 1 mm × the largest instance scale of the float file's poses; geometry shrinks."""
+    import clients
+    from treegen_cli.exchange.validate import ValidatorUnavailable, summary, validate_gltf
+    from treegen_cli.forest import gltf_options
+
+    layout, sc, files = walk
+    try:
+        base = clients.three_load(files[".glb"], poses=4, timeout=300)
+    except clients.ClientMissing as e:
+        pytest.skip(str(e))
+    bound = 1e-3 * max(i.scale for i in sc.instances)
+    sizes = [_geometry_bytes(files[".glb"])]
+    for c in ("quantize", "meshopt"):
+        path = tmp_path / f"walk_{c}.glb"
+        write_scene(sc, path, gltf_options(layout, c))
+        gltf, _ = read_gltf(path)
+        need = {"KHR_mesh_quantization", "KHR_texture_transform"} | (
+            {"EXT_meshopt_compression"} if c == "meshopt" else set())
+        assert set(gltf["extensionsRequired"]) == need
+        assert len(gltf["meshes"]) == sum(len(a.lods) for a in sc.prototypes)   # still shared
+        try:
+            report = validate_gltf(path)
+        except ValidatorUnavailable as e:
+            pytest.skip(str(e))
+        assert report["issues"]["numErrors"] == 0 and report["issues"]["numWarnings"] == 0, \
+            summary(report)
+        r = clients.three_load(path, poses=4, timeout=300)
+        assert r["loaded"] and not r["warnings"], r.get("error") or r["warnings"]
+        assert len(r["skeletons"]) == len(base["skeletons"]) == len(sc.instances)
+        (clip,), (clip0,) = r["animations"], base["animations"]
+        assert clip["tracks"] == clip0["tracks"] and clip["bones_moved"] > 0
+        err = np.abs(np.asarray(clip["poses"]) - np.asarray(clip0["poses"])).max()
+        assert err <= bound, (c, err)
+        sizes.append(_geometry_bytes(path))
+    assert sizes[0] > 1.4 * sizes[1] > 1.4 * 2 * sizes[2], sizes
+
+
+def test_forest_compress_refused_for_usd(tmp_path):
+    import subprocess
+    import sys
+    layout = write_layout(tmp_path, no_camera(scatter=[]))
+    out = tmp_path / "out"
+    out.mkdir()
+    proc = subprocess.run([sys.executable, "-m", "treegen_cli", "forest", str(layout), "-o",
+                           str(out / "f.usdc"), "--compress", "meshopt"], capture_output=True,
+                          text=True)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.count("\n") == 1, proc.stderr
+    assert "--compress meshopt is for .glb/.gltf only (USD has no such encoding" in proc.stderr
+    assert not any(out.iterdir())
+
+
 def test_camera_orders_the_walk_forest_nearest_first(scene, tmp_path):
     layout, baked = scene
     walk_sc = build_scene(layout, workers=1, progress=False)

@@ -68,7 +68,7 @@ INTS = ("seed", "max_stems", "max_leaves", "max_joints", "width", "max_vertices"
         "texture_size")
 OPTIONAL_INTS = ("triangles", "joints")      # None: no budget / --max-joints decides
 # Options added after assets were first keyed: left out of identity hashes while unset, so a
-# catalogue built before they existed keeps its keys (batch.py).
+# catalogue built before they existed keeps its keys (batch/catalogue.py).
 UNSET_FREE = ("triangles", "joints", "profile")
 PATHS = ("leaf_texture", "bark_texture")
 FLOATS = ("max_size", "wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "fov", "error_px",

@@ -134,6 +134,17 @@ def _leaf_count(per_unit: float, factor: float) -> int:
     return int(math.floor(per_unit * factor + 0.5))
 
 
+def _leaves_per_unit(small, params: Params, fmin: float,
+                     generate_options: GenerateOptions) -> float:
+    """Leaves per unit of LeafQuality factor, counted on `small` (grown at factor `fmin`). A
+    species whose leaves all round away at `fmin` (a few dozen leaves in all) is counted again
+    at factor 1: taken for leafless, its budget plan left them out and the build, which grows
+    them, went over the budget (1,506 triangles for --triangles 1500)."""
+    if small.n_leaves or not params.leaves:
+        return small.n_leaves / fmin
+    return float(regrow_leaves(small, params, generate_options).n_leaves)
+
+
 def _fewer_levels(params: Params, levels: int) -> Params:
     return replace(keep_leaf_count(params, levels, params.leaf_quality), levels=levels)
 
@@ -168,7 +179,7 @@ def candidates(params: Params, seed: int, options: BudgetOptions, coarsen: bool,
             t = generate(small, seed, generate_options) if base is None else \
                 base if drop == 0 else regrow_leaves(base, small, generate_options)
             base = t if base is None else base
-            out.append((c, drop, p, t, t.n_leaves / fmin))
+            out.append((c, drop, p, t, _leaves_per_unit(t, p, fmin, generate_options)))
     return out
 
 
@@ -186,7 +197,8 @@ def plan_budget(params: Params, seed: int, mesh: MeshOptions,
                      generate_options)
     tri_per_leaf = len(leaf_outline(first, mesh).triangles) if mesh.leaves else 0
     bark0 = estimate_triangles(first, mesh)[0]
-    leaves0 = tri_per_leaf * _leaf_count(first.n_leaves / fmin, 1.0)
+    leaves0 = tri_per_leaf * _leaf_count(_leaves_per_unit(first, params, fmin, generate_options),
+                                         1.0)
     lo, hi = options.bark_share
     share = min(max(bark0 / max(bark0 + leaves0, 1), lo), hi)
     coarsen = T < bark0 + leaves0          # over budget: coarsen; under it: refine

@@ -30,7 +30,8 @@ from .errors import TreegenError
                    "at the same path.")
 @click.option("--force", is_flag=True, help="Rebuild every job, even those already up to date.")
 @click.option("--dry-run", is_flag=True,
-              help="Print the job table and a size/time estimate; build and write nothing.")
+              help="Print the job table with each tree's plan (LODs, triangles, joints, as the build "
+                   "will make them) and a size/time estimate; build and write nothing.")
 @click.option("--schema", is_flag=True, help="Print the catalogue's JSON Schema and exit.")
 @click.option("--json", "as_json", is_flag=True,
               help="One JSON line per finished job, then a summary line.")
@@ -67,10 +68,18 @@ def batch(catalogue, out_dir, workers, scheduler, force, dry_run, schema, as_jso
 
 
 def _dry_run(cat, plan, workers, scheduler, as_json) -> None:
-    from .batch import estimate
+    """The job table with each tree's plan (LODs, triangles and joints per LOD, as the build
+    will make them) and a size/time estimate; exit 1 when a job would fail, as the run would."""
+    from .batch import estimate, plan_trees
     from .executor import default_workers, scheduler_address
 
-    est = estimate(cat, plan)
+    shapes = plan_trees(cat, plan.build)
+    for j in plan.skip:         # up to date: what the manifest recorded when it was built
+        row = plan.previous[j.output]
+        shapes.setdefault(j.task, [{"triangles": t, "joints": n, "distance_m": d} for t, n, d in
+                                   zip(row["triangles"], row["joints"], row["lod_distances_m"])])
+    est = estimate(cat, plan, shapes)
+    failing = [j for j in plan.build if isinstance(shapes[j.task], str)]
     todo = {j.output for j in plan.build}
     per_task: dict[str, float] = {}
     for j in plan.build:
@@ -85,18 +94,23 @@ def _dry_run(cat, plan, workers, scheduler, as_json) -> None:
                       "format": j.fmt, "grid": dict(j.grid), "path": j.output,
                       "options_hash": j.key, "action": "build" if j.output in todo else "skip",
                       "estimated_bytes": round(est[j.output][0]),
-                      "estimated_seconds": round(est[j.output][1], 3)} for j in cat.jobs],
+                      "estimated_seconds": round(est[j.output][1], 3), **_shape(shapes[j.task])}
+                     for j in cat.jobs],
             "build": len(plan.build), "skip": len(plan.skip), "trees": len(per_task),
             "estimated_bytes": round(size), "estimated_work_seconds": round(work, 2),
-            "workers": n, "estimate": "+".join(how)}, indent=1))
+            "workers": n, "estimate": "+".join(how), "failing": len(failing)}, indent=1))
+        _fail(failing, shapes)
         return
     width = max([len(j.output) for j in cat.jobs] + [6])
     click.echo(f"{'#':>4}  {'entry':<12}{'seed':>6}  {'format':<7}{'output':<{width}}  "
-               f"{'action':<7}{'est MB':>8}{'est s':>8}")
+               f"{'action':<7}{'LODs':>5}{'LOD0 tris':>11}{'joints':>8}{'est MB':>8}{'est s':>8}")
     for j in cat.jobs:
         b, s, _ = est[j.output]
+        shape = shapes[j.task]
+        lods = f"{len(shape):>5}{shape[0]['triangles']:>11,}{shape[0]['joints']:>8}" \
+            if isinstance(shape, list) else f"{'fails':>5}{'-':>11}{'-':>8}"
         click.echo(f"{j.index:>4}  {j.source:<12}{j.seed:>6}  {j.fmt:<7}{j.output:<{width}}  "
-                   f"{'build' if j.output in todo else 'skip':<7}{b / 1e6:>8.1f}{s:>8.2f}")
+                   f"{'build' if j.output in todo else 'skip':<7}{lods}{b / 1e6:>8.1f}{s:>8.2f}")
     if not plan.build:
         click.echo(f"{len(cat.jobs)} jobs, all up to date: nothing to build")
         return
@@ -104,6 +118,24 @@ def _dry_run(cat, plan, workers, scheduler, as_json) -> None:
     click.echo(f"{len(cat.jobs)} jobs: {len(plan.build)} to build ({len(per_task)} trees), "
                f"{len(plan.skip)} up to date; about {size / 1e6:.0f} MB and {work:.0f} s of "
                f"work{wall} ({' + '.join(how)} estimate)")
+    _fail(failing, shapes)
+
+
+def _shape(shape) -> dict:
+    """A job's planned LODs in the manifest's own fields (or the error it would fail with)."""
+    if isinstance(shape, str):
+        return {"error": shape}
+    return {"triangles": [r["triangles"] for r in shape], "joints": [r["joints"] for r in shape],
+            "lod_distances_m": [r["distance_m"] for r in shape]}
+
+
+def _fail(failing, shapes) -> None:
+    """One stderr line per job the run would fail, as the run reports it; then exit 1."""
+    for j in failing:
+        click.echo(f"treegen: would fail: {j.source} seed {j.seed} ({j.output}): "
+                   f"{shapes[j.task]}", err=True)
+    if failing:
+        sys.exit(1)
 
 
 def _run(cat, plan, out_dir, workers, scheduler, as_json) -> None:

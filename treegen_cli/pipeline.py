@@ -8,11 +8,13 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field, replace
 
+import numpy as np
+
 from . import __version__
 from .asset import Asset, Lod
 from .budget import DEFAULTS as BUDGET_DEFAULTS, BudgetOptions, plan_budget
 from .generate import DEFAULTS as GENERATE_DEFAULTS, GenerateOptions, generate
-from .impostor import ImpostorOptions, build_impostor, switch_distance
+from .impostor import ImpostorOptions, build_impostor, cards, switch_distance
 from .exchange.compress import GLTF_DEFAULTS, GltfOptions
 from .limits import LIMITS_DEFAULTS, Limits, check_keys, check_mesh
 from .lod import LOD_DEFAULTS, LodOptions, decimate, screen_coverage, switch_distances
@@ -139,3 +141,29 @@ def build_asset(params: Params, seed: int = 0, options: MakeOptions = MakeOption
                   extras={"species": params.name, "seed": seed,
                           "generator": f"treegen {__version__}"})
     return timings.run("prepare", prepare, asset), tree
+
+
+def plan_asset(params: Params, seed: int = 0, options: MakeOptions = MakeOptions()) -> list[dict]:
+    """What `build_asset` would build, per LOD: triangles, vertices, joints and the switch
+    distance (metres), without its costly stages: the same budget plan, tree, LOD cuts, rigs
+    and meshes (exactly the counts the build gets), no wind (it changes no count), textures or
+    impostor atlas (the impostor's cards and one joint are counted, not rendered). For
+    `treegen batch --dry-run`."""
+    plain = replace(options, wind=None)
+    if plain.budget.triangles is not None:
+        plan = plan_budget(params, seed, plain.mesh, plain.budget, plain.generate)
+        params, plain = plan.params, replace(plain, mesh=plan.mesh)
+    tree = generate(params, seed, plain.generate)
+    timings = Timings()
+    lods = [build_lod(tree, plain, seed, timings)] if plain.lod is None else \
+        build_lods(params, tree, plain, seed, timings)
+    rows = [{"triangles": sum(len(p.indices) // 3 for p in lod.primitives),
+             "vertices": sum(len(p.positions) for p in lod.primitives),
+             "joints": len(lod.skeleton.names), "distance_m": float(lod.distance)}
+            for lod in lods]
+    if plain.lod is not None and plain.impostor is not None:
+        card = cards(np.zeros(3), 1.0, plain.impostor.grid)
+        rows.append({"triangles": len(card.indices) // 3, "vertices": len(card.positions),
+                     "joints": 1, "distance_m": switch_distance(
+                         tree_height(tree), lods[-1].distance, plain.lod, plain.impostor)})
+    return rows

@@ -165,10 +165,14 @@ def export_parts(parts: list[Asset], path: str | os.PathLike,
     return _write(write_all, targets[0])
 
 
-def export_forest(forest: Forest, path: str | os.PathLike) -> list[Path]:
-    """Write a prepared forest, atomically; the suffix picks glTF or USD."""
+def export_forest(forest: Forest, path: str | os.PathLike,
+                  options: GltfOptions = GLTF_DEFAULTS) -> list[Path]:
+    """Write a prepared forest, atomically; the suffix picks glTF or USD (`options`: glTF only)."""
     path = check_suffix(path, FOREST_WRITERS)
+    check_compress(path, options.compress)
     writer = FOREST_WRITERS[path.suffix.lower()]
+    if options != GLTF_DEFAULTS:
+        return _write(lambda tmp: write_forest_gltf(forest, tmp, options=options), path)
     return _write(lambda tmp: writer(forest, tmp), path)
 
 

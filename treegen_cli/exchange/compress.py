@@ -35,6 +35,7 @@ QUANTIZATION = "KHR_mesh_quantization"
 MESHOPT = "EXT_meshopt_compression"
 TEXTURE_TRANSFORM = "KHR_texture_transform"
 ENCODER = "meshopt_encode.mjs"
+DECODER = "meshopt_decode.mjs"       # reading EXT_meshopt_compression back (preview)
 
 
 @dataclass(frozen=True)
@@ -164,14 +165,13 @@ class MeshoptView:
     source: np.ndarray | None = None
 
 
-def _node() -> str:
+def _node(who: str = "--compress meshopt", what: str = "encoder") -> str:
     given = os.environ.get("TREEGEN_NODE")
     node = shutil.which(given) if given else shutil.which("node")
     if not node:
         where = f"TREEGEN_NODE={given} is not an executable" if given else \
             "`node` is not on PATH; set TREEGEN_NODE to its path"
-        raise TreegenError(f"--compress meshopt needs Node.js ({where}) to run "
-                           "meshoptimizer's encoder")
+        raise TreegenError(f"{who} needs Node.js ({where}) to run meshoptimizer's {what}")
     return node
 
 
@@ -181,18 +181,43 @@ def check_encoder() -> None:
     _tools()
 
 
-def _tools() -> str:
+def _tools(who: str = "--compress meshopt", script: str = ENCODER) -> str:
     from .validate import ValidatorUnavailable, tools_dir
     try:
         tools = tools_dir()
     except ValidatorUnavailable:
         tools = None
     if tools is None or not (tools / "node_modules" / "meshoptimizer").is_dir() \
-            or not (tools / ENCODER).is_file():
-        raise TreegenError("--compress meshopt needs the npm package meshoptimizer: run "
+            or not (tools / script).is_file():
+        raise TreegenError(f"{who} needs the npm package meshoptimizer: run "
                            "`make install` (npm ci in tools/) in a treegen checkout, or set "
-                           "TREEGEN_TOOLS to a folder holding meshopt_encode.mjs and node_modules/")
+                           f"TREEGEN_TOOLS to a folder holding {script} and node_modules/")
     return str(tools)
+
+
+def decode(views: list[tuple[dict, bytes]], who: str) -> list[bytes]:
+    """Decode EXT_meshopt_compression views with meshoptimizer's own decoder, in one node
+    process (tools/meshopt_decode.mjs): each (the extension object, its encoded bytes) →
+    byteStride × count bytes, filters undone into the stored integers (int8 normals, int16
+    quaternions), as a client without the extension would have read the fallback. `who`
+    names the reading file in messages."""
+    jobs = [{"mode": ext["mode"], "filter": ext.get("filter", "NONE"), "stride": ext["byteStride"],
+             "count": ext["count"], "bytes": len(data)} for ext, data in views]
+    head = json.dumps({"jobs": jobs}).encode()
+    tools = _tools(who, DECODER)
+    proc = subprocess.run([_node(who, "decoder"), os.path.join(tools, DECODER)], cwd=tools,
+                          capture_output=True,
+                          input=b"".join([struct.pack("<I", len(head)), head,
+                                          *(data for _, data in views)]))
+    if proc.returncode != 0:
+        raise TreegenError(f"{who}: meshoptimizer could not decode it: "
+                           f"{proc.stderr.decode(errors='replace').strip().splitlines()[-1:]}")
+    out, pos = [], 0
+    for job in jobs:
+        size = job["count"] * job["stride"]
+        out.append(proc.stdout[pos:pos + size])
+        pos += size
+    return out
 
 
 def encode(views: list[tuple[MeshoptView, memoryview]],

@@ -19,6 +19,11 @@ variety comes from `phase_variants` copies of each clip, key arrays rotated (For
 prepared), each instance playing the variant the forest stage chose for its time offset. With
 `all_lods` every LOD of every instance is written and LOD0's node lists the others with
 MSFT_lod (lower LODs' meshes are reached only through it).
+
+`--compress quantize|meshopt` (compress.py) encodes the shared data as the tree writer does:
+one position grid per (prototype, LOD) skin, folded into its inverse bind matrices, one UV box
+per material over every prototype using it, int16 rotation keys; meshopt then encodes every
+view. Per-instance JSON is unchanged, so the saving grows with prototypes, not trees.
 """
 from __future__ import annotations
 
@@ -29,18 +34,20 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..asset import Forest
-from .gltf import (Textures, _Buffer, _is_default, _primitive, lod_extras, moving_joints, inverse_bind_accessor,
-                   joint_fields, material_dict, rotation_samplers, set_msft_lod, to_y_up,
-                   write_document)
-
+from ..asset import Forest, Material
+from .compress import GLTF_DEFAULTS, GltfOptions, UvRange, meshopt_step, position_grid, uv_range
+from .gltf import (Quantization, Textures, _Buffer, _gltf_uvs, _is_default, _primitive, _y_up32,
+                   finish, inverse_bind_accessor, joint_fields, lod_extras, material_dict,
+                   moving_joints, rotation_samplers, set_msft_lod, to_y_up, write_document)
 
 
 class _Shared:
     """Lazily written per-(prototype, LOD[, variant]) data, so unused LODs cost nothing."""
 
-    def __init__(self, scene: Forest, buf: _Buffer):
-        self.scene, self.buf = scene, buf
+    def __init__(self, scene: Forest, buf: _Buffer, options: GltfOptions = GLTF_DEFAULTS):
+        self.scene, self.buf, self.options = scene, buf, options
+        self.uv_boxes = _uv_boxes(scene) if options.quantized else {}
+        self._quant: dict = {}
         self.textures = Textures(buf)
         self.materials: list[dict] = []
         self._mat: dict = {}
@@ -55,8 +62,23 @@ class _Shared:
     def material(self, m) -> int:
         if m not in self._mat:
             self._mat[m] = len(self.materials)
-            self.materials.append(material_dict(m, self.textures))
+            self.materials.append(material_dict(m, self.textures, self.uv_boxes.get(m)))
         return self._mat[m]
+
+    def quant(self, p: int, k: int) -> Quantization | None:
+        """--compress: LOD k of prototype p's position grid (meshopt: coarsened to a quarter
+        pixel at the LOD's distance) and its materials' UV boxes; None uncompressed."""
+        if not self.options.quantized:
+            return None
+        if (p, k) not in self._quant:
+            asset = self.scene.prototypes[p]
+            lod = asset.lods[k]
+            step = meshopt_step(self.options, lod.distance) \
+                if self.options.compress == "meshopt" else 0.0
+            grid = position_grid([_y_up32(q.positions) for q in lod.primitives], step)
+            self._quant[(p, k)] = Quantization(
+                grid, {m.name: self.uv_boxes[m] for m in asset.materials if m in self.uv_boxes})
+        return self._quant[(p, k)]
 
     def mesh(self, p: int, k: int) -> int:
         if (p, k) not in self._mesh:
@@ -64,7 +86,9 @@ class _Shared:
             lod = asset.lods[k]
             mats = {m.name: m for m in asset.materials}
             J = len(lod.skeleton.names)
-            prims = [_primitive(self.buf, q, J, self.material(mats[q.material])) for q in lod.primitives]
+            quant = self.quant(p, k)
+            prims = [_primitive(self.buf, q, J, self.material(mats[q.material]), quant)
+                     for q in lod.primitives]
             self._mesh[(p, k)] = len(self.meshes)
             self.meshes.append({"name": f"{asset.name}_s{asset.extras.get('seed', p)}_LOD{k}",
                                 "primitives": prims})
@@ -72,7 +96,9 @@ class _Shared:
 
     def ibm(self, p: int, k: int) -> int:
         if (p, k) not in self._ibm:
-            self._ibm[(p, k)] = inverse_bind_accessor(self.buf, self.scene.prototypes[p].lods[k].skeleton)
+            quant = self.quant(p, k)
+            self._ibm[(p, k)] = inverse_bind_accessor(self.buf, self.scene.prototypes[p].lods[k].skeleton,
+                                                      quant.grid if quant is not None else None)
         return self._ibm[(p, k)]
 
     def joints(self, p: int, k: int) -> tuple[list[dict], list[list[int]]]:
@@ -84,7 +110,7 @@ class _Shared:
             kids: list[list[int]] = [[] for _ in range(len(parent))]
             for j in np.flatnonzero(parent >= 0):
                 kids[parent[j]].append(int(j))
-            self._joints[(p, k)] = (joint_fields(sk), kids)
+            self._joints[(p, k)] = (joint_fields(sk, self.options.quantized), kids)
         return self._joints[(p, k)]
 
     def tracks(self, p: int, k: int, v: int) -> list[tuple[int, int]]:
@@ -96,23 +122,35 @@ class _Shared:
         if (p, k) in self.scene.variants:
             clip = self.scene.variants[(p, k)][v]
             joints = moving_joints(clip)
-            for j, sampler in rotation_samplers(self.buf, clip, joints, self._inputs):
+            for j, sampler in rotation_samplers(self.buf, clip, joints, self._inputs,
+                                                self.options.quantized):
                 self.samplers.append(sampler)
                 out.append((j, len(self.samplers) - 1))
         self._tracks[key] = out
         return out
 
 
-def build_forest(scene: Forest) -> tuple[dict, bytes]:
+def _uv_boxes(scene: Forest) -> dict[Material, UvRange]:
+    """Each material's UV box over every prototype and LOD that uses it (--compress)."""
+    by: dict[Material, list[np.ndarray]] = {}
+    for asset in scene.prototypes:
+        mats = {m.name: m for m in asset.materials}
+        for lod in asset.lods:
+            for q in lod.primitives:
+                by.setdefault(mats[q.material], []).append(_gltf_uvs(q))
+    return {m: uv_range(u) for m, u in by.items()}
+
+
+def build_forest(scene: Forest, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, bytes]:
     """Scene → (glTF JSON dict without buffer uri, binary buffer)."""
-    gltf, buf = _build_forest(scene)
+    gltf, buf = _build_forest(scene, options)
     return gltf, buf.blob()
 
 
-def _build_forest(scene: Forest) -> tuple[dict, _Buffer]:
+def _build_forest(scene: Forest, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, _Buffer]:
     """Scene → (glTF JSON dict without buffer uri, the unjoined buffer)."""
-    buf = _Buffer()
-    sh = _Shared(scene, buf)
+    buf = _Buffer(meshopt=options.compress == "meshopt", pooled=options.quantized)
+    sh = _Shared(scene, buf, options)
     nodes: list[dict] = []
     skins: list[dict] = []
     channels: list[dict] = []
@@ -179,14 +217,12 @@ def _build_forest(scene: Forest) -> tuple[dict, _Buffer]:
         gltf["animations"] = [{"name": "wind_loop", "samplers": sh.samplers, "channels": channels}]
     if any("extensions" in n for n in nodes):
         gltf["extensionsUsed"] = ["MSFT_lod"]
-    gltf["accessors"] = buf.accessors
-    gltf["bufferViews"] = buf.views
-    gltf["buffers"] = [{"byteLength": buf.size + len(buf.padding())}]
-    return gltf, buf
+    return gltf, finish(gltf, buf, options.quantized, sh.uv_boxes.values())
 
 
-def write_forest_gltf(scene: Forest, path: str | os.PathLike) -> None:
+def write_forest_gltf(scene: Forest, path: str | os.PathLike,
+                      options: GltfOptions = GLTF_DEFAULTS) -> None:
     """Write straight to `path` (.glb, or .gltf + `<stem>.bin`); exchange.export_forest stages it."""
     path = Path(path)
-    gltf, buf = _build_forest(scene)
+    gltf, buf = _build_forest(scene, options)
     write_document(gltf, buf, path, binary=path.suffix.lower() != ".gltf")

@@ -68,7 +68,7 @@ class _Buffer:
     Parts are kept as byte views of the arrays themselves (no tobytes copy); `write_to` streams
     them into a file, so a 300 MB buffer is never joined in memory on the way to disk."""
 
-    def __init__(self, meshopt: bool = False) -> None:
+    def __init__(self, meshopt: bool = False, pooled: bool = False) -> None:
         self.parts: list[memoryview] = []
         self.size = 0
         self.views: list[dict] = []
@@ -77,8 +77,10 @@ class _Buffer:
         # --compress meshopt: how each accessor's view is encoded (compress.meshopt_views)
         self.meshopt: dict[int, MeshoptView] | None = {} if meshopt else None
         self.groups: list[tuple[int, list[int]]] = []    # (index view, vertex views) per primitive
-        # meshopt: skin and key data pooled into one view per (element type, filter), so the
-        # codec sees long streams instead of hundreds of 301-key tracks (as gltfpack does)
+        # --compress: skin and key data pooled into one view per (element type, filter), so
+        # meshopt's codec sees long streams instead of hundreds of 301-key tracks (as gltfpack
+        # does) and the JSON lists a few views instead of one per track
+        self.pooled = pooled or meshopt
         self.pools: dict[tuple, list[tuple[dict, np.ndarray, np.ndarray | None]]] = {}
 
     def view(self, data, target: int | None) -> int:
@@ -106,7 +108,7 @@ class _Buffer:
         a = a.astype(a.dtype.newbyteorder("<"), copy=False)    # no copy on little-endian hosts
         stored = 1 if a.ndim == 1 else math.prod(a.shape[1:])
         comps = stored - 1 if padded else stored
-        if self.meshopt is not None and target is None:
+        if self.pooled and target is None:
             acc = self._fields(a, comps, stored, normalized, bounds)
             self.pools.setdefault((a.dtype.str, stored, filter), []).append((acc, a, source))
             self.accessors.append(acc)
@@ -136,8 +138,7 @@ class _Buffer:
         return acc
 
     def flush_pools(self) -> None:
-        """One view per meshopt pool, each accessor at its offset in it."""
-        assert self.meshopt is not None
+        """One view per pool, each accessor at its offset in it (meshopt: with its encoding)."""
         for (_, stored, filter), members in self.pools.items():
             data = np.concatenate([a.reshape(-1).view(np.uint8) for _, a, _ in members])
             view = self.view(data, None)
@@ -147,6 +148,8 @@ class _Buffer:
                 if offset:
                     acc["byteOffset"] = offset
                 offset += a.nbytes
+            if self.meshopt is None:
+                continue
             size = members[0][1].itemsize * stored
             sources = [src for _, _, src in members]
             self.meshopt[view] = MeshoptView(
@@ -476,7 +479,7 @@ def material_dict(m: Material, textures: Textures, uvs: UvRange | None = None) -
 
 def _build(asset: Asset, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, _Buffer]:
     """Asset → (glTF JSON dict without buffer uri, the unjoined buffer)."""
-    buf = _Buffer(meshopt=options.compress == "meshopt")
+    buf = _Buffer(meshopt=options.compress == "meshopt", pooled=options.quantized)
     textures = Textures(buf)
     mat_index = {m.name: i for i, m in enumerate(asset.materials)}
     steps = [meshopt_step(options, lod.distance) if options.compress == "meshopt" else 0.0
@@ -549,21 +552,28 @@ def _build(asset: Asset, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, _B
     if len(asset.lods) > 1:
         set_msft_lod(nodes[lod_nodes[0]], lod_nodes[1:], asset.lods)
         gltf["extensionsUsed"] = ["MSFT_lod"]
-    if buf.meshopt is not None:
+    return gltf, finish(gltf, buf, options.quantized, uv_boxes.values())
+
+
+def finish(gltf: dict, buf: _Buffer, quantized: bool, uv_boxes) -> _Buffer:
+    """Accessors, views and buffers into `gltf`; with --compress, the extensions it uses
+    (KHR_texture_transform when a material's UV box is not the identity) and the meshopt
+    encoding. Returns the buffer to write (tree and forest writers alike)."""
+    if buf.pooled:
         buf.flush_pools()
     gltf["accessors"] = buf.accessors
     gltf["bufferViews"] = buf.views
     gltf["buffers"] = [{"byteLength": buf.size + len(buf.padding())}]
-    if options.quantized:
+    if quantized:
         used = [QUANTIZATION]
-        if any(not box.identity for box in uv_boxes.values()):
+        if any(not box.identity for box in uv_boxes):
             used.append(TEXTURE_TRANSFORM)
         if buf.meshopt is not None:
             used.append(MESHOPT)
             buf = _meshopt(gltf, buf)
         gltf["extensionsUsed"] = sorted(gltf.get("extensionsUsed", []) + used)
         gltf["extensionsRequired"] = sorted(used)
-    return gltf, buf
+    return buf
 
 
 def _meshopt(gltf: dict, buf: _Buffer) -> _Buffer:

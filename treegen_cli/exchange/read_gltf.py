@@ -7,7 +7,11 @@ baseColorTexture (PNG/JPEG, or WebP through EXT_texture_webp, decoded by Pillow)
 TEXCOORD_n (float, or normalized unsigned byte/short), sampler wrap modes, normalTexture
 (+ scale, when it shares the base texture's UV set), alphaMode MASK + alphaCutoff (BLEND is
 previewed as a cut-out at 0.5: no sorting in a preview), doubleSided. Images come from a
-bufferView, a data: URI, or a relative URI beside the file. Not read: KHR_texture_transform,
+bufferView, a data: URI, or a relative URI beside the file. `--compress` files too:
+KHR_mesh_quantization's integers are dequantized as the spec says (normalized / through the
+skin's inverse binds) and EXT_meshopt_compression's views are decoded by meshoptimizer's own
+decoder (npm, through Node: compress.decode), the library that encoded them. Read only for
+the base texture's UV set: KHR_texture_transform offset and scale. Not read:
 occlusion/emissive/metallic-roughness maps (the preview's lighting has no use for them).
 """
 from __future__ import annotations
@@ -22,6 +26,7 @@ import numpy as np
 from ..drawable import Channel, Drawable, Part, PoseRig, check_lod, decode_image, vertex_normals
 from ..errors import TreegenError
 from ..skeleton import forward, trs
+from .compress import MESHOPT, decode
 from .gltf import read_accessor, read_gltf
 
 WRAP = {10497: "REPEAT", 33071: "CLAMP", 33648: "MIRROR"}      # sampler wrapS / wrapT
@@ -50,14 +55,38 @@ def read_drawable(path: Path, lod: int = 0) -> Drawable:
     """A .glb/.gltf (ours, or any triangle glTF with at most one skin per LOD node)."""
     try:
         gltf, blob = read_gltf(path)
-        if "EXT_meshopt_compression" in gltf.get("extensionsRequired", []):
-            raise TreegenError(f"{path}: EXT_meshopt_compression data cannot be read here "
-                               "(write it with --compress quantize or none to preview it)")
+        if MESHOPT in gltf.get("extensionsUsed", []):
+            gltf, blob = _unpack_meshopt(gltf, blob, path)
         return _gltf_scene(gltf, blob, _accessor, lod, path)
     except TreegenError:
         raise
     except (OSError, ValueError, KeyError, IndexError, TypeError, struct.error) as e:
         raise TreegenError(f"{path}: not a readable glTF file ({type(e).__name__}: {e})") from None
+
+
+def _unpack_meshopt(gltf: dict, blob: bytes, path: Path) -> tuple[dict, bytes]:
+    """EXT_meshopt_compression → the plain layout: every compressed view decoded by
+    meshoptimizer (compress.decode) and appended to buffer 0, so the readers below see
+    ordinary views (quantized integers, as KHR_mesh_quantization stores them). Views must
+    live in buffer 0 or a fallback buffer (what gltfpack and treegen write)."""
+    views = gltf.get("bufferViews", [])
+    packed = [i for i, v in enumerate(views) if MESHOPT in v.get("extensions", {})]
+    exts = [views[i]["extensions"][MESHOPT] for i in packed]
+    if any(e.get("buffer", 0) != 0 for e in exts) or \
+            any(v.get("buffer", 0) != 0 for i, v in enumerate(views) if i not in set(packed)):
+        raise TreegenError(f"{path}: EXT_meshopt_compression data outside the GLB's own buffer "
+                           "is not read here")
+    encoded = [blob[e.get("byteOffset", 0):e.get("byteOffset", 0) + e["byteLength"]] for e in exts]
+    parts, size = [blob], len(blob)
+    views = [dict(v) for v in views]
+    for i, data in zip(packed, decode(list(zip(exts, encoded)), str(path))):
+        pad = -size % 4
+        parts.append(b"\0" * pad)
+        views[i] = {"buffer": 0, "byteOffset": size + pad, "byteLength": len(data),
+                    **({"byteStride": views[i]["byteStride"]} if "byteStride" in views[i] else {})}
+        parts.append(data)
+        size += pad + len(data)
+    return {**gltf, "bufferViews": views}, b"".join(parts)
 
 
 def _gltf_scene(gltf, blob, read_accessor, lod, path) -> Drawable:

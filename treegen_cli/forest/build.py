@@ -22,9 +22,9 @@ from rich.progress import Progress
 
 from ..asset import Asset, Forest, Instance, Lod, lod_bounds
 from ..errors import TreegenError, in_file as _in_file
-from ..exchange import FOREST_WRITERS, check_suffix, export_forest
+from ..exchange import FOREST_WRITERS, GltfOptions, check_compress, check_suffix, export_forest
 from ..limits import MAX_TREES
-from ..lod import LOD_DEFAULTS, leaf_updates as lod_leaf_updates
+from ..lod import LOD_DEFAULTS, leaf_updates as lod_leaf_updates, pixel_size
 from ..params import load_params
 from ..pipeline import MakeOptions, build_asset
 from ..prepare import prepare_forest
@@ -67,6 +67,15 @@ def make_options(layout: Layout, error_px: float | None = None):
                   error_px=layout.defaults.error_px if error_px is None else error_px,
                   distances=layout.defaults.lod_distances or LOD_DEFAULTS.distances)
     return MakeOptions(rig=RigOptions(max_joints=layout.defaults.max_joints), wind=wind, lod=lod)
+
+
+def gltf_options(layout: Layout, compress: str = "none",
+                 error_px: float | None = None) -> GltfOptions:
+    """--compress for the forest's glTF: meshopt's position grids coarsen with each LOD's
+    distance on the prototypes' screen (the layout's camera, else make's defaults)."""
+    lod = make_options(layout, error_px).lod
+    return GltfOptions(compress=compress, pixel_size=pixel_size(1.0, lod)
+                       if compress == "meshopt" and lod is not None else 0.0)
 
 
 def build_prototype(params, seed: int, options) -> Asset:
@@ -248,15 +257,18 @@ def summary(scene: Forest, written: list[Path], seconds: float, camera: bool = T
 
 def run_forest(layout_path, output, all_lods: bool = True, error_px: float | None = None,
                workers: int | None = None, progress: bool | None = None,
-               max_trees: int = MAX_TREES, scheduler: str | None = None) -> dict:
-    """The whole command: validate (nothing written on error), build, write, summarise."""
+               max_trees: int = MAX_TREES, scheduler: str | None = None,
+               compress: str = "none") -> dict:
+    """The whole command: validate (nothing written on error), build, write, summarise.
+    `compress`: glTF's --compress (quantize, meshopt; a USD output refuses it)."""
     t0 = time.perf_counter()
     output = check_suffix(output, FOREST_WRITERS, flag="-o")
+    check_compress(output, compress)
     if error_px is not None and not (math.isfinite(error_px) and 0 <= error_px <= 100):
         raise TreegenError(f"--error-px {error_px}: allowed range 0..100 pixels")
     layout = load_layout(layout_path, max_trees)
     scene = build_scene(layout, all_lods, error_px, workers, progress, scheduler)
     t1 = time.perf_counter()
-    written = export_forest(scene, output)
+    written = export_forest(scene, output, gltf_options(layout, compress, error_px))
     scene.timings["write_s"] = time.perf_counter() - t1
     return summary(scene, written, time.perf_counter() - t0, layout.camera is not None)

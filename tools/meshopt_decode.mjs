@@ -1,0 +1,23 @@
+// meshoptimizer's own decoder for reading EXT_meshopt_compression files (`treegen preview`).
+// One call per file. stdin: uint32 LE JSON length, JSON {jobs: [{mode, filter, stride, count,
+// bytes}]}, then each job's encoded bytes. stdout: the decoded views (count × stride bytes
+// each, filters undone into their stored integer form) in job order.
+import { MeshoptDecoder } from "meshoptimizer";
+
+const chunks = [];
+for await (const c of process.stdin) chunks.push(c);
+const input = Buffer.concat(chunks);
+const n = input.readUInt32LE(0);
+const { jobs } = JSON.parse(input.subarray(4, 4 + n).toString("utf8"));
+await MeshoptDecoder.ready;
+
+let pos = 4 + n;
+const out = jobs.map((job) => {
+  const source = new Uint8Array(input.subarray(pos, pos + job.bytes));
+  pos += job.bytes;
+  const target = new Uint8Array(job.count * job.stride);
+  MeshoptDecoder.decodeGltfBuffer(target, job.count, job.stride, source, job.mode, job.filter);
+  return target;
+});
+if (pos !== input.length) throw new Error(`stdin has ${input.length - pos} unread bytes`);
+process.stdout.write(Buffer.concat(out.map((o) => Buffer.from(o.buffer, o.byteOffset, o.length))));

@@ -1,0 +1,102 @@
+"""What a run will do: the jobs to build and those up to date (resume), each tree's plan
+(--dry-run: LODs, triangles, joints as the build makes them) and size/time estimates."""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..errors import TreegenError
+from .catalogue import Catalogue, Job, options_sha, species_sha
+from .manifest import journal_rows
+
+def _up_to_date(out_dir: Path, job: Job, row: dict | None) -> bool:
+    if row is None or row.get("options_hash") != job.key:
+        return False
+    files = [out_dir / f for f in row.get("files", [job.output])]
+    try:
+        return sum(f.stat().st_size for f in files) == row.get("bytes")
+    except OSError:
+        return False
+
+
+@dataclass
+class Plan:
+    build: list[Job]
+    skip: list[Job]
+    previous: dict[str, dict]          # output path → earlier row
+
+
+def plan_jobs(cat: Catalogue, out_dir: str | os.PathLike, force: bool = False) -> Plan:
+    out_dir = Path(out_dir)
+    previous = journal_rows(out_dir) if out_dir.is_dir() else {}
+    build, skip = [], []
+    for job in cat.jobs:
+        (skip if not force and _up_to_date(out_dir, job, previous.get(job.output)) else build).append(job)
+    return Plan(build=build, skip=skip, previous=previous)
+
+
+def plan_trees(cat: Catalogue, jobs: list[Job]) -> dict[str, list[dict] | str]:
+    """Per task of `jobs`: what its build will have per LOD (pipeline.plan_asset: triangles,
+    vertices, joints, switch distance; budgets, profiles and joint limits applied as the build
+    applies them), or the one-line error the build would fail with. Grown here, one tree at a
+    time, without wind, textures or the impostor atlas."""
+    from ..pipeline import plan_asset
+
+    out: dict[str, list[dict] | str] = {}
+    for job in jobs:
+        if job.task in out:
+            continue
+        r = cat.resolved[job.task]
+        try:
+            out[job.task] = plan_asset(cat.params[job.species], r.seed, r.options)
+        except TreegenError as e:
+            out[job.task] = str(e)
+    return out
+
+
+# bytes per vertex (float32 position, normal, UV; joints, weights, tangents on bark) and per
+# triangle (indices), and the share of that --compress keeps (README: ~60 %, ~a fifth)
+_VERTEX_BYTES, _TRIANGLE_BYTES = 48, 8
+_COMPRESSED = {"none": 1.0, "quantize": 0.6, "meshopt": 0.2}
+
+
+def estimate(cat: Catalogue, plan: Plan,
+             shapes: dict[str, list[dict] | str] | None = None) -> dict[str, tuple[float, float, str]]:
+    """Per output path: (bytes, seconds, how). Measured when an earlier run built the same
+    species, format and options (any seed); otherwise a model of the clip length and either
+    the planned LODs (`shapes`, plan_trees: "plan") or the leaf and stem counts the species
+    predicts (generate.estimate_counts: "model")."""
+    from ..generate import estimate_counts
+
+    measured: dict[tuple, list] = {}
+    for row in plan.previous.values():
+        measured.setdefault((row.get("species_sha"), row.get("format"), row.get("options_sha")),
+                            []).append((row.get("bytes", 0), row.get("seconds", 0.0)))
+    out = {}
+    for job in cat.jobs:
+        r = cat.resolved[job.task]
+        sha = species_sha(cat, job)
+        opt = options_sha(r.values)
+        m = measured.get((sha, job.fmt, opt))
+        if m:
+            out[job.output] = (sum(b for b, _ in m) / len(m), sum(s for _, s in m) / len(m), "measured")
+            continue
+        frames = 0 if r.options.wind is None else r.options.wind.duration * r.options.wind.fps + 1
+        shape = shapes.get(job.task) if shapes is not None else None
+        if isinstance(shape, list):
+            lods = len(shape)
+            verts = sum(row["vertices"] for row in shape)
+            size = _COMPRESSED[r.values["compress"]] * sum(
+                row["vertices"] * _VERTEX_BYTES + row["triangles"] * _TRIANGLE_BYTES
+                for row in shape) + shape[0]["joints"] * frames * 16 * min(lods, 2)
+            how = "plan"
+        else:
+            stems, leaves = estimate_counts(cat.params[job.species])
+            lods = 1 if r.options.lod is None else r.options.lod.count
+            verts = (leaves * 4 + stems * 60) * (1.0 if lods == 1 else 1.9)
+            size = verts * 27 + r.options.rig.max_joints * frames * 16 * min(lods, 2)
+            how = "model"
+        secs = 0.03 + verts * 0.9e-6 + (lods > 1) * 0.1 + frames * 5e-4
+        out[job.output] = (size, secs, how)
+    return out
