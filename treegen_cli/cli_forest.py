@@ -31,8 +31,12 @@ from .limits import MAX_TREES
                    "$DASK_SCHEDULER_ADDRESS, else an embedded cluster].")
 @click.option("--max-trees", type=int, default=MAX_TREES, show_default=True,
               help="Refuse layouts that place more trees than this (checked before building).")
+@click.option("--impostor/--no-impostor", default=True, show_default=True,
+              help="End each tree's LODs with its impostor (crossed cards cut from a view "
+                   "atlas), as `treegen make` does.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
-def forest(layout, output, schema, all_lods, error_px, workers, scheduler, max_trees, as_json):
+def forest(layout, output, schema, all_lods, error_px, workers, scheduler, max_trees, impostor,
+           as_json):
     """Build the forest described by LAYOUT (JSON; see --schema): each distinct (species, seed)
     tree is built once and instanced; every instance carries all its LODs (--camera-lod: the
     one the layout's camera needs)."""
@@ -56,7 +60,7 @@ def forest(layout, output, schema, all_lods, error_px, workers, scheduler, max_t
 
     s = run_forest(layout, output, all_lods=all_lods, error_px=error_px, workers=workers,
                    max_trees=max_trees, progress=current_reporter().show_progress,
-                   scheduler=scheduler)
+                   scheduler=scheduler, impostor=impostor)
     if as_json:
         click.echo(json.dumps(s, indent=2))
         return
