@@ -471,6 +471,16 @@ def test_default_forest_needs_no_camera_and_carries_every_lod(walk):
     assert layout.camera is None and sc.all_lods
     assert [i.source for i in sc.instances] == [p.source for p in layout.placements]   # layout order
     assert {i.lod for i in sc.instances} == {0}
+    # each prototype ends in its impostor, as `treegen make` builds it (--no-impostor: not)
+    for a in sc.prototypes:
+        *geo, imp = a.lods
+        assert len(geo) == len(FAST["lod_distances"]) and imp.impostor is not None
+        assert all(lod.impostor is None for lod in geo) and imp.distance >= 1.5 * geo[-1].distance
+        assert sum(len(p.indices) for p in imp.primitives) == 3 * 8
+        assert any(m.base_texture is imp.impostor.albedo for m in a.materials)
+    from treegen_cli.forest.build import make_options
+
+    assert make_options(layout).impostor is not None and make_options(layout, impostor=False).impostor is None
     with pytest.raises(TreegenError, match=r"--camera-lod: .* has no camera"):
         build_scene(layout, all_lods=False, workers=1, progress=False)
 
@@ -657,7 +667,7 @@ def test_200_trees_with_all_lods_cost_little_more_than_their_prototypes(tmp_path
         "seed": 7, "variants": 1}])
     sc = build_scene(load_layout(write_layout(tmp_path, data)), workers=1, progress=False)
     assert len(sc.instances) == 200 and len(sc.prototypes) == 3
-    assert all(len(a.lods) == 3 for a in sc.prototypes)
+    assert all(len(a.lods) == 3 + 1 for a in sc.prototypes)           # + the impostor
     forest = sum(p.stat().st_size for p in write_scene(sc, tmp_path / "f.glb"))
     own = sum(p.stat().st_size for k, a in enumerate(sc.prototypes)
               for p in export(a, tmp_path / f"p{k}.glb"))

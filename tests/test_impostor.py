@@ -118,6 +118,90 @@ def test_a_direction_lands_in_the_cell_the_formula_gives_and_shows_that_view():
     assert checked >= 3
 
 
+def _srgb_to_linear(c):
+    c = np.asarray(c, float) / 255
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def _linear_to_srgb(x):
+    x = np.clip(x, 0, 1)
+    return 255 * np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
+
+
+@needs_gl
+def test_a_leaf_card_in_the_atlas_shows_its_texel_times_colour_tint_shade_and_occlusion():
+    """The leaves' lean program: a single double-sided card facing +a, drawn from the +a and
+    −a horizon cells, is covered where its texture is opaque (left half) and nowhere else,
+    its albedo is the texel × colour × the leaf's tint × LEAF_SHADE × the occlusion at its
+    vertices (written out here), its normal faces the viewer on both sides, depth from its plane."""
+    from treegen_cli.drawable import Drawable
+    from treegen_cli.impostor_render import LEAF_SHADE, leaf_tint, render_atlas
+
+    tex = np.zeros((16, 16, 4), np.uint8)
+    tex[..., :3] = (200, 120, 60)
+    tex[:, :8, 3] = 255                                     # left half opaque (u < 0.5)
+    y = np.array([0.0, 0.0, 0.0])
+    pos = np.array([[0, -1, -1], [0, 1, -1], [0, -1, 1], [0, 1, 1]], np.float32)   # x = 0 plane
+    uv = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], np.float32)
+    color = (0.8, 0.9, 0.7)
+    leaf = Part("leaves", pos, np.tile(np.float32([1, 0, 0]), (4, 1)),
+                np.array([0, 1, 3, 0, 3, 2], np.uint32), np.zeros((4, 4), np.int64),
+                np.tile(np.float32([1, 0, 0, 0]), (4, 1)), color, double_sided=True, uvs=uv,
+                texture=tex, alpha_cutoff=0.5, wrap=("CLAMP", "CLAMP"))
+    grid, cell, radius = 4, 64, 2.0
+    albedo, normal = render_atlas(Drawable([leaf], 1), y, radius, grid, cell)
+    # the crown is the card itself: its box's half extents (0.05 floor in x) in radius units
+    rel = pos / radius
+    r = np.linalg.norm(rel / np.array([0.05, 0.5, 0.5]), axis=1)
+    t = np.clip((r - 0.1) / 0.9, 0, 1)
+    ao = 0.45 + 0.55 * t * t * (3 - 2 * t)                  # 1 at every corner: r > 1
+    assert np.allclose(ao, 1.0)
+    shade = np.asarray(color) * leaf_tint(np.array([0]))[0] * LEAF_SHADE
+    expected = _linear_to_srgb(_srgb_to_linear((200, 120, 60)) * shade)
+    for d, facing in (((1.0, 0.0, 1e-6), +1), ((-1.0, 0.0, 1e-6), -1)):
+        col, row = cell_of(np.array(d), grid)
+        right, up = view_basis(cell_direction(col, row, grid))
+        a = albedo[row * cell:(row + 1) * cell, col * cell:(col + 1) * cell]
+        n = normal[row * cell:(row + 1) * cell, col * cell:(col + 1) * cell]
+        covered = a[..., 3] > 0
+        # the opaque half: card y < 0 → this view's x = y·right.y
+        xs = (np.arange(cell) + 0.5) / cell * 2 - 1
+        side = np.sign(right[1]) * xs < 0
+        inside = (np.abs(xs)[None, :] < 0.5 - 0.05) & (np.abs(xs)[:, None] < 0.5 - 0.05)
+        assert covered[inside & side[None, :]].all() and not covered[inside & ~side[None, :]].any()
+        assert not covered[(np.abs(xs)[:, None] > 0.55) | (np.abs(xs)[None, :] > 0.55)].any()
+        assert np.abs(a[covered][:, :3] - expected).max() <= 1.5, (a[covered][:3], expected)
+        nn = n[covered][:, :3] / 255 * 2 - 1
+        assert np.allclose(nn.mean(0), [facing * 1, 0, 0], atol=0.02)
+        depth = n[covered][:, 3] / 255             # 0.5 + 0.5·dot(p − centre, d)/radius
+        dz = cell_direction(col, row, grid)[2]       # the view looks slightly down at the card
+        assert np.abs(depth - 0.5).max() <= 0.5 * dz / radius + 2 / 255
+        assert abs(depth.mean() - 0.5) <= 2 / 255
+
+
+def test_leaf_ids_tint_shrink_and_png_helpers():
+    """Cards are leaves 0, 1, … in order (the tint the views give leaf k is hash(k)); the leaf
+    atlas shrinks by powers of two to ≥ 256 texels, keeping its coverage; the unfiltered PNG
+    decodes to the same pixels."""
+    from treegen_cli.impostor_render import leaf_ids, leaf_tint, shrink
+    from treegen_cli.textures import png_bytes_unfiltered
+
+    cards = (np.array([0, 1, 3, 0, 3, 2])[None] + 4 * np.arange(5)[:, None]).ravel()
+    assert np.array_equal(leaf_ids(cards, 20), np.arange(20) // 4)
+    tint = leaf_tint(np.arange(1000))
+    assert tint.shape == (1000, 3) and len(np.unique(tint[:, 0])) > 900
+    assert np.allclose(tint.min(0), [0.925, 0.9, 0.9], atol=1e-3)
+    assert np.allclose(tint.max(0), [1.075, 1.1, 1.0], atol=1e-3)
+    rng = np.random.default_rng(0)
+    img = rng.integers(0, 256, (1024, 512, 4), dtype=np.uint8)
+    small = shrink(img)
+    assert small.shape == (512, 256, 4)
+    assert abs(small[..., 3].mean() - img[..., 3].mean()) < 0.6
+    assert np.array_equal(small[0, 0], np.round(img[:2, :2].reshape(4, 4).mean(0) + 1e-9))
+    assert shrink(img[:300]).shape == (300, 512, 4)           # 300 rows: no halving fits
+    assert np.array_equal(decode_image(png_bytes_unfiltered(img), 4), img)
+
+
 # ------------------------------------------------------------------------ the asset
 
 @needs_gl

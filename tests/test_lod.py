@@ -250,8 +250,19 @@ def test_cli_info_lod_json():
                                    "--lod-distances", "0,130", "--schedule", "bounded-step"])
     assert res.exit_code == 0, res.output
     rows = json.loads(res.output)["lods"]
-    assert [r["distance_m"] for r in rows] == [0.0, 130.0]
+    assert [r["distance_m"] for r in rows][:2] == [0.0, 130.0]
     assert rows[1]["max_error_px"] <= 1.0 and rows[1]["keys_kept_pct"] < 100.0
+    # the impostor level, as `make` builds it: after the last LOD (≥ 1.5 × its distance),
+    # 8 triangles, its atlas described
+    from treegen_cli.render import egl_available
+
+    if egl_available():
+        imp = rows[2]
+        assert len(rows) == 3 and "impostor" not in rows[1]
+        assert imp["distance_m"] >= 1.5 * 130.0 and imp["triangles"] == 8 and imp["joints"] == 1
+        assert imp["impostor"]["grid"] == 16 and imp["impostor"]["atlas_px"] == 1024
+        assert 15.0 < imp["impostor"]["card_m"] < 25.0 and imp["impostor"]["atlas_bytes"] > 1e5
+        assert rows[1]["screen_coverage"] > 0.0 == imp["screen_coverage"]
     res = CliRunner().invoke(cli, ["info", str(SPECIES_DIR / "quaking_aspen.txt"), "--lod",
                                    "--lod-distances", "30,10"])
     assert res.exit_code != 0

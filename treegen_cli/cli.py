@@ -178,6 +178,12 @@ def info(species, seed, max_stems, max_leaves, max_size, as_json, with_lod, lod_
             click.echo(f"    {k:<4}{r['distance_m']:>8g}{r['keys_kept']:>9,} {r['keys_kept_pct']:>5.1f}%"
                        f"{r['max_error_px']:>11.3f}{r['leaf_vertex_updates_per_frame']:>15,.0f}"
                        f"{r['leaf_vertices']:>12,}{r['joints']:>8}{r['triangles']:>11,}")
+            if "impostor" in r:
+                i = r["impostor"]
+                click.echo(f"    LOD {k} is the impostor: from {r['distance_m']:g} m, two crossed "
+                           f"cards {i['card_m']:g} m square cut from {i['grid']}×{i['grid']} views "
+                           f"of {i['cell_px']} px ({i['atlas_px']}² atlas, "
+                           f"{i['atlas_bytes'] / 1e3:,.0f} KB of PNG)")
         click.echo("  schedules on the full tree (the paper's Table 3; error: perspective-true, "
                    "measured on every vertex's bound)")
         click.echo(f"    {'dist m':>6}  {'schedule':<9}{'keys kept':>16}{'anim bytes':>12}"
@@ -222,10 +228,13 @@ def _triangle_rows(species, params, seed, tree, triangles, generate_options) -> 
 def _lod_rows(species, params, seed, tree, generate_options, lod_options) -> tuple[list, list]:
     """Rows per LOD (the make pipeline with these LOD options, on the tree `info` already grew,
     measured per LOD), and the full tree's schedules side by side at the paper's distances."""
+    from .impostor import IMPOSTOR_DEFAULTS
     from .lod import PAPER_DISTANCES, lod_table_row, schedule_rows
     from .pipeline import MakeOptions, Timings, build_asset
+    from .render import egl_available
 
-    options = MakeOptions(generate=generate_options, lod=lod_options)
+    options = MakeOptions(generate=generate_options, lod=lod_options,      # as `make` builds it
+                          impostor=IMPOSTOR_DEFAULTS if egl_available() else None)
     asset, _tree = _in_file(species, build_asset, params, seed, options, Timings(), tree)
     return ([lod_table_row(lod, lod_options) for lod in asset.lods],
             schedule_rows(asset.lods[0], PAPER_DISTANCES, lod_options))

@@ -35,9 +35,12 @@ from .limits import MAX_TREES
               show_default=True,
               help="glTF only, as for `treegen make`: quantize = KHR_mesh_quantization, meshopt "
                    "= that plus EXT_meshopt_compression (three.js/Babylon; not Godot or Unreal).")
+@click.option("--impostor/--no-impostor", default=True, show_default=True,
+              help="End each tree's LODs with its impostor (crossed cards cut from a view "
+                   "atlas), as `treegen make` does.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 def forest(layout, output, schema, all_lods, error_px, workers, scheduler, max_trees, compress,
-           as_json):
+           impostor, as_json):
     """Build the forest described by LAYOUT (JSON; see --schema): each distinct (species, seed)
     tree is built once and instanced; every instance carries all its LODs (--camera-lod: the
     one the layout's camera needs)."""
@@ -61,7 +64,7 @@ def forest(layout, output, schema, all_lods, error_px, workers, scheduler, max_t
 
     s = run_forest(layout, output, all_lods=all_lods, error_px=error_px, workers=workers,
                    max_trees=max_trees, progress=current_reporter().show_progress,
-                   scheduler=scheduler, compress=compress)
+                   scheduler=scheduler, compress=compress, impostor=impostor)
     if as_json:
         click.echo(json.dumps(s, indent=2))
         return

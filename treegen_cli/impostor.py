@@ -140,34 +140,59 @@ def _widest_bark(prim: Primitive, cap: int) -> Primitive:
 
 def _dilate(rgba: np.ndarray, grid: int, cell: int) -> np.ndarray:
     """Transparent texels take their cell's mean visible colour, so clients' mipmaps and
-    bilinear filtering do not darken the cut-out's edges."""
+    bilinear filtering do not darken the cut-out's edges. (The renderer clears to 0, so a
+    cell's colour sum needs no mask.)"""
     a = rgba.reshape(grid, cell, grid, cell, 4)
-    seen = a[..., 3:] > 0
-    total = np.where(seen, a[..., :3], 0).sum(axis=(1, 3), dtype=np.uint32)
-    count = np.maximum(seen.sum(axis=(1, 3), dtype=np.uint32), 1)
-    fill = ((total + count // 2) // count).astype(np.uint8)[:, None, :, None, :]
-    out = a.copy()
-    np.copyto(out[..., :3], np.broadcast_to(fill, a[..., :3].shape), where=~seen)
-    return out.reshape(rgba.shape)
+    seen = rgba[..., 3] > 0
+    total = a[..., :3].sum(axis=1, dtype=np.uint32).sum(axis=2)            # (grid, grid, 3)
+    count = np.maximum(seen.reshape(grid, cell, grid, cell).sum(axis=(1, 3), dtype=np.uint32), 1)
+    fill = ((total + count[..., None] // 2) // count[..., None]).astype(np.uint8)
+    out = rgba.copy()
+    np.copyto(out[..., :3], np.repeat(np.repeat(fill, cell, axis=0), cell, axis=1),
+              where=~seen[..., None])
+    return out
 
 
-def _z_up(v: np.ndarray) -> np.ndarray:
-    """Y up (a Drawable's) back to generator space: (x, y, z) → (x, −z, y)."""
-    return np.stack([v[:, 0], -v[:, 2], v[:, 1]], 1).astype(np.float32)
+def _atlas_parts(prims: list[Primitive], materials: list[Material]) -> list:
+    """What render_atlas draws, in generator space (Z up): each primitive with its material's
+    colour, cut-out and base texture (decoded once). Not drawable.from_asset: that would
+    turn everything Y up and back, decode the unused normal maps and build a rig."""
+    from .drawable import Part, decode_image
+
+    mats = {m.name: m for m in materials}
+    decoded: dict[int, np.ndarray] = {}
+    parts = []
+    for p in prims:
+        m = mats.get(p.material)
+        has_uv = p.uvs is not None and len(p.uvs) == len(p.positions)
+        tex = m.base_texture if m is not None and has_uv else None
+        if tex is not None and id(tex) not in decoded:
+            decoded[id(tex)] = decode_image(tex.png, 4, f"texture {tex.name!r}")
+        wrap = tex.wrap if tex is not None and tex.wrap in ("REPEAT", "CLAMP", "MIRROR") else "REPEAT"
+        parts.append(Part(
+            name=p.name, positions=np.asarray(p.positions, np.float32),
+            normals=np.asarray(p.normals, np.float32), indices=np.asarray(p.indices, np.uint32),
+            joints=np.asarray(p.joints), weights=np.asarray(p.weights, np.float32),
+            color=(m.base_color[0], m.base_color[1], m.base_color[2]) if m is not None
+            else (0.6, 0.6, 0.6),
+            double_sided=bool(m is not None and m.double_sided),
+            uvs=np.asarray(p.uvs, np.float32) if has_uv else None,
+            texture=None if tex is None else decoded[id(tex)],
+            alpha_cutoff=m.alpha_cutoff if m is not None else None,
+            opacity=float(m.base_color[3]) if m is not None and len(m.base_color) > 3 else 1.0,
+            wrap=(wrap, wrap)))
+    return parts
 
 
 def render_views(lod: Lod, materials: list[Material], centre: np.ndarray, radius: float,
                  options: ImpostorOptions) -> tuple[np.ndarray, np.ndarray]:
     """The two atlases (albedo + alpha, normals + depth) of `lod`'s rest pose."""
-    from .drawable import from_asset
-    from .asset import Asset
+    from .drawable import Drawable
     from .impostor_render import render_atlas
 
     prims = [_widest_bark(_fewer_leaves(p, options.max_leaf_cards), options.max_bark_triangles)
              for p in lod.primitives]
-    scene = from_asset(Asset("atlas", materials, [replace(lod, primitives=prims, clips=[])]))
-    scene = replace(scene, parts=[replace(p, positions=_z_up(p.positions), normals=_z_up(p.normals))
-                                  for p in scene.parts])
+    scene = Drawable(parts=_atlas_parts(prims, materials), n_joints=1)
     albedo, normal = render_atlas(scene, centre, radius, options.grid, options.cell)
     return _dilate(albedo, options.grid, options.cell), normal
 
@@ -280,10 +305,10 @@ def build_impostor(full: Lod, coarse: Lod, materials: list[Material],
     source = atlas_source(full, coarse)
     centre, radius = sphere(source)
     albedo, normal = render_views(source, materials, centre, radius, options)
-    from .textures import png_bytes
+    from .textures import png_bytes_unfiltered as png
 
-    albedo_tex = Texture("impostor_albedo", png_bytes(albedo), wrap="CLAMP")
-    normal_tex = Texture("impostor_normal", png_bytes(normal), wrap="CLAMP", srgb=False)
+    albedo_tex = Texture("impostor_albedo", png(albedo), wrap="CLAMP")
+    normal_tex = Texture("impostor_normal", png(normal), wrap="CLAMP", srgb=False)
     prim = cards(centre, radius, options.grid)
     skel, dense = trunk_sway(coarse, float(centre[2]))
     clips = [] if dense is None else \

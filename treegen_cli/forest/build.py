@@ -23,6 +23,7 @@ from rich.progress import Progress
 from ..asset import Asset, Forest, Instance, Lod, lod_bounds
 from ..errors import TreegenError, in_file as _in_file
 from ..exchange import FOREST_WRITERS, GltfOptions, check_compress, check_suffix, export_forest
+from ..impostor import IMPOSTOR_DEFAULTS
 from ..limits import MAX_TREES
 from ..lod import LOD_DEFAULTS, leaf_updates as lod_leaf_updates, pixel_size
 from ..params import load_params
@@ -53,9 +54,10 @@ def time_offsets(positions: np.ndarray, wind: WindSpec, seed: int = 0) -> np.nda
     return np.mod(travel + jitter, wind.duration)
 
 
-def make_options(layout: Layout, error_px: float | None = None):
+def make_options(layout: Layout, error_px: float | None = None, impostor: bool = True):
     """MakeOptions for every prototype: the layout's joint budget, the shared-field wind, and
-    LOD schedules for the layout's camera (fov, width; else the make defaults) and error bound."""
+    LOD schedules for the layout's camera (fov, width; else the make defaults) and error bound;
+    with `impostor`, each prototype's impostor as its last LOD, as `treegen make` builds it."""
 
     w = layout.wind
     wind = WindOptions(speed=w.speed, direction_deg=w.direction_deg, gust=w.gust,
@@ -66,7 +68,8 @@ def make_options(layout: Layout, error_px: float | None = None):
                   width=cam.width_px if cam else LOD_DEFAULTS.width,
                   error_px=layout.defaults.error_px if error_px is None else error_px,
                   distances=layout.defaults.lod_distances or LOD_DEFAULTS.distances)
-    return MakeOptions(rig=RigOptions(max_joints=layout.defaults.max_joints), wind=wind, lod=lod)
+    return MakeOptions(rig=RigOptions(max_joints=layout.defaults.max_joints), wind=wind, lod=lod,
+                       impostor=IMPOSTOR_DEFAULTS if impostor else None)
 
 
 def gltf_options(layout: Layout, compress: str = "none",
@@ -169,8 +172,9 @@ def _rotz(deg: np.ndarray) -> np.ndarray:
 
 def build_scene(layout: Layout, all_lods: bool = True, error_px: float | None = None,
                 workers: int | None = None, progress: bool | None = None,
-                scheduler: str | None = None) -> Forest:
-    """Prototypes (built once each) and instances with their time offset.
+                scheduler: str | None = None, impostor: bool = True) -> Forest:
+    """Prototypes (built once each, each ending in its impostor unless `impostor` is False)
+    and instances with their time offset.
 
     all_lods (default): every instance carries all its prototype's LODs, for an engine to
     switch as the player walks; the camera, if the layout has one, only orders the instances
@@ -182,7 +186,7 @@ def build_scene(layout: Layout, all_lods: bool = True, error_px: float | None = 
     t0 = time.perf_counter()
     keys = sorted({(p.species, p.seed) for p in layout.placements}, key=lambda k: (str(k[0]), k[1]))
     index = {k: i for i, k in enumerate(keys)}
-    options = make_options(layout, error_px)
+    options = make_options(layout, error_px, impostor)
     report: dict = {}
     prototypes = build_prototypes(keys, options, workers, progress, layout.params, scheduler,
                                   report)
@@ -258,16 +262,17 @@ def summary(scene: Forest, written: list[Path], seconds: float, camera: bool = T
 def run_forest(layout_path, output, all_lods: bool = True, error_px: float | None = None,
                workers: int | None = None, progress: bool | None = None,
                max_trees: int = MAX_TREES, scheduler: str | None = None,
-               compress: str = "none") -> dict:
+               compress: str = "none", impostor: bool = True) -> dict:
     """The whole command: validate (nothing written on error), build, write, summarise.
-    `compress`: glTF's --compress (quantize, meshopt; a USD output refuses it)."""
+    `compress`: glTF's --compress (quantize, meshopt; a USD output refuses it); `impostor`:
+    end each prototype's LODs with its impostor."""
     t0 = time.perf_counter()
     output = check_suffix(output, FOREST_WRITERS, flag="-o")
     check_compress(output, compress)
     if error_px is not None and not (math.isfinite(error_px) and 0 <= error_px <= 100):
         raise TreegenError(f"--error-px {error_px}: allowed range 0..100 pixels")
     layout = load_layout(layout_path, max_trees)
-    scene = build_scene(layout, all_lods, error_px, workers, progress, scheduler)
+    scene = build_scene(layout, all_lods, error_px, workers, progress, scheduler, impostor)
     t1 = time.perf_counter()
     written = export_forest(scene, output, gltf_options(layout, compress, error_px))
     scene.timings["write_s"] = time.perf_counter() - t1
