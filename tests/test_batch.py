@@ -369,7 +369,7 @@ def test_dry_run_prints_the_table_and_an_estimate_and_writes_nothing(workspace):
 
 def test_schema_and_defaults_agree_with_make():
     from treegen_cli import api
-    from treegen_cli.cli import make
+    from treegen_cli.commands.make import make
 
     schema = json.loads(treegen("batch", "--schema").stdout)
     entry = schema["$defs"]["entry"]["properties"]
