@@ -65,3 +65,32 @@ def test_readme_quotes_the_defaults():
     ]
     missing = [q for q in quotes if q not in text]
     assert not missing, f"README no longer quotes these defaults: {missing}"
+
+
+def test_lod_flags_are_checked_once_in_lod_options_and_worded_as_typed():
+    import pytest
+
+    from treegen_cli.errors import TreegenError
+    from treegen_cli.lod import LodOptions
+
+    with pytest.raises(TreegenError) as stage:
+        LodOptions(screen=(0.5, 0.6))
+    with pytest.raises(TreegenError) as cli_msg:
+        resolve({"lod_screen": "0.5,0.6"})
+    with pytest.raises(TreegenError) as catalogue:
+        resolve({"lod_screen": [0.5, 0.6]}, label=lambda k: f"entries[0].{k}")
+    assert str(stage.value) == str(cli_msg.value) == (
+        "--lod-screen 0.5,0.6: give descending fractions of the screen height, each in "
+        "(0, 100], e.g. 0.5,0.25,0.1")
+    assert str(catalogue.value).startswith("entries[0].lod_screen 0.5,0.6: give descending")
+    with pytest.raises(TreegenError, match=r"^--lod-distances 0,10,10: distances repeat$"):
+        resolve({"lod_distances": "0,10,10"})
+
+
+def test_screen_distance_in_fractions_and_pixels_agree():
+    from treegen_cli.lod import screen_distance, switch_distances
+
+    screen_px = LOD_DEFAULTS.width / LOD_DEFAULTS.aspect             # 1080
+    d = switch_distances(13.0, LOD_DEFAULTS)
+    assert d[1] == screen_distance(13.0, 0.5) and round(d[1], 1) == 40.0   # lod.py's example
+    assert abs(screen_distance(13.0, 0.5 * screen_px, of=screen_px) - d[1]) < 1e-9 * d[1]

@@ -190,17 +190,6 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
     v["lod_triangles"] = _number_list("lod_triangles", v["lod_triangles"], float, label)
     v["lod_screen"] = _number_list("lod_screen", v["lod_screen"], float, label)
 
-    d, sc = v["lod_distances"], v["lod_screen"]
-    if not v["no_lod"] and (not sc or any(not (math.isfinite(x) and 0 < x <= 100) for x in sc)
-                            or list(sc) != sorted(set(sc), reverse=True)):
-        raise TreegenError(f"{label('lod_screen')} {_text(sc) or '(none)'}: give descending "
-                           "fractions of the screen height, each in (0, 100], e.g. 0.5,0.25,0.1")
-    if not v["no_lod"] and d is not None:
-        if not d or any(not math.isfinite(x) or x < 0 for x in d) or list(d) != sorted(d):
-            raise TreegenError(f"{label('lod_distances')} {_text(d) or '(none)'}: "
-                               "give one or more ascending distances in metres, each >= 0")
-        if len(set(d)) != len(d):
-            raise TreegenError(f"{label('lod_distances')} {_text(d)}: distances repeat")
     if not v["no_lod"]:
         t = v["lod_triangles"]
         if not t or any(not (math.isfinite(x) and 0.0 < x <= 1.0) for x in t):
@@ -242,11 +231,15 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
             speed=v["wind_speed"], direction_deg=v["wind_dir"], gust=v["gust"],
             turbulence=v["turbulence"], duration=v["duration"], fps=v["fps"],
             stiffness=v["stiffness"])
-        lod = None if v["no_lod"] or static else LodOptions(
-            distances=d, screen=sc, fov_deg=v["fov"], width=v["width"], error_px=v["error_px"],
-            schedule=v["schedule"], triangles=(1.0, *v["lod_triangles"]))
+        # LodOptions checks --lod-screen/--lod-distances (also for a static format, which
+        # then drops the LODs)
+        lod = None if v["no_lod"] else LodOptions(
+            distances=v["lod_distances"], screen=v["lod_screen"], fov_deg=v["fov"],
+            width=v["width"], error_px=v["error_px"], schedule=v["schedule"],
+            triangles=(1.0, *v["lod_triangles"]))
     except OptionError as e:
         raise TreegenError(e.worded(label(STAGE_FIELDS.get(e.field, e.field)))) from None
+    lod = None if static else lod
 
     make_options = MakeOptions(
         impostor=IMPOSTOR_DEFAULTS if v["impostor"] and lod is not None else None,
