@@ -402,7 +402,7 @@ def test_dry_run_plans_what_the_run_builds_with_budgets_and_profiles(workspace):
 
 def test_schema_and_defaults_agree_with_make():
     from treegen_cli import api
-    from treegen_cli.cli import make
+    from treegen_cli.commands.make import make
 
     schema = json.loads(treegen("batch", "--schema").stdout)
     entry = schema["$defs"]["entry"]["properties"]

@@ -1,4 +1,4 @@
-"""treegen as a library: `make(species, output, **options)` is `treegen make` without a shell.
+"""treegen as a library: `make(species, out, **options)` is `treegen make` without a shell.
 
     from treegen_cli import api
     summary = api.make("species/quaking_aspen.txt", "aspen.glb", seed=3, wind_speed=6,
@@ -8,285 +8,46 @@
 Options go by their CLI names with underscores (`--wind-speed` → `wind_speed`); list options
 (`lod_distances`, `sides`, `joint_levels`) take a list or the CLI's "0,10,30" text. The CLI's
 `make`, this function and `treegen batch` all turn options into stage options through
-`resolve()`, so they share defaults, validation and error messages, and one set of options
-always writes the same bytes whichever door it came in by.
+`options.resolve()`, so they share defaults, validation and error messages, and one set of
+options always writes the same bytes whichever door it came in by.
+
+`treegen make` in one read: commands/make.py hands the flags it was given to `plan_make`
+(output name checked, `options.resolve` → stage options, species file parsed), then
+`run_make`: `pipeline.build_asset` (grow, rig, mesh, wind, LODs, impostor, `prepare`) →
+`exchange.export` (the writer the suffix picks, staged and renamed atomically) →
+`make_summary`.
 """
 from __future__ import annotations
 
-import math
 import os
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable
 
-from .errors import OptionError, TreegenError, in_file
-from .generate import GenerateOptions
-
-# Every `make` option (CLI name with underscores) and its default. cli.py's click options carry
-# the same defaults (tests/test_batch.py checks they agree).
-DEFAULTS: dict[str, object] = {
-    "seed": 0,
-    "max_stems": GenerateOptions.max_stems,
-    "max_leaves": GenerateOptions.max_leaves,
-    "max_size": GenerateOptions.max_size,
-    "max_joints": 256,
-    "joint_levels": None,
-    "sides": None,
-    "leaf_geometry": "card",
-    "texture_size": 512,
-    "leaf_texture": None,
-    "bark_texture": None,
-    "no_textures": False,
-    "wind_speed": 4.0,
-    "wind_dir": 0.0,
-    "gust": 0.35,
-    "turbulence": 0.3,
-    "duration": 10.0,
-    "fps": 30.0,
-    "stiffness": 1.0,
-    "no_wind": False,
-    "lod_screen": "0.5,0.25,0.1",
-    "lod_distances": None,
-    "fov": 60.0,
-    "width": 1920,
-    "error_px": 1.0,
-    "schedule": "bounded",
-    "lod_triangles": "0.5,0.15,0.05",
-    "no_lod": False,
-    "lod_files": False,
-    "impostor": True,
-    "up_axis": None,
-    "compress": "none",
-    "max_vertices": 20_000_000,
-    "max_keys": 5_000_000,
-    "triangles": None,
-    "joints": None,
-    "profile": None,
-}
-INTS = ("seed", "max_stems", "max_leaves", "max_joints", "width", "max_vertices", "max_keys",
-        "texture_size")
-OPTIONAL_INTS = ("triangles", "joints")      # None: no budget / --max-joints decides
-# Options added after assets were first keyed: left out of identity hashes while unset, so a
-# catalogue built before they existed keeps its keys (batch/catalogue.py).
-UNSET_FREE = ("triangles", "joints", "profile")
-PATHS = ("leaf_texture", "bark_texture")
-FLOATS = ("max_size", "wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "fov", "error_px",
-          "stiffness")
-FLAGS = ("no_wind", "no_lod", "lod_files", "no_textures", "impostor")
-CHOICES = {"leaf_geometry": ("card", "shape"), "schedule": ("bounded", "bounded-step", "paper"),
-           "up_axis": (None, "y", "z"), "profile": (None, "mobile", "web", "desktop", "hero"),
-           "compress": ("none", "quantize", "meshopt")}
-LISTS = ("joint_levels", "sides", "lod_screen", "lod_distances", "lod_triangles")
-# stage option fields (WindOptions, LodOptions) → the make option a user typed for them
-STAGE_FIELDS = {"speed": "wind_speed", "direction_deg": "wind_dir", "distances": "lod_distances",
-                "fov_deg": "fov", "screen": "lod_screen"}
-
-
-def cli_name(key: str) -> str:
-    """How the CLI spells an option in messages: `wind_speed` → `--wind-speed`."""
-    return "--" + key.replace("_", "-")
-
-
-@dataclass(frozen=True)
-class Resolved:
-    """One validated set of make options: the seed, the stage options, and the canonical
-    option values (defaults filled in, lists as numbers) that identify the output."""
-
-    seed: int
-    options: object            # pipeline.MakeOptions
-    values: dict
-
-
-def _text(value) -> str:
-    if isinstance(value, (list, tuple)):
-        return ",".join(f"{v:g}" if isinstance(v, float) else str(v) for v in value)
-    return str(value)
-
-
-def _number_list(key: str, value, kind: type, label: Callable[[str], str]) -> tuple | None:
-    """A list option from a list/tuple of numbers or from the CLI's comma-separated text."""
-    if value is None:
-        return None
-    if isinstance(value, str):
-        try:
-            values = tuple(kind(v) for v in value.split(",") if v.strip() != "")
-        except ValueError:
-            example = "0,10,30,130" if kind is float else "0,1,2"
-            what = "metres" if kind is float else "whole numbers"
-            if key == "lod_triangles":
-                example, what = "0.5,0.15,0.05", "fractions"
-            if key == "lod_screen":
-                example, what = "0.5,0.25,0.1", "fractions"
-            raise TreegenError(f"{label(key)} '{value}': expected comma-separated {what}, "
-                               f"e.g. {example}") from None
-    elif isinstance(value, (list, tuple)) and all(
-            isinstance(v, (int, float)) and not isinstance(v, bool)
-            and (kind is float or float(v).is_integer()) for v in value):
-        values = tuple(kind(v) for v in value)
-    else:
-        raise TreegenError(f"{label(key)} {value!r}: expected a list of "
-                           f"{'numbers' if kind is float else 'whole numbers'} or text like "
-                           f"{'0,10,30' if kind is float else '0,1,2'}")
-    if not values and kind is int:
-        raise TreegenError(f"{label(key)} '{_text(value)}': give at least one value")
-    return values
-
-
-def _scalar(key: str, value, label: Callable[[str], str]):
-    """Type-check one scalar option (click did this for the CLI; the API and catalogues need it)."""
-    if key in FLAGS:
-        if not isinstance(value, bool):
-            raise TreegenError(f"{label(key)} {value!r}: expected true or false")
-        return value
-    if key in OPTIONAL_INTS and value is None:
-        return None
-    if key in INTS or key in OPTIONAL_INTS:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise TreegenError(f"{label(key)} {value!r}: expected a whole number")
-        return value
-    if key in FLOATS:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                or not math.isfinite(value):
-            raise TreegenError(f"{label(key)} {value!r}: expected a finite number")
-        return float(value)
-    if key in PATHS:
-        if value is not None and not isinstance(value, (str, os.PathLike)):
-            raise TreegenError(f"{label(key)} {value!r}: expected a PNG file name")
-        return None if value is None else Path(value)
-    if key in CHOICES:
-        if value not in CHOICES[key]:
-            raise TreegenError(f"{label(key)} {value!r}: use one of {', '.join(str(c).lower() for c in CHOICES[key])}")
-        return value
-    return value
-
-
-def resolve(options: dict, label: Callable[[str], str] = cli_name,
-            output: str | os.PathLike | None = None) -> Resolved:
-    """Validate `make` options (missing ones take DEFAULTS) and build the stage options.
-    For a static `output` format (.obj .ply) no wind or LODs are built: it cannot hold them.
-
-    `label(key)` names an option in messages: `--max-joints` for the CLI and the API, a JSON
-    path for a catalogue entry. Every refusal is a TreegenError naming the option and range."""
-    from .limits import Limits
-    from .lod import LodOptions, pixel_size
-    from .materials import TEXTURE_SIZES, MaterialOptions
-    from .mesh import MESH_DEFAULTS
-    from .pipeline import MakeOptions
-    from .params import MAX_LEVELS
-    from .rig import MAX_JOINTS, RigOptions
-    from .wind import WindOptions
-    from .exchange import STATIC, GltfOptions, check_compress
-
-    from .budget import BudgetOptions
-    from .profiles import apply_profile
-
-    unknown = sorted(set(options) - set(DEFAULTS))
-    if unknown:
-        raise TreegenError(f"unknown make option '{unknown[0]}'; allowed: {', '.join(DEFAULTS)}")
-    options = _joints_alias(options, label)
-    options = apply_profile(options, label) if options.get("profile") is not None else options
-    v = {k: _scalar(k, options.get(k, d), label) for k, d in DEFAULTS.items()}
-    v["joint_levels"] = _number_list("joint_levels", v["joint_levels"], int, label)
-    v["sides"] = _number_list("sides", v["sides"], int, label)
-    v["lod_distances"] = _number_list("lod_distances", v["lod_distances"], float, label)
-    v["lod_triangles"] = _number_list("lod_triangles", v["lod_triangles"], float, label)
-    v["lod_screen"] = _number_list("lod_screen", v["lod_screen"], float, label)
-
-    d, sc = v["lod_distances"], v["lod_screen"]
-    if not v["no_lod"] and (not sc or any(not (math.isfinite(x) and 0 < x <= 100) for x in sc)
-                            or list(sc) != sorted(set(sc), reverse=True)):
-        raise TreegenError(f"{label('lod_screen')} {_text(sc) or '(none)'}: give descending "
-                           "fractions of the screen height, each in (0, 100], e.g. 0.5,0.25,0.1")
-    if not v["no_lod"] and d is not None:
-        if not d or any(not math.isfinite(x) or x < 0 for x in d) or list(d) != sorted(d):
-            raise TreegenError(f"{label('lod_distances')} {_text(d) or '(none)'}: "
-                               "give one or more ascending distances in metres, each >= 0")
-        if len(set(d)) != len(d):
-            raise TreegenError(f"{label('lod_distances')} {_text(d)}: distances repeat")
-    if not v["no_lod"]:
-        t = v["lod_triangles"]
-        if not t or any(not (math.isfinite(x) and 0.0 < x <= 1.0) for x in t):
-            raise TreegenError(f"{label('lod_triangles')} '{_text(t)}': give LOD1, LOD2, … "
-                               "triangles as fractions of LOD0's, each in (0, 1], e.g. 0.5,0.15,0.05")
-    if v["triangles"] is not None and not 1 <= v["triangles"] <= 100_000_000:
-        raise TreegenError(f"{label('triangles')} {v['triangles']}: the LOD0 triangle budget "
-                           "must be in [1, 100000000]")
-    if v["max_joints"] < 1:
-        raise TreegenError(f"{label('max_joints')} {v['max_joints']}: the joint budget must be at least 1")
-    mesh = replace(MESH_DEFAULTS, leaf_geometry=v["leaf_geometry"])
-    if v["sides"] is not None:
-        if min(v["sides"]) < 3 or max(v["sides"]) > 64:
-            raise TreegenError(f"{label('sides')} '{_text(options.get('sides'))}': "
-                               "each value must be in [3, 64]")
-        mesh = replace(mesh, sides=v["sides"])
-    if not 0 <= v["seed"] < 2**63:
-        raise TreegenError(f"{label('seed')} {v['seed']}: allowed range 0..{2**63 - 1}")
-    for key in ("max_stems", "max_leaves", "max_vertices", "max_keys"):
-        if v[key] < 1:
-            raise TreegenError(f"{label(key)} {v[key]}: the limit must be at least 1")
-    if not v["max_size"] > 0:
-        raise TreegenError(f"{label('max_size')} {v['max_size']:g}: the bound must be > 0 metres")
-    if v["joint_levels"] is not None and not all(0 <= n <= MAX_LEVELS for n in v["joint_levels"]):
-        raise TreegenError(f"{label('joint_levels')} '{_text(v['joint_levels'])}': each stem "
-                           f"level must be in 0..{MAX_LEVELS}")
-    if v["max_joints"] > MAX_JOINTS:
-        raise TreegenError(f"{label('max_joints')} {v['max_joints']}: the joint budget must be "
-                           f"in 1..{MAX_JOINTS}")
-    lo, hi = TEXTURE_SIZES
-    n = v["texture_size"]
-    if not (lo <= n <= hi and n & (n - 1) == 0):
-        raise TreegenError(f"{label('texture_size')} {n}: must be a power of two in [{lo}, {hi}]")
-    static = output is not None and Path(output).suffix.lower() in STATIC
-    if output is not None:
-        check_compress(output, v["compress"], label("compress"))
-    try:        # a stage's range check names its own field: say what the user typed instead
-        wind = None if v["no_wind"] or static else WindOptions(
-            speed=v["wind_speed"], direction_deg=v["wind_dir"], gust=v["gust"],
-            turbulence=v["turbulence"], duration=v["duration"], fps=v["fps"],
-            stiffness=v["stiffness"])
-        lod = None if v["no_lod"] or static else LodOptions(
-            distances=d, screen=sc, fov_deg=v["fov"], width=v["width"], error_px=v["error_px"],
-            schedule=v["schedule"], triangles=(1.0, *v["lod_triangles"]))
-    except OptionError as e:
-        raise TreegenError(e.worded(label(STAGE_FIELDS.get(e.field, e.field)))) from None
-    from .impostor import IMPOSTOR_DEFAULTS
-
-    make_options = MakeOptions(
-        impostor=IMPOSTOR_DEFAULTS if v["impostor"] and lod is not None else None,
-        generate=GenerateOptions(max_stems=v["max_stems"], max_leaves=v["max_leaves"],
-                                 max_size=v["max_size"]),
-        rig=RigOptions(max_joints=v["max_joints"], joint_levels=v["joint_levels"]),
-        mesh=mesh, wind=wind, lod=lod,
-        limits=Limits(max_vertices=v["max_vertices"], max_keys=v["max_keys"]),
-        materials=MaterialOptions(textures=not v["no_textures"], texture_size=v["texture_size"],
-                                  leaf_texture=v["leaf_texture"], bark_texture=v["bark_texture"]),
-        budget=BudgetOptions(triangles=v["triangles"], fixed_sides=v["sides"] is not None),
-        gltf=GltfOptions(compress=v["compress"], pixel_size=pixel_size(1.0, lod)
-                         if lod is not None and v["compress"] == "meshopt" else 0.0))
-
-    values = {k: list(x) if isinstance(x, tuple) else str(x) if isinstance(x, Path) else x
-              for k, x in v.items()}
-    return Resolved(seed=v["seed"], options=make_options, values=values)
-
-
-def _joints_alias(options: dict, label: Callable[[str], str]) -> dict:
-    """`joints` is `max_joints` by a shorter name: merged into it (both given must agree)."""
-    joints = _scalar("joints", options.get("joints"), label)
-    if joints is None:
-        return options
-    if options.get("max_joints", joints) != joints:
-        raise TreegenError(f"{label('joints')} {joints} and {label('max_joints')} "
-                           f"{options['max_joints']}: the same joint budget; give one of them")
-    return {**{k: x for k, x in options.items() if k != "joints"}, "max_joints": joints}
+from .budget import BudgetOptions, plan_budget
+from .bundled import resolve_species
+from .errors import TreegenError, in_file
+from .exchange import GLTF_DEFAULTS, STATIC, check_suffix, check_up_axis, export, export_parts
+from .forest import run_forest, schema_text as forest_schema_text  # noqa: F401  (the forest door)
+from .generate import generate
+from .limits import MAX_TREES, estimate_triangles  # noqa: F401  (MAX_TREES: forest's default)
+from .lod import PAPER_DISTANCES, lod_table_row, schedule_rows
+from .mesh import MESH_DEFAULTS
+from .options import (DEFAULTS, GROUPS, UNSET_FREE, Resolved, cli_name,  # noqa: F401  (re-exported)
+                      resolve)
+from .params import Params, load_params
+from .pipeline import MakeOptions, Timings, build_asset
+from .prepare import split_lods
+from .progress import current_reporter
+from .rig import build_rig
+from .tree import tree_stats
+from .wind import wind_report
 
 
 def check_output(output: str | os.PathLike, up_axis: str | None = None,
                  flag: str | None = None) -> Path:
     """Refuse an output name whose suffix no writer handles (or a folder), or an up axis its
     format cannot carry, before any work is done; `flag` ("-o") names the option in messages."""
-    from .exchange import check_suffix, check_up_axis
-
     path = check_suffix(output, flag=flag)
     check_up_axis(path, up_axis)
     return path
@@ -294,8 +55,6 @@ def check_output(output: str | os.PathLike, up_axis: str | None = None,
 
 def build(params, species, job: Resolved, timings=None):
     """Grow, rig, mesh and animate one tree; user errors are reported against `species`."""
-    from .pipeline import Timings, build_asset
-
     return in_file(species, build_asset, params, job.seed, job.options,
                    timings if timings is not None else Timings())
 
@@ -303,11 +62,6 @@ def build(params, species, job: Resolved, timings=None):
 def write(asset, tree, output, timings, t0: float, job: Resolved | None = None) -> dict:
     """Export `asset` atomically to `output` (as per-LOD files with lod_files) and return the
     `make --json` summary."""
-    from .exchange import export, export_parts
-    from .prepare import split_lods
-
-    from .exchange import GLTF_DEFAULTS
-
     values = job.values if job is not None else DEFAULTS
     gltf = job.options.gltf if job is not None else GLTF_DEFAULTS
     asset = replace(asset, up_axis=values["up_axis"])
@@ -316,21 +70,60 @@ def write(asset, tree, output, timings, t0: float, job: Resolved | None = None) 
     return make_summary(asset, tree, written, timings.stages, time.perf_counter() - t0)
 
 
+# ------------------------------------------------------------------------------------- make
+
+@dataclass(frozen=True)
+class MakeJob:
+    """One checked `make` request, nothing built yet: what `run_make` needs."""
+
+    species: str | os.PathLike     # as given: user errors in the species file name it
+    output: Path
+    params: Params
+    job: Resolved
+    t0: float                      # when the request arrived (the summary's seconds)
+
+    @property
+    def static(self) -> bool:
+        """.obj/.ply: no wind or LODs (the format cannot hold them)."""
+        return self.output.suffix.lower() in STATIC
+
+    @property
+    def stage_runs(self) -> int:
+        """Stage runs to expect, for a progress bar: per LOD generate, rig, mesh (, wind,
+        lod), then materials, prepare, write (, impostor)."""
+        o = self.job.options
+        per_lod = 3 if o.wind is None else 5
+        if o.lod is None:
+            return per_lod + 3
+        return o.lod.count * per_lod + 3 + (o.impostor is not None)
+
+
+def plan_make(species: str | os.PathLike, output: str | os.PathLike, options: dict,
+              flag: str | None = None) -> MakeJob:
+    """Check the output name, resolve `options` (missing ones: a --profile, then DEFAULTS)
+    and parse the species file; every refusal comes before any work."""
+    t0 = time.perf_counter()
+    path = check_output(output, options.get("up_axis"), flag=flag)
+    job = resolve(options, output=path)
+    return MakeJob(species, path, load_params(resolve_species(species)), job, t0)
+
+
+def run_make(make_job: MakeJob, timings=None) -> dict:
+    """Build the asset and write it; returns the `make --json` summary."""
+    timings = timings if timings is not None else Timings()
+    asset, tree = build(make_job.params, make_job.species, make_job.job, timings)
+    summary = write(asset, tree, make_job.output, timings, make_job.t0, make_job.job)
+    current_reporter().detail(
+        f"  counts    stems per level {tree_stats(tree)['stems_per_level']}, "
+        f"{tree.n_nodes:,} nodes, {tree.n_leaves:,} leaves, {len(asset.lods)} LOD(s)")
+    return summary
+
+
 def make(species: str | os.PathLike, output: str | os.PathLike, **options) -> dict:
     """Grow `species` (a file, or a bundled name such as "quaking_aspen") and write it to
     `output` (format from the suffix), as `treegen make` does with the same options; returns
     what `treegen make --json` prints."""
-    from .bundled import resolve_species
-    from .params import load_params
-    from .pipeline import Timings
-
-    t0 = time.perf_counter()
-    output = check_output(output, options.get("up_axis"))
-    job = resolve(options, output=output)
-    params = load_params(resolve_species(species))
-    timings = Timings()
-    asset, tree = build(params, species, job, timings)
-    return write(asset, tree, output, timings, t0, job)
+    return run_make(plan_make(species, output, options))
 
 
 def make_summary(asset, tree, written, stages: dict, seconds: float) -> dict:
@@ -354,3 +147,66 @@ def make_summary(asset, tree, written, stages: dict, seconds: float) -> dict:
                                                                "keys", "joint_keys")},
             "lods": lods, "seconds": round(seconds, 4),
             "stages_s": {k: round(v, 4) for k, v in stages.items()}}
+
+
+# ------------------------------------------------------------------------------------- info
+
+def info(species: str | os.PathLike, lod: bool = False, wind: bool = False,
+         triangles: int | None = None, **options) -> dict:
+    """`treegen info --json`: grow `species` and report stems, leaves, sizes and LOD0
+    triangles; with `triangles` the budget plan `make --triangles` would build; with `lod` a
+    row per LOD and the paper's Table 3 side by side; with `wind` the wind model's numbers.
+    Only the options a report uses are validated (a LOD option without `lod` is ignored)."""
+    def given(group: str) -> dict:
+        return {k: v for k, v in options.items() if k in GROUPS[group]}
+
+    unknown = {k: v for k, v in options.items() if k not in DEFAULTS}
+    generate_job = resolve(given("generate") | unknown)
+    generate_options, seed = generate_job.options.generate, generate_job.seed
+    path = resolve_species(species)
+    params = load_params(path)
+    t0 = time.perf_counter()
+    tree = in_file(path, generate, params, seed, generate_options)
+    seconds = time.perf_counter() - t0
+    current_reporter().detail(f"  generate  {seconds:8.3f} s  ({tree.n_stems:,} stems, "
+                              f"{tree.n_nodes:,} nodes, {tree.n_leaves:,} leaves)")
+    stats = tree_stats(tree) | {"generate_s": round(seconds, 4), "file": str(path)}
+    stats["triangles"] = _triangle_rows(path, params, seed, tree, triangles, generate_options)
+    if lod:
+        lod_options = resolve(given("lod")).options.lod
+        assert lod_options is not None              # no_lod is not an info option
+        from .impostor import IMPOSTOR_DEFAULTS
+        from .render import egl_available          # lazy: GL only when the impostor is drawn
+
+        make_options = MakeOptions(generate=generate_options, lod=lod_options,  # as `make` builds it
+                                   impostor=IMPOSTOR_DEFAULTS if egl_available() else None)
+        asset, _tree = in_file(path, build_asset, params, seed, make_options, Timings(), tree)
+        stats["lods"] = [lod_table_row(level, lod_options) for level in asset.lods]
+        stats["schedules"] = schedule_rows(asset.lods[0], PAPER_DISTANCES, lod_options)
+    if wind:
+        wind_options = resolve(given("wind")).options.wind
+        stats["wind"] = wind_report(tree, build_rig(tree), wind_options, seed)
+    return stats
+
+
+def _triangle_rows(species, params, seed, tree, triangles, generate_options) -> dict:
+    """LOD0 triangles as `make` builds the grown tree (exact, from its stems and leaves), and
+    with a budget the plan `make --triangles` would build."""
+    bark, leaves = estimate_triangles(tree, MESH_DEFAULTS)
+    out: dict = {"lod0": bark + leaves, "bark": bark, "leaves": leaves}
+    if triangles is not None:
+        plan = in_file(species, plan_budget, params, seed, MESH_DEFAULTS,
+                       BudgetOptions(triangles=triangles), generate_options)
+        out["budget"] = {"triangles": plan.triangles, "bark": plan.bark, "leaves": plan.leaves,
+                         "levels": plan.levels, "curve_scale": plan.curve_scale,
+                         "sides": list(plan.mesh.sides),
+                         "rings_per_segment": list(plan.mesh.rings_per_segment),
+                         "leaf_quality_factor": round(plan.leaf_factor, 6),
+                         "minimum": plan.minimum, "maximum": plan.maximum,
+                         "plan": plan.describe()}
+    return out
+
+
+__all__ = ["DEFAULTS", "MAX_TREES", "MakeJob", "Resolved", "TreegenError", "build", "check_output",
+           "cli_name", "forest_schema_text", "info", "make", "make_summary", "plan_make",
+           "resolve", "run_forest", "run_make", "write"]

@@ -32,7 +32,7 @@ import numpy as np
 
 from .asset import Clip, Impostor, Lod, Material, Primitive, Skeleton, Texture
 from .errors import TreegenError
-from .lod import LodOptions, decimate
+from .lod import LodOptions, decimate, screen_distance
 from .quat import mul as quat_mul, unit as unit_quat
 
 
@@ -282,9 +282,8 @@ def trunk_sway(lod: Lod, height: float) -> tuple[Skeleton, Clip | None]:
 def switch_distance(height: float, last: float, lod_options: LodOptions,
                     options: ImpostorOptions) -> float:
     """Metres from which the tree is at most switch_px tall on screen (and ≥ min_factor × last)."""
-    screen_h = lod_options.width / lod_options.aspect
-    tan_half_v = math.tan(0.5 * math.radians(lod_options.fov_deg)) / lod_options.aspect
-    d = height * screen_h / (2.0 * tan_half_v * options.switch_px)
+    d = screen_distance(height, options.switch_px, lod_options,
+                        of=lod_options.width / lod_options.aspect)
     return float(max(d, options.min_factor * last, 1e-3))
 
 

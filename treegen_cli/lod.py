@@ -80,8 +80,8 @@ class LodOptions:
         if (d is None and not s) or any(not (math.isfinite(x) and 0.0 < x <= 100.0) for x in s) \
                 or list(s) != sorted(s, reverse=True) or len(set(s)) != len(s):
             raise OptionError("screen", ",".join(f"{x:g}" for x in s) or "(none)",
-                              "give descending fractions of the screen height, each in (0, 100]",
-                              "--lod-screen")
+                              "give descending fractions of the screen height, each in (0, 100], "
+                              "e.g. 0.5,0.25,0.1", "--lod-screen")
         if not 0.0 < self.fov_deg < 180.0:
             raise OptionError("fov_deg", self.fov_deg, "the horizontal field of view must be in "
                                                         "(0, 180) degrees", "--fov")
@@ -135,8 +135,15 @@ def switch_distances(height: float, options: LodOptions = LOD_DEFAULTS) -> tuple
     Result (height 13 m, fov 60°, 16:9, screen 0.5/0.25/0.1): (0, 40.0, 80.1, 200.1) m."""
     if options.distances is not None:
         return tuple(float(x) for x in options.distances)
-    view = 2.0 * _tan_half_fov_y(options)
-    return (0.0,) + tuple(float(height / (s * view)) for s in options.screen)
+    return (0.0,) + tuple(screen_distance(height, s, options) for s in options.screen)
+
+
+def screen_distance(height: float, share: float, options: LodOptions = LOD_DEFAULTS,
+                    of: float = 1.0) -> float:
+    """Metres from which a tree `height` metres tall fills `share` of `of` of the screen
+    height: a fraction (of = 1, `--lod-screen`) or pixels (of = width / aspect, the
+    impostor's switch_px). height · of / (share · 2·tan(fov_y/2))."""
+    return float(height * of / (share * (2.0 * _tan_half_fov_y(options))))
 
 
 def pixel_size(distance: float, options: LodOptions = LOD_DEFAULTS) -> float:

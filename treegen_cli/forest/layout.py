@@ -15,39 +15,8 @@ from ..errors import TreegenError
 from ..limits import MAX_TREES
 from ..params import load_params
 from .scatter import polygon_area, scatter_points
-from .schema import check_schema, layout_schema, read_json_file, show_value
-
-
-@dataclass(frozen=True)
-class Camera:
-    position: tuple[float, float, float]
-    target: tuple[float, float, float]
-    fov_deg: float = 60.0
-    width_px: int = 1920
-
-
-@dataclass(frozen=True)
-class WindSpec:
-    speed: float = 4.0
-    direction_deg: float = 0.0
-    gust: float = 0.35
-    turbulence: float = 0.3
-    duration: float = 4.0
-    fps: float = 30.0
-    seed: int = 0
-    phase_jitter: float = 0.25
-    enabled: bool = True
-
-
-@dataclass(frozen=True)
-class Defaults:
-    seed: int = 0
-    scale: float = 1.0
-    rotation_deg: float = 0.0
-    max_joints: int = 48
-    lod_distances: tuple[float, ...] | None = None
-    error_px: float = 1.0
-    phase_variants: int = 4
+from .schema import (Camera, Defaults, WindSpec, check_schema, layout_schema,  # noqa: F401
+                     read_json_file, show_value)
 
 
 @dataclass(frozen=True)
@@ -109,7 +78,8 @@ def parse_layout(data, path: Path, max_trees: int = MAX_TREES) -> Layout:
     if "camera" in data:
         cam = data["camera"]
         camera = Camera(_xyz(cam["position"]), _xyz(cam["target"]),
-                        float(cam.get("fov_deg", 60.0)), int(cam.get("width_px", 1920)))
+                        float(cam.get("fov_deg", Camera.fov_deg)),
+                        int(cam.get("width_px", Camera.width_px)))
         if np.allclose(camera.position, camera.target):
             raise TreegenError("camera.target: must differ from camera.position")
     wind = WindSpec(**data.get("wind", {}))

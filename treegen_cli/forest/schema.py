@@ -2,17 +2,64 @@
 (type, properties, required, additionalProperties, items, min/maxItems, minimum/maximum,
 exclusive bounds, minLength, $ref), so the published schema and the checks cannot drift apart.
 Every message starts with the JSON path of the offending value.
+
+The camera, wind and defaults objects are dataclasses here; their defaults (the wind's and the
+screen's read from the stage DEFAULTS) are written into the schema as it is loaded, so the
+published "default"s are never typed twice.
 """
 from __future__ import annotations
 
 import json
 import math
+from dataclasses import MISSING, dataclass, fields
 from importlib import resources
 from pathlib import Path
 
 from ..errors import TreegenError
+from ..lod import LOD_DEFAULTS
+from ..wind import DEFAULTS as WIND_DEFAULTS
 
 SCHEMA_NAME = "layout.schema.json"
+FOREST_LOOP_S = 4.0     # a forest's wind loop: shorter than make's (many trees share one file)
+FOREST_MAX_JOINTS = 48  # joints per prototype: a forest's trees are seen from afar
+
+
+@dataclass(frozen=True)
+class Camera:
+    position: tuple[float, float, float]
+    target: tuple[float, float, float]
+    fov_deg: float = LOD_DEFAULTS.fov_deg
+    width_px: int = LOD_DEFAULTS.width
+
+
+@dataclass(frozen=True)
+class WindSpec:
+    """The layout's "wind" object: one field for the whole forest (wind.WindOptions per tree)."""
+
+    speed: float = WIND_DEFAULTS.speed
+    direction_deg: float = WIND_DEFAULTS.direction_deg
+    gust: float = WIND_DEFAULTS.gust
+    turbulence: float = WIND_DEFAULTS.turbulence
+    duration: float = FOREST_LOOP_S
+    fps: float = WIND_DEFAULTS.fps
+    seed: int = 0
+    phase_jitter: float = 0.25
+    enabled: bool = True
+
+
+@dataclass(frozen=True)
+class Defaults:
+    seed: int = 0
+    scale: float = 1.0
+    rotation_deg: float = 0.0
+    max_joints: int = FOREST_MAX_JOINTS
+    lod_distances: tuple[float, ...] | None = LOD_DEFAULTS.distances
+    error_px: float = LOD_DEFAULTS.error_px
+    phase_variants: int = 4
+
+
+# the schema's objects whose "default"s the dataclasses define
+DOCUMENTED = {"camera": Camera, "wind": WindSpec, "defaults": Defaults}
 
 
 def read_json_file(path: Path, kind: str):
@@ -33,13 +80,29 @@ def read_json_file(path: Path, kind: str):
         raise TreegenError(f"{path}: line {e.lineno} column {e.colno}: invalid JSON ({e.msg})") from None
 
 
-def schema_text() -> str:
-    """The published JSON Schema of layout files (package data)."""
-    return resources.files("treegen_cli").joinpath("schemas", SCHEMA_NAME).read_text("utf-8")
+def _json_default(value):
+    """4.0 → 4, as the schema has always printed whole numbers."""
+    return int(value) if isinstance(value, float) and value.is_integer() else value
 
 
 def layout_schema() -> dict:
-    return json.loads(schema_text())
+    """The layout schema (package data) with the defaults of DOCUMENTED filled in."""
+    text = resources.files("treegen_cli").joinpath("schemas", SCHEMA_NAME).read_text("utf-8")
+    schema = json.loads(text)
+    for key, cls in DOCUMENTED.items():
+        props = schema["properties"][key]["properties"]
+        for f in fields(cls):
+            if f.default is not MISSING and f.default is not None and f.name in props:
+                items = [kv for kv in props[f.name].items() if kv[0] != "default"]
+                at = next((i for i, kv in enumerate(items) if kv[0] == "description"), len(items))
+                items.insert(at, ("default", _json_default(f.default)))
+                props[f.name] = dict(items)
+    return schema
+
+
+def schema_text() -> str:
+    """The published JSON Schema of layout files, as `treegen forest --schema` prints it."""
+    return json.dumps(layout_schema(), indent=2, ensure_ascii=False) + "\n"
 
 
 _TYPES = {

@@ -1,4 +1,5 @@
-"""`treegen forest LAYOUT -o OUT`: the command body, kept out of cli.py (which only registers it)."""
+"""`treegen forest LAYOUT -o OUT`: build a layout's trees once each and instance them
+(`api.run_forest`, i.e. forest/build.py, does the work)."""
 from __future__ import annotations
 
 import json
@@ -6,8 +7,10 @@ from pathlib import Path
 
 import click
 
-from .errors import TreegenError
-from .limits import MAX_TREES
+from .. import api
+from ..errors import TreegenError
+from ..progress import current_reporter
+from . import flags
 
 
 @click.command()
@@ -23,13 +26,11 @@ from .limits import MAX_TREES
 @click.option("--error-px", type=float, default=None,
               help="Screen-space error bound of the key schedules, pixels [default: the "
                    "layout's defaults.error_px, else 1].")
-@click.option("--workers", type=int, default=None,
-              help="Worker processes of the embedded Dask cluster building the prototypes "
-                   "[default: one per core; 1: in this process].")
-@click.option("--scheduler", default=None, metavar="tcp://HOST:8786",
-              help="Build the prototypes on this Dask scheduler's workers instead [default: "
-                   "$DASK_SCHEDULER_ADDRESS, else an embedded cluster].")
-@click.option("--max-trees", type=int, default=MAX_TREES, show_default=True,
+@flags.cluster("Worker processes of the embedded Dask cluster building the prototypes "
+               "[default: one per core; 1: in this process].",
+               "Build the prototypes on this Dask scheduler's workers instead [default: "
+               "$DASK_SCHEDULER_ADDRESS, else an embedded cluster].")
+@click.option("--max-trees", type=int, default=api.MAX_TREES, show_default=True,
               help="Refuse layouts that place more trees than this (checked before building).")
 @click.option("--compress", type=click.Choice(["none", "quantize", "meshopt"]), default="none",
               show_default=True,
@@ -38,33 +39,23 @@ from .limits import MAX_TREES
 @click.option("--impostor/--no-impostor", default=True, show_default=True,
               help="End each tree's LODs with its impostor (crossed cards cut from a view "
                    "atlas), as `treegen make` does.")
-@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
+@flags.json_flag("Print the summary as JSON.")
 def forest(layout, output, schema, all_lods, error_px, workers, scheduler, max_trees, compress,
            impostor, as_json):
     """Build the forest described by LAYOUT (JSON; see --schema): each distinct (species, seed)
     tree is built once and instanced; every instance carries all its LODs (--camera-lod: the
     one the layout's camera needs)."""
-    from .forest import run_forest, schema_text
-
     if schema:
-        click.echo(schema_text().rstrip())
+        click.echo(api.forest_schema_text().rstrip())
         return
     if layout is None:
         raise TreegenError("forest: give a LAYOUT file (or --schema)")
     if output is None:
         raise TreegenError("forest: give an output file with -o, e.g. -o forest.glb")
-    if workers is not None and workers < 1:
-        raise TreegenError(f"--workers {workers}: must be at least 1")
-    from .executor import scheduler_address
-    from .progress import current_reporter
-
-    if workers is not None and scheduler_address(scheduler):
-        raise TreegenError(f"--workers {workers}: only for the embedded cluster; a --scheduler "
-                           "(or DASK_SCHEDULER_ADDRESS) cluster has its own workers")
-
-    s = run_forest(layout, output, all_lods=all_lods, error_px=error_px, workers=workers,
-                   max_trees=max_trees, progress=current_reporter().show_progress,
-                   scheduler=scheduler, compress=compress, impostor=impostor)
+    flags.check_cluster(workers, scheduler)
+    s = api.run_forest(layout, output, all_lods=all_lods, error_px=error_px, workers=workers,
+                       max_trees=max_trees, progress=current_reporter().show_progress,
+                       scheduler=scheduler, compress=compress, impostor=impostor)
     if as_json:
         click.echo(json.dumps(s, indent=2))
         return

@@ -1,4 +1,4 @@
-"""`treegen batch CATALOGUE -o DIR`: the command body (cli.py only registers it).
+"""`treegen batch CATALOGUE -o DIR`: many `make` jobs on Dask (batch.py plans and runs them).
 
 Output policy: one stdout line at the end (or, with --json, one JSON line per finished job
 and a closing {"event": "done", ...} line, for machines that want results as they stream);
@@ -15,31 +15,30 @@ from pathlib import Path
 
 import click
 
-from .errors import TreegenError
+from ..batch import estimate, load_catalogue, plan_jobs, plan_trees, run_jobs, schema_text
+from ..errors import TreegenError
+from ..executor import default_workers, scheduler_address
+from ..progress import current_reporter
+from . import flags
 
 
 @click.command()
 @click.argument("catalogue", type=click.Path(path_type=Path), required=False)
 @click.option("-o", "--output", "out_dir", type=click.Path(path_type=Path), metavar="DIR",
               help="Output folder (created if missing); assets, manifest.json and manifest.csv go here.")
-@click.option("--workers", type=int, default=None,
-              help="Worker processes of the embedded Dask cluster [default: one per core].")
-@click.option("--scheduler", default=None, metavar="tcp://HOST:8786",
-              help="Run the jobs on this Dask scheduler's workers instead [default: "
-                   "$DASK_SCHEDULER_ADDRESS, else an embedded cluster]. Workers must see DIR "
-                   "at the same path.")
+@flags.cluster("Worker processes of the embedded Dask cluster [default: one per core].",
+               "Run the jobs on this Dask scheduler's workers instead [default: "
+               "$DASK_SCHEDULER_ADDRESS, else an embedded cluster]. Workers must see DIR "
+               "at the same path.")
 @click.option("--force", is_flag=True, help="Rebuild every job, even those already up to date.")
 @click.option("--dry-run", is_flag=True,
               help="Print the job table with each tree's plan (LODs, triangles, joints, as the build "
                    "will make them) and a size/time estimate; build and write nothing.")
 @click.option("--schema", is_flag=True, help="Print the catalogue's JSON Schema and exit.")
-@click.option("--json", "as_json", is_flag=True,
-              help="One JSON line per finished job, then a summary line.")
+@flags.json_flag("One JSON line per finished job, then a summary line.")
 def batch(catalogue, out_dir, workers, scheduler, force, dry_run, schema, as_json):
     """Build every asset CATALOGUE (JSON; see --schema) lists — species × seeds × grid ×
     formats — in parallel on Dask, into DIR with a manifest. Reruns skip what is up to date."""
-    from .batch import load_catalogue, plan_jobs, schema_text
-
     if schema:
         click.echo(schema_text().rstrip())
         return
@@ -52,13 +51,7 @@ def batch(catalogue, out_dir, workers, scheduler, force, dry_run, schema, as_jso
     base = next(p for p in (out_dir.absolute(), *out_dir.absolute().parents) if p.exists())
     if not base.is_dir() or not os.access(base, os.W_OK | os.X_OK):
         raise TreegenError(f"-o {out_dir}: cannot write into '{base}'")
-    if workers is not None and workers < 1:
-        raise TreegenError(f"--workers {workers}: must be at least 1")
-    from .executor import scheduler_address
-
-    if workers is not None and scheduler_address(scheduler):
-        raise TreegenError(f"--workers {workers}: only for the embedded cluster; a --scheduler "
-                           "(or DASK_SCHEDULER_ADDRESS) cluster has its own workers")
+    flags.check_cluster(workers, scheduler)
     cat = load_catalogue(catalogue)
     plan = plan_jobs(cat, out_dir, force)
     if dry_run:
@@ -70,9 +63,6 @@ def batch(catalogue, out_dir, workers, scheduler, force, dry_run, schema, as_jso
 def _dry_run(cat, plan, workers, scheduler, as_json) -> None:
     """The job table with each tree's plan (LODs, triangles and joints per LOD, as the build
     will make them) and a size/time estimate; exit 1 when a job would fail, as the run would."""
-    from .batch import estimate, plan_trees
-    from .executor import default_workers, scheduler_address
-
     shapes = plan_trees(cat, plan.build)
     for j in plan.skip:         # up to date: what the manifest recorded when it was built
         row = plan.previous[j.output]
@@ -139,9 +129,6 @@ def _fail(failing, shapes) -> None:
 
 
 def _run(cat, plan, out_dir, workers, scheduler, as_json) -> None:
-    from .batch import run_jobs
-    from .progress import current_reporter
-
     rep = current_reporter()
     counts = {"built": 0, "failed": 0, "skipped": 0}
     with _progress(rep, len(plan.build)) as bar:
