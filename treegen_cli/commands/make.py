@@ -39,10 +39,11 @@ def make(species, output, as_json, **options):
     if job.static:
         click.echo("  static format: no wind or LODs")
     click.echo(f"  {s['stems']:,} stems, {s['leaves']:,} leaves; {s['vertices']:,} vertices, "
-               f"{s['triangles']:,} triangles; {s['joints']} joints; {s['keys']} keys")
+               f"{s['triangles']:,} triangles; {s['joints']} joints; "
+               f"{s['joint_keys']:,} keys ({s['keys']} frames)")
     if len(s["lods"]) > 1:
         click.echo("  LODs: " + "; ".join(
-            f"{r['distance_m']:g} m: {r['triangles']:,} tris, {r['joints']} joints"
+            f"{r['distance_m']:.1f} m: {r['triangles']:,} tris, {r['joints']} joints"
             + (f", {r['joint_keys']:,} keys" if r["decimated"] else "") for r in s["lods"]))
     stages = ", ".join(f"{k} {v:.2f}" for k, v in timings.stages.items())
     click.echo(f"  {time.perf_counter() - t0:.2f} s  ({stages})")
