@@ -167,7 +167,8 @@ def test_parents_keys_move_children_synthetic_chain():
 
 
 def test_lod_meshes_keep_leaf_cover_and_coarsen():
-    """Leaf area changes only as much as keeping the crown's cover needs (lod_budget.leaf_factor;
+    """Leaf area changes only as much as keeping the crown's cover needs (lod_budget.cover_factors:
+    the kept leaves also make up for the dropped twigs' bark, so the area may grow by a third;
     the cover itself is rendered and compared in test_lod_budget.py)."""
     for name in ("quaking_aspen", "black_tupelo"):
         asset = _asset(name)
@@ -179,7 +180,7 @@ def test_lod_meshes_keep_leaf_cover_and_coarsen():
             tris.append(sum(len(p.indices) // 3 for p in lod.primitives))
             joints.append(len(lod.skeleton.names))
             leaf_verts.append(len(leaf.positions))
-        assert np.allclose(areas, areas[0], rtol=0.25), areas
+        assert all(0.9 * areas[0] <= a <= 1.4 * areas[0] for a in areas), areas
         assert tris == sorted(tris, reverse=True) and tris[-1] < tris[0]
         assert joints == sorted(joints, reverse=True) and joints[-1] < joints[0]
         assert leaf_verts[-1] < leaf_verts[0]

@@ -25,14 +25,20 @@ from treegen_cli.rig import build_rig
 FRACTIONS = LodOptions().triangles            # (1, 0.5, 0.15, 0.05)
 RENDER_PX = 384       # longest image side: leaves still span a pixel or more at every switch
 COVERAGE_TOL = 0.05   # issue 13: covered area within ±5 % at every switch
-# Species the coverage-true thinning does not hold to ±5 % yet (measured at RENDER_PX; the
-# bound guards against regressions): fan palms' leaflets converge and overlap at the fan's
-# heart, which the Boolean cover model misses; conifers' needles (larch) lose cover; rush and
-# shave grass are bare stems whose count the 5 % budget cuts to a few.
-COVERAGE_GAPS = {"black_tupelo": 0.07, "desert_bush": 0.07, "european_larch": 0.34,
-                 "fan_palm": 0.32, "lombardy_poplar": 0.10, "palm": 0.09, "rush": 0.16,
-                 "sassafras": 0.08, "shave_grass": 0.24, "tamarack": 0.10}
-IOU_FLOOR = 0.42      # issue 13 asks 0.9: not reached by thinned leaves (cards would); worst 0.44
+IOU_TARGET = 0.9      # issue 13: silhouette IoU at least this at every switch
+# Measured per species (worst switch, RENDER_PX, the view below; bench/lod_pop_bench.py --views 1
+# --max-px 384): (covered area off by at most, IoU at least), a regression guard a little
+# below what the LODs reach, not the target. Cover is within ±5 % but for the oak, palms,
+# poplar, cottonwood and tamarack (5–9 % off); IoU ≥ 0.9 only for the fir, the willow and the rush:
+# kept leaves are fewer and larger, and their scatter differs from LOD0's at the 3-pixel scale;
+# shave grass keeps few whole branches of its whorls at 5 % of the triangles.
+MEASURED = {"balsam_fir": (0.024, 0.926), "black_tupelo": (0.056, 0.863),
+            "ca_black_oak": (0.088, 0.813), "desert_bush": (0.034, 0.734),
+            "eastern_cottonwood": (0.061, 0.792), "european_larch": (0.042, 0.742),
+            "fan_palm": (0.063, 0.784), "lombardy_poplar": (0.075, 0.767), "palm": (0.10, 0.723),
+            "quaking_aspen": (0.038, 0.869), "rush": (0.057, 0.891), "sassafras": (0.041, 0.861),
+            "shave_grass": (0.068, 0.443), "tamarack": (0.069, 0.844),
+            "weeping_willow": (0.05, 0.90)}
 
 
 @lru_cache(maxsize=None)
@@ -127,8 +133,8 @@ def test_pruned_stems_keep_their_leaves_in_place():
 @pytest.mark.parametrize("species", SPECIES)
 def test_lod_switches_keep_cover(species):
     """Consecutive LODs rendered at the tree's size on screen at their switch (fov 60°, 1920
-    px, the project's renderer, alpha-tested leaves): covered area within ±5 %, silhouette IoU
-    above the floor."""
+    px, the project's renderer, alpha-tested leaves): covered area within ±5 % and silhouette
+    IoU ≥ 0.9 (issue 13), or no worse than measured (MEASURED) where that is not reached."""
     from treegen_cli.render import egl_available
     from treegen_cli.silhouette import lod_pops
 
@@ -136,9 +142,10 @@ def test_lod_switches_keep_cover(species):
         pytest.fail("no headless OpenGL (EGL) context: the renderer cannot run here")
     asset = _asset(species)
     asset = replace(asset, lods=[lod for lod in asset.lods if lod.impostor is None])  # (test_impostor)
+    cover_off, iou = MEASURED[species]
     for pop in lod_pops(asset, LodOptions(), views=(-90.0,), max_px=RENDER_PX):
-        assert abs(pop.coverage - 1.0) <= COVERAGE_GAPS.get(species, COVERAGE_TOL), (species, pop)
-        assert pop.iou >= IOU_FLOOR, (species, pop)
+        assert abs(pop.coverage - 1.0) <= max(cover_off, COVERAGE_TOL), (species, pop)
+        assert pop.iou >= min(iou, IOU_TARGET), (species, pop)
 
 
 def test_default_options_build_the_planned_tree():

@@ -7,9 +7,12 @@ Each LOD is cut from LOD0's tree (lod_leaves.py), in this order:
      mesh's own ring and side formulas, fits the bark share of the budget — LOD0's share of bark
      in its triangles, so bark and leaves shrink together;
   3. leaves: as many stratified leaves as the rest of the budget holds, their blades scaled so
-     the LOD covers what LOD0 covers (`leaf_factor`; kept stems thicken where bark shows most: `radius_factor`).
+     the LOD covers on screen, at its switch distance, what LOD0 covers (`cover_factors`,
+     lod_cover.py): each region of a few pixels keeps LOD0's area (dropped twigs' bark and
+     leaves included), one factor then matches the whole. A leafless tree thickens its kept
+     branches instead.
 
-    plan = plan_lod(tree, lod0_counts, budget=0.15 * lod0_total, mesh=mesh_k)
+    plan = plan_lod(tree, bark0, leaf0, budget=0.15 * (bark0 + leaf0), mesh=mesh_k, px=0.03)
     # Result: plan.tree (pruned, thinned), plan.bark_estimate + plan.leaf_triangles <= budget
 """
 from __future__ import annotations
@@ -20,13 +23,14 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .limits import bark_triangles
-from .lod_leaves import prune_stems, stem_closure, thin_leaves
+from .lod_cover import Blades, Grid, solve_factor, stem_area, tree_area
+from .lod_leaves import LENGTH_SHARE, grow_leaves, prune_stems, stem_closure, thin_leaves
 from .mesh import MeshOptions
 from .tree import Tree
 
 
-CELL = 1.0               # Boolean-model cell, in enlarged leaves (projected_cover)
-BARK_SHOWS = 0.9         # bark's share of the shown area above which dropped stems thicken kept ones
+REGION_PX = 4.0         # cells (pixels at the switch) over which a LOD keeps LOD0's area
+REGION_CLIP = 4.0       # a region's leaves grow at most this much more (or less) than the crown's
 MIN_RADIUS_PX = 0.5      # stems thinner than this many pixels at the LOD's distance are dropped
 
 
@@ -35,7 +39,7 @@ class LodPlan:
     tree: Tree
     bark_estimate: int          # upper bound on the bark triangles the mesh will have
     leaf_triangles: int
-    area_factor: float          # each kept leaf's blade area × this
+    area_factor: float          # kept leaves' blade area × this, on average
     mesh: MeshOptions | None = None   # the mesh options to draw it with
 
 
@@ -58,9 +62,10 @@ def keep_stems(tree: Tree, per_stem: np.ndarray, budget: float, min_radius: floa
 
 
 def plan_lod(tree: Tree, bark0: int, leaf0: int, budget: float, mesh: MeshOptions,
-             min_radius: float = 0.0) -> LodPlan:
+             px: float) -> LodPlan:
     """LOD `tree` within `budget` triangles for `mesh` (see the module doc). `bark0`, `leaf0`:
-    LOD0's bark and leaf triangles."""
+    LOD0's bark and leaf triangles; `px`: metres a pixel spans at the LOD's switch distance."""
+    min_radius = MIN_RADIUS_PX * px
     total0 = bark0 + leaf0
     p = tree.params
     if p.lobes > 0 and p.lobe_depth != 0 and tree.n_stems and \
@@ -75,88 +80,75 @@ def plan_lod(tree: Tree, bark0: int, leaf0: int, budget: float, mesh: MeshOption
     L = tree.n_leaves
     per_leaf = leaf0 / L if L else 0.0
     n_keep = int(min(L, max(1, math.floor((budget - per_stem[keep].sum()) / per_leaf)))) if L else 0
-    leaf = leaf_factor(tree, thin_leaves(pruned, n_keep, 1.0))
-    radius = radius_factor(tree, keep)
+    thin = thin_leaves(pruned, n_keep, 1.0)
+    leaf, radius = cover_factors(tree, thin, px)
+    mesh_thin = mesh
     if radius != 1.0:     # thicker stems draw the same rings; sides cut to the bark table's
-        pruned = replace(pruned, stem_radius=pruned.stem_radius * radius,
-                         node_radius=pruned.node_radius * radius)
+        thin = thicken(thin, radius)
         mesh_thin = replace(mesh, thin_radius=mesh.thin_radius * radius)
-    else:
-        mesh_thin = mesh
-    bark = int(bark_triangles(pruned, mesh_thin).sum())
-    return LodPlan(thin_leaves(pruned, n_keep, leaf), bark, int(round(n_keep * per_leaf)), leaf,
-                   mesh_thin)
+    bark = int(bark_triangles(thin, mesh_thin).sum())
+    return LodPlan(grow_leaves(thin, leaf), bark, int(round(n_keep * per_leaf)),
+                   float(np.mean(leaf)), mesh_thin)
 
 
-def _splats(tree: Tree, leaf_factor: float = 1.0):
-    """Leaf blades as what covers the view: centres, areas, normals (seen × |n·v|)."""
-    if not tree.n_leaves:
-        return None
-    F = tree.leaf_frame
-    return (tree.leaf_pos + (0.5 * tree.leaf_size[:, 0])[:, None] * F[:, :, 1],
-            tree.leaf_area * leaf_factor, F[:, :, 2])
+def cover_factors(full: Tree, thin: Tree, px: float) -> tuple[np.ndarray | float, float]:
+    """(leaf area factors (L,), stem radius factor) so that `thin` (pruned and thinned from
+    `full`) covers on screen what `full` covers, at `px` metres per pixel (lod_cover): each
+    kept leaf grows by what its region (cells of REGION_PX pixels) lost in leaves and stems,
+    times one factor solved so the whole covers as `full` does. A leafless tree thickens its
+    kept branches instead."""
+    grid = Grid.around(full, px)
+    target = grid.cover(tree_area(full, grid))
+    if thin.n_leaves and full.n_leaves:
+        local = regional_factors(full, thin, REGION_PX * px)
+        stems = stem_area(thin, grid)
+        blades = Blades(thin, grid.px, LENGTH_SHARE, float(np.median(local)))
+        f = solve_factor(lambda f: grid.cover(stems + blades.area(grid, f * local)), target, 0.25, 4.0)
+        return f * local, 1.0
+    r = solve_factor(lambda r: grid.cover(stem_area(thicken(thin, r), grid)), target, 0.5, 32.0)
+    return 1.0, r
 
 
-def projected_cover(splats, cell: float) -> float:
-    """Cover (m²) seen from four sides, by the Boolean model per cell of a `cell`-metre grid:
-    1 − exp(−projected area in the cell / cell area), summed. Leaves that clump together (on
-    one twig) overlap and cover less than their area, which is why thinning and enlarging
-    them changes the cover unless the factor is solved for."""
-    if splats is None:
-        return 0.0
-    pts, area, normal = splats
-    total = 0.0
-    for view in ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)):
-        v = np.array([view[0], view[1], 0.0])
-        side = np.array([-view[1], view[0], 0.0])
-        seen = area * np.abs(normal @ v)
-        u = np.floor(pts @ side / cell).astype(np.int64)
-        w = np.floor(pts[:, 2] / cell).astype(np.int64)
-        key = (u - u.min()) * (int(w.max() - w.min()) + 1) + (w - w.min())
-        a = np.bincount(key, weights=seen)
-        total += float(np.sum(1.0 - np.exp(-a[a > 0] / (cell * cell)))) * cell * cell
-    return total / 4.0
+def thicken(tree: Tree, factor: float) -> Tree:
+    """`tree` with its branches' radii (not the trunks') × `factor`."""
+    if factor == 1.0:
+        return tree
+    f = np.where(tree.stem_level > 0, factor, 1.0)
+    return replace(tree, stem_radius=tree.stem_radius * f, node_radius=tree.node_radius * f[tree.node_stem])
 
 
-def _solve(cover_at, target: float, lo: float, hi: float) -> float:
-    """The factor in [lo, hi] (log-bisection) at which the increasing `cover_at` meets `target`."""
-    lo, hi = math.log(lo), math.log(hi)
-    for _ in range(14):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if cover_at(math.exp(mid)) < target else (lo, mid)
-    return math.exp(0.5 * (lo + hi))
+def _seen(tree: Tree, leaves: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(points, area seen from the side, mean over directions): blade middles or stem
+    segment middles."""
+    if leaves:
+        F = tree.leaf_frame
+        mid = tree.leaf_pos + (0.5 * tree.leaf_size[:, 0])[:, None] * F[:, :, 1]
+        return mid, tree.leaf_area * (1.0 - 0.5 * np.abs(F[:, 2, 2]))
+    a = np.arange(max(tree.n_nodes - 1, 0))
+    seg = a[tree.node_stem[a] == tree.node_stem[a + 1]]
+    d = tree.node_pos[seg + 1] - tree.node_pos[seg]
+    length = np.linalg.norm(d, axis=1)
+    width = tree.node_radius[seg] + tree.node_radius[seg + 1]
+    return tree.node_pos[seg] + 0.5 * d, width * length * np.sqrt(1.0 - 0.5 * (d[:, 2] / np.maximum(length, 1e-12)) ** 2)
 
 
-def leaf_factor(full: Tree, kept: Tree) -> float:
-    """Blade area factor for `kept` (thinned leaves of `full`) so its leaves cover what
-    `full`'s cover (`projected_cover`, cells the size of the enlarged leaves)."""
-    if not kept.n_leaves or not full.n_leaves:
-        return 1.0
-    base = float(full.leaf_area.sum() / max(kept.leaf_area.sum(), 1e-30))
-    cell = CELL * float(np.sqrt(np.mean(full.leaf_size[:, 0] * full.leaf_size[:, 1]) * base))
-    target = projected_cover(_splats(full), cell)
-    return _solve(lambda f: projected_cover(_splats(kept, f), cell), target,
-                  base / 4.0, base * 4.0)
-
-
-def _stem_area(tree: Tree) -> np.ndarray:
-    """Side-on area of each stem (S,): length × twice its mean node radius."""
-    r = np.bincount(tree.node_stem, weights=tree.node_radius, minlength=tree.n_stems)
-    return 2.0 * tree.stem_length * r / np.maximum(tree.stem_node_count, 1)
-
-
-def radius_factor(full: Tree, keep: np.ndarray) -> float:
-    """Radius factor for the stems `keep` of `full` so they show the bark area the dropped
-    ones showed, when bark is nearly all the tree shows (a share of at least BARK_SHOWS, leaves
-    seen at random angles showing half their area): a bush of bare twigs or a horsetail keeps
-    its cover. In a leafy crown the leaves hid the twigs and make up for them (`leaf_factor`)."""
-    area = _stem_area(full)
-    kept = float(area[keep].sum())
-    dropped = float(area.sum()) - kept
-    if dropped <= 0 or kept <= 0:
-        return 1.0
-    share = float(area.sum()) / (float(area.sum()) + 0.5 * float(full.leaf_area.sum()))
-    return 1.0 + share * dropped / kept if share >= BARK_SHOWS else 1.0
+def regional_factors(full: Tree, thin: Tree, cell: float) -> np.ndarray:
+    """Per kept leaf (L,), the area factor that gives its cell (of `cell` metres) the area
+    `full` showed there (leaves and stems) less the kept stems', relative to the whole crown's
+    (clipped to [1/REGION_CLIP, REGION_CLIP] of it): where the dropped twigs were, leaves grow more."""
+    pts = [_seen(full, True), _seen(full, False), _seen(thin, False), _seen(thin, True)]
+    lo = np.min([p.min(0) for p, _ in pts if len(p)], axis=0)
+    keys = np.concatenate([np.floor((p - lo) / cell).astype(np.int64) for p, _ in pts])
+    _, flat = np.unique(keys, axis=0, return_inverse=True)     # occupied cells only
+    flat = flat.reshape(-1)
+    n = int(flat.max()) + 1 if flat.size else 1
+    ends = np.cumsum([len(p) for p, _ in pts])
+    flat = np.split(flat, ends[:-1])
+    sums = [np.bincount(f, weights=a, minlength=n) for f, (_, a) in zip(flat, pts)]
+    want = np.maximum(sums[0] + sums[1] - sums[2], 0.0)
+    ratio = want.sum() / max(sums[3].sum(), 1e-30)
+    g = np.where(sums[3] > 0, want / np.maximum(sums[3], 1e-30), ratio)[flat[3]] / ratio
+    return ratio * np.clip(g, 1.0 / REGION_CLIP, REGION_CLIP)
 
 
 def _triangles(lod, name: str | None = None) -> int:
@@ -181,5 +173,5 @@ def lod_tree(tree: Tree, k: int, lod0, previous, rig_options, mesh_options, opti
 
     px = pixel_size(options.distances[k], options)
     plan = plan_lod(tree, _triangles(lod0, "bark"), _triangles(lod0, "leaves"),
-                    lod_budget(k, lod0, previous, options), mesh, MIN_RADIUS_PX * px)
+                    lod_budget(k, lod0, previous, options), mesh, px)
     return plan.tree, rig, plan.mesh or mesh

@@ -102,16 +102,26 @@ def stratified_pick(points: np.ndarray, n_keep: int, seed: int) -> np.ndarray:
     return np.sort(picked)
 
 
-def thin_leaves(tree: Tree, n_keep: int, area_factor: float, seed: int = 0) -> Tree:
-    """`n_keep` stratified leaves of `tree`, each blade scaled by `area_factor` in area
-    (length × area_factor^LENGTH_SHARE, width × the rest)."""
+def thin_leaves(tree: Tree, n_keep: int, area_factor, seed: int = 0) -> Tree:
+    """`n_keep` stratified leaves of `tree`, each blade scaled by `area_factor` in area (one
+    factor, or one per kept leaf; see grow_leaves)."""
     if tree.n_leaves == 0:
         return tree
     pick = stratified_pick(tree.leaf_pos, n_keep, tree.seed if seed == 0 else seed)
-    f = max(area_factor, 0.0)
-    grow = np.array([f ** LENGTH_SHARE, f ** (1.0 - LENGTH_SHARE)])   # (length, width) factors
-    size, frame = tree.leaf_size[pick], tree.leaf_frame[pick]
+    kept = replace(tree, leaf_stem=tree.leaf_stem[pick], leaf_node=tree.leaf_node[pick],
+                   leaf_pos=tree.leaf_pos[pick], leaf_frame=tree.leaf_frame[pick],
+                   leaf_size=tree.leaf_size[pick])
+    return grow_leaves(kept, area_factor)
+
+
+def grow_leaves(tree: Tree, area_factor) -> Tree:
+    """`tree` with each blade scaled by `area_factor` (scalar or (L,)) in area about its
+    middle: length × area_factor^LENGTH_SHARE, width × the rest."""
+    f = np.maximum(np.broadcast_to(np.asarray(area_factor, dtype=np.float64), (tree.n_leaves,)), 0.0)
+    if not tree.n_leaves or np.all(f == 1.0):
+        return tree
+    grow = np.stack([f ** LENGTH_SHARE, f ** (1.0 - LENGTH_SHARE)], axis=1)   # (length, width)
+    size, frame = tree.leaf_size, tree.leaf_frame
     # grown about the blade's middle, not its base: the leaf stays where it was
-    pos = tree.leaf_pos[pick] - (0.5 * (grow[0] - 1.0) * size[:, 0])[:, None] * frame[:, :, 1]
-    return replace(tree, leaf_stem=tree.leaf_stem[pick], leaf_node=tree.leaf_node[pick],
-                   leaf_pos=pos, leaf_frame=frame, leaf_size=size * grow)
+    pos = tree.leaf_pos - (0.5 * (grow[:, 0] - 1.0) * size[:, 0])[:, None] * frame[:, :, 1]
+    return replace(tree, leaf_pos=pos, leaf_size=size * grow)

@@ -1,0 +1,212 @@
+"""What a tree covers on screen at a LOD switch, estimated without a renderer: the crown's
+covered area (m²) seen from the side, pixel by pixel, as the renderer's coverage mask counts it.
+
+Leaf cards (their area thinned by the blade's fill factor, as the renderer's hashed cut-out
+covers them from a distance) and stem segments are sampled with points about a pixel apart; each point carries its share of the projected area into a
+pixel-size cell, and a cell covers 1 − exp(−area / cell area) of itself (the Boolean model:
+what lands in one cell overlaps at random). Blades that clump — leaflets converging on a fan,
+needles on a twig — land in the same cells and cover less than their summed area, which a sum
+of areas (or cells the size of a leaf) misses; stems thinner than a pixel count for their width.
+
+    grid = Grid.around(tree, px)
+    target = grid.cover(tree_area(tree, grid))
+    stems, blades = stem_area(lod, grid), Blades(lod, grid.px, 0.25)
+    f = solve_factor(lambda f: grid.cover(stems + blades.area(grid, f)), target, 0.25, 8.0)
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .leafshapes import fill_factor
+from .tree import Tree
+
+AZIMUTHS = (0.0, 90.0)   # side views, degrees about Z (orthographic: 180° mirrors 0°)
+SAMPLES_PER_PX = 1.5     # sample points per pixel of blade or stem extent
+MAX_ALONG = 64           # samples per stem segment, at most
+MAX_ACROSS = 8           # samples across a stem, at most
+MAX_BLADE = 64           # samples along a blade, at most (and across it)
+MAX_SAMPLES = 300_000    # blade samples of a whole crown, about: a crown of many blades is
+                         # measured in cells coarser than a pixel (cell_size)
+MAX_CELLS = 1024         # cells across the tree, at most (a near switch is measured coarser)
+MARGIN = 0.25            # the grid reaches this share of the tree's size beyond its bounds
+
+
+def _axes() -> tuple[np.ndarray, np.ndarray]:
+    """Per view: the viewing direction and the screen's horizontal axis, (V, 3) each."""
+    a = np.radians(AZIMUTHS)
+    view = np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], axis=1)
+    side = np.stack([-np.sin(a), np.cos(a), np.zeros_like(a)], axis=1)
+    return view, side
+
+
+def _project(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(V, P) screen coordinates (horizontal, vertical) of (P, 3) points or directions."""
+    _, side = _axes()
+    return side @ points.T, np.broadcast_to(points[:, 2], (len(AZIMUTHS), points.shape[0]))
+
+
+def _counts(extent: float, px: float, cap: int) -> int:
+    """Samples SAMPLES_PER_PX per pixel over `extent` (a typical size), 1 to `cap`."""
+    return int(min(cap, max(1, math.ceil(SAMPLES_PER_PX * extent / max(px, 1e-12)))))
+
+
+def cell_size(tree: Tree, px: float) -> float:
+    """Cell for `tree` at pixels of `px`: the pixel, or coarser where the tree would span more
+    than MAX_CELLS of them, or sampling every blade SAMPLES_PER_PX per cell would take more
+    than MAX_SAMPLES samples."""
+    size = float(np.ptp(tree.node_pos, axis=0).max()) if tree.n_nodes else 0.0
+    px = max(px, size / MAX_CELLS)
+    if not tree.n_leaves:
+        return px
+    blade = float(np.median(tree.leaf_size[:, 0] * tree.leaf_size[:, 1]))
+    return max(px, SAMPLES_PER_PX * math.sqrt(blade * tree.n_leaves / MAX_SAMPLES))
+
+
+@dataclass(frozen=True)
+class Grid:
+    """Pixel cells over the side views of a tree: per view the screen origin (u, w), cells of
+    `px` metres, `shape` (nu, nw). Points outside land in the border cells."""
+
+    px: float
+    origin: np.ndarray          # (V, 2)
+    shape: tuple[int, int]
+
+    @staticmethod
+    def around(tree: Tree, px: float) -> "Grid":
+        """Cells of `cell_size(tree, px)` over `tree` seen from the side, with a margin."""
+        px = cell_size(tree, px)
+        pts = np.concatenate([tree.node_pos, tree.leaf_pos]) if tree.n_leaves else tree.node_pos
+        u, w = _project(pts)
+        lo = np.stack([u.min(1), w.min(1)], 1)
+        hi = np.stack([u.max(1), w.max(1)], 1)
+        pad = MARGIN * float(np.max(hi - lo)) + 2 * px
+        shape = np.ceil(((hi - lo).max(0) + 2 * pad) / px).astype(np.int64) + 1
+        return Grid(px, lo - pad, (int(shape[0]), int(shape[1])))
+
+    def bins(self, u: np.ndarray, w: np.ndarray, seen: np.ndarray) -> np.ndarray:
+        """(V, nu·nw) area (m²) per cell of sample points (V, P) carrying `seen` (V, P)."""
+        nu, nw = self.shape
+        out = np.zeros((u.shape[0], nu * nw))
+        for v in range(u.shape[0]):
+            iu = np.clip(np.floor((u[v] - self.origin[v, 0]) / self.px).astype(np.int64), 0, nu - 1)
+            iw = np.clip(np.floor((w[v] - self.origin[v, 1]) / self.px).astype(np.int64), 0, nw - 1)
+            out[v] = np.bincount(iu * nw + iw, weights=seen[v], minlength=nu * nw)
+        return out
+
+    def cover(self, area: np.ndarray) -> float:
+        """Covered area (m²), mean over the views, of per-cell areas (V, cells): Boolean model."""
+        a = self.px * self.px
+        return float(np.sum(-np.expm1(-area / a))) * a / area.shape[0]
+
+
+def _segments(tree: Tree, px: float, radius_factor: float):
+    """Stem segments (between consecutive nodes of a stem) sampled along and across."""
+    a = np.arange(tree.n_nodes - 1)
+    seg = a[tree.node_stem[a] == tree.node_stem[a + 1]]
+    p0, p1 = tree.node_pos[seg], tree.node_pos[seg + 1]
+    d = p1 - p0
+    length = np.linalg.norm(d, axis=1)
+    width = (tree.node_radius[seg] + tree.node_radius[seg + 1]) * radius_factor   # 2 × mean radius
+    n = np.clip(np.ceil(SAMPLES_PER_PX * length / max(px, 1e-12)), 1, MAX_ALONG).astype(np.int64)
+    m = np.clip(np.ceil(SAMPLES_PER_PX * width / max(px, 1e-12)), 1, MAX_ACROSS).astype(np.int64)
+    nm = n * m
+    which = np.repeat(np.arange(seg.size), nm)
+    k = np.arange(which.size) - np.repeat(np.cumsum(nm) - nm, nm)
+    along = (k // m[which] + 0.5) / n[which]
+    across = (k % m[which] + 0.5) / m[which] - 0.5
+    view, side = _axes()
+    axis = d / np.maximum(length, 1e-12)[:, None]
+    sin = np.sqrt(np.maximum(1.0 - (view @ axis.T) ** 2, 0.0))           # (V, seg)
+    # across the stem on screen: perpendicular to its projected axis
+    au, aw = side @ axis.T, np.broadcast_to(axis[:, 2], sin.shape)
+    norm = np.maximum(np.hypot(au, aw), 1e-12)
+    cu, cw = _project(p0[which] + along[:, None] * d[which])
+    off = across[None, :] * width[which][None, :]
+    u = cu - off * (aw / norm)[:, which]
+    w = cw + off * (au / norm)[:, which]
+    seen = sin * (width * length)[None, :] / nm[None, :]
+    return u, w, seen[:, which]
+
+
+def stem_area(tree: Tree, grid: Grid, radius_factor: float = 1.0) -> np.ndarray:
+    """(V, cells) area of `tree`'s stems (radii × `radius_factor`) per cell of `grid`."""
+    if tree.n_nodes < 2:
+        return np.zeros((len(AZIMUTHS), grid.shape[0] * grid.shape[1]))
+    return grid.bins(*_segments(tree, grid.px, radius_factor))
+
+
+class Blades:
+    """A tree's leaf blades projected once into the side views, to be binned into a Grid at
+    any growth factor (one for all or one per blade) without projecting them again."""
+
+    def __init__(self, tree: Tree, px: float, length_share: float, reach: float = 1.0):
+        """`px`: the grid's cell (Grid.px); `reach`: a typical growth factor to sample for."""
+        F = tree.leaf_frame
+        self.length, self.width, self.share = tree.leaf_size[:, 0], tree.leaf_size[:, 1], length_share
+        # sample spacing for blades grown by `reach` (a typical factor)
+        r = max(reach, 1e-6)
+        na = _counts(float(np.median(self.length)) * r ** length_share, px, MAX_BLADE)
+        nw = _counts(float(np.median(self.width)) * r ** (1 - length_share), px, MAX_BLADE)
+        # the card's box, thinned by the fill factor: what the renderer's hashed cut-out
+        # covers once a texel spans a pixel or more
+        ia, iw = np.divmod(np.arange(na * nw), nw)
+        self.s = (ia + 0.5) / na - 0.5          # along the blade, from its middle
+        self.t = (iw + 0.5) / nw - 0.5          # across it
+        mid = tree.leaf_pos + (0.5 * self.length)[:, None] * F[:, :, 1]
+        view, _ = _axes()
+        self.mu, self.mw = _project(mid)
+        self.lu, self.lw = _project(F[:, :, 1])
+        self.wu, self.ww = _project(F[:, :, 0])
+        self.seen = np.abs(view @ F[:, :, 2].T) * (self.length * self.width
+                                                   * fill_factor(tree.params.leaf_shape) / self.s.size)
+
+    def area(self, grid: Grid, factor) -> np.ndarray:
+        """(V, cells) area of the blades grown by `factor` in area about their middles."""
+        f = np.broadcast_to(np.asarray(factor, dtype=np.float64), self.length.shape)
+        ls = (self.length * f ** self.share)[None, :, None] * self.s
+        ws = (self.width * f ** (1.0 - self.share))[None, :, None] * self.t
+        u = self.mu[:, :, None] + ls * self.lu[:, :, None] + ws * self.wu[:, :, None]
+        w = self.mw[:, :, None] + ls * self.lw[:, :, None] + ws * self.ww[:, :, None]
+        seen = np.broadcast_to((self.seen * f[None, :])[:, :, None], u.shape)
+        V = u.shape[0]
+        return grid.bins(u.reshape(V, -1), w.reshape(V, -1), seen.reshape(V, -1))
+
+
+def tree_area(tree: Tree, grid: Grid) -> np.ndarray:
+    """(V, cells) area of all of `tree` (blades as they are, stems) per cell of `grid`."""
+    area = stem_area(tree, grid)
+    if tree.n_leaves:
+        area = area + Blades(tree, grid.px, 0.25).area(grid, 1.0)
+    return area
+
+
+def solve_factor(cover_at, target: float, lo: float, hi: float, tol: float = 0.005,
+                 steps: int = 10) -> float:
+    """The factor in [lo, hi] at which the increasing `cover_at` meets `target` (within `tol`
+    of it): regula falsi on log(factor), Illinois variant, ending at the clamp if out of reach."""
+    a, b = math.log(lo), math.log(hi)
+    fa, fb = cover_at(lo) - target, cover_at(hi) - target
+    if fa >= 0:
+        return lo
+    if fb <= 0:
+        return hi
+    side = 0
+    for _ in range(steps):
+        c = (a * fb - b * fa) / (fb - fa)
+        fc = cover_at(math.exp(c)) - target
+        if abs(fc) <= tol * target:
+            return math.exp(c)
+        if fc < 0:
+            a, fa = c, fc
+            if side == -1:
+                fb *= 0.5
+            side = -1
+        else:
+            b, fb = c, fc
+            if side == 1:
+                fa *= 0.5
+            side = 1
+    return math.exp((a * fb - b * fa) / (fb - fa))
