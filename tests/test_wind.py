@@ -281,7 +281,7 @@ def test_static_wind_solves_the_coupled_system(tree_rig):
 
 def _mass_points(tree, rig, opts):
     """Every wood segment (mid-point, mass, rod term) and leaf of the tree, with its carrier."""
-    from treegen_cli.wind import _node_carrier
+    from treegen_cli.wind_loads import _node_carrier
 
     carrier = _node_carrier(tree, rig, rig.skeleton.parent.shape[0])
     seg = np.flatnonzero(tree.node_stem[:-1] == tree.node_stem[1:])
@@ -327,7 +327,7 @@ def test_mass_matrix_is_the_kinetic_energy(tree_rig):
 
 def test_gravity_stiffness_is_the_potential_energy_curvature(tree_rig):
     """K − springs equals the Hessian of Σ m g z under exact rotations (finite differences)."""
-    from treegen_cli.wind import _springs
+    from treegen_cli.wind_dynamics import _springs
 
     tree, rig = tree_rig
     opts = WindOptions()
