@@ -1,22 +1,27 @@
 """Wind bake benchmark: per species, the natural frequencies (lowest modes and the trunk's sway
-mode), the bake time of a 10 s, 30 fps clip at the default joint budget, and the amplitudes at
-4 and 12 m/s (tree top's lean and RMS sway, largest joint turn, median leaf movement).
+mode), the bake time of a 10 s, 30 fps clip at the default joint budget (wall and CPU seconds,
+medians; on a shared machine the CPU time is the one to compare), and the amplitudes at 4 and
+12 m/s (tree top's lean and RMS sway, largest joint turn, median leaf movement).
 Target (issue 14): bake under 0.5 s at the default budget, the willow ≤ 1 s.
 
     python bench/wind_bench.py [species ...] [--seed N] [--repeat N]
-    (default: the paper's four species; OPENBLAS_NUM_THREADS=1 is faster on a busy machine)
+    python bench/wind_bench.py weeping_willow --joints 128,256,512,900
+    (default: the paper's four species; OPENBLAS_NUM_THREADS=1 is faster on a busy machine;
+    --joints: the median leaf movement at 4 m/s per joint budget instead)
 
-Measured 2026-11-23, seed 0, OPENBLAS_NUM_THREADS=1, 2 shared cores at load average ~14
-(with threaded OpenBLAS at that load the bake took 1.5–3.5 s: threads fight over 2 cores):
-species          joints              modes Hz  sway Hz  bake s    m/s     ζ  lean m  sway m  max ° leaf cm
-quaking_aspen       256      0.56, 0.56, 0.87    0.565   0.320      4  0.22    0.10    0.03    4.6    14.6
-                                                                   12  0.28    0.56    0.24   17.7    94.8
-black_tupelo        210      0.39, 0.39, 0.70    0.393   0.246      4  0.23    0.23    0.07    4.9    17.9
-                                                                   12  0.29    1.28    0.49   21.4   116.2
-weeping_willow      222      0.14, 0.14, 0.14    0.535   0.818      4  0.16    0.02    0.01   10.8     2.1
-                                                                   12  0.17    0.12    0.07   30.4    13.8
-ca_black_oak        238      0.51, 0.51, 0.87    0.511   0.420      4  0.16    0.03    0.01    8.6     2.0
-                                                                   12  0.17    0.14    0.07   29.1    14.5
+Measured 2026-11-23 18:00, seed 0, OPENBLAS_NUM_THREADS=1, 2 shared cores at load average 13-18
+(wall time ran 7-10x the CPU time; read the cpu column; all 15 bundled species bake in
+0.07-0.28 CPU s, the willow 0.41):
+species          joints              modes Hz  sway Hz  bake s  cpu s    m/s     ζ  lean m  sway m  max ° leaf cm
+black_tupelo        210      0.39, 0.39, 0.70    0.393   0.967  0.100      4  0.23    0.23    0.07    4.9    17.8
+                                                                          12  0.29    1.28    0.49   21.4   115.5
+ca_black_oak        238      0.51, 0.51, 0.87    0.511   1.330  0.122      4  0.16    0.03    0.01    8.5     2.0
+                                                                          12  0.17    0.14    0.07   29.1    14.5
+quaking_aspen       256      0.56, 0.56, 0.85    0.565   1.325  0.146      4  0.22    0.10    0.03    5.9    14.5
+                                                                          12  0.28    0.56    0.24   19.5    93.7
+weeping_willow      222      0.14, 0.14, 0.14    0.535   3.924  0.408      4  0.16    0.02    0.01   10.8     2.1
+                                                                          12  0.17    0.12    0.07   30.4    13.8
+--joints on the willow (median leaf cm at 4 m/s): 2.07 / 2.07 / 2.16 at 256 / 512 / 900 joints.
 """
 from __future__ import annotations
 
@@ -29,7 +34,7 @@ import numpy as np
 
 from treegen_cli.generate import generate
 from treegen_cli.params import load_params
-from treegen_cli.rig import build_rig
+from treegen_cli.rig import RigOptions, build_rig
 from treegen_cli.skeleton import pose_world
 from treegen_cli.wind import WindOptions, bake_wind, wind_report
 
@@ -46,34 +51,61 @@ def median_leaf_motion(tree, rig, clip, every: int = 29) -> float:
     return float(np.median(np.linalg.norm(x - tree.leaf_pos[::every][None], axis=2).max(axis=0)))
 
 
+def species_path(name: str) -> str:
+    """A species file, or a bundled species by its name."""
+    return name if Path(name).suffix else str(ROOT / "species" / f"{name}.txt")
+
+
+def leaf_motion_by_budget(paths: list[str], budgets: list[int], seed: int) -> None:
+    """Median leaf movement at 4 m/s per joint budget: does the budget limit it?"""
+    print(f"{'species':<16}{'budget':>7}{'joints':>7}{'bake s':>8}{'leaf cm':>8}")
+    for path in paths:
+        params = load_params(path)
+        tree = generate(params, seed)
+        for budget in budgets:
+            rig = build_rig(tree, RigOptions(max_joints=budget))
+            t0 = time.perf_counter()
+            clip = bake_wind(tree, rig, WindOptions(), seed=seed)
+            wall = time.perf_counter() - t0
+            print(f"{params.name:<16}{budget:>7}{len(rig.joint_node):>7}{wall:>8.2f}"
+                  f"{100 * median_leaf_motion(tree, rig, clip):>8.2f}", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("species", nargs="*", default=[str(ROOT / "species" / f"{s}.txt") for s in PAPER])
+    ap.add_argument("species", nargs="*", default=PAPER)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--joints", help="comma-separated joint budgets: leaf movement per budget")
     args = ap.parse_args()
+    paths = [species_path(s) for s in args.species]
+    if args.joints:
+        leaf_motion_by_budget(paths, [int(b) for b in args.joints.split(",")], args.seed)
+        return
 
-    print(f"{'species':<16}{'joints':>7}{'modes Hz':>22}{'sway Hz':>9}{'bake s':>8}"
+    print(f"{'species':<16}{'joints':>7}{'modes Hz':>22}{'sway Hz':>9}{'bake s':>8}{'cpu s':>7}"
           f"{'':>3}{'m/s':>4}{'ζ':>6}{'lean m':>8}{'sway m':>8}{'max °':>7}{'leaf cm':>8}")
-    for path in args.species:
+    for path in paths:
         params = load_params(path)
         tree = generate(params, args.seed)
         rig = build_rig(tree)
         options = WindOptions(duration=10.0, fps=30.0)
-        times = []
+        times, cpu = [], []
         for _ in range(args.repeat):
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             bake_wind(tree, rig, options, seed=args.seed)
             times.append(time.perf_counter() - t0)
+            cpu.append(time.process_time() - c0)
         for k, speed in enumerate((4.0, 12.0)):
             o = WindOptions(speed=speed, duration=10.0, fps=30.0)
             rep = wind_report(tree, rig, o, args.seed)
-            leaf = median_leaf_motion(tree, rig, bake_wind(tree, rig, o, seed=args.seed))
+            leaf = (f"{100 * median_leaf_motion(tree, rig, bake_wind(tree, rig, o, seed=args.seed)):>8.1f}"
+                    if tree.n_leaves else f"{'-':>8}")
             modes = ", ".join(f"{m['hz']:.2f}" for m in rep["modes"][:3])
-            head = (f"{params.name:<16}{len(rig.joint_node):>7}{modes:>22}"
-                    f"{rep['sway_hz']:>9.3f}{statistics.median(times):>8.3f}") if k == 0 else " " * 62
+            head = (f"{params.name:<16}{len(rig.joint_node):>7}{modes:>22}{rep['sway_hz']:>9.3f}"
+                    f"{statistics.median(times):>8.3f}{statistics.median(cpu):>7.3f}") if k == 0 else " " * 69
             print(f"{head}{'':>3}{speed:>4g}{rep['sway_damping']:>6.2f}{rep['top_lean_m']:>8.2f}"
-                  f"{rep['top_sway_rms_m']:>8.2f}{rep['max_joint_deg']:>7.1f}{100 * leaf:>8.1f}")
+                  f"{rep['top_sway_rms_m']:>8.2f}{rep['max_joint_deg']:>7.1f}{leaf}", flush=True)
 
 
 if __name__ == "__main__":

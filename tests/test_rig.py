@@ -117,19 +117,50 @@ def test_coarse_chain_blends_by_node_z():
     np.testing.assert_array_equal(rig.leaf_joint, dom)
 
 
+def test_jointless_stem_moves_with_the_drawn_bark_of_a_coarse_chain(monkeypatch):
+    """Trunk joints on nodes 0 and 2 only: stem 2 (no joints) grows from trunk segment 1 (nodes
+    1-2, node 1 blended half-way) at t = 0.5. The drawn bark there is straight between the two
+    rings' skinned centres; under any pose the stem's base, skinned with its own binding, is
+    exactly that point (a blend of the ends' weights would put 0.75 on joint 1, not 0.5)."""
+    tree = synthetic_tree()
+    chosen = np.zeros(tree.n_nodes, dtype=bool)
+    chosen[[0, 2]] = True
+    monkeypatch.setattr("treegen_cli.rig._select", lambda tree, options: chosen)
+    rig = build_rig(tree)
+    base = tree.stem_node_start[2]
+    np.testing.assert_allclose(rig.node_weights[base], [0.5, 0.5], atol=1e-6)
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        turn = Rotation.from_rotvec(rng.normal(0.0, 0.6, (2, 3))).as_matrix()
+        skin = np.tile(np.eye(4), (2, 1, 1))
+        for j in range(2):                  # joint j turns about its pivot, children follow
+            p = tree.node_pos[rig.joint_node[j]]
+            m = np.eye(4)
+            m[:3, :3], m[:3, 3] = turn[j], p - turn[j] @ p
+            skin[j] = (skin[rig.skeleton.parent[j]] if j else np.eye(4)) @ m
+
+        def skinned(node: int, point: np.ndarray) -> np.ndarray:
+            w, jj = rig.node_weights[node].astype(float), rig.node_joints[node].astype(int)
+            return sum(w[k] * (skin[jj[k]] @ np.r_[point, 1.0])[:3] for k in range(2))
+
+        a, b = 1, 2
+        bark = 0.5 * skinned(a, tree.node_pos[a]) + 0.5 * skinned(b, tree.node_pos[b])
+        np.testing.assert_allclose(skinned(base, tree.node_pos[base]), bark, atol=1e-9)
+
+
 def test_joint_levels_restrict_and_rigid_stems_ride_on_their_carrier():
     tree = synthetic_tree()
     rig = build_rig(tree, RigOptions(joint_levels=(0,)))
     check_rig(tree, rig, 256)
     assert np.all(tree.stem_level[rig.joint_stem] == 0)
     # Stem 2 grows from trunk segment 1 at z = 3, half-way between the trunk joints on nodes 1
-    # and 2: all its nodes and its child's take the trunk bark's binding there, (0.5, 0.5), so
-    # they move with the bark; leaves ride on the dominant (first) joint.
+    # and 2. The trunk's bark there is drawn straight between its rings on nodes 1 and 2, whose
+    # centres move with joint 1 (node 2 is joint 2's pivot): so all its nodes and its child's
+    # take joint 1 alone, and ride exactly as that bark; leaves ride on it too.
     j = np.flatnonzero(rig.joint_node == 1)[0]
-    j2 = np.flatnonzero(rig.joint_node == 2)[0]
     nodes2 = np.flatnonzero(np.isin(tree.node_stem, [2, 4]))
-    assert np.all(rig.node_joints[nodes2, 0] == j) and np.all(rig.node_joints[nodes2, 1] == j2)
-    np.testing.assert_allclose(rig.node_weights[nodes2], 0.5)
+    assert np.all(rig.node_joints[nodes2, 0] == j)
+    np.testing.assert_allclose(rig.node_weights[nodes2], [[1.0, 0.0]] * len(nodes2))
     assert np.all(rig.leaf_joint[tree.leaf_stem == 4] == j)
     # Levels that skip the trunk still get the trunk base as root.
     r2 = build_rig(tree, RigOptions(joint_levels=(2,)))

@@ -281,7 +281,7 @@ def test_static_wind_solves_the_coupled_system(tree_rig):
 
 def _mass_points(tree, rig, opts):
     """Every wood segment (mid-point, mass, rod term) and leaf of the tree, with its carrier."""
-    from treegen_cli.wind import _node_carrier
+    from treegen_cli.wind_loads import _node_carrier
 
     carrier = _node_carrier(tree, rig, rig.skeleton.parent.shape[0])
     seg = np.flatnonzero(tree.node_stem[:-1] == tree.node_stem[1:])
@@ -327,7 +327,7 @@ def test_mass_matrix_is_the_kinetic_energy(tree_rig):
 
 def test_gravity_stiffness_is_the_potential_energy_curvature(tree_rig):
     """K − springs equals the Hessian of Σ m g z under exact rotations (finite differences)."""
-    from treegen_cli.wind import _springs
+    from treegen_cli.wind_dynamics import _springs
 
     tree, rig = tree_rig
     opts = WindOptions()
@@ -594,38 +594,3 @@ def test_storms_lean_downwind_without_a_trunk_kink(paper_trees, species):
         theta = wind_angles(tree, rig, opts, seed=0)
         kink = np.degrees(np.linalg.norm(theta[trunk] - theta[parent[trunk]], axis=2))
         assert kink.max() <= 6.0, (speed, kink.max())
-
-
-def test_jointless_stems_stay_on_their_parents_bark(paper_trees):
-    """A stem without joints is skinned like its parent's bark where it attaches: at 12 m/s its
-    base stays within the parent's radius of the parent's axis point there (here: exactly on)."""
-    tree, rig = paper_trees["quaking_aspen"]
-    clip = bake_wind(tree, rig, WindOptions(speed=12.0), seed=0)
-    world = pose_world(rig.skeleton, clip.rotations) @ np.linalg.inv(rig.skeleton.bind_world)[None]
-    jointed = np.zeros(tree.n_stems, dtype=bool)
-    jointed[rig.joint_stem] = True
-    stems = np.flatnonzero(~jointed & (tree.stem_parent >= 0))
-    assert stems.size > 100
-
-    def skinned(points: np.ndarray, joints: np.ndarray, weights: np.ndarray) -> np.ndarray:
-        p = np.c_[points, np.ones(len(points))]
-        return sum(weights[None, :, k, None] * np.einsum("knab,nb->kna", world[:, joints[:, k]], p)[..., :3]
-                   for k in range(joints.shape[1]))
-
-    # the parent's bark at the attach point: its axis point between the segment's end nodes,
-    # skinned as the mesh does (both nodes' bindings, blended by the fraction t)
-    a = tree.stem_parent_node[stems]
-    b = np.where(tree.node_stem[np.minimum(a + 1, tree.n_nodes - 1)] == tree.node_stem[a], a + 1, a)
-    base = tree.node_pos[tree.stem_node_start[stems]]
-    ab = tree.node_pos[b] - tree.node_pos[a]
-    t = np.clip(np.sum((base - tree.node_pos[a]) * ab, axis=1) / np.maximum(np.sum(ab * ab, axis=1), 1e-24), 0, 1)
-    axis_point = tree.node_pos[a] + t[:, None] * ab
-    joints = np.concatenate([rig.node_joints[a], rig.node_joints[b]], axis=1).astype(int)
-    weights = np.concatenate([rig.node_weights[a] * (1 - t[:, None]), rig.node_weights[b] * t[:, None]], axis=1)
-    parent_bark = skinned(axis_point, joints, weights)
-    child = skinned(base, rig.node_joints[tree.stem_node_start[stems]].astype(int),
-                    rig.node_weights[tree.stem_node_start[stems]].astype(float))
-    radius = tree.node_radius[a] + t * (tree.node_radius[b] - tree.node_radius[a])
-    distance = np.linalg.norm(child - parent_bark, axis=2)
-    assert np.all(distance <= np.linalg.norm(base - axis_point, axis=1)[None] + radius[None] + 1e-9)
-    assert np.all(distance <= 2.0 * radius[None] + 1e-6)

@@ -149,10 +149,10 @@ def build_rig(tree, options: RigOptions = RIG_DEFAULTS) -> Rig:
     node_joints[:, 1] = np.where(w > 0, joint_of[np.minimum(nxt, N - 1)], 0)
     node_weights = np.column_stack([1.0 - w, w]).astype(np.float32)
     # A stem without joints of its own takes its parent's skin binding where it attaches (the
-    # parent's bark there blends its segment's two end nodes by the attach point's fraction t),
-    # so it moves exactly as that bark and can never separate from it; riding rigidly on one
-    # joint let it float off wherever the parent blends two. Both end bindings only ever use the
-    # segment's two chain joints. One pass per stem generation.
+    # binding that moves that point as the parent's drawn bark does, below), so it can never
+    # separate from it; riding rigidly on one joint let it float off wherever the parent blends
+    # two. Both end bindings only ever use the segment's two chain joints. One pass per stem
+    # generation.
     rigid = np.flatnonzero(~has_prev & (attach >= 0))
     stem_of = s[rigid]
     a = attach[rigid]
@@ -173,6 +173,25 @@ def build_rig(tree, options: RigOptions = RIG_DEFAULTS) -> Rig:
         other = np.where((cand != first[:, None]) & (wt > 0.0), wt, -1.0)
         second = cand[np.arange(len(todo)), np.argmax(other, axis=1)]
         has2 = other.max(axis=1) > 0.0
+        # The bark between the two rings is drawn straight between their skinned centres, so
+        # the axis point there moves by (1 − t)·Δ_a + t·Δ_b; blending the weights instead would
+        # sag it by t(1 − t)·(M_a − M_b)(c_b − c_a) (centimetres at 12 m/s). The two joints are
+        # consecutive on one chain, the later (its pivot p) turning about the earlier; the
+        # weight β on it that puts the point where the bark is solves
+        # β (x − p) = (1 − t) α_a (c_a − p) + t α_b (c_b − p)   (α: each end's weight on it),
+        # exact when p is on the segment's line (least squares otherwise).
+        desc = np.maximum(first, second)
+        alpha_a = np.sum(np.where(ja == desc[:, None], wa, 0.0), axis=1)
+        alpha_b = np.sum(np.where(jb == desc[:, None], wb, 0.0), axis=1)
+        pivot = tree.node_pos[joint_node[desc]]
+        ca, cb, tk = tree.node_pos[a[k]] - pivot, tree.node_pos[b[k]] - pivot, t[k, None]
+        x = ca + tk * (cb - ca)
+        rhs = (1.0 - tk) * alpha_a[:, None] * ca + tk * alpha_b[:, None] * cb
+        den = np.einsum("ij,ij->i", x, x)
+        beta = np.where(den > 1e-18, np.einsum("ij,ij->i", rhs, x) / np.maximum(den, 1e-18),
+                        (1.0 - t[k]) * alpha_a + t[k] * alpha_b)
+        beta = np.clip(beta, 0.0, 1.0)
+        w0 = np.where(first == desc, beta, 1.0 - beta)
         node_joints[todo, 0] = first
         node_joints[todo, 1] = np.where(has2, second, 0)
         node_weights[todo, 0] = np.where(has2, w0, 1.0)
