@@ -24,6 +24,7 @@ test: lint
 # ruff's lint rules and a type check of the public stage and exchange modules (pyproject.toml)
 lint:
 	$(PYTHON) -m ruff check treegen_cli tests bench
+	$(PYTHON) -m ruff format --check treegen_cli tests bench
 	$(PYTHON) -m mypy
 
 bench:

@@ -23,6 +23,7 @@ free cores; byte-identical outputs checked in every run):
     treegen batch --workers 2             16.3    2.48×  28.2 s building on workers
     scheduler overhead per job (1 worker): 2 ms
 """
+
 from __future__ import annotations
 
 import argparse
@@ -42,8 +43,10 @@ ENV.pop("DASK_SCHEDULER_ADDRESS", None)
 
 
 def catalogue(seeds: int, clip: dict) -> dict:
-    return {"defaults": {**clip, "seeds": f"1-{seeds}"},
-            "entries": [{"species": str(ROOT / "species" / f"{s}.txt")} for s in PAPER_SPECIES]}
+    return {
+        "defaults": {**clip, "seeds": f"1-{seeds}"},
+        "entries": [{"species": str(ROOT / "species" / f"{s}.txt")} for s in PAPER_SPECIES],
+    }
 
 
 def jobs(seeds: int) -> list[tuple[str, int]]:
@@ -53,9 +56,23 @@ def jobs(seeds: int) -> list[tuple[str, int]]:
 def loop_processes(out: Path, seeds: int, clip_args: list[str]) -> float:
     t0 = time.perf_counter()
     for s, seed in jobs(seeds):
-        subprocess.run([sys.executable, "-m", "treegen_cli", "make", str(ROOT / "species" / f"{s}.txt"),
-                        "-o", str(out / f"{s}_{seed}.glb"), "--seed", str(seed), *clip_args, "-q"],
-                       env=ENV, check=True)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "treegen_cli",
+                "make",
+                str(ROOT / "species" / f"{s}.txt"),
+                "-o",
+                str(out / f"{s}_{seed}.glb"),
+                "--seed",
+                str(seed),
+                *clip_args,
+                "-q",
+            ],
+            env=ENV,
+            check=True,
+        )
     return time.perf_counter() - t0
 
 
@@ -73,11 +90,29 @@ def batch(cat: Path, out: Path, workers: int) -> tuple[float, dict, list[tuple[f
     """Wall seconds, the manifest, and per built job (in arrival order): when its result line
     arrived (seconds since start) and how long it built on its worker."""
     t0 = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-m", "treegen_cli", "batch", str(cat), "-o", str(out),
-                             "--workers", str(workers), "--json"], env=ENV, text=True,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    arrived = [(time.perf_counter() - t0, json.loads(line)["seconds"]) for line in proc.stdout
-               if '"event": "built"' in line]
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "treegen_cli",
+            "batch",
+            str(cat),
+            "-o",
+            str(out),
+            "--workers",
+            str(workers),
+            "--json",
+        ],
+        env=ENV,
+        text=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    arrived = [
+        (time.perf_counter() - t0, json.loads(line)["seconds"])
+        for line in proc.stdout
+        if '"event": "built"' in line
+    ]
     err = proc.stderr.read()
     wall = time.perf_counter() - t0
     if proc.wait() != 0:
@@ -88,17 +123,23 @@ def batch(cat: Path, out: Path, workers: int) -> tuple[float, dict, list[tuple[f
 def cluster_start_stop(workers: int) -> float:
     """Seconds to start and close an embedded cluster of `workers` processes, in a fresh
     process like the batch's (so imports count the same)."""
-    code = ("import time; t=time.perf_counter(); from treegen_cli.executor import dask_client\n"
-            f"with dask_client(None, {workers}) as c: pass\n"
-            "print(time.perf_counter()-t)")
-    return float(subprocess.run([sys.executable, "-c", code], env=ENV, capture_output=True,
-                                text=True, check=True).stdout.split()[-1])
+    code = (
+        "import time; t=time.perf_counter(); from treegen_cli.executor import dask_client\n"
+        f"with dask_client(None, {workers}) as c: pass\n"
+        "print(time.perf_counter()-t)"
+    )
+    return float(
+        subprocess.run(
+            [sys.executable, "-c", code], env=ENV, capture_output=True, text=True, check=True
+        ).stdout.split()[-1]
+    )
 
 
 def same_bytes(a: Path, b: Path) -> bool:
     names = sorted(p.name for p in a.glob("*.glb"))
     return names == sorted(p.name for p in b.glob("*.glb")) and all(
-        (a / n).read_bytes() == (b / n).read_bytes() for n in names)
+        (a / n).read_bytes() == (b / n).read_bytes() for n in names
+    )
 
 
 def main() -> None:
@@ -142,8 +183,10 @@ def main() -> None:
                 note += f"; cluster start+stop {start:.1f} s"
             rows.append((f"treegen batch --workers {w}", wall, note))
             shutil.rmtree(out)
-    print(f"{n} jobs: {', '.join(PAPER_SPECIES)} × {args.seeds} seeds → GLB"
-          f"{' (1 s clip at 10 fps)' if clip else ''}; {os.cpu_count()} cores")
+    print(
+        f"{n} jobs: {', '.join(PAPER_SPECIES)} × {args.seeds} seeds → GLB"
+        f"{' (1 s clip at 10 fps)' if clip else ''}; {os.cpu_count()} cores"
+    )
     print(f"  {'run':<34}{'wall s':>8}{'vs loop':>9}  notes")
     for name, wall, note in rows:
         print(f"  {name:<34}{wall:>8.1f}{t_loop / wall:>8.2f}×  {note}")

@@ -4,6 +4,7 @@ levers, and the triangles LOD0 really has when built (bark + leaves from build_m
     python bench/budget_bench.py                 # --triangles 20000 on every species
     python bench/budget_bench.py 50000 weeping_willow quaking_aspen
 """
+
 from __future__ import annotations
 
 import statistics
@@ -43,9 +44,11 @@ def main(argv: list[str]) -> None:
         built = sum(len(p.indices) // 3 for p in build_mesh(tree, build_rig(tree), plan.mesh))
         off = 100.0 * (built - budget) / budget
         offs.append(abs(off))
-        print(f"{name:<20}{own:>11,}{seconds:>8.2f}{built:>9,}{off:>7.2f}  "
-              f"{plan.levels} levels, CurveRes ×{plan.curve_scale:g}, sides "
-              f"{','.join(map(str, plan.mesh.sides))}, LeafQuality ×{plan.leaf_factor:.3g}")
+        print(
+            f"{name:<20}{own:>11,}{seconds:>8.2f}{built:>9,}{off:>7.2f}  "
+            f"{plan.levels} levels, CurveRes ×{plan.curve_scale:g}, sides "
+            f"{','.join(map(str, plan.mesh.sides))}, LeafQuality ×{plan.leaf_factor:.3g}"
+        )
     if offs:
         print(f"median |off| {statistics.median(offs):.2f} %, max {max(offs):.2f} %")
 

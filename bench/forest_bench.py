@@ -26,6 +26,7 @@ Measured 2026-11-23 (2-core box shared with other jobs, load 16-22; 7 prototypes
     Before the quiet worker settings (executor.QUIET) Dask was 1.53× the old pool.
     Idle-box figures before issue 15: camera glb 2.8 s / 42 MB, all LODs 3.9 s / 106 MB.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -58,21 +59,28 @@ def old_pool(keys, params, options, workers: int) -> list:
 
 def sizes(layout_path: str, workers: int | None, tmp: Path) -> None:
     layout = load_layout(layout_path)
-    print(f"{'LODs':>7} {'format':>6} {'protos':>6} {'trees':>6} {'proto_s':>8} {'write_s':>8} "
-          f"{'out_MB':>8} {'own_MB':>8} {'ratio':>6}")
+    print(
+        f"{'LODs':>7} {'format':>6} {'protos':>6} {'trees':>6} {'proto_s':>8} {'write_s':>8} "
+        f"{'out_MB':>8} {'own_MB':>8} {'ratio':>6}"
+    )
     own: dict[str, float] = {}
     for all_lods in (True, False):
         scene = build_scene(layout, all_lods=all_lods, workers=workers, progress=False)
         for suffix in (".glb", ".usdc"):
-            if suffix not in own:     # the prototypes' own files, as `treegen make` writes them
-                own[suffix] = sum(p.stat().st_size for k, a in enumerate(scene.prototypes)
-                                  for p in export(a, tmp / f"proto{k}{suffix}"))
+            if suffix not in own:  # the prototypes' own files, as `treegen make` writes them
+                own[suffix] = sum(
+                    p.stat().st_size
+                    for k, a in enumerate(scene.prototypes)
+                    for p in export(a, tmp / f"proto{k}{suffix}")
+                )
             t0 = time.perf_counter()
             out = sum(p.stat().st_size for p in export_forest(scene, tmp / f"forest{suffix}"))
             write = time.perf_counter() - t0
-            print(f"{'all' if all_lods else 'camera':>7} {suffix[1:]:>6} {len(scene.prototypes):>6} "
-                  f"{len(scene.instances):>6} {scene.timings['prototypes_s']:>8.2f} {write:>8.2f} "
-                  f"{out / 1e6:>8.1f} {own[suffix] / 1e6:>8.1f} {out / own[suffix]:>6.2f}")
+            print(
+                f"{'all' if all_lods else 'camera':>7} {suffix[1:]:>6} {len(scene.prototypes):>6} "
+                f"{len(scene.instances):>6} {scene.timings['prototypes_s']:>8.2f} {write:>8.2f} "
+                f"{out / 1e6:>8.1f} {own[suffix] / 1e6:>8.1f} {out / own[suffix]:>6.2f}"
+            )
 
 
 def pools(layout_path: str, workers: int, reps: int, tmp: Path) -> None:
@@ -81,22 +89,25 @@ def pools(layout_path: str, workers: int, reps: int, tmp: Path) -> None:
     options = make_options(layout)
     runs: dict[str, list[float]] = {"old pool": [], "dask": [], "in process": []}
     built = {}
-    for _ in range(reps):          # interleaved, so a busy spell hits every method alike
+    for _ in range(reps):  # interleaved, so a busy spell hits every method alike
         for name in runs:
             t0 = time.perf_counter()
             if name == "old pool":
                 built[name] = old_pool(keys, layout.params, options, workers)
             else:
-                built[name] = build_prototypes(keys, options, workers if name == "dask" else 1,
-                                               False, layout.params)
+                built[name] = build_prototypes(
+                    keys, options, workers if name == "dask" else 1, False, layout.params
+                )
             runs[name].append(time.perf_counter() - t0)
     same = all(_bytes(built["dask"], tmp, "d") == _bytes(b, tmp, n[:3]) for n, b in built.items())
     base = statistics.median(runs["old pool"])
     print(f"\nprototypes ({len(keys)}), {workers} workers, median of {reps}:")
     for name, ts in runs.items():
         m = statistics.median(ts)
-        print(f"  {name:>10}  {m:6.2f} s  ({m / base:.2f} × the old pool)  runs "
-              + " ".join(f"{t:.2f}" for t in ts))
+        print(
+            f"  {name:>10}  {m:6.2f} s  ({m / base:.2f} × the old pool)  runs "
+            + " ".join(f"{t:.2f}" for t in ts)
+        )
     print(f"  same bytes from every path: {same}")
 
 

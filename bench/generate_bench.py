@@ -4,6 +4,7 @@ Two figures per species: in-process `generate()` (median of 5, after one warm-up
 whole `treegen info` process (median of 3 wall-clock runs, peak RSS from the child's rusage).
 Prints a table; run with `make bench` or `python bench/generate_bench.py [species ...]`.
 """
+
 from __future__ import annotations
 
 import os
@@ -25,8 +26,9 @@ def whole_process(path: Path) -> tuple[float, float]:
     times, peaks = [], []
     for _ in range(3):
         t0 = time.perf_counter()
-        child = subprocess.Popen([sys.executable, "-m", "treegen_cli", "info", str(path)],
-                                 stdout=subprocess.DEVNULL, cwd=ROOT)
+        child = subprocess.Popen(
+            [sys.executable, "-m", "treegen_cli", "info", str(path)], stdout=subprocess.DEVNULL, cwd=ROOT
+        )
         _, status, usage = os.wait4(child.pid, 0)
         times.append(time.perf_counter() - t0)
         if status != 0:
@@ -36,8 +38,9 @@ def whole_process(path: Path) -> tuple[float, float]:
 
 
 def main(names: list[str]) -> None:
-    files = [ROOT / "species" / f"{n}.txt" for n in names] if names else \
-        sorted((ROOT / "species").glob("*.txt"))
+    files = (
+        [ROOT / "species" / f"{n}.txt" for n in names] if names else sorted((ROOT / "species").glob("*.txt"))
+    )
     # whole-process runs first: a child inherits its parent's peak RSS at fork on Linux, so the
     # parent must not hold a grown tree yet
     whole = {path: whole_process(path) for path in files}
@@ -51,8 +54,10 @@ def main(names: list[str]) -> None:
             generate(p, 0)
             runs.append(time.perf_counter() - t0)
         wall, peak = whole[path]
-        print(f"{p.name:<20}{tree.n_stems:>8,}{tree.n_leaves:>10,}{statistics.median(runs):>9.3f}"
-              f"{wall:>9.2f}{peak:>9.0f}")
+        print(
+            f"{p.name:<20}{tree.n_stems:>8,}{tree.n_leaves:>10,}{statistics.median(runs):>9.3f}"
+            f"{wall:>9.2f}{peak:>9.0f}"
+        )
 
 
 if __name__ == "__main__":

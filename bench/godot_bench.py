@@ -14,6 +14,7 @@ each: 4 LODs and the impostor): weeping willow 23.6 (256 MB), balsam fir 21.0 (1
 black tupelo 2.9, lombardy
 poplar 2.7, quaking aspen 2.7, fan palm 2.4. Every one under 60 s.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -31,25 +32,27 @@ import clients  # noqa: E402  (tests/clients.py: the real-client harness)
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("species", nargs="*",
-                    default=sorted(p.stem for p in (ROOT / "species").glob("*.txt")))
+    ap.add_argument("species", nargs="*", default=sorted(p.stem for p in (ROOT / "species").glob("*.txt")))
     ap.add_argument("--repeat", type=int, default=1)
     args = ap.parse_args()
-    print(f"Godot {clients.godot_version()} editor import, one file per project, "
-          f"median of {args.repeat}")
+    print(f"Godot {clients.godot_version()} editor import, one file per project, median of {args.repeat}")
     print(f"{'species':<20} {'import s':>9} {'file MB':>8} {'skeletons':>10} {'bones':>16} {'clean':>6}")
     with tempfile.TemporaryDirectory(prefix="godot_bench.") as tmp:
         for name in args.species:
             out = Path(tmp) / f"{name}.glb"
-            subprocess.run([sys.executable, "-m", "treegen_cli", "make", name, "-o", str(out), "-q"],
-                           check=True, cwd=tmp)
+            subprocess.run(
+                [sys.executable, "-m", "treegen_cli", "make", name, "-o", str(out), "-q"], check=True, cwd=tmp
+            )
             runs = [clients.godot_import(out, timeout=600) for _ in range(args.repeat)]
             r = runs[-1]
             bones = "/".join(str(s["bone_count"]) for s in r.get("skeletons", []))
             clean = r["imported"] and not r["errors"]
-            print(f"{name:<20} {statistics.median(x['import_seconds'] for x in runs):>9.1f} "
-                  f"{out.stat().st_size / 1e6:>8.1f} {len(r.get('skeletons', [])):>10} {bones:>16} "
-                  f"{'yes' if clean else 'NO':>6}", flush=True)
+            print(
+                f"{name:<20} {statistics.median(x['import_seconds'] for x in runs):>9.1f} "
+                f"{out.stat().st_size / 1e6:>8.1f} {len(r.get('skeletons', [])):>10} {bones:>16} "
+                f"{'yes' if clean else 'NO':>6}",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

@@ -19,6 +19,7 @@ a leaf out of the fragment shader, samples a 256² copy of the leaf atlas, and w
 unfiltered at zlib level 1 (the same pixels as before within the atlas comparison in
 tests/test_impostor.py).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -66,7 +67,7 @@ def bench(name: str) -> dict:
     _timed(impostor_render, "render_atlas", acc, "gl")
     for fn in ("png_bytes", "png_bytes_unfiltered"):
         _timed(textures, fn, acc, "png")
-    add_impostor(asset.lods, asset.materials, tree, options)        # imports, shader cache
+    add_impostor(asset.lods, asset.materials, tree, options)  # imports, shader cache
     wall, cpu, gl, png = [], [], [], []
     for _ in range(RUNS):
         acc.clear()
@@ -82,10 +83,19 @@ def bench(name: str) -> dict:
         base = export(asset, Path(tmp) / "a.glb")[0].stat().st_size
         full = export(with_imp, Path(tmp) / "b.glb")[0].stat().st_size
     med = statistics.median
-    return {"species": name, "wall_s": med(wall), "cpu_s": med(cpu), "gl_s": med(gl),
-            "png_s": med(png), "lod_s": timings.stages.get("lod", 0.0), "glb_mb": base / 1e6,
-            "added_kb": (full - base) / 1e3, "albedo_kb": len(imp.albedo.png) / 1e3,
-            "normal_kb": len(imp.normal_depth.png) / 1e3, "distance_m": lods[-1].distance}
+    return {
+        "species": name,
+        "wall_s": med(wall),
+        "cpu_s": med(cpu),
+        "gl_s": med(gl),
+        "png_s": med(png),
+        "lod_s": timings.stages.get("lod", 0.0),
+        "glb_mb": base / 1e6,
+        "added_kb": (full - base) / 1e3,
+        "albedo_kb": len(imp.albedo.png) / 1e3,
+        "normal_kb": len(imp.normal_depth.png) / 1e3,
+        "distance_m": lods[-1].distance,
+    }
 
 
 def main() -> None:
@@ -93,18 +103,25 @@ def main() -> None:
     ap.add_argument("species", nargs="*", default=["quaking_aspen"])
     ap.add_argument("--root", type=Path, default=None, help="another treegen checkout to run")
     args = ap.parse_args()
-    sys.path.insert(0, str((args.root or ROOT).resolve()))     # before treegen_cli is imported
+    sys.path.insert(0, str((args.root or ROOT).resolve()))  # before treegen_cli is imported
     import treegen_cli
 
-    print(f"impostor stage ({Path(treegen_cli.__file__).parent.parent}), median of {RUNS}, "
-          "16×16 views × 64 px, CPU seconds unless wall")
-    print(f"{'species':<16}{'cpu s':>8}{'GL s':>8}{'PNG s':>8}{'wall s':>8}{'lod s':>8}"
-          f"{'GLB MB':>8}{'+KB':>8}{'albedo':>8}{'normal':>8}{'from m':>8}")
+    print(
+        f"impostor stage ({Path(treegen_cli.__file__).parent.parent}), median of {RUNS}, "
+        "16×16 views × 64 px, CPU seconds unless wall"
+    )
+    print(
+        f"{'species':<16}{'cpu s':>8}{'GL s':>8}{'PNG s':>8}{'wall s':>8}{'lod s':>8}"
+        f"{'GLB MB':>8}{'+KB':>8}{'albedo':>8}{'normal':>8}{'from m':>8}"
+    )
     for name in args.species:
         r = bench(name)
-        print(f"{r['species']:<16}{r['cpu_s']:>8.3f}{r['gl_s']:>8.3f}{r['png_s']:>8.3f}"
-              f"{r['wall_s']:>8.3f}{r['lod_s']:>8.3f}{r['glb_mb']:>8.2f}{r['added_kb']:>8.0f}"
-              f"{r['albedo_kb']:>8.0f}{r['normal_kb']:>8.0f}{r['distance_m']:>8.0f}", flush=True)
+        print(
+            f"{r['species']:<16}{r['cpu_s']:>8.3f}{r['gl_s']:>8.3f}{r['png_s']:>8.3f}"
+            f"{r['wall_s']:>8.3f}{r['lod_s']:>8.3f}{r['glb_mb']:>8.2f}{r['added_kb']:>8.0f}"
+            f"{r['albedo_kb']:>8.0f}{r['normal_kb']:>8.0f}{r['distance_m']:>8.0f}",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

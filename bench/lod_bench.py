@@ -13,6 +13,7 @@ Table 2, per species and clip length: the default `treegen make` (GLB, in-proces
 (flat = linear in clip length), switch distances (from the tree's height on screen) and
 triangles per LOD. Seconds are wall-clock on a shared box: read ratios, not absolutes.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -45,32 +46,38 @@ def main() -> None:
 
 
 def schedules(species: list[str]) -> None:
-    print(f"{'species':<16}{'dist m':>7}  {'schedule':<9}{'keys kept':>17}{'anim bytes':>19}"
-          f"{'max err px':>11}{'updates/frame':>15}{'seconds':>9}")
+    print(
+        f"{'species':<16}{'dist m':>7}  {'schedule':<9}{'keys kept':>17}{'anim bytes':>19}"
+        f"{'max err px':>11}{'updates/frame':>15}{'seconds':>9}"
+    )
     for name in species:
-        asset, _ = build_asset(load_params(ROOT / "species" / f"{name}.txt"), 0,
-                               MakeOptions(lod=None))
+        asset, _ = build_asset(load_params(ROOT / "species" / f"{name}.txt"), 0, MakeOptions(lod=None))
         for r in schedule_rows(asset.lods[0], PAPER_DISTANCES, LOD_DEFAULTS):
             pct = 100.0 * r["animation_bytes"] / r["animation_bytes_dense"]
-            print(f"{name:<16}{r['distance_m']:>7g}  {r['schedule']:<9}{r['keys_kept']:>9,} "
-                  f"{r['keys_kept_pct']:>6.1f}%{r['animation_bytes']:>11,} {pct:>6.1f}%"
-                  f"{r['max_error_px']:>11.3f}{r['leaf_vertex_updates_per_frame']:>15,.0f}"
-                  f"{r['seconds']:>9.2f}")
+            print(
+                f"{name:<16}{r['distance_m']:>7g}  {r['schedule']:<9}{r['keys_kept']:>9,} "
+                f"{r['keys_kept_pct']:>6.1f}%{r['animation_bytes']:>11,} {pct:>6.1f}%"
+                f"{r['max_error_px']:>11.3f}{r['leaf_vertex_updates_per_frame']:>15,.0f}"
+                f"{r['seconds']:>9.2f}"
+            )
     print()
 
 
 def stage_seconds(species: list[str], durations: list[float]) -> None:
-    print(f"{'species':<16}{'clip s':>7}{'make s':>8}{'lod s':>7}{'lod/make':>9}{'lod s/clip s':>13}"
-          f"  switch m / triangles per LOD")
+    print(
+        f"{'species':<16}{'clip s':>7}{'make s':>8}{'lod s':>7}{'lod/make':>9}{'lod s/clip s':>13}"
+        f"  switch m / triangles per LOD"
+    )
     with tempfile.TemporaryDirectory() as tmp:
         for name in species:
             for duration in durations:
-                s = api.make(ROOT / "species" / f"{name}.txt", Path(tmp) / f"{name}.glb",
-                             duration=duration)
+                s = api.make(ROOT / "species" / f"{name}.txt", Path(tmp) / f"{name}.glb", duration=duration)
                 lod_s = s["stages_s"].get("lod", 0.0)
                 lods = " ".join(f"{r['distance_m']:.0f}:{r['triangles']:,}" for r in s["lods"])
-                print(f"{name:<16}{duration:>7g}{s['seconds']:>8.2f}{lod_s:>7.2f}"
-                      f"{lod_s / s['seconds']:>9.2f}{lod_s / duration:>13.3f}  {lods}")
+                print(
+                    f"{name:<16}{duration:>7g}{s['seconds']:>8.2f}{lod_s:>7.2f}"
+                    f"{lod_s / s['seconds']:>9.2f}{lod_s / duration:>13.3f}  {lods}"
+                )
 
 
 if __name__ == "__main__":

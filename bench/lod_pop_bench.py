@@ -14,6 +14,7 @@ After: cover within ±5 % for 9 of 15 species (larch −22 %, fan palm +29 %, sh
 rush ±17 %, palm +6 %, tamarack +5.3 % are not), triangles 50/15/5 % for all but shave grass
 (4.8 %); IoU 0.49–0.95, the 0.9 target met only by balsam fir and the willow.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -35,22 +36,28 @@ def main() -> None:
     ap.add_argument("--views", type=int, default=4)
     ap.add_argument("--max-px", type=int, default=MAX_PX)
     args = ap.parse_args()
-    names = args.species.split(",") if args.species else \
-        sorted(p.stem for p in (ROOT / "species").glob("*.txt"))
+    names = (
+        args.species.split(",") if args.species else sorted(p.stem for p in (ROOT / "species").glob("*.txt"))
+    )
     views = tuple(-90.0 + 360.0 * i / args.views for i in range(args.views))
     opts = LodOptions()
     print(f"{'species':<20}{'switch':>7}{'dist m':>8}{'px':>6}{'IoU':>7}{'cover':>8}   triangles / LOD0")
     worst_iou, worst_cov = 1.0, 0.0
     for name in names:
         t0 = time.perf_counter()
-        asset, _ = build_asset(load_params(ROOT / "species" / f"{name}.txt"), 0,
-                               MakeOptions(wind=None, lod=opts, materials=MaterialOptions(texture_size=256)))
+        asset, _ = build_asset(
+            load_params(ROOT / "species" / f"{name}.txt"),
+            0,
+            MakeOptions(wind=None, lod=opts, materials=MaterialOptions(texture_size=256)),
+        )
         tris = [sum(len(p.indices) // 3 for p in lod.primitives) for lod in asset.lods]
         frac = " ".join(f"{t / tris[0]:.3f}" for t in tris)
         for pop in lod_pops(asset, opts, views, args.max_px):
             worst_iou, worst_cov = min(worst_iou, pop.iou), max(worst_cov, abs(pop.coverage - 1))
-            print(f"{name:<20}{pop.switch:>7}{pop.distance:>8g}{pop.pixels:>6}{pop.iou:>7.3f}"
-                  f"{100 * (pop.coverage - 1):>+7.1f}%   {frac}")
+            print(
+                f"{name:<20}{pop.switch:>7}{pop.distance:>8g}{pop.pixels:>6}{pop.iou:>7.3f}"
+                f"{100 * (pop.coverage - 1):>+7.1f}%   {frac}"
+            )
         print(f"{'':<20}{'':>7}  ({time.perf_counter() - t0:.1f} s)")
     print(f"worst: IoU {worst_iou:.3f}, coverage {100 * worst_cov:.1f}% off")
 

@@ -14,6 +14,7 @@ output: gltfpack drops or collapses to one key every track it finds nearly still
 ones whose motion moves the geometry by millimetres (beyond treegen's 1 mm LOD0 bound), which is
 where a ratio above 1 comes from.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -40,8 +41,7 @@ for _profile in ("mobile", "web"):
 
 
 def gltfpack(src: Path, dst: Path, *flags: str) -> int:
-    subprocess.run([str(GLTFPACK), "-i", str(src), "-o", str(dst), *flags], check=True,
-                   capture_output=True)
+    subprocess.run([str(GLTFPACK), "-i", str(src), "-o", str(dst), *flags], check=True, capture_output=True)
     return dst.stat().st_size
 
 
@@ -51,8 +51,9 @@ def moving_tracks(path: Path) -> int:
     anim = next((a for a in gltf.get("animations", []) if a.get("name") == "wind_loop"), None)
     if anim is None:
         return 0
-    return sum(gltf["accessors"][anim["samplers"][c["sampler"]]["output"]]["count"] > 1
-               for c in anim["channels"])
+    return sum(
+        gltf["accessors"][anim["samplers"][c["sampler"]]["output"]]["count"] > 1 for c in anim["channels"]
+    )
 
 
 def row(name: str, set_name: str, options: dict, tmp: Path) -> dict:
@@ -60,9 +61,12 @@ def row(name: str, set_name: str, options: dict, tmp: Path) -> dict:
     base = api.resolve({**options, "compress": "none"}, output="x.glb")
     asset, tree = api.build(params, name, base, Timings())
     asset = replace(asset, up_axis=base.values["up_axis"])
-    out: dict = {"species": name, "set": set_name,
-                 "triangles": sum(len(p.indices) // 3 for p in asset.lods[0].primitives),
-                 "joints": len(asset.lods[0].skeleton.names)}
+    out: dict = {
+        "species": name,
+        "set": set_name,
+        "triangles": sum(len(p.indices) // 3 for p in asset.lods[0].primitives),
+        "joints": len(asset.lods[0].skeleton.names),
+    }
     for compress in ("none", "quantize", "meshopt"):
         job = api.resolve({**options, "compress": compress}, output="x.glb")
         path = tmp / f"{name}_{set_name}_{compress}.glb"
@@ -85,19 +89,24 @@ def main() -> None:
     if not GLTFPACK.exists():
         raise SystemExit(f"{GLTFPACK} missing: run make install (cd tools && npm ci)")
     mb = 1e6
-    print(f"{'species':<16}{'set':<9}{'tris':>9}{'joints':>7}{'none MB':>9}{'quant MB':>9}"
-          f"{'gp MB':>8}{'q/gp':>6}{'meshopt':>9}{'gp -cc':>8}{'m/gp':>6}{'none/m':>7}"
-          f"{'tracks':>10}")
+    print(
+        f"{'species':<16}{'set':<9}{'tris':>9}{'joints':>7}{'none MB':>9}{'quant MB':>9}"
+        f"{'gp MB':>8}{'q/gp':>6}{'meshopt':>9}{'gp -cc':>8}{'m/gp':>6}{'none/m':>7}"
+        f"{'tracks':>10}"
+    )
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.species.split(","):
             for set_name in args.sets.split(","):
                 r = row(name, set_name, OPTION_SETS[set_name], Path(tmp))
-                print(f"{name:<16}{set_name:<9}{r['triangles']:>9,}{r['joints']:>7}"
-                      f"{r['none'] / mb:>9.2f}{r['quantize'] / mb:>9.2f}{r['gp'] / mb:>8.2f}"
-                      f"{r['quantize'] / r['gp']:>6.2f}{r['meshopt'] / mb:>9.2f}"
-                      f"{r['gp_cc'] / mb:>8.2f}{r['meshopt'] / r['gp_cc']:>6.2f}"
-                      f"{r['none'] / r['meshopt']:>7.1f}"
-                      f"{r['tracks']:>5}/{r['gp_tracks']:<4}", flush=True)
+                print(
+                    f"{name:<16}{set_name:<9}{r['triangles']:>9,}{r['joints']:>7}"
+                    f"{r['none'] / mb:>9.2f}{r['quantize'] / mb:>9.2f}{r['gp'] / mb:>8.2f}"
+                    f"{r['quantize'] / r['gp']:>6.2f}{r['meshopt'] / mb:>9.2f}"
+                    f"{r['gp_cc'] / mb:>8.2f}{r['meshopt'] / r['gp_cc']:>6.2f}"
+                    f"{r['none'] / r['meshopt']:>7.1f}"
+                    f"{r['tracks']:>5}/{r['gp_tracks']:<4}",
+                    flush=True,
+                )
 
 
 if __name__ == "__main__":

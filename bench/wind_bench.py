@@ -23,6 +23,7 @@ weeping_willow      222      0.14, 0.14, 0.14    0.535   3.924  0.408      4  0.
                                                                           12  0.17    0.12    0.07   30.4    13.8
 --joints on the willow (median leaf cm at 4 m/s): 2.07 / 2.07 / 2.16 at 256 / 512 / 900 joints.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -45,8 +46,11 @@ PAPER = ["quaking_aspen", "black_tupelo", "weeping_willow", "ca_black_oak"]
 def median_leaf_motion(tree, rig, clip, every: int = 29) -> float:
     """Median over leaves of the largest distance a leaf base moves from rest in the loop (m)."""
     j = rig.leaf_joint[::every].astype(int)
-    local = np.einsum("lab,lb->la", np.linalg.inv(rig.skeleton.bind_world[j]),
-                      np.c_[tree.leaf_pos[::every], np.ones(len(j))])
+    local = np.einsum(
+        "lab,lb->la",
+        np.linalg.inv(rig.skeleton.bind_world[j]),
+        np.c_[tree.leaf_pos[::every], np.ones(len(j))],
+    )
     x = np.einsum("klab,lb->kla", pose_world(rig.skeleton, clip.rotations)[:, j], local)[..., :3]
     return float(np.median(np.linalg.norm(x - tree.leaf_pos[::every][None], axis=2).max(axis=0)))
 
@@ -67,8 +71,11 @@ def leaf_motion_by_budget(paths: list[str], budgets: list[int], seed: int) -> No
             t0 = time.perf_counter()
             clip = bake_wind(tree, rig, WindOptions(), seed=seed)
             wall = time.perf_counter() - t0
-            print(f"{params.name:<16}{budget:>7}{len(rig.joint_node):>7}{wall:>8.2f}"
-                  f"{100 * median_leaf_motion(tree, rig, clip):>8.2f}", flush=True)
+            print(
+                f"{params.name:<16}{budget:>7}{len(rig.joint_node):>7}{wall:>8.2f}"
+                f"{100 * median_leaf_motion(tree, rig, clip):>8.2f}",
+                flush=True,
+            )
 
 
 def main() -> None:
@@ -83,8 +90,10 @@ def main() -> None:
         leaf_motion_by_budget(paths, [int(b) for b in args.joints.split(",")], args.seed)
         return
 
-    print(f"{'species':<16}{'joints':>7}{'modes Hz':>22}{'sway Hz':>9}{'bake s':>8}{'cpu s':>7}"
-          f"{'':>3}{'m/s':>4}{'ζ':>6}{'lean m':>8}{'sway m':>8}{'max °':>7}{'leaf cm':>8}")
+    print(
+        f"{'species':<16}{'joints':>7}{'modes Hz':>22}{'sway Hz':>9}{'bake s':>8}{'cpu s':>7}"
+        f"{'':>3}{'m/s':>4}{'ζ':>6}{'lean m':>8}{'sway m':>8}{'max °':>7}{'leaf cm':>8}"
+    )
     for path in paths:
         params = load_params(path)
         tree = generate(params, args.seed)
@@ -99,13 +108,25 @@ def main() -> None:
         for k, speed in enumerate((4.0, 12.0)):
             o = WindOptions(speed=speed, duration=10.0, fps=30.0)
             rep = wind_report(tree, rig, o, args.seed)
-            leaf = (f"{100 * median_leaf_motion(tree, rig, bake_wind(tree, rig, o, seed=args.seed)):>8.1f}"
-                    if tree.n_leaves else f"{'-':>8}")
+            leaf = (
+                f"{100 * median_leaf_motion(tree, rig, bake_wind(tree, rig, o, seed=args.seed)):>8.1f}"
+                if tree.n_leaves
+                else f"{'-':>8}"
+            )
             modes = ", ".join(f"{m['hz']:.2f}" for m in rep["modes"][:3])
-            head = (f"{params.name:<16}{len(rig.joint_node):>7}{modes:>22}{rep['sway_hz']:>9.3f}"
-                    f"{statistics.median(times):>8.3f}{statistics.median(cpu):>7.3f}") if k == 0 else " " * 69
-            print(f"{head}{'':>3}{speed:>4g}{rep['sway_damping']:>6.2f}{rep['top_lean_m']:>8.2f}"
-                  f"{rep['top_sway_rms_m']:>8.2f}{rep['max_joint_deg']:>7.1f}{leaf}", flush=True)
+            head = (
+                (
+                    f"{params.name:<16}{len(rig.joint_node):>7}{modes:>22}{rep['sway_hz']:>9.3f}"
+                    f"{statistics.median(times):>8.3f}{statistics.median(cpu):>7.3f}"
+                )
+                if k == 0
+                else " " * 69
+            )
+            print(
+                f"{head}{'':>3}{speed:>4g}{rep['sway_damping']:>6.2f}{rep['top_lean_m']:>8.2f}"
+                f"{rep['top_sway_rms_m']:>8.2f}{rep['max_joint_deg']:>7.1f}{leaf}",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

@@ -9,6 +9,7 @@ install copies them from the project's usd-core (the definitions are the same).
     python tests/arkit_check.py --install      # once
     python tests/arkit_check.py FILE.usdz      # prints the checker's errors / failed checks
 """
+
 from __future__ import annotations
 
 import json
@@ -30,9 +31,21 @@ def available() -> bool:
 def install() -> None:
     """pip-install usd-core 24.11 into TARGET and give its usdHydra plugin the shader defs."""
     if not available():
-        subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps",
-                        "--target", str(TARGET), f"usd-core=={VERSION}"], check=True)
-    import pxr   # the project's usd-core: it has the definitions
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "pip",
+                "install",
+                "--quiet",
+                "--no-deps",
+                "--target",
+                str(TARGET),
+                f"usd-core=={VERSION}",
+            ],
+            check=True,
+        )
+    import pxr  # the project's usd-core: it has the definitions
 
     src = Path(pxr.__file__).parent / "pluginfo" / "usdShaders" / "resources" / "shaders"
     dst = TARGET / "pxr" / "pluginfo" / "usdHydra" / "resources" / "shaders"
@@ -46,8 +59,14 @@ def check(path) -> dict[str, list[str]]:
     run under usd-core 24.11 (call only when available())."""
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PXR_PLUGINPATH_NAME")}
     env["PYTHONPATH"] = str(TARGET)
-    proc = subprocess.run([sys.executable, "-c", _RUN, str(path)], capture_output=True,
-                          text=True, env=env, cwd=str(TARGET), timeout=300)
+    proc = subprocess.run(
+        [sys.executable, "-c", _RUN, str(path)],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=str(TARGET),
+        timeout=300,
+    )
     if proc.returncode != 0:
         raise RuntimeError(f"ComplianceChecker failed to run: {proc.stderr[-2000:]}")
     return json.loads(proc.stdout.strip().splitlines()[-1])

@@ -11,6 +11,7 @@
 A missing client raises ClientMissing whose message names the install command; tests turn it into
 a skip. Nothing here imports treegen_cli: the clients only ever see the files.
 """
+
 from __future__ import annotations
 
 import json
@@ -40,12 +41,21 @@ class ClientMissing(RuntimeError):
 # ---------------------------------------------------------------------------------------------
 # process helpers
 
+
 def _run(cmd, *, cwd=None, env=None, timeout):
     """Run cmd in its own process group; on timeout kill the whole group.
     -> (returncode or None on timeout, stdout, stderr, seconds)"""
     t0 = time.monotonic()
-    proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, errors="replace", start_new_session=True)
+    proc = subprocess.Popen(
+        cmd,
+        cwd=cwd,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        errors="replace",
+        start_new_session=True,
+    )
     try:
         out, err = proc.communicate(timeout=timeout)
         return proc.returncode, out, err, time.monotonic() - t0
@@ -111,8 +121,13 @@ def godot_version() -> str:
 
 def _tail(text: str, n: int = 30) -> list[str]:
     """The last n lines of Godot output that are not server-build noise (for failure reports)."""
-    keep = [ln for ln in text.splitlines() if ln.strip() and not any(p.search(ln) for p in _GODOT_NOISE)
-            and not ln.strip().startswith("At: core/os/memory.cpp")]
+    keep = [
+        ln
+        for ln in text.splitlines()
+        if ln.strip()
+        and not any(p.search(ln) for p in _GODOT_NOISE)
+        and not ln.strip().startswith("At: core/os/memory.cpp")
+    ]
     return keep[-n:]
 
 
@@ -146,15 +161,21 @@ def _project(tmp: Path) -> tuple[Path, dict]:
     proj.mkdir()
     (proj / "project.godot").write_text(_PROJECT)
     shutil.copyfile(TOOLS / "godot" / "inspect.gd", proj / "inspect.gd")
-    env = dict(os.environ, LANG="en_US.UTF-8", XDG_CONFIG_HOME=str(tmp / "config"),
-               XDG_DATA_HOME=str(tmp / "data"), XDG_CACHE_HOME=str(tmp / "cache"))
+    env = dict(
+        os.environ,
+        LANG="en_US.UTF-8",
+        XDG_CONFIG_HOME=str(tmp / "config"),
+        XDG_DATA_HOME=str(tmp / "data"),
+        XDG_CACHE_HOME=str(tmp / "cache"),
+    )
     return proj, env
 
 
 def _inspect(proj: Path, env: dict, scene: str, result: dict, timeout: float) -> None:
     """Run inspect.gd on the imported `scene` and merge its report into `result`."""
-    rc, out, err, secs = _run([GODOT, "--path", str(proj), "-s", "res://inspect.gd",
-                               f"--scene={scene}"], env=env, timeout=timeout)
+    rc, out, err, secs = _run(
+        [GODOT, "--path", str(proj), "-s", "res://inspect.gd", f"--scene={scene}"], env=env, timeout=timeout
+    )
     result["inspect_seconds"] = round(secs, 2)
     result["errors"] += _godot_messages(err, "inspect", result["noise"])
     line = next((ln for ln in out.splitlines() if ln.startswith("TREEGEN_JSON ")), None)
@@ -162,15 +183,16 @@ def _inspect(proj: Path, env: dict, scene: str, result: dict, timeout: float) ->
         result["reason"] = "inspect: timeout" if rc is None else f"inspect: no output (exit {rc})"
         result["log_tail"] = _tail(out + err)
         return
-    report = json.loads(line[len("TREEGEN_JSON "):])
+    report = json.loads(line[len("TREEGEN_JSON ") :])
     result.update({k: v for k, v in report.items() if k != "scene"})
     result["imported"] = bool(report.get("loaded"))
     if not result["imported"]:
         result["reason"] = report.get("reason", "not loaded")
 
 
-def godot_import(glb_path, timeout: float = 120, *, options: dict | None = None,
-                 keep_project: str | None = None) -> dict:
+def godot_import(
+    glb_path, timeout: float = 120, *, options: dict | None = None, keep_project: str | None = None
+) -> dict:
     """Import glb_path the way the Godot 3.2 editor does, then load and inspect the imported scene.
 
     Import: a fresh project with project.godot and the file as res://x.glb, then
@@ -199,16 +221,23 @@ def godot_import(glb_path, timeout: float = 120, *, options: dict | None = None,
     glb_path = Path(glb_path)
     if not glb_path.is_file():
         raise FileNotFoundError(glb_path)
-    result: dict = {"client": "godot", "version": version, "file": str(glb_path), "imported": False,
-                    "reason": None, "errors": [], "noise": {}}
+    result: dict = {
+        "client": "godot",
+        "version": version,
+        "file": str(glb_path),
+        "imported": False,
+        "reason": None,
+        "errors": [],
+        "noise": {},
+    }
     with tempfile.TemporaryDirectory(prefix="treegen_godot_") as tmp:
         proj, env = _project(Path(tmp))
         shutil.copyfile(glb_path, proj / "x.glb")
-        (proj / "x.glb.import").write_text(_IMPORT_PRESET + "".join(
-            f"{k}={_godot_literal(v)}\n" for k, v in (options or {}).items()))
+        (proj / "x.glb.import").write_text(
+            _IMPORT_PRESET + "".join(f"{k}={_godot_literal(v)}\n" for k, v in (options or {}).items())
+        )
 
-        rc, _, err, secs = _run([GODOT, "--path", str(proj), "--editor", "--quit"], env=env,
-                                timeout=timeout)
+        rc, _, err, secs = _run([GODOT, "--path", str(proj), "--editor", "--quit"], env=env, timeout=timeout)
         result["import_seconds"] = round(secs, 2)
         result["import_exit"] = "timeout" if rc is None else rc
         result["errors"] += _godot_messages(err, "import", result["noise"])
@@ -240,17 +269,22 @@ def godot_import_many(glb_paths, timeout: float = 600, *, inspect_timeout: float
             names[p] = name
             shutil.copyfile(p, proj / name)
             (proj / f"{name}.import").write_text(_IMPORT_PRESET)
-        rc, _, err, secs = _run([GODOT, "--path", str(proj), "--editor", "--quit"], env=env,
-                                timeout=timeout)
+        rc, _, err, secs = _run([GODOT, "--path", str(proj), "--editor", "--quit"], env=env, timeout=timeout)
         import_noise: dict = {}
         import_errors = _godot_messages(err, "import", import_noise)
         for p in paths:
             name = names[p]
-            r: dict = {"client": "godot", "version": version, "file": str(p), "imported": False,
-                       "reason": None, "import_seconds": round(secs, 2),
-                       "import_exit": "timeout" if rc is None else rc,
-                       "errors": [e for e in import_errors if name in e["message"] or
-                                  p.stem in e["message"]], "noise": {}}
+            r: dict = {
+                "client": "godot",
+                "version": version,
+                "file": str(p),
+                "imported": False,
+                "reason": None,
+                "import_seconds": round(secs, 2),
+                "import_exit": "timeout" if rc is None else rc,
+                "errors": [e for e in import_errors if name in e["message"] or p.stem in e["message"]],
+                "noise": {},
+            }
             imp = proj / ".import"
             if not (imp.is_dir() and list(imp.glob(f"{name}-*.scn"))):
                 r["reason"] = "timeout" if rc is None else f"no imported scene (exit {rc})"
@@ -265,21 +299,31 @@ def godot_import_many(glb_paths, timeout: float = 600, *, inspect_timeout: float
 # ---------------------------------------------------------------------------------------------
 # three.js and Babylon.js (Node)
 
+
 def _node_client(script: str, package: str, what: str, glb_path, extra, timeout) -> dict:
     if shutil.which(NODE) is None or not (TOOLS / "node_modules" / package / "package.json").is_file():
         raise ClientMissing(NPM_INSTALL.format(what=what))
     glb_path = Path(glb_path).resolve()  # node runs in tools/
     if not glb_path.is_file():
         raise FileNotFoundError(glb_path)
-    rc, out, err, secs = _run([NODE, str(TOOLS / script), *extra, str(glb_path)], cwd=TOOLS,
-                              timeout=timeout)
+    rc, out, err, secs = _run([NODE, str(TOOLS / script), *extra, str(glb_path)], cwd=TOOLS, timeout=timeout)
     if rc is None:
-        return {"client": what, "file": str(glb_path), "loaded": False, "error": "timeout",
-                "seconds": round(secs, 2)}
+        return {
+            "client": what,
+            "file": str(glb_path),
+            "loaded": False,
+            "error": "timeout",
+            "seconds": round(secs, 2),
+        }
     lines = [ln for ln in out.splitlines() if ln.startswith("{")]
     if rc != 0 or not lines:
-        return {"client": what, "file": str(glb_path), "loaded": False,
-                "error": f"exit {rc}: {err.strip()[-2000:]}", "seconds": round(secs, 2)}
+        return {
+            "client": what,
+            "file": str(glb_path),
+            "loaded": False,
+            "error": f"exit {rc}: {err.strip()[-2000:]}",
+            "seconds": round(secs, 2),
+        }
     report = json.loads(lines[-1])
     report["seconds"] = round(secs, 2)
     report["warnings"] = [m["text"] for m in report.get("messages", []) if m["level"] in ("warn", "error")]
@@ -319,12 +363,12 @@ def babylon_load(glb_path, timeout: float = 120, container: bool = False) -> dic
         "messages": [{level, text}], "warnings": [text]}
     """
     extra = ["--container"] if container else []
-    return _node_client("babylon_check.mjs", "@babylonjs/loaders", "Babylon.js", glb_path, extra,
-                        timeout)
+    return _node_client("babylon_check.mjs", "@babylonjs/loaders", "Babylon.js", glb_path, extra, timeout)
 
 
 # ---------------------------------------------------------------------------------------------
 # GLB surgery for experiments
+
 
 def _read_glb(path):
     data = Path(path).read_bytes()
@@ -334,7 +378,7 @@ def _read_glb(path):
     n, kind = struct.unpack_from("<II", data, 12)
     if kind != 0x4E4F534A:
         raise ValueError(f"{path}: first chunk is not JSON")
-    return json.loads(data[20:20 + n]), data[20 + n:]
+    return json.loads(data[20 : 20 + n]), data[20 + n :]
 
 
 def _write_glb(path, gltf, rest: bytes):
@@ -404,8 +448,9 @@ def main(argv=None) -> int:
     ap.add_argument("glb")
     ap.add_argument("--client", action="append", choices=["godot", "three", "babylon"])
     ap.add_argument("--timeout", type=float, default=120)
-    ap.add_argument("--siblings", action="store_true",
-                    help="import a sibling_layout() copy instead of the file itself")
+    ap.add_argument(
+        "--siblings", action="store_true", help="import a sibling_layout() copy instead of the file itself"
+    )
     args = ap.parse_args(argv)
     glb = Path(args.glb)
     with tempfile.TemporaryDirectory() as tmp:

@@ -1,5 +1,6 @@
 """Shared test fixtures: paths, the bundled species, a grown tree per species (grown once per
 test session), and one way to run the CLI in a fresh process."""
+
 from __future__ import annotations
 
 import subprocess
@@ -32,8 +33,12 @@ def grown(name: str, seed: int = 0):
 
 def run_treegen(*args, cwd=None) -> subprocess.CompletedProcess:
     """`treegen ARGS` in a fresh interpreter, as a user runs it."""
-    return subprocess.run([sys.executable, "-m", "treegen_cli", *map(str, args)],
-                          capture_output=True, text=True, cwd=cwd or ROOT)
+    return subprocess.run(
+        [sys.executable, "-m", "treegen_cli", *map(str, args)],
+        capture_output=True,
+        text=True,
+        cwd=cwd or ROOT,
+    )
 
 
 @pytest.fixture

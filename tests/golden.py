@@ -5,6 +5,7 @@ A refactor must leave these bytes alone; a change that means to alter the output
 on purpose, in its own commit, with `python tests/golden.py --update` (the diff of
 tests/fixtures/golden.json then shows exactly which outputs moved).
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -30,15 +31,25 @@ def cases() -> dict[str, list[str]]:
     for ex in sorted((ROOT / "examples").glob("forest_*.json")):
         if ex.stem != "forest_1000":
             out[f"{ex.stem}.glb"] = ["forest", str(ex), "-o", "{out}", "--camera-lod"]
-    out["forest_30m.usda"] = ["forest", str(ROOT / "examples" / "forest_30m.json"), "-o", "{out}",
-                              "--camera-lod"]
+    out["forest_30m.usda"] = [
+        "forest",
+        str(ROOT / "examples" / "forest_30m.json"),
+        "-o",
+        "{out}",
+        "--camera-lod",
+    ]
     # the default: every tree with all its LODs
     for ext in ("glb", "usda"):
-        out[f"forest_30m_walk.{ext}"] = ["forest", str(ROOT / "examples" / "forest_30m.json"),
-                                         "-o", "{out}"]
+        out[f"forest_30m_walk.{ext}"] = ["forest", str(ROOT / "examples" / "forest_30m.json"), "-o", "{out}"]
     out["palm.obj"] = ["make", str(ROOT / "species" / "palm.txt"), "-o", "{out}", "--no-wind"]
-    out["quaking_aspen.png"] = ["preview", str(ROOT / "species" / "quaking_aspen.txt"),
-                                "-o", "{out}", "--size", "96"]
+    out["quaking_aspen.png"] = [
+        "preview",
+        str(ROOT / "species" / "quaking_aspen.txt"),
+        "-o",
+        "{out}",
+        "--size",
+        "96",
+    ]
     return out
 
 
@@ -47,8 +58,9 @@ def digest(name: str, args: list[str]) -> str:
     with tempfile.TemporaryDirectory() as tmp:
         target = Path(tmp) / name
         argv = [a.replace("{out}", str(target)) for a in args]
-        proc = subprocess.run([sys.executable, "-m", "treegen_cli", *argv, "-q"],
-                              capture_output=True, text=True, cwd=tmp)
+        proc = subprocess.run(
+            [sys.executable, "-m", "treegen_cli", *argv, "-q"], capture_output=True, text=True, cwd=tmp
+        )
         if proc.returncode != 0:
             raise RuntimeError(f"treegen {' '.join(argv)} failed: {proc.stderr}")
         h = hashlib.sha256()

@@ -5,6 +5,7 @@ with leaf quads on the last joints. LOD k has fewer joints, sides and leaves tha
 The clip sways every non-root joint about generator X/Y with a few keys; LOD0's clip carries a
 sparse key schedule (`Clip.keys`), lower LODs keep every key.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -12,8 +13,8 @@ from scipy.spatial.transform import Rotation
 
 from treegen_cli.asset import Asset, Clip, Lod, Material, Primitive, Skeleton, Texture
 
-SEGMENT = 2.5          # metres between joints along the chain
-BEND_DEG = 15.0        # rest bend of every non-root joint about its local X
+SEGMENT = 2.5  # metres between joints along the chain
+BEND_DEG = 15.0  # rest bend of every non-root joint about its local X
 
 
 def _matrix(t: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -34,8 +35,13 @@ def chain_skeleton(n_joints: int) -> Skeleton:
     for j in range(n_joints):  # a handful of joints: the loop is fine
         local = _matrix(t[j], q[j])
         world[j] = local if parent[j] < 0 else world[parent[j]] @ local
-    return Skeleton(names=[f"j{j}" for j in range(n_joints)], parent=parent,
-                    rest_translation=t, rest_rotation=q, bind_world=world)
+    return Skeleton(
+        names=[f"j{j}" for j in range(n_joints)],
+        parent=parent,
+        rest_translation=t,
+        rest_rotation=q,
+        bind_world=world,
+    )
 
 
 def _to_world(bind: np.ndarray, joint: np.ndarray, local: np.ndarray) -> np.ndarray:
@@ -51,14 +57,17 @@ def bark(skel: Skeleton, sides: int, radius: float = 0.3) -> Primitive:
     ring_r = radius * np.linspace(1.0, 0.3, rings)
     a = np.arange(sides) * (2 * np.pi / sides)
     ca, sa = np.cos(a), np.sin(a)
-    local = np.stack([ring_r[:, None] * ca, ring_r[:, None] * sa,
-                      np.broadcast_to(ring_z[:, None], (rings, sides))], axis=-1).reshape(-1, 3)
+    local = np.stack(
+        [ring_r[:, None] * ca, ring_r[:, None] * sa, np.broadcast_to(ring_z[:, None], (rings, sides))],
+        axis=-1,
+    ).reshape(-1, 3)
     nloc = np.tile(np.stack([ca, sa, np.zeros(sides)], axis=-1), (rings, 1))
     vj = np.repeat(ring_joint, sides)
     pos = _to_world(skel.bind_world, vj, local)
     nrm = np.einsum("vij,vj->vi", skel.bind_world[vj, :3, :3], nloc)
-    uv = np.stack([np.tile(np.arange(sides) / sides, rings),
-                   np.repeat(np.arange(rings, dtype=float), sides)], axis=-1)
+    uv = np.stack(
+        [np.tile(np.arange(sides) / sides, rings), np.repeat(np.arange(rings, dtype=float), sides)], axis=-1
+    )
     # quads between consecutive rings, counter-clockwise seen from outside
     r, s = np.meshgrid(np.arange(rings - 1), np.arange(sides), indexing="ij")
     v00 = r * sides + s
@@ -74,8 +83,16 @@ def bark(skel: Skeleton, sides: int, radius: float = 0.3) -> Primitive:
     joints[blend, 1] = vj[blend] - 1
     weights[:, 0] = np.where(blend, 0.75, 1.0)
     weights[:, 1] = np.where(blend, 0.25, 0.0)
-    return Primitive("bark", "bark", pos.astype(np.float32), nrm.astype(np.float32),
-                     uv.astype(np.float32), idx.astype(np.uint32), joints, weights)
+    return Primitive(
+        "bark",
+        "bark",
+        pos.astype(np.float32),
+        nrm.astype(np.float32),
+        uv.astype(np.float32),
+        idx.astype(np.uint32),
+        joints,
+        weights,
+    )
 
 
 def leaves(skel: Skeleton, n_leaves: int, size: float = 0.4) -> Primitive:
@@ -94,18 +111,27 @@ def leaves(skel: Skeleton, n_leaves: int, size: float = 0.4) -> Primitive:
     nrm = np.einsum("vij,vj->vi", skel.bind_world[vj, :3, :3], nloc)
     uv = np.tile([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]], (n_leaves, 1))
     base = 4 * np.arange(n_leaves)[:, None]
-    flip = side[:, None] < 0   # mirrored quads: swap winding to stay counter-clockwise
+    flip = side[:, None] < 0  # mirrored quads: swap winding to stay counter-clockwise
     tri = np.where(flip, [0, 2, 1, 0, 3, 2], [0, 1, 2, 0, 2, 3]) + base
     joints = np.zeros((4 * n_leaves, 4), np.uint16)
     joints[:, 0] = vj
     weights = np.zeros((4 * n_leaves, 4), np.float32)
     weights[:, 0] = 1.0
-    return Primitive("leaves", "leaf", pos.astype(np.float32), nrm.astype(np.float32),
-                     uv.astype(np.float32), tri.reshape(-1).astype(np.uint32), joints, weights)
+    return Primitive(
+        "leaves",
+        "leaf",
+        pos.astype(np.float32),
+        nrm.astype(np.float32),
+        uv.astype(np.float32),
+        tri.reshape(-1).astype(np.uint32),
+        joints,
+        weights,
+    )
 
 
-def sway_clip(skel: Skeleton, name: str, n_keys: int = 9, duration: float = 2.0,
-              sparse: bool = False) -> Clip:
+def sway_clip(
+    skel: Skeleton, name: str, n_keys: int = 9, duration: float = 2.0, sparse: bool = False
+) -> Clip:
     """Every non-root joint rocks about X and Y; the last key equals the first (loops).
 
     sparse=True keeps every other key on joints 1.. (identical sets, so writers can share one
@@ -145,10 +171,21 @@ def synthetic_asset(lods: int = 1, with_clip: bool = True) -> Asset:
     for k, (J, sides, n_leaves, dist, cover) in enumerate(LOD_TABLE[:lods]):
         skel = chain_skeleton(J)
         clips = [sway_clip(skel, f"wind_lod{k}", sparse=(k == 0))] if with_clip else []
-        out.append(Lod(primitives=[bark(skel, sides), leaves(skel, n_leaves)], skeleton=skel,
-                       clips=clips, distance=dist, screen_coverage=cover))
-    return Asset(name="synthetic", materials=list(MATERIALS), lods=out,
-                 extras={"species": "synthetic", "seed": 0, "treegen": "test"})
+        out.append(
+            Lod(
+                primitives=[bark(skel, sides), leaves(skel, n_leaves)],
+                skeleton=skel,
+                clips=clips,
+                distance=dist,
+                screen_coverage=cover,
+            )
+        )
+    return Asset(
+        name="synthetic",
+        materials=list(MATERIALS),
+        lods=out,
+        extras={"species": "synthetic", "seed": 0, "treegen": "test"},
+    )
 
 
 def synthetic_textures(size: int = 32) -> dict[str, Texture]:
@@ -158,9 +195,11 @@ def synthetic_textures(size: int = 32) -> dict[str, Texture]:
 
     atlas = leaf_atlas(0, (0.1, 0.3, 0.05), size=size, variants=1)
     albedo, normal = bark_textures((0.2, 0.15, 0.1), size=size)
-    return {"leaf": Texture("leaf", png_bytes(atlas.rgba), wrap="CLAMP"),
-            "bark": Texture("bark", png_bytes(albedo)),
-            "bark_normal": Texture("bark_normal", png_bytes(normal), srgb=False)}
+    return {
+        "leaf": Texture("leaf", png_bytes(atlas.rgba), wrap="CLAMP"),
+        "bark": Texture("bark", png_bytes(albedo)),
+        "bark_normal": Texture("bark_normal", png_bytes(normal), srgb=False),
+    }
 
 
 def textured_asset(lods: int = 1, with_clip: bool = True, size: int = 32) -> Asset:
@@ -170,6 +209,8 @@ def textured_asset(lods: int = 1, with_clip: bool = True, size: int = 32) -> Ass
 
     tex = synthetic_textures(size)
     bark, leaf = MATERIALS
-    materials = [replace(bark, base_texture=tex["bark"], normal_texture=tex["bark_normal"]),
-                 replace(leaf, base_texture=tex["leaf"])]
+    materials = [
+        replace(bark, base_texture=tex["bark"], normal_texture=tex["bark_normal"]),
+        replace(leaf, base_texture=tex["leaf"]),
+    ]
     return replace(synthetic_asset(lods, with_clip), materials=materials)

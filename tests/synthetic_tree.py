@@ -1,13 +1,14 @@
 """A small hand-built Tree (no generator) following treegen_cli/tree.py's contract exactly.
 
-    stem 0  trunk, level 0: 5 nodes straight up z = 0, 2, 4, 6, 8; tip radius 0 (pointed)
-    stem 1  split clone of the trunk at trunk node 2 (z = 4), tilted 30°; 3 nodes; capped tip
-    stem 2  level 1 on trunk segment 1 (z = 3), 4 nodes, straight, 60° down angle
-    stem 3  level 1 on trunk segment 2 (z = 5), 4 nodes, bending up at its node 2
-    stem 4  level 2 on stem 2, 3 nodes
-    stem 5  level 2 on stem 3, 2 nodes, radius 1 mm (a "thin" twig)
-    leaves  on stems 4 and 5 (and one on stem 3), random proper frames
+stem 0  trunk, level 0: 5 nodes straight up z = 0, 2, 4, 6, 8; tip radius 0 (pointed)
+stem 1  split clone of the trunk at trunk node 2 (z = 4), tilted 30°; 3 nodes; capped tip
+stem 2  level 1 on trunk segment 1 (z = 3), 4 nodes, straight, 60° down angle
+stem 3  level 1 on trunk segment 2 (z = 5), 4 nodes, bending up at its node 2
+stem 4  level 2 on stem 2, 3 nodes
+stem 5  level 2 on stem 3, 2 nodes, radius 1 mm (a "thin" twig)
+leaves  on stems 4 and 5 (and one on stem 3), random proper frames
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -30,10 +31,16 @@ def _stem(base, frames, seg_len, z0, radii):
     return np.array(pos), frames, np.asarray(radii, dtype=np.float64), z0 + seg_len * np.arange(n)
 
 
-def synthetic_tree(leaf_shape: int = 0, lobes: int = 0, lobe_depth: float = 0.0,
-                   flare: float = 0.0) -> Tree:
-    params = dataclasses.replace(Params(), name="synthetic", levels=3, leaf_shape=leaf_shape,
-                                 lobes=lobes, lobe_depth=lobe_depth, flare=flare)
+def synthetic_tree(leaf_shape: int = 0, lobes: int = 0, lobe_depth: float = 0.0, flare: float = 0.0) -> Tree:
+    params = dataclasses.replace(
+        Params(),
+        name="synthetic",
+        levels=3,
+        leaf_shape=leaf_shape,
+        lobes=lobes,
+        lobe_depth=lobe_depth,
+        flare=flare,
+    )
     eye = np.eye(3)
     rx30 = Rotation.from_euler("x", 30, degrees=True).as_matrix()
     ry60 = Rotation.from_euler("y", 60, degrees=True).as_matrix()
@@ -50,7 +57,7 @@ def synthetic_tree(leaf_shape: int = 0, lobes: int = 0, lobe_depth: float = 0.0,
     stems.append((1, 0, 1, 3.0, 3.0, 0.1, False, a))
     b = _stem([0, 0, 5], [b1, b1, b2, b2], 1.0, 0.0, [0.08, 0.06, 0.03, 0.0])
     stems.append((1, 0, 2, 5.0, 3.0, 0.08, False, b))
-    a_start = 5 + 3                                   # global index of stem 2's node 0
+    a_start = 5 + 3  # global index of stem 2's node 0
     b_start = a_start + 4
     c4 = _stem(a[0][1] + 0.5 * a[1][1][:, 2], [c] * 3, 0.4, 0.0, [0.03, 0.02, 0.0])
     stems.append((2, 2, a_start + 1, 1.5, 0.8, 0.03, False, c4))
@@ -68,11 +75,14 @@ def synthetic_tree(leaf_shape: int = 0, lobes: int = 0, lobe_depth: float = 0.0,
     node_pos = np.concatenate([st[7][0] for st in stems])
     leaf_frame = Rotation.random(len(leaf_stem), random_state=rng).as_matrix()
     leaf_pos = node_pos[leaf_node] + 0.01 * rng.standard_normal((len(leaf_stem), 3))
-    leaf_size = np.column_stack([np.linspace(0.1, 0.2, len(leaf_stem)),
-                                 np.linspace(0.05, 0.08, len(leaf_stem))])
+    leaf_size = np.column_stack(
+        [np.linspace(0.1, 0.2, len(leaf_stem)), np.linspace(0.05, 0.08, len(leaf_stem))]
+    )
 
     return Tree(
-        params=params, seed=0, scale=8.0,
+        params=params,
+        seed=0,
+        scale=8.0,
         stem_level=np.array([st[0] for st in stems], dtype=np.int8),
         stem_parent=np.array([st[1] for st in stems], dtype=np.int32),
         stem_parent_node=np.array([st[2] for st in stems], dtype=np.int32),
@@ -87,8 +97,11 @@ def synthetic_tree(leaf_shape: int = 0, lobes: int = 0, lobe_depth: float = 0.0,
         node_frame=np.concatenate([st[7][1] for st in stems]),
         node_radius=np.concatenate([st[7][2] for st in stems]),
         node_z=np.concatenate([st[7][3] for st in stems]),
-        leaf_stem=leaf_stem, leaf_node=leaf_node, leaf_pos=leaf_pos,
-        leaf_frame=leaf_frame, leaf_size=leaf_size,
+        leaf_stem=leaf_stem,
+        leaf_node=leaf_node,
+        leaf_pos=leaf_pos,
+        leaf_frame=leaf_frame,
+        leaf_size=leaf_size,
     )
 
 
@@ -98,16 +111,28 @@ def trunk_only(lobes: int = 0, lobe_depth: float = 0.0, flare: float = 0.0) -> T
     n = int(t.stem_node_count[0])
     one = slice(0, 1)
     return Tree(
-        params=t.params, seed=0, scale=t.scale,
-        stem_level=t.stem_level[one], stem_parent=t.stem_parent[one],
-        stem_parent_node=t.stem_parent_node[one], stem_offset=t.stem_offset[one],
-        stem_length=t.stem_length[one], stem_radius=t.stem_radius[one],
-        stem_clone=t.stem_clone[one], stem_node_start=t.stem_node_start[one],
+        params=t.params,
+        seed=0,
+        scale=t.scale,
+        stem_level=t.stem_level[one],
+        stem_parent=t.stem_parent[one],
+        stem_parent_node=t.stem_parent_node[one],
+        stem_offset=t.stem_offset[one],
+        stem_length=t.stem_length[one],
+        stem_radius=t.stem_radius[one],
+        stem_clone=t.stem_clone[one],
+        stem_node_start=t.stem_node_start[one],
         stem_node_count=t.stem_node_count[one],
-        node_stem=t.node_stem[:n], node_pos=t.node_pos[:n], node_frame=t.node_frame[:n],
-        node_radius=t.node_radius[:n], node_z=t.node_z[:n],
-        leaf_stem=np.zeros(0, np.int32), leaf_node=np.zeros(0, np.int32),
-        leaf_pos=np.zeros((0, 3)), leaf_frame=np.zeros((0, 3, 3)), leaf_size=np.zeros((0, 2)),
+        node_stem=t.node_stem[:n],
+        node_pos=t.node_pos[:n],
+        node_frame=t.node_frame[:n],
+        node_radius=t.node_radius[:n],
+        node_z=t.node_z[:n],
+        leaf_stem=np.zeros(0, np.int32),
+        leaf_node=np.zeros(0, np.int32),
+        leaf_pos=np.zeros((0, 3)),
+        leaf_frame=np.zeros((0, 3, 3)),
+        leaf_size=np.zeros((0, 2)),
     )
 
 

@@ -1,6 +1,7 @@
 """The package's shape: data flows one way. No import cycles between treegen_cli modules (at
 module level or inside functions), and writers import nothing from the stages but the Asset
 types and small helpers."""
+
 from __future__ import annotations
 
 import ast
@@ -26,7 +27,7 @@ def imports(path: Path) -> set[str]:
         if isinstance(node, ast.ImportFrom):
             if node.level:
                 base = package.split(".")
-                base = base[:len(base) - node.level + 1]
+                base = base[: len(base) - node.level + 1]
                 target = ".".join(base + ([node.module] if node.module else []))
             else:
                 target = node.module or ""
@@ -88,12 +89,17 @@ def test_no_import_cycles():
     assert cycles(graph()) == []
 
 
-WRITERS = ["exchange.gltf", "exchange.usd", "exchange.forest_gltf", "exchange.forest_usd",
-           "exchange.static", "exchange.image"]
+WRITERS = [
+    "exchange.gltf",
+    "exchange.usd",
+    "exchange.forest_gltf",
+    "exchange.forest_usd",
+    "exchange.static",
+    "exchange.image",
+]
 # what a writer may use: the Asset types, errors, the version, axis and quaternion helpers,
 # and its sibling encoders
-ALLOWED = {"treegen_cli", "treegen_cli.asset", "treegen_cli.errors", "treegen_cli.axes",
-           "treegen_cli.quat"}
+ALLOWED = {"treegen_cli", "treegen_cli.asset", "treegen_cli.errors", "treegen_cli.axes", "treegen_cli.quat"}
 
 
 def test_writers_import_only_asset_types_and_helpers():
@@ -106,9 +112,18 @@ def test_writers_import_only_asset_types_and_helpers():
 
 # What a command may import: the API and the option table, the front doors of the jobs that
 # are not one tree (batch, forest via api, preview, species list), and the CLI plumbing.
-COMMAND_ALLOWED = {"treegen_cli", "treegen_cli.api", "treegen_cli.options", "treegen_cli.errors",
-                   "treegen_cli.progress", "treegen_cli.batch", "treegen_cli.executor",
-                   "treegen_cli.preview", "treegen_cli.species_list", "treegen_cli.bundled"}
+COMMAND_ALLOWED = {
+    "treegen_cli",
+    "treegen_cli.api",
+    "treegen_cli.options",
+    "treegen_cli.errors",
+    "treegen_cli.progress",
+    "treegen_cli.batch",
+    "treegen_cli.executor",
+    "treegen_cli.preview",
+    "treegen_cli.species_list",
+    "treegen_cli.bundled",
+}
 
 
 def test_commands_import_the_api_not_the_stages():
@@ -116,8 +131,7 @@ def test_commands_import_the_api_not_the_stages():
     commands = [m for m in g if m.startswith("treegen_cli.commands.")]
     assert {"treegen_cli.commands.make", "treegen_cli.commands.info"} <= set(commands)
     for name in commands:
-        bad = {t for t in g[name] if t not in COMMAND_ALLOWED
-               and not t.startswith("treegen_cli.commands")}
+        bad = {t for t in g[name] if t not in COMMAND_ALLOWED and not t.startswith("treegen_cli.commands")}
         assert not bad, f"{name} imports {sorted(bad)}; go through api/options"
 
 
@@ -127,8 +141,9 @@ def test_every_make_option_is_one_click_option_with_the_table_default():
     from treegen_cli.commands.make import make
     from treegen_cli.options import DEFAULTS
 
-    params = {p.name: p for p in make.params
-              if p.name not in ("species", "output", "as_json", "quiet", "verbose")}
+    params = {
+        p.name: p for p in make.params if p.name not in ("species", "output", "as_json", "quiet", "verbose")
+    }
     assert set(params) == set(DEFAULTS)
     assert {k: p.default for k, p in params.items()} == DEFAULTS
 
@@ -145,4 +160,5 @@ def test_split_modules_stay_under_400_lines_or_say_why():
             doc = ast.get_docstring(ast.parse(text)) or ""
             n = text.count("\n")
             assert n <= 400 or "400 lines" in doc, (
-                f"{path.relative_to(PKG)}: {n} lines; split it or say why in its docstring")
+                f"{path.relative_to(PKG)}: {n} lines; split it or say why in its docstring"
+            )

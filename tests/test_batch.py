@@ -3,6 +3,7 @@
 reruns that skip, a changed option that rebuilds only its jobs, a failing entry reported by its
 JSON path; the embedded LocalCluster the same way; catalogue errors exit 2 writing nothing.
 Every output must be byte-identical to a serial `treegen make` of the same job."""
+
 from __future__ import annotations
 
 import json
@@ -17,8 +18,10 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(
-    [str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])}
+ENV = {
+    **os.environ,
+    "PYTHONPATH": os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]),
+}
 ENV.pop("DASK_SCHEDULER_ADDRESS", None)
 CLIP = {"duration": 1, "fps": 10, "lod_distances": [0, 30]}
 
@@ -31,15 +34,30 @@ CATALOGUE = {
         {"species": "species/rush.txt", "seeds": "5-8"},
     ],
 }
-OUTPUTS = ["quaking_aspen_1.glb", "quaking_aspen_1.usdc", "quaking_aspen_2.glb",
-           "quaking_aspen_2.usdc", "pair_small_3_wind_speed-2.glb", "pair_small_4_wind_speed-2.glb",
-           "pair_small_3_wind_speed-8.glb", "pair_small_4_wind_speed-8.glb", "rush_5.glb",
-           "rush_6.glb", "rush_7.glb", "rush_8.glb"]
+OUTPUTS = [
+    "quaking_aspen_1.glb",
+    "quaking_aspen_1.usdc",
+    "quaking_aspen_2.glb",
+    "quaking_aspen_2.usdc",
+    "pair_small_3_wind_speed-2.glb",
+    "pair_small_4_wind_speed-2.glb",
+    "pair_small_3_wind_speed-8.glb",
+    "pair_small_4_wind_speed-8.glb",
+    "rush_5.glb",
+    "rush_6.glb",
+    "rush_7.glb",
+    "rush_8.glb",
+]
 
 
 def treegen(*args, env=None, cwd=None):
-    return subprocess.run([sys.executable, "-m", "treegen_cli", *map(str, args)],
-                          capture_output=True, text=True, env=env or ENV, cwd=cwd or ROOT)
+    return subprocess.run(
+        [sys.executable, "-m", "treegen_cli", *map(str, args)],
+        capture_output=True,
+        text=True,
+        env=env or ENV,
+        cwd=cwd or ROOT,
+    )
 
 
 def events(stdout: str) -> list[dict]:
@@ -57,8 +75,12 @@ def workspace(tmp_path_factory) -> Path:
     """A catalogue folder with its own species files (paths are relative to the catalogue)."""
     root = tmp_path_factory.mktemp("batch")
     (root / "species").mkdir()
-    for src in (ROOT / "species" / "quaking_aspen.txt", ROOT / "species" / "rush.txt",
-                ROOT / "species" / "weeping_willow.txt", ROOT / "tests" / "fixtures" / "pair_small.txt"):
+    for src in (
+        ROOT / "species" / "quaking_aspen.txt",
+        ROOT / "species" / "rush.txt",
+        ROOT / "species" / "weeping_willow.txt",
+        ROOT / "tests" / "fixtures" / "pair_small.txt",
+    ):
         shutil.copy(src, root / "species" / src.name)
     (root / "catalogue.json").write_text(json.dumps(CATALOGUE, indent=1))
     return root
@@ -77,8 +99,13 @@ def serial(workspace) -> Path:
             api.make(sp / "quaking_aspen.txt", out / f"quaking_aspen_{seed}.{ext}", seed=seed, **CLIP)
     for wind in (2, 8):
         for seed in (3, 4):
-            api.make(sp / "pair_small.txt", out / f"pair_small_{seed}_wind_speed-{wind}.glb",
-                     seed=seed, wind_speed=wind, **CLIP)
+            api.make(
+                sp / "pair_small.txt",
+                out / f"pair_small_{seed}_wind_speed-{wind}.glb",
+                seed=seed,
+                wind_speed=wind,
+                **CLIP,
+            )
     for seed in (5, 6, 7, 8):
         api.make(sp / "rush.txt", out / f"rush_{seed}.glb", seed=seed, **CLIP)
     return out
@@ -90,14 +117,32 @@ def cluster():
     its nanny can be killed together), importing this checkout's treegen_cli."""
     port = free_port()
     address = f"tcp://127.0.0.1:{port}"
-    common = dict(env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                  start_new_session=True)
-    procs = [subprocess.Popen(["dask", "scheduler", "--host", "127.0.0.1", "--port", str(port),
-                               "--no-dashboard"], **common)]
+    common = dict(env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    procs = [
+        subprocess.Popen(
+            ["dask", "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"], **common
+        )
+    ]
     for name in ("w1", "w2"):
-        procs.append(subprocess.Popen(["dask", "worker", address, "--nthreads", "1",
-                                       "--nworkers", "1", "--name", name, "--host", "127.0.0.1",
-                                       "--no-dashboard"], **common))
+        procs.append(
+            subprocess.Popen(
+                [
+                    "dask",
+                    "worker",
+                    address,
+                    "--nthreads",
+                    "1",
+                    "--nworkers",
+                    "1",
+                    "--name",
+                    name,
+                    "--host",
+                    "127.0.0.1",
+                    "--no-dashboard",
+                ],
+                **common,
+            )
+        )
     from distributed import Client
 
     try:
@@ -120,14 +165,30 @@ def assert_outputs(out: Path, serial: Path) -> None:
 
 # ----------------------------------------------------------------------------- on a Dask cluster
 
+
 @pytest.fixture(scope="module")
 def scheduler_run(workspace, cluster):
     """The first run through --scheduler; worker w2 is SIGKILLed after the first job is in."""
     out = workspace / "out"
-    proc = subprocess.Popen([sys.executable, "-m", "treegen_cli", "batch",
-                             workspace / "catalogue.json", "-o", out, "--scheduler",
-                             cluster["address"], "--json"], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=ENV, cwd=workspace)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "treegen_cli",
+            "batch",
+            workspace / "catalogue.json",
+            "-o",
+            out,
+            "--scheduler",
+            cluster["address"],
+            "--json",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=ENV,
+        cwd=workspace,
+    )
     lines = []
     killed_after = None
     for line in proc.stdout:
@@ -138,8 +199,13 @@ def scheduler_run(workspace, cluster):
             w2.wait()
             killed_after = len(lines)
     proc.wait(timeout=120)
-    return {"out": out, "rc": proc.returncode, "stderr": proc.stderr.read(),
-            "events": events("".join(lines)), "killed_after": killed_after}
+    return {
+        "out": out,
+        "rc": proc.returncode,
+        "stderr": proc.stderr.read(),
+        "events": events("".join(lines)),
+        "killed_after": killed_after,
+    }
 
 
 def test_cluster_builds_every_job_byte_identical_despite_a_killed_worker(scheduler_run, serial):
@@ -147,7 +213,7 @@ def test_cluster_builds_every_job_byte_identical_despite_a_killed_worker(schedul
 
     run, out = scheduler_run, scheduler_run["out"]
     assert run["rc"] == 0, run["stderr"]
-    assert run["killed_after"] is not None and run["killed_after"] < 12   # killed mid-run
+    assert run["killed_after"] is not None and run["killed_after"] < 12  # killed mid-run
     done = run["events"][-1]
     assert done["event"] == "done" and done["built"] == 12 and done["failed"] == 0, done
     assert_outputs(out, serial)
@@ -162,7 +228,7 @@ def test_cluster_builds_every_job_byte_identical_despite_a_killed_worker(schedul
     assert r["entry"] == "entries[1]" and r["seed"] == 4 and r["grid"] == {"wind_speed": 8}
     assert r["files"] == [r["path"], r["path"] + ".impostor.json"] and r["status"] == "built"
     assert r["bytes"] == sum((out / f).stat().st_size for f in r["files"])
-    assert len(r["triangles"]) == len(r["joints"]) == len(r["keys"]) == 3    # 2 LODs + impostor
+    assert len(r["triangles"]) == len(r["joints"]) == len(r["keys"]) == 3  # 2 LODs + impostor
     assert r["worker"].startswith("tcp://127.0.0.1:") and r["seconds"] > 0
     assert len({r["worker"] for r in rows.values()}) >= 1
     csv_lines = (out / "manifest.csv").read_text().splitlines()
@@ -171,9 +237,21 @@ def test_cluster_builds_every_job_byte_identical_despite_a_killed_worker(schedul
 
 def test_a_serial_treegen_make_writes_the_same_bytes(scheduler_run, workspace, tmp_path):
     # same file name: a .usdc names its sibling textures after itself
-    proc = treegen("make", workspace / "species" / "quaking_aspen.txt", "-o",
-                   tmp_path / "quaking_aspen_2.usdc", "--seed", "2", "--duration", "1", "--fps", "10",
-                   "--lod-distances", "0,30", "-q")
+    proc = treegen(
+        "make",
+        workspace / "species" / "quaking_aspen.txt",
+        "-o",
+        tmp_path / "quaking_aspen_2.usdc",
+        "--seed",
+        "2",
+        "--duration",
+        "1",
+        "--fps",
+        "10",
+        "--lod-distances",
+        "0,30",
+        "-q",
+    )
     assert proc.returncode == 0, proc.stderr
     for p in tmp_path.iterdir():
         assert p.read_bytes() == (scheduler_run["out"] / p.name).read_bytes(), p.name
@@ -182,8 +260,14 @@ def test_a_serial_treegen_make_writes_the_same_bytes(scheduler_run, workspace, t
 def test_rerun_skips_every_job(scheduler_run, workspace, cluster):
     out = scheduler_run["out"]
     before = {n: (out / n).stat().st_mtime_ns for n in OUTPUTS}
-    proc = treegen("batch", workspace / "catalogue.json", "-o", out, "--json",
-                   env={**ENV, "DASK_SCHEDULER_ADDRESS": cluster["address"]})
+    proc = treegen(
+        "batch",
+        workspace / "catalogue.json",
+        "-o",
+        out,
+        "--json",
+        env={**ENV, "DASK_SCHEDULER_ADDRESS": cluster["address"]},
+    )
     assert proc.returncode == 0, proc.stderr
     done = events(proc.stdout)[-1]
     assert done["skipped"] == 12 and done["built"] == 0, done
@@ -208,11 +292,11 @@ def test_a_changed_option_rebuilds_only_its_jobs(scheduler_run, workspace, clust
 
 
 def test_a_failing_entry_is_reported_by_its_json_path_and_the_rest_complete(
-        scheduler_run, workspace, cluster):
+    scheduler_run, workspace, cluster
+):
     out = scheduler_run["out"]
     failing = json.loads(json.dumps(CATALOGUE))
-    failing["entries"].append({"species": "species/weeping_willow.txt", "seeds": [1],
-                               "max_leaves": 1000})
+    failing["entries"].append({"species": "species/weeping_willow.txt", "seeds": [1], "max_leaves": 1000})
     cat = workspace / "failing.json"
     cat.write_text(json.dumps(failing))
     proc = treegen("batch", cat, "-o", out, "--scheduler", cluster["address"], "--force", "--json")
@@ -228,26 +312,43 @@ def test_a_failing_entry_is_reported_by_its_json_path_and_the_rest_complete(
 
 
 def test_a_cluster_whose_worker_lacks_this_treegen_is_refused_before_anything_is_written(
-        scheduler_run, workspace, cluster, tmp_path):
+    scheduler_run, workspace, cluster, tmp_path
+):
     fake = tmp_path / "fake"
     (fake / "treegen_cli").mkdir(parents=True)
     (fake / "treegen_cli" / "__init__.py").write_text('__version__ = "0.0.0"\n')
-    worker = subprocess.Popen(["dask", "worker", cluster["address"], "--nthreads", "1",
-                               "--name", "stale", "--host", "127.0.0.1", "--no-dashboard"],
-                              env={**ENV, "PYTHONPATH": str(fake)}, stdout=subprocess.DEVNULL,
-                              stderr=subprocess.DEVNULL, start_new_session=True)
+    worker = subprocess.Popen(
+        [
+            "dask",
+            "worker",
+            cluster["address"],
+            "--nthreads",
+            "1",
+            "--name",
+            "stale",
+            "--host",
+            "127.0.0.1",
+            "--no-dashboard",
+        ],
+        env={**ENV, "PYTHONPATH": str(fake)},
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
     try:
         from distributed import Client
 
         with Client(cluster["address"], timeout="30s") as client:
-            client.wait_for_workers(2, timeout=60)         # w1 and the stale one (w2 was killed)
+            client.wait_for_workers(2, timeout=60)  # w1 and the stale one (w2 was killed)
         out = workspace / "refused"
-        proc = treegen("batch", workspace / "catalogue.json", "-o", out, "--force",
-                       "--scheduler", cluster["address"])
+        proc = treegen(
+            "batch", workspace / "catalogue.json", "-o", out, "--force", "--scheduler", cluster["address"]
+        )
         assert proc.returncode == 2, proc.stderr
         # refused either because the stale package cannot run a job or by its version
-        assert ("cannot run treegen" in proc.stderr and "install treegen" in proc.stderr) or \
-            ("has treegen 0.0.0" in proc.stderr and "install the same version" in proc.stderr)
+        assert ("cannot run treegen" in proc.stderr and "install treegen" in proc.stderr) or (
+            "has treegen 0.0.0" in proc.stderr and "install the same version" in proc.stderr
+        )
         assert len(proc.stderr.strip().splitlines()) == 1 and not out.exists()
     finally:
         os.killpg(worker.pid, signal.SIGKILL)
@@ -256,6 +357,7 @@ def test_a_cluster_whose_worker_lacks_this_treegen_is_refused_before_anything_is
 
 # ----------------------------------------------------------------------------- embedded cluster
 
+
 def test_embedded_local_cluster_builds_the_same_bytes_and_resumes(workspace, serial):
     out = workspace / "local"
     proc = treegen("batch", workspace / "catalogue.json", "-o", out, "--workers", "2", "-v")
@@ -263,7 +365,7 @@ def test_embedded_local_cluster_builds_the_same_bytes_and_resumes(workspace, ser
     assert "built 12, skipped 0, failed 0 of 12" in proc.stdout and "2 local worker(s)" in proc.stdout
     assert sum(line.lstrip().startswith("built ") for line in proc.stderr.splitlines()) == 12
     assert_outputs(out, serial)
-    (out / "rush_6.glb").unlink()                         # a lost file is rebuilt, alone
+    (out / "rush_6.glb").unlink()  # a lost file is rebuilt, alone
     proc = treegen("batch", workspace / "catalogue.json", "-o", out, "--workers", "1", "--json")
     assert proc.returncode == 0, proc.stderr
     assert [e["path"] for e in events(proc.stdout) if e["event"] == "built"] == ["rush_6.glb"]
@@ -272,14 +374,29 @@ def test_embedded_local_cluster_builds_the_same_bytes_and_resumes(workspace, ser
 
 def test_ctrl_c_closes_the_cluster_and_leaves_no_partial_files(workspace):
     out = workspace / "interrupted"
-    proc = subprocess.Popen([sys.executable, "-m", "treegen_cli", "batch",
-                             workspace / "catalogue.json", "-o", out, "--workers", "1", "--json"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV,
-                            start_new_session=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "treegen_cli",
+            "batch",
+            workspace / "catalogue.json",
+            "-o",
+            out,
+            "--workers",
+            "1",
+            "--json",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=ENV,
+        start_new_session=True,
+    )
     for line in proc.stdout:
         if '"event": "built"' in line:
             break
-    os.killpg(proc.pid, signal.SIGINT)        # the terminal sends Ctrl-C to the whole group
+    os.killpg(proc.pid, signal.SIGINT)  # the terminal sends Ctrl-C to the whole group
     proc.wait(timeout=60)
     err = proc.stderr.read()
     assert proc.returncode == 130, err
@@ -290,39 +407,69 @@ def test_ctrl_c_closes_the_cluster_and_leaves_no_partial_files(workspace):
     on_disk = sorted(p.name for p in out.iterdir() if p.name not in ("manifest.json", "manifest.csv"))
     assert on_disk == sorted(built) or set(built) <= set(on_disk)
     for p in out.iterdir():
-        assert not p.name.startswith("."), p.name          # no staging folders, no journal
-        if p.name in built:                              # the file and its sibling textures
-            mine = [q for q in out.iterdir() if q.name == p.name or (
-                p.suffix in (".usda", ".usdc", ".obj") and q.suffix == ".png"
-                and q.name.startswith(p.stem + "_")) or q.name == p.name + ".impostor.json"]
+        assert not p.name.startswith("."), p.name  # no staging folders, no journal
+        if p.name in built:  # the file and its sibling textures
+            mine = [
+                q
+                for q in out.iterdir()
+                if q.name == p.name
+                or (
+                    p.suffix in (".usda", ".usdc", ".obj")
+                    and q.suffix == ".png"
+                    and q.name.startswith(p.stem + "_")
+                )
+                or q.name == p.name + ".impostor.json"
+            ]
             assert sum(q.stat().st_size for q in mine) == built[p.name]["bytes"]
 
 
 # ----------------------------------------------------------------------------- catalogue checks
 
-@pytest.mark.parametrize("change, needles", [
-    ({"entries": [{"species": "species/nope.txt"}]}, ["entries[0].species", "nope.txt"]),
-    ({"entries": [{"species": "species/rush.txt", "grid": {"wind_speed": [2, 200]}}]},
-     ["entries[0].grid.wind_speed[1]", "200", "[0, 100]"]),
-    ({"entries": [{"species": "species/rush.txt", "seeds": "9-3"}]}, ["entries[0].seeds", "9-3"]),
-    ({"entries": [{"species": "species/rush.txt", "wind_sped": 3}]},
-     ["entries[0].wind_sped", "unknown key", "wind_speed"]),
-    ({"defaults": {"max_joints": 0}, "entries": [{"species": "species/rush.txt"}]},
-     ["defaults.max_joints", "[1, 65535]"]),
-    ({"defaults": {"lod_distances": "30,10"}, "entries": [{"species": "species/rush.txt"}]},
-     ["defaults.lod_distances", "ascending"]),
-    ({"entries": [{"species": "species/rush.txt", "formats": ["fbx"]}]},
-     ["entries[0].formats[0]", "fbx", "glb"]),
-    ({"entries": [{"species": "species/rush.txt", "sides": [2]}]}, ["entries[0].sides", "[3, 64]"]),
-    ({"entries": [{"species": "species/rush.txt", "name": "{species}.{ext}", "seeds": [1, 2]}]},
-     ["entries[0]", "rush.glb", "also written by entries[0] (seed 1)"]),
-    ({"entries": [{"species": "species/rush.txt"}, {"species": "species/rush.txt"}]},
-     ["entries[1]", "rush_0.glb", "entries[0]"]),
-    ({"entries": [{"species": "species/rush.txt", "name": "../{species}_{seed}.{ext}"}]},
-     ["entries[0].name", "inside the output folder"]),
-    ({"entries": [{"species": "species/rush.txt", "wind_speed": 3, "grid": {"wind_speed": [1]}}]},
-     ["entries[0].grid.wind_speed", "also set as entries[0].wind_speed"]),
-])
+
+@pytest.mark.parametrize(
+    "change, needles",
+    [
+        ({"entries": [{"species": "species/nope.txt"}]}, ["entries[0].species", "nope.txt"]),
+        (
+            {"entries": [{"species": "species/rush.txt", "grid": {"wind_speed": [2, 200]}}]},
+            ["entries[0].grid.wind_speed[1]", "200", "[0, 100]"],
+        ),
+        ({"entries": [{"species": "species/rush.txt", "seeds": "9-3"}]}, ["entries[0].seeds", "9-3"]),
+        (
+            {"entries": [{"species": "species/rush.txt", "wind_sped": 3}]},
+            ["entries[0].wind_sped", "unknown key", "wind_speed"],
+        ),
+        (
+            {"defaults": {"max_joints": 0}, "entries": [{"species": "species/rush.txt"}]},
+            ["defaults.max_joints", "[1, 65535]"],
+        ),
+        (
+            {"defaults": {"lod_distances": "30,10"}, "entries": [{"species": "species/rush.txt"}]},
+            ["defaults.lod_distances", "ascending"],
+        ),
+        (
+            {"entries": [{"species": "species/rush.txt", "formats": ["fbx"]}]},
+            ["entries[0].formats[0]", "fbx", "glb"],
+        ),
+        ({"entries": [{"species": "species/rush.txt", "sides": [2]}]}, ["entries[0].sides", "[3, 64]"]),
+        (
+            {"entries": [{"species": "species/rush.txt", "name": "{species}.{ext}", "seeds": [1, 2]}]},
+            ["entries[0]", "rush.glb", "also written by entries[0] (seed 1)"],
+        ),
+        (
+            {"entries": [{"species": "species/rush.txt"}, {"species": "species/rush.txt"}]},
+            ["entries[1]", "rush_0.glb", "entries[0]"],
+        ),
+        (
+            {"entries": [{"species": "species/rush.txt", "name": "../{species}_{seed}.{ext}"}]},
+            ["entries[0].name", "inside the output folder"],
+        ),
+        (
+            {"entries": [{"species": "species/rush.txt", "wind_speed": 3, "grid": {"wind_speed": [1]}}]},
+            ["entries[0].grid.wind_speed", "also set as entries[0].wind_speed"],
+        ),
+    ],
+)
 def test_catalogue_errors_name_the_json_path_exit_2_and_write_nothing(workspace, change, needles):
     cat = workspace / "bad.json"
     cat.write_text(json.dumps(change))
@@ -340,18 +487,33 @@ def test_catalogue_errors_name_the_json_path_exit_2_and_write_nothing(workspace,
 def test_seeds_grid_and_names_expand_as_documented(workspace):
     from treegen_cli.batch import parse_catalogue
 
-    data = {"name": "{species}/{seed}.{ext}", "defaults": {"seeds": "1-2,7"},
-            "entries": [{"species": "species/rush.txt", "grid": {"fps": [10, 12.5]}},
-                        {"species": "species/pair_small.txt", "seeds": [4],
-                         "name": "pair_w{wind_speed}_{seed}.{ext}", "formats": ["usda", "glb"],
-                         "grid": {"wind_speed": [3], "lod_distances": [[0, 15, 60]]}}]}
+    data = {
+        "name": "{species}/{seed}.{ext}",
+        "defaults": {"seeds": "1-2,7"},
+        "entries": [
+            {"species": "species/rush.txt", "grid": {"fps": [10, 12.5]}},
+            {
+                "species": "species/pair_small.txt",
+                "seeds": [4],
+                "name": "pair_w{wind_speed}_{seed}.{ext}",
+                "formats": ["usda", "glb"],
+                "grid": {"wind_speed": [3], "lod_distances": [[0, 15, 60]]},
+            },
+        ],
+    }
     cat = parse_catalogue(data, workspace / "x.json")
     assert [j.output for j in cat.jobs] == [
-        "rush/1_fps-10.glb", "rush/2_fps-10.glb", "rush/7_fps-10.glb",
-        "rush/1_fps-12.5.glb", "rush/2_fps-12.5.glb", "rush/7_fps-12.5.glb",
-        "pair_w3_4_lod_distances-0,15,60.usda", "pair_w3_4_lod_distances-0,15,60.glb"]
+        "rush/1_fps-10.glb",
+        "rush/2_fps-10.glb",
+        "rush/7_fps-10.glb",
+        "rush/1_fps-12.5.glb",
+        "rush/2_fps-12.5.glb",
+        "rush/7_fps-12.5.glb",
+        "pair_w3_4_lod_distances-0,15,60.usda",
+        "pair_w3_4_lod_distances-0,15,60.glb",
+    ]
     assert cat.jobs[-1].task == cat.jobs[-2].task and cat.jobs[-1].key != cat.jobs[-2].key
-    assert len(cat.params) == 2                              # each species parsed once
+    assert len(cat.params) == 2  # each species parsed once
 
 
 def test_dry_run_prints_the_table_and_an_estimate_and_writes_nothing(workspace):
@@ -361,7 +523,7 @@ def test_dry_run_prints_the_table_and_an_estimate_and_writes_nothing(workspace):
     lines = proc.stdout.splitlines()
     assert len(lines) == 14 and "est MB" in lines[0] and "rush_8.glb" in lines[12]
     assert "12 jobs: 12 to build (10 trees)" in lines[-1] and "on 2 worker(s)" in lines[-1]
-    assert not out.exists()       # (--json: test_dry_run_plans_what_the_run_builds_…)
+    assert not out.exists()  # (--json: test_dry_run_plans_what_the_run_builds_…)
 
 
 def test_dry_run_plans_what_the_run_builds_with_budgets_and_profiles(workspace):
@@ -369,11 +531,24 @@ def test_dry_run_plans_what_the_run_builds_with_budgets_and_profiles(workspace):
     LOD count, triangles, joints and switch distances it prints are the manifest's after the
     real run, and a budget the species cannot meet is the same failure in both."""
     cat = workspace / "budgets.json"
-    cat.write_text(json.dumps({"defaults": {"duration": 1, "fps": 10}, "entries": [
-        {"species": "species/rush.txt", "seeds": [1], "profile": "mobile"},
-        {"species": "species/pair_small.txt", "seeds": [2], "triangles": 1500, "joints": 6,
-         "formats": ["glb", "usda"]},
-        {"species": "species/rush.txt", "seeds": [3], "triangles": 10, "name": "tiny.{ext}"}]}))
+    cat.write_text(
+        json.dumps(
+            {
+                "defaults": {"duration": 1, "fps": 10},
+                "entries": [
+                    {"species": "species/rush.txt", "seeds": [1], "profile": "mobile"},
+                    {
+                        "species": "species/pair_small.txt",
+                        "seeds": [2],
+                        "triangles": 1500,
+                        "joints": 6,
+                        "formats": ["glb", "usda"],
+                    },
+                    {"species": "species/rush.txt", "seeds": [3], "triangles": 10, "name": "tiny.{ext}"},
+                ],
+            }
+        )
+    )
     out = workspace / "budgets"
     dry = treegen("batch", cat, "-o", out, "--dry-run", "--json")
     assert dry.returncode == 1 and not out.exists()
@@ -384,8 +559,8 @@ def test_dry_run_plans_what_the_run_builds_with_budgets_and_profiles(workspace):
     planned = {j["path"]: j for j in doc["jobs"]}
     assert "use --triangles" in planned["tiny.glb"]["error"]
     rush, pair = planned["rush_1.glb"], planned["pair_small_2.glb"]
-    assert rush["triangles"][0] <= 20_000 and max(rush["joints"]) <= 64      # the mobile row
-    assert len(rush["triangles"]) == 4                      # 0.3,0.1 switches + the impostor
+    assert rush["triangles"][0] <= 20_000 and max(rush["joints"]) <= 64  # the mobile row
+    assert len(rush["triangles"]) == 4  # 0.3,0.1 switches + the impostor
     assert 1350 <= pair["triangles"][0] <= 1500 and pair["joints"][0] <= 6
     run = treegen("batch", cat, "-o", out, "--workers", "1")
     assert run.returncode == 1, run.stderr
@@ -407,7 +582,10 @@ def test_schema_and_defaults_agree_with_make():
     schema = json.loads(treegen("batch", "--schema").stdout)
     entry = schema["$defs"]["entry"]["properties"]
     assert set(api.DEFAULTS) - {"seed"} <= set(entry)
-    assert set(schema["properties"]["defaults"]["properties"]) == set(api.DEFAULTS) - {"seed"} | {"seeds", "formats"}
+    assert set(schema["properties"]["defaults"]["properties"]) == set(api.DEFAULTS) - {"seed"} | {
+        "seeds",
+        "formats",
+    }
     click_defaults = {p.name: p.default for p in make.params if p.name in api.DEFAULTS}
     assert click_defaults == api.DEFAULTS
     for k, v in api.DEFAULTS.items():
@@ -426,10 +604,15 @@ def test_api_make_validates_like_the_cli(tmp_path):
     with pytest.raises(TreegenError, match=r"--lod-distances 'a,b': expected comma-separated metres"):
         api.make(ROOT / "species" / "rush.txt", tmp_path / "r.glb", lod_distances="a,b")
     assert not list(tmp_path.iterdir())
-    s = api.make(ROOT / "tests" / "fixtures" / "pair_small.txt", tmp_path / "p.glb", seed=2,
-                 lod_distances=[0, 30], **{k: v for k, v in CLIP.items() if k != "lod_distances"})
+    s = api.make(
+        ROOT / "tests" / "fixtures" / "pair_small.txt",
+        tmp_path / "p.glb",
+        seed=2,
+        lod_distances=[0, 30],
+        **{k: v for k, v in CLIP.items() if k != "lod_distances"},
+    )
     assert s["file"] == str(tmp_path / "p.glb") and s["seed"] == 2
-    assert len(s["lods"]) == 3 and s["lods"][-1]["triangles"] == 8      # + the impostor
+    assert len(s["lods"]) == 3 and s["lods"][-1]["triangles"] == 8  # + the impostor
 
 
 def test_staging_sweep_leaves_other_hosts_folders_alone(tmp_path):
@@ -437,8 +620,9 @@ def test_staging_sweep_leaves_other_hosts_folders_alone(tmp_path):
     dead writer's staging folder is swept only by its own host."""
     from treegen_cli.exchange import staging
 
-    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
-                          capture_output=True, text=True).stdout.strip()
+    dead = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True
+    ).stdout.strip()
     mine = tmp_path / f".a.glb.{dead}@{staging._HOST}.abcd1234.tmp"
     other = tmp_path / f".b.glb.{dead}@some-other-host.abcd1234.tmp"
     for d in (mine, other):

@@ -1,5 +1,6 @@
 """Triangle budgets (`--triangles`, budget.py), the `--joints` alias and `--profile` presets
 (profiles.py): counts are those of real built meshes, refusals one line with exit code 2."""
+
 from __future__ import annotations
 
 import json
@@ -23,8 +24,12 @@ def budget_build(name: str, triangles: int):
     from treegen_cli.params import load_params
     from treegen_cli.pipeline import MakeOptions, build_asset
 
-    options = MakeOptions(wind=None, lod=None, materials=MaterialOptions(textures=False),
-                          budget=BudgetOptions(triangles=triangles))
+    options = MakeOptions(
+        wind=None,
+        lod=None,
+        materials=MaterialOptions(textures=False),
+        budget=BudgetOptions(triangles=triangles),
+    )
     try:
         asset, tree = build_asset(load_params(species_path(name)), 0, options)
     except TreegenError as e:
@@ -41,8 +46,11 @@ def test_triangle_estimate_is_the_mesh(name):
 
     tree = grown(name)
     rig = build_rig(tree)
-    for mesh in (MESH_DEFAULTS, replace(MESH_DEFAULTS, sides=(5, 3), rings_per_segment=(1,)),
-                 replace(MESH_DEFAULTS, leaf_geometry="shape")):
+    for mesh in (
+        MESH_DEFAULTS,
+        replace(MESH_DEFAULTS, sides=(5, 3), rings_per_segment=(1,)),
+        replace(MESH_DEFAULTS, leaf_geometry="shape"),
+    ):
         built = [len(p.indices) // 3 for p in build_mesh(tree, rig, mesh)]
         bark, leaves = estimate_triangles(tree, mesh)
         assert built == ([bark, leaves] if leaves else [bark])
@@ -64,8 +72,7 @@ def test_every_species_meets_the_budget_or_names_its_minimum(name):
     triangles, tree = result
     assert 0.9 * BUDGET <= triangles <= BUDGET, (name, triangles)
     # the plan's count is the built count, so the estimate can be trusted before building
-    plan = plan_budget(load_params(species_path(name)), 0, MESH_DEFAULTS,
-                       BudgetOptions(triangles=BUDGET))
+    plan = plan_budget(load_params(species_path(name)), 0, MESH_DEFAULTS, BudgetOptions(triangles=BUDGET))
     assert plan.triangles == triangles
     assert tree.params == plan.params
 
@@ -84,8 +91,7 @@ def test_a_tree_whose_leaves_round_away_still_counts_them(triangles):
 
     params = load_params(ROOT / "tests" / "fixtures" / "pair_small.txt")
     budget = BudgetOptions(triangles=triangles)
-    options = MakeOptions(wind=None, lod=None, materials=MaterialOptions(textures=False),
-                          budget=budget)
+    options = MakeOptions(wind=None, lod=None, materials=MaterialOptions(textures=False), budget=budget)
     asset, tree = build_asset(params, 2, options)
     built = sum(len(p.indices) // 3 for p in asset.lods[0].primitives)
     assert tree.n_leaves > 0 and 0.9 * triangles <= built <= triangles, built
@@ -99,10 +105,9 @@ def test_budget_keeps_leaf_area_and_refines_small_trees():
     triangles, tree = budget_build("weeping_willow", BUDGET)
     assert tree.n_leaves < grown("weeping_willow").n_leaves / 20
     assert float(tree.leaf_area.sum()) == pytest.approx(full, rel=0.02)
-    n, palm = budget_build("fan_palm", BUDGET)     # 8,360 triangles as the species is
+    n, palm = budget_build("fan_palm", BUDGET)  # 8,360 triangles as the species is
     assert palm.n_leaves > grown("fan_palm").n_leaves
-    assert float(palm.leaf_area.sum()) == pytest.approx(float(grown("fan_palm").leaf_area.sum()),
-                                                        rel=0.02)
+    assert float(palm.leaf_area.sum()) == pytest.approx(float(grown("fan_palm").leaf_area.sum()), rel=0.02)
 
 
 def test_refusal_names_the_minimum_and_the_minimum_builds(tmp_path):
@@ -135,29 +140,42 @@ def test_mobile_profile_on_the_paper_species(tmp_path, name):
 
     s = api.make(species_path(name), tmp_path / "t.glb", profile="mobile")
     mobile = PROFILES["mobile"]
-    assert 18_000 <= s["triangles"] <= 20_000 and s["joints"] <= 64   # all far larger as is
+    assert 18_000 <= s["triangles"] <= 20_000 and s["joints"] <= 64  # all far larger as is
     screen = [float(x) for x in str(mobile["lod_screen"]).split(",")]
-    assert len(s["lods"]) == len(screen) + 2            # LOD0, one per switch, the impostor
-    assert s["lods"][-1]["triangles"] == 8              # the impostor's crossed cards
+    assert len(s["lods"]) == len(screen) + 2  # LOD0, one per switch, the impostor
+    assert s["lods"][-1]["triangles"] == 8  # the impostor's crossed cards
     distances = [r["distance_m"] for r in s["lods"]]
     assert distances[0] == 0.0 and distances == sorted(distances)
     assert s["keys"] == mobile["duration"] * mobile["fps"] + 1
     tris = [r["triangles"] for r in s["lods"]]
-    assert tris == sorted(tris, reverse=True), tris      # LODs never add triangles
+    assert tris == sorted(tris, reverse=True), tris  # LODs never add triangles
     assert all(r["joints"] <= 64 for r in s["lods"])
 
 
 def test_explicit_options_win_over_the_profile(tmp_path):
     """--fps 30 is the click default, yet typed it beats the profile's 15 (parameter source)."""
-    s = _make_json(species_path("quaking_aspen"), "-o", tmp_path / "a.glb", "--profile",
-                   "mobile", "--fps", "30", "--joints", "12", "--lod-distances", "0,40",
-                   "--texture-size", "64")
-    assert s["keys"] == 6 * 30 + 1               # mobile's 6 s clip at the typed 30 fps
+    s = _make_json(
+        species_path("quaking_aspen"),
+        "-o",
+        tmp_path / "a.glb",
+        "--profile",
+        "mobile",
+        "--fps",
+        "30",
+        "--joints",
+        "12",
+        "--lod-distances",
+        "0,40",
+        "--texture-size",
+        "64",
+    )
+    assert s["keys"] == 6 * 30 + 1  # mobile's 6 s clip at the typed 30 fps
     assert s["joints"] == 12
-    assert [r["distance_m"] for r in s["lods"]][:2] == [0.0, 40.0]   # then the impostor
+    assert [r["distance_m"] for r in s["lods"]][:2] == [0.0, 40.0]  # then the impostor
     assert len(s["lods"]) == 3
     assert s["triangles"] <= 20_000
     from treegen_cli import api
+
     v = api.resolve({"profile": "web", "triangles": 30_000, "max_joints": 256}).values
     assert (v["triangles"], v["max_joints"], v["fps"]) == (30_000, 256, 24.0)
 
@@ -180,15 +198,15 @@ def test_catalogue_accepts_a_profile(tmp_path):
     from treegen_cli.batch import parse_catalogue
     from treegen_cli.errors import TreegenError
 
-    data = {"defaults": {"profile": "mobile"},
-            "entries": [{"species": str(species_path("rush")), "fps": 10}]}
+    data = {"defaults": {"profile": "mobile"}, "entries": [{"species": str(species_path("rush")), "fps": 10}]}
     cat = parse_catalogue(data, tmp_path / "c.json")
     (r,) = cat.resolved.values()
     assert (r.values["triangles"], r.values["max_joints"], r.values["fps"]) == (20_000, 64, 10.0)
     assert r.options.budget.triangles == 20_000
     with pytest.raises(TreegenError, match=r"entries\[0\]\.profile"):
-        parse_catalogue({"entries": [{"species": str(species_path("rush")), "profile": "tv"}]},
-                        tmp_path / "c.json")
+        parse_catalogue(
+            {"entries": [{"species": str(species_path("rush")), "profile": "tv"}]}, tmp_path / "c.json"
+        )
 
 
 def test_readme_profile_table_is_the_module():

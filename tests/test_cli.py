@@ -1,5 +1,6 @@
 """The command line as a user meets it: real processes, exit codes, one-line errors, no
 partial output, byte-identical reruns."""
+
 from __future__ import annotations
 
 import json
@@ -13,8 +14,12 @@ ASPEN = ROOT / "species" / "quaking_aspen.txt"
 
 
 def treegen(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "treegen_cli", *map(str, args)],
-                          capture_output=True, text=True, cwd=cwd or ROOT)
+    return subprocess.run(
+        [sys.executable, "-m", "treegen_cli", *map(str, args)],
+        capture_output=True,
+        text=True,
+        cwd=cwd or ROOT,
+    )
 
 
 def assert_user_error(proc, *needles):
@@ -60,8 +65,12 @@ def test_make_writes_a_valid_glb_and_the_same_bytes_twice(tmp_path):
     assert a.read_bytes() == b.read_bytes()
     issues = validate_gltf(a)["issues"]
     assert issues["numErrors"] == 0 and issues["numWarnings"] == 0
-    assert sorted(p.name for p in tmp_path.iterdir()) == [   # no temp files left
-        "a.glb", "a.glb.impostor.json", "b.glb", "b.glb.impostor.json"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [  # no temp files left
+        "a.glb",
+        "a.glb.impostor.json",
+        "b.glb",
+        "b.glb.impostor.json",
+    ]
 
 
 def test_make_usdc_twice_is_byte_identical(tmp_path):
@@ -78,12 +87,10 @@ def test_make_usdc_twice_is_byte_identical(tmp_path):
 
 def test_make_refuses_bad_requests_and_writes_nothing(tmp_path):
     assert_user_error(treegen("make", ASPEN, "-o", tmp_path / "x.fbx"), "x.fbx", ".glb")
-    assert_user_error(treegen("make", ASPEN, "-o", tmp_path / "x.glb", "--max-joints", "0"),
-                      "--max-joints")
+    assert_user_error(treegen("make", ASPEN, "-o", tmp_path / "x.glb", "--max-joints", "0"), "--max-joints")
     assert_user_error(treegen("make", ASPEN, "-o", tmp_path / "nowhere" / "x.glb"), "nowhere")
     assert_user_error(treegen("make", ASPEN, "-o", tmp_path / "x.glb", "--sides", "2,1"), "--sides")
-    assert_user_error(treegen("make", ASPEN, "-o", tmp_path / "x.glb", "--wind-speed", "-3"),
-                      "speed")
+    assert_user_error(treegen("make", ASPEN, "-o", tmp_path / "x.glb", "--wind-speed", "-3"), "speed")
     assert list(tmp_path.iterdir()) == []
 
 

@@ -6,6 +6,7 @@ file within the joint budget, leaves and bark with normals, UVs in range, the wi
 so Godot loops it and moving bones, no importer errors. A client that is not installed skips
 its tests with the install command (CI installs all three: `make install`).
 """
+
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
@@ -16,7 +17,7 @@ import clients
 from conftest import SPECIES, run_treegen, species_path
 
 MAX_BONES = 256
-UV_LIMIT = 64.0           # engines store UVs as half floats
+UV_LIMIT = 64.0  # engines store UVs as half floats
 
 
 @pytest.fixture(scope="module")
@@ -58,10 +59,10 @@ def _godot_checks(r, n_lods, sways=True, impostor=1):
     assert all(0 < s["bone_count"] <= MAX_BONES for s in skeletons)
     surfaces = [s for m in r["mesh_instances"] for s in m["surfaces"]]
     bark = [s for s in surfaces if s["material"]["name"] == "bark"]
-    assert len(bark) == n_lods - impostor                    # (+ leaves, where the species has any)
+    assert len(bark) == n_lods - impostor  # (+ leaves, where the species has any)
     cards = [s for s in surfaces if s["material"]["name"] == "impostor"]
     assert len(cards) == impostor
-    for s in cards:                     # cut-out cards on atlas cells, one face each way
+    for s in cards:  # cut-out cards on atlas cells, one face each way
         assert all(0 <= v <= 1 for v in s["uv_min"] + s["uv_max"])
         m = s["material"]
         assert m["albedo_texture"] and m["alpha_scissor"] and 0 < m["alpha_scissor_threshold"] < 1, m
@@ -69,7 +70,7 @@ def _godot_checks(r, n_lods, sways=True, impostor=1):
         assert s["has_normal"] and s["zero_normals"] == 0
         assert all(abs(v) <= UV_LIMIT for v in s["uv_min"] + s["uv_max"]), s
     leaves = [s for s in surfaces if s["material"]["name"] == "leaf"]
-    for s in leaves:                    # cut-out leaf texture, UVs inside the atlas
+    for s in leaves:  # cut-out leaf texture, UVs inside the atlas
         assert all(0 <= v <= 1 for v in s["uv_min"] + s["uv_max"])
         m = s["material"]
         assert m["albedo_texture"] and m["alpha_scissor"] and 0 < m["alpha_scissor_threshold"] < 1, m
@@ -87,7 +88,7 @@ def _godot_checks(r, n_lods, sways=True, impostor=1):
 
 @pytest.mark.parametrize("species", SPECIES)
 def test_godot_imports_the_default_file(godot, files, species):
-    _godot_checks(godot[str(files[species][0])], 5)          # 4 LODs + the impostor
+    _godot_checks(godot[str(files[species][0])], 5)  # 4 LODs + the impostor
 
 
 @pytest.mark.parametrize("species", SPECIES)
@@ -110,21 +111,21 @@ def _web_checks(r, n_skinned_lods=1, far: bool | None = False, loop_tol=None):
     assert meshes and all(m["has_normal"] for m in meshes)
     for m in r["materials"]:
         assert m["base_color_texture"], m
-        if m["name"] == "leaf":         # alpha-tested cut-out, both faces drawn
-            if "alpha_test" in m:       # three.js
+        if m["name"] == "leaf":  # alpha-tested cut-out, both faces drawn
+            if "alpha_test" in m:  # three.js
                 assert m["alpha_test"] > 0 and m["double_sided"], m
-            else:                       # Babylon: ALPHATEST mode
+            else:  # Babylon: ALPHATEST mode
                 assert m["transparency_mode"] == 1 and not m["back_face_culling"], m
         if m["name"] == "bark":
             assert m["normal_texture"], m
-        if m["name"] == "impostor":     # cut-out cards, single-sided twins
+        if m["name"] == "impostor":  # cut-out cards, single-sided twins
             if "alpha_test" in m:
                 assert m["alpha_test"] > 0 and not m["double_sided"], m
             else:
                 assert m["transparency_mode"] == 1 and m["back_face_culling"], m
     anims = {a["name"]: a for a in r["animations"]}
     wind = anims["wind_loop"]
-    if far is not None:     # None: a lower LOD of a short clip, which may hold its end keys only
+    if far is not None:  # None: a lower LOD of a short clip, which may hold its end keys only
         assert wind["max_local_change"] > 0 if far else wind["bones_moved"] > 0
     if loop_tol is None:
         assert wind["loop_closes"]
@@ -149,7 +150,7 @@ def test_three_and_babylon_load_and_play(web, files, species):
     _web_checks(three)
     _web_checks(babylon)
     # Babylon honours MSFT_lod: every level loads; three.js shows LOD0 only
-    assert babylon["msft_lod_levels_loaded"] == [0, 1, 2, 3, 4]   # the impostor is level 4
+    assert babylon["msft_lod_levels_loaded"] == [0, 1, 2, 3, 4]  # the impostor is level 4
 
 
 def test_lod_files_load_in_three_and_babylon(web, files):
@@ -186,8 +187,17 @@ def compressed(tmp_path_factory):
         made = dict(pool.map(make, keys))
     parts = out / "parts" / "quaking_aspen.glb"
     parts.parent.mkdir()
-    proc = run_treegen("make", species_path("quaking_aspen"), "-o", parts, "--lod-files",
-                       "--compress", "meshopt", *SHORT, "-q")
+    proc = run_treegen(
+        "make",
+        species_path("quaking_aspen"),
+        "-o",
+        parts,
+        "--lod-files",
+        "--compress",
+        "meshopt",
+        *SHORT,
+        "-q",
+    )
     assert proc.returncode == 0, proc.stderr
     made["quaking_aspen", "meshopt-parts"] = sorted(parts.parent.glob("quaking_aspen_LOD*.glb"))
     return made
@@ -217,7 +227,7 @@ def test_compressed_files_load_and_play(compressed, compressed_web, species, com
     _web_checks(babylon, loop_tol=1e-3)
     assert "KHR_mesh_quantization" in three["extensions_required"]
     assert ("EXT_meshopt_compression" in three["extensions_required"]) == (compress == "meshopt")
-    assert babylon["msft_lod_levels_loaded"] == [0, 1, 2, 3, 4]     # 4 LODs + the impostor
+    assert babylon["msft_lod_levels_loaded"] == [0, 1, 2, 3, 4]  # 4 LODs + the impostor
     assert all(m["vertices"] > 0 for m in three["meshes"] + babylon["meshes"])
     report = validate_gltf(path)
     assert report["issues"]["numErrors"] == 0, summary(report)

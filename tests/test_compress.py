@@ -5,6 +5,7 @@ decoded here (grid positions through the skin's inverse bind matrices, int8 norm
 UVs through KHR_texture_transform, int16 rotations); meshopt is decoded by three.js's own
 MeshoptDecoder (tests/clients.py), the only reader of it we trust.
 """
+
 from __future__ import annotations
 
 import json
@@ -96,7 +97,7 @@ def test_quantized_geometry_decodes_within_tolerance(files):
             a0, a1 = p0["attributes"], p1["attributes"]
             pos = read_accessor(*none, a0["POSITION"]).astype(np.float64)
             q = _accessor(*quant, a1["POSITION"]).astype(np.float64)
-            assert quant[0]["accessors"][a1["POSITION"]]["componentType"] == 5123   # uint16
+            assert quant[0]["accessors"][a1["POSITION"]]["componentType"] == 5123  # uint16
             err = np.linalg.norm(q @ d[:3, :3].T + d[:3, 3] - pos, axis=1).max()
             assert err <= np.sqrt(3) * step / 2 * 1.001
             if lod == 0:
@@ -147,7 +148,7 @@ def test_compressed_previews_match_the_float_one(files):
 
     opts = PreviewOptions(width=160, height=160)
     base = render_still(load_scene(files["none"], opts), opts).astype(np.float64)
-    assert (np.abs(base - base[0, 0]).max(axis=2) > 40).mean() > 0.05        # a tree is drawn
+    assert (np.abs(base - base[0, 0]).max(axis=2) > 40).mean() > 0.05  # a tree is drawn
 
     def blocks(img, k=8):
         return img.reshape(160 // k, k, 160 // k, k, 3).mean(axis=(1, 3))
@@ -209,6 +210,7 @@ def test_animation_error_within_the_lod_bound(files):
     for LOD0's clip on a 19 m tree, and within a quarter pixel at each lower LOD's distance
     (default 60°, 1920 px view), on top of the LOD's own error_px."""
     from treegen_cli.lod import pixel_size
+
     base = _three(files["none"], poses=8)
     bound = [max(1 * MM, pixel_size(lod.distance) / 4) for lod in files["asset"].lods]
     for c in ("quantize", "meshopt"):
@@ -217,7 +219,10 @@ def test_animation_error_within_the_lod_bound(files):
         for k, (a0, a1) in enumerate(zip(base["animations"], r["animations"])):
             # int16 quaternions are unit only to ~1e-5 and three.js normalizes them on some
             # paths only: first and last frame agree to a fraction of a millimetre, not 1e-4
-            assert a1["loop_max_diff"] <= 0.5 * MM and abs(a1["bones_moved"] - a0["bones_moved"]) <= 0.05 * a0["bones_moved"]
+            assert (
+                a1["loop_max_diff"] <= 0.5 * MM
+                and abs(a1["bones_moved"] - a0["bones_moved"]) <= 0.05 * a0["bones_moved"]
+            )
             err = np.abs(np.asarray(a1["poses"]) - np.asarray(a0["poses"])).max()
             assert err <= bound[k], (c, a0["name"], err)
 
@@ -235,15 +240,17 @@ def _geometry_bytes(path) -> int:
     every setting stores alike)."""
     gltf, _ = read_gltf(path)
     views = gltf["bufferViews"]
-    return path.stat().st_size - sum(views[i["bufferView"]]["byteLength"]
-                                     for i in gltf.get("images", []) if "bufferView" in i)
+    return path.stat().st_size - sum(
+        views[i["bufferView"]]["byteLength"] for i in gltf.get("images", []) if "bufferView" in i
+    )
 
 
 def test_lod_files_compress_each_part(files, tmp_path):
-    parts = export_parts(split_lods(files["asset"]), tmp_path / "t.glb",
-                         _job("meshopt").options.gltf)
+    parts = export_parts(split_lods(files["asset"]), tmp_path / "t.glb", _job("meshopt").options.gltf)
     n = len(files["asset"].lods)
-    assert [p.name for p in parts] == [f"t_LOD{k}.glb" for k in range(n)] + [f"t_LOD{n - 1}.glb.impostor.json"]
+    assert [p.name for p in parts] == [f"t_LOD{k}.glb" for k in range(n)] + [
+        f"t_LOD{n - 1}.glb.impostor.json"
+    ]
     for p in parts[:n]:
         gltf, _ = read_gltf(p)
         assert "EXT_meshopt_compression" in gltf["extensionsRequired"]
@@ -251,6 +258,7 @@ def test_lod_files_compress_each_part(files, tmp_path):
 
 
 # ---- refusals: one line, exit 2, nothing written ----
+
 
 @pytest.mark.parametrize("suffix", [".usdc", ".usdz", ".obj"])
 def test_compress_refused_outside_gltf(tmp_path, suffix):
@@ -266,9 +274,25 @@ def test_meshopt_without_node_is_one_line(tmp_path):
     env = {**os.environ, "TREEGEN_NODE": str(tmp_path / "no-node")}
     import subprocess
     import sys
-    proc = subprocess.run([sys.executable, "-m", "treegen_cli", "make", str(species_path("rush")),
-                           "-o", str(out), "--compress", "meshopt", "--no-lod", "--no-wind"],
-                          capture_output=True, text=True, env=env)
+
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "treegen_cli",
+            "make",
+            str(species_path("rush")),
+            "-o",
+            str(out),
+            "--compress",
+            "meshopt",
+            "--no-lod",
+            "--no-wind",
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+    )
     assert proc.returncode == 2, proc.stderr
     assert proc.stderr.count("\n") == 1 and "needs Node.js" in proc.stderr
     assert not any(tmp_path.iterdir())
@@ -277,15 +301,27 @@ def test_meshopt_without_node_is_one_line(tmp_path):
 def test_catalogue_compress_refuses_usd_formats(tmp_path):
     from treegen_cli.batch import load_catalogue
     from treegen_cli.errors import TreegenError
+
     cat = tmp_path / "c.json"
-    cat.write_text(json.dumps({"entries": [{"species": str(species_path("rush")),
-                                            "formats": ["glb", "usdc"], "compress": "meshopt"}]}))
-    with pytest.raises(TreegenError, match=r"entries\[0\]\.compress: meshopt is for glb/gltf only, "
-                                           r"but entries\[0\]\.formats\[1\] is \"usdc\""):
+    cat.write_text(
+        json.dumps(
+            {
+                "entries": [
+                    {"species": str(species_path("rush")), "formats": ["glb", "usdc"], "compress": "meshopt"}
+                ]
+            }
+        )
+    )
+    with pytest.raises(
+        TreegenError,
+        match=r"entries\[0\]\.compress: meshopt is for glb/gltf only, "
+        r"but entries\[0\]\.formats\[1\] is \"usdc\"",
+    ):
         load_catalogue(cat)
-    cat.write_text(json.dumps({"entries": [{"species": str(species_path("rush")),
-                                            "compress": "zip"}]}))
-    with pytest.raises(TreegenError, match=r"entries\[0\]\.compress 'zip': use one of none, quantize, meshopt"):
+    cat.write_text(json.dumps({"entries": [{"species": str(species_path("rush")), "compress": "zip"}]}))
+    with pytest.raises(
+        TreegenError, match=r"entries\[0\]\.compress 'zip': use one of none, quantize, meshopt"
+    ):
         load_catalogue(cat)
 
 

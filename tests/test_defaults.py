@@ -1,6 +1,7 @@
 """Each option default is defined once, beside its stage (wind.DEFAULTS, lod.LOD_DEFAULTS,
 rig/mesh/materials/limits); `make`'s option table, the click options, the layout schema and
 the README read or quote it. These fail when a copy drifts."""
+
 from __future__ import annotations
 
 import json
@@ -33,13 +34,20 @@ def test_make_with_no_options_builds_exactly_the_stage_defaults():
 
 
 def test_layout_schema_publishes_the_stage_defaults():
-    props = {k: v["properties"] for k, v in layout_schema()["properties"].items()
-             if k in ("camera", "wind", "defaults")}
+    props = {
+        k: v["properties"]
+        for k, v in layout_schema()["properties"].items()
+        if k in ("camera", "wind", "defaults")
+    }
     wind = {k: v.get("default") for k, v in props["wind"].items()}
-    assert (wind["speed"], wind["direction_deg"], wind["gust"], wind["turbulence"], wind["fps"]) \
-        == (WIND_DEFAULTS.speed, WIND_DEFAULTS.direction_deg, WIND_DEFAULTS.gust,
-            WIND_DEFAULTS.turbulence, WIND_DEFAULTS.fps)
-    assert wind["duration"] == FOREST_LOOP_S             # the forest's own loop, stated once
+    assert (wind["speed"], wind["direction_deg"], wind["gust"], wind["turbulence"], wind["fps"]) == (
+        WIND_DEFAULTS.speed,
+        WIND_DEFAULTS.direction_deg,
+        WIND_DEFAULTS.gust,
+        WIND_DEFAULTS.turbulence,
+        WIND_DEFAULTS.fps,
+    )
+    assert wind["duration"] == FOREST_LOOP_S  # the forest's own loop, stated once
     assert props["camera"]["fov_deg"]["default"] == LOD_DEFAULTS.fov_deg
     assert props["camera"]["width_px"]["default"] == LOD_DEFAULTS.width
     assert props["defaults"]["error_px"]["default"] == LOD_DEFAULTS.error_px
@@ -79,9 +87,14 @@ def test_lod_flags_are_checked_once_in_lod_options_and_worded_as_typed():
         resolve({"lod_screen": "0.5,0.6"})
     with pytest.raises(TreegenError) as catalogue:
         resolve({"lod_screen": [0.5, 0.6]}, label=lambda k: f"entries[0].{k}")
-    assert str(stage.value) == str(cli_msg.value) == (
-        "--lod-screen 0.5,0.6: give descending fractions of the screen height, each in "
-        "(0, 100], e.g. 0.5,0.25,0.1")
+    assert (
+        str(stage.value)
+        == str(cli_msg.value)
+        == (
+            "--lod-screen 0.5,0.6: give descending fractions of the screen height, each in "
+            "(0, 100], e.g. 0.5,0.25,0.1"
+        )
+    )
     assert str(catalogue.value).startswith("entries[0].lod_screen 0.5,0.6: give descending")
     with pytest.raises(TreegenError, match=r"^--lod-distances 0,10,10: distances repeat$"):
         resolve({"lod_distances": "0,10,10"})
@@ -90,7 +103,7 @@ def test_lod_flags_are_checked_once_in_lod_options_and_worded_as_typed():
 def test_screen_distance_in_fractions_and_pixels_agree():
     from treegen_cli.lod import screen_distance, switch_distances
 
-    screen_px = LOD_DEFAULTS.width / LOD_DEFAULTS.aspect             # 1080
+    screen_px = LOD_DEFAULTS.width / LOD_DEFAULTS.aspect  # 1080
     d = switch_distances(13.0, LOD_DEFAULTS)
-    assert d[1] == screen_distance(13.0, 0.5) and round(d[1], 1) == 40.0   # lod.py's example
+    assert d[1] == screen_distance(13.0, 0.5) and round(d[1], 1) == 40.0  # lod.py's example
     assert abs(screen_distance(13.0, 0.5 * screen_px, of=screen_px) - d[1]) < 1e-9 * d[1]

@@ -1,4 +1,5 @@
 """treegen forest: layout validation, scatter, LOD selection, shared prototype data, writers."""
+
 from __future__ import annotations
 
 import json
@@ -19,9 +20,19 @@ from treegen_cli.clip import phase_rotate, playback, repeat_clip
 from treegen_cli.asset import Forest, Instance
 from treegen_cli.exchange import export_forest as write_scene
 from treegen_cli.prepare import prepare_forest
-from treegen_cli.forest import (WindSpec, build_scene, inside_polygon, load_layout,
-                                parse_layout, polygon_area,
-                                run_forest, scatter_points, schema_text, select_lod, time_offsets)
+from treegen_cli.forest import (
+    WindSpec,
+    build_scene,
+    inside_polygon,
+    load_layout,
+    parse_layout,
+    polygon_area,
+    run_forest,
+    scatter_points,
+    schema_text,
+    select_lod,
+    time_offsets,
+)
 
 from synthetic import synthetic_asset
 
@@ -32,14 +43,26 @@ FAST = {"max_joints": 12, "lod_distances": [0, 25, 60]}
 
 
 def layout_dict(**over) -> dict:
-    d = {"camera": CAMERA, "wind": {"duration": 1.0, "fps": 8, "seed": 3}, "defaults": FAST,
-         "instances": [
-             {"species": POPLAR, "position": [0, 0], "seed": 1},
-             {"species": PALM, "position": [6, 30, 0.5], "rotation_deg": 90, "scale": 1.5, "seed": 2},
-             {"species": POPLAR, "position": [-4, 80], "seed": 1, "scale": 0.8}],
-         "scatter": [{"species": [{"file": POPLAR}, {"file": PALM, "weight": 2}],
-                      "rectangle": {"min": [-10, -10], "max": [10, 10]}, "count": 9,
-                      "min_spacing": 3, "seed": 5, "variants": 1}]}
+    d = {
+        "camera": CAMERA,
+        "wind": {"duration": 1.0, "fps": 8, "seed": 3},
+        "defaults": FAST,
+        "instances": [
+            {"species": POPLAR, "position": [0, 0], "seed": 1},
+            {"species": PALM, "position": [6, 30, 0.5], "rotation_deg": 90, "scale": 1.5, "seed": 2},
+            {"species": POPLAR, "position": [-4, 80], "seed": 1, "scale": 0.8},
+        ],
+        "scatter": [
+            {
+                "species": [{"file": POPLAR}, {"file": PALM, "weight": 2}],
+                "rectangle": {"min": [-10, -10], "max": [10, 10]},
+                "count": 9,
+                "min_spacing": 3,
+                "seed": 5,
+                "variants": 1,
+            }
+        ],
+    }
     d.update(over)
     return d
 
@@ -59,10 +82,11 @@ def scene(tmp_path_factory):
 
 # ----------------------------------------------------------------------------- schema + CLI
 
+
 def test_schema_is_published_and_printed():
     schema = json.loads(schema_text())
     assert schema["$schema"].endswith("2020-12/schema") and "camera" in schema["properties"]
-    assert "camera" not in schema.get("required", [])           # optional since issue 15
+    assert "camera" not in schema.get("required", [])  # optional since issue 15
     out = CliRunner().invoke(cli, ["forest", "--schema"])
     assert out.exit_code == 0 and json.loads(out.output) == schema
 
@@ -86,27 +110,69 @@ BAD = [
     ({"defaults": {"lod_distances": [0, 30, 30]}}, "defaults.lod_distances: must increase"),
     ({"instances": [], "scatter": []}, "instances: the layout places no trees"),
     ({"instances": [{"species": POPLAR}]}, "instances[0].position: required"),
-    ({"instances": [{"species": POPLAR, "position": [0, 0]}, {"species": "nope.txt", "position": [1, 1]}]},
-     "instances[1].species: species file 'nope.txt' not found"),
-    ({"instances": [{"species": POPLAR, "position": [0, 0], "scale": 0}]},
-     "instances[0].scale: 0 is out of range"),
+    (
+        {"instances": [{"species": POPLAR, "position": [0, 0]}, {"species": "nope.txt", "position": [1, 1]}]},
+        "instances[1].species: species file 'nope.txt' not found",
+    ),
+    (
+        {"instances": [{"species": POPLAR, "position": [0, 0], "scale": 0}]},
+        "instances[0].scale: 0 is out of range",
+    ),
     ({"instances": [{"species": POPLAR, "position": [0, 0], "seed": -1}]}, "instances[0].seed: -1"),
-    ({"scatter": [{"species": [{"file": PALM}], "count": 3}]},
-     "scatter[0]: give exactly one of 'rectangle' or 'polygon'"),
-    ({"scatter": [{"species": [{"file": PALM}], "polygon": [[0, 0], [1, 0], [0, 1]]}]},
-     "scatter[0]: give exactly one of 'count' or 'density'"),
-    ({"scatter": [{"species": [{"file": PALM, "weight": 0}], "polygon": [[0, 0], [1, 0], [0, 1]], "count": 1}]},
-     "scatter[0].species[0].weight: 0 is out of range"),
-    ({"scatter": [{"species": [{"file": "x/y.txt"}], "polygon": [[0, 0], [1, 0], [0, 1]], "count": 1}]},
-     "scatter[0].species[0].file: species file 'x/y.txt' not found"),
-    ({"scatter": [{"species": [{"file": PALM}], "rectangle": {"min": [0, 0], "max": [0, 5]}, "count": 1}]},
-     "scatter[0].rectangle.max: must exceed min"),
-    ({"scatter": [{"species": [{"file": PALM}], "polygon": [[0, 0], [1, 1], [2, 2]], "count": 1}]},
-     "scatter[0].polygon: has zero area"),
-    ({"scatter": [{"species": [{"file": PALM}], "rectangle": {"min": [0, 0], "max": [10, 10]},
-                   "count": 500, "min_spacing": 2}]}, "scatter[0]: impossible scatter: 500 trees"),
-    ({"scatter": [{"species": [{"file": PALM}], "rectangle": {"min": [0, 0], "max": [10, 10]},
-                   "count": 2, "scale": [2, 1]}]}, "scatter[0].scale: [low, high]"),
+    (
+        {"scatter": [{"species": [{"file": PALM}], "count": 3}]},
+        "scatter[0]: give exactly one of 'rectangle' or 'polygon'",
+    ),
+    (
+        {"scatter": [{"species": [{"file": PALM}], "polygon": [[0, 0], [1, 0], [0, 1]]}]},
+        "scatter[0]: give exactly one of 'count' or 'density'",
+    ),
+    (
+        {
+            "scatter": [
+                {"species": [{"file": PALM, "weight": 0}], "polygon": [[0, 0], [1, 0], [0, 1]], "count": 1}
+            ]
+        },
+        "scatter[0].species[0].weight: 0 is out of range",
+    ),
+    (
+        {"scatter": [{"species": [{"file": "x/y.txt"}], "polygon": [[0, 0], [1, 0], [0, 1]], "count": 1}]},
+        "scatter[0].species[0].file: species file 'x/y.txt' not found",
+    ),
+    (
+        {"scatter": [{"species": [{"file": PALM}], "rectangle": {"min": [0, 0], "max": [0, 5]}, "count": 1}]},
+        "scatter[0].rectangle.max: must exceed min",
+    ),
+    (
+        {"scatter": [{"species": [{"file": PALM}], "polygon": [[0, 0], [1, 1], [2, 2]], "count": 1}]},
+        "scatter[0].polygon: has zero area",
+    ),
+    (
+        {
+            "scatter": [
+                {
+                    "species": [{"file": PALM}],
+                    "rectangle": {"min": [0, 0], "max": [10, 10]},
+                    "count": 500,
+                    "min_spacing": 2,
+                }
+            ]
+        },
+        "scatter[0]: impossible scatter: 500 trees",
+    ),
+    (
+        {
+            "scatter": [
+                {
+                    "species": [{"file": PALM}],
+                    "rectangle": {"min": [0, 0], "max": [10, 10]},
+                    "count": 2,
+                    "scale": [2, 1],
+                }
+            ]
+        },
+        "scatter[0].scale: [low, high]",
+    ),
     ({"extra": 1}, "extra: unknown key; allowed:"),
 ]
 
@@ -132,10 +198,22 @@ def test_bad_json_and_nan(tmp_path):
 def test_cli_bad_layout_exits_2_and_writes_nothing(tmp_path):
     import subprocess
     import sys
+
     layout = write_layout(tmp_path, layout_dict(instances=[{"species": "missing.txt", "position": [0, 0]}]))
     out = tmp_path / "forest.glb"
-    proc = subprocess.run([sys.executable, "-c", "import sys; from treegen_cli.cli import main; main(sys.argv[1:])",
-                           "forest", str(layout), "-o", str(out)], capture_output=True, text=True)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "import sys; from treegen_cli.cli import main; main(sys.argv[1:])",
+            "forest",
+            str(layout),
+            "-o",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert proc.returncode == 2
     assert "instances[0].species: species file 'missing.txt' not found" in proc.stderr
     assert "Traceback" not in proc.stderr
@@ -148,12 +226,14 @@ def test_species_paths_are_relative_to_the_layout(tmp_path):
     rel = str(Path("..") / "species" / "palm.txt")
     (tmp_path / "species").mkdir()
     (tmp_path / "species" / "palm.txt").write_text(Path(PALM).read_text())
-    layout = load_layout(write_layout(sub, layout_dict(instances=[{"species": rel, "position": [1, 2]}],
-                                                       scatter=[])))
+    layout = load_layout(
+        write_layout(sub, layout_dict(instances=[{"species": rel, "position": [1, 2]}], scatter=[]))
+    )
     assert layout.placements[0].species == (tmp_path / "species" / "palm.txt").resolve()
 
 
 # ----------------------------------------------------------------------------- scatter
+
 
 def test_scatter_rectangle_bounds_and_spacing():
     rect = np.array([[-5.0, 0.0], [15.0, 0.0], [15.0, 8.0], [-5.0, 8.0]])
@@ -165,8 +245,12 @@ def test_scatter_rectangle_bounds_and_spacing():
 
 
 def test_scatter_polygon_bounds_and_spacing():
-    star = np.array([[np.cos(a) * r, np.sin(a) * r] for a, r in
-                     zip(np.linspace(0, 2 * np.pi, 10, endpoint=False), [20, 8] * 5)])
+    star = np.array(
+        [
+            [np.cos(a) * r, np.sin(a) * r]
+            for a, r in zip(np.linspace(0, 2 * np.pi, 10, endpoint=False), [20, 8] * 5)
+        ]
+    )
     pts = scatter_points(star, True, 60, 2.0, np.random.default_rng(1))
     assert len(pts) == 60 and inside_polygon(pts, star).all()
     assert cKDTree(pts).query(pts, k=2)[0][:, 1].min() >= 2.0
@@ -178,23 +262,32 @@ def test_scatter_polygon_bounds_and_spacing():
 
 
 def test_density_sets_the_count(tmp_path):
-    data = layout_dict(instances=[], scatter=[{"species": [{"file": PALM}],
-                                               "rectangle": {"min": [0, 0], "max": [20, 10]},
-                                               "density": 0.05, "seed": 2}])
+    data = layout_dict(
+        instances=[],
+        scatter=[
+            {
+                "species": [{"file": PALM}],
+                "rectangle": {"min": [0, 0], "max": [20, 10]},
+                "density": 0.05,
+                "seed": 2,
+            }
+        ],
+    )
     layout = parse_layout(data, tmp_path / "l.json")
-    assert len(layout.placements) == 10                      # 0.05 / m² × 200 m²
+    assert len(layout.placements) == 10  # 0.05 / m² × 200 m²
     pos = np.array([p.position for p in layout.placements])
     assert np.all((pos[:, :2] >= 0) & (pos[:, :2] <= [20, 10]))
 
 
 # ----------------------------------------------------------------------------- LOD + phase
 
+
 def test_select_lod_by_distance_over_scale():
     starts = [0.0, 10.0, 30.0, 130.0]
     d = np.array([0.0, 9.9, 10.0, 29.0, 31.0, 500.0])
     assert select_lod(d, starts).tolist() == [0, 0, 1, 1, 2, 3]
-    assert select_lod([20.0], starts, scale=2.0).tolist() == [1]   # 2× tree at 20 m ≈ 10 m
-    assert select_lod([50.0, 5.0], [0.0]).tolist() == [0, 0]      # single LOD: always LOD0
+    assert select_lod([20.0], starts, scale=2.0).tolist() == [1]  # 2× tree at 20 m ≈ 10 m
+    assert select_lod([50.0, 5.0], [0.0]).tolist() == [0, 0]  # single LOD: always LOD0
 
 
 def test_nearer_instances_get_finer_lods(scene):
@@ -203,7 +296,7 @@ def test_nearer_instances_get_finer_lods(scene):
     lod = np.array([i.lod for i in sc.instances])
     order = np.argsort(eff)
     assert np.all(np.diff(lod[order]) >= 0)
-    assert lod.min() < lod.max()                               # the layout spans LODs
+    assert lod.min() < lod.max()  # the layout spans LODs
     for i in sc.instances:
         starts = [lod.distance for lod in sc.prototypes[i.prototype].lods]
         assert starts[i.lod] <= i.distance / i.scale
@@ -212,13 +305,13 @@ def test_nearer_instances_get_finer_lods(scene):
 def test_time_offsets_follow_the_wind_and_wrap():
     wind = WindSpec(speed=5.0, direction_deg=0.0, duration=4.0, phase_jitter=0.0)
     pos = np.array([[0.0, 0, 0], [5.0, 0, 0], [10.0, 3, 0], [25.0, 0, 0]])
-    assert np.allclose(time_offsets(pos, wind), [0.0, 1.0, 2.0, 1.0])   # 25 m: 5 s wraps to 1
+    assert np.allclose(time_offsets(pos, wind), [0.0, 1.0, 2.0, 1.0])  # 25 m: 5 s wraps to 1
     jit = time_offsets(pos, replace(wind, phase_jitter=0.5))
     assert np.all((jit >= 0) & (jit < 4.0)) and not np.allclose(jit, [0, 1, 2, 1])
 
 
 def test_phase_rotate_plays_the_shifted_clip_exactly():
-    clip = synthetic_asset(1).lods[0].clips[0]        # sparse keys
+    clip = synthetic_asset(1).lods[0].clips[0]  # sparse keys
     assert clip.keys is not None
     n = len(clip.times) - 1
     base = playback(clip)
@@ -235,11 +328,12 @@ def test_phase_rotate_plays_the_shifted_clip_exactly():
 
 # ----------------------------------------------------------------------------- built scene
 
+
 def test_instances_and_placement_match_the_layout(scene, tmp_path):
     layout, sc = scene
     assert len(sc.instances) == 3 + 9
     keys = {(p.species, p.seed) for p in layout.placements}
-    assert len(sc.prototypes) == len(keys)                     # each (species, seed) once
+    assert len(sc.prototypes) == len(keys)  # each (species, seed) once
     path = tmp_path / "f.glb"
     write_scene(sc, path)
     gltf, blob = read_gltf(path)
@@ -256,10 +350,13 @@ def test_instances_and_placement_match_the_layout(scene, tmp_path):
     for root, p in zip(places, layout.placements):
         place = nodes[root]
         x, y, z = p.position
-        assert np.allclose(place.get("translation", [0, 0, 0]), [x, z, -y], atol=1e-6)   # Y up
+        assert np.allclose(place.get("translation", [0, 0, 0]), [x, z, -y], atol=1e-6)  # Y up
         q = place.get("rotation", [0, 0, 0, 1])
-        assert np.allclose(Rotation.from_quat(q).as_rotvec(),
-                           [0, np.radians((p.rotation_deg + 180) % 360 - 180), 0], atol=1e-6)
+        assert np.allclose(
+            Rotation.from_quat(q).as_rotvec(),
+            [0, np.radians((p.rotation_deg + 180) % 360 - 180), 0],
+            atol=1e-6,
+        )
         assert np.allclose(place.get("scale", [1, 1, 1]), [p.scale] * 3)
     # placed joints: each instance's skin uses its own joint nodes, never another's
     joint_sets = [set(s["joints"]) for s in gltf["skins"]]
@@ -272,9 +369,17 @@ def test_shared_data_is_not_duplicated(scene):
 
     def blob_size(n):
         rng = np.random.default_rng(n)
-        inst = [Instance(i % 3, (float(x), float(y), 0.0), float(r), 1.0, 0, float(t), variant=i % 4)
-                for i, (x, y, r, t) in enumerate(zip(rng.uniform(-50, 50, n), rng.uniform(-50, 50, n),
-                                                     rng.uniform(0, 360, n), rng.uniform(0, 1, n)))]
+        inst = [
+            Instance(i % 3, (float(x), float(y), 0.0), float(r), 1.0, 0, float(t), variant=i % 4)
+            for i, (x, y, r, t) in enumerate(
+                zip(
+                    rng.uniform(-50, 50, n),
+                    rng.uniform(-50, 50, n),
+                    rng.uniform(0, 360, n),
+                    rng.uniform(0, 1, n),
+                )
+            )
+        ]
         s = prepare_forest(Forest("t", protos, inst, phase_variants=4, loop=1.0))
         gltf, blob = build_forest(s)
         assert len(gltf["meshes"]) == 3 and len({sk["inverseBindMatrices"] for sk in gltf["skins"]}) == 3
@@ -286,6 +391,7 @@ def test_shared_data_is_not_duplicated(scene):
 
 def test_gltf_forest_validator_clean(scene, tmp_path):
     from treegen_cli.exchange.validate import ValidatorUnavailable, summary, validate_gltf
+
     _, sc = scene
     for all_lods in (False, True):
         path = tmp_path / f"f{int(all_lods)}.glb"
@@ -297,8 +403,11 @@ def test_gltf_forest_validator_clean(scene, tmp_path):
         assert report["issues"]["numErrors"] == 0 and report["issues"]["numWarnings"] == 0, summary(report)
         gltf, _ = read_gltf(path)
         if all_lods:
-            lod_ids = [gltf["nodes"][r]["extensions"]["MSFT_lod"]["ids"] for r in gltf["scenes"][0]["nodes"]
-                       if "mesh" in gltf["nodes"][r]]
+            lod_ids = [
+                gltf["nodes"][r]["extensions"]["MSFT_lod"]["ids"]
+                for r in gltf["scenes"][0]["nodes"]
+                if "mesh" in gltf["nodes"][r]
+            ]
             assert all(len(ids) == len(sc.prototypes[0].lods) - 1 for ids in lod_ids)
             assert gltf["extensionsUsed"] == ["MSFT_lod"]
 
@@ -309,7 +418,7 @@ def test_gltf_phase_variants_share_samplers(scene, tmp_path):
     anim = gltf["animations"][0]
     targets = [(c["target"]["node"], c["target"]["path"]) for c in anim["channels"]]
     assert len(targets) == len(set(targets))
-    assert len(anim["samplers"]) < len(anim["channels"])       # shared across instances
+    assert len(anim["samplers"]) < len(anim["channels"])  # shared across instances
     # channel rotations are unit quaternions
     q = read_accessor(gltf, blob, anim["samplers"][0]["output"])
     assert np.allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-5)
@@ -319,6 +428,7 @@ def test_usd_forest_validator_clean_and_offsets(scene, tmp_path):
     from pxr import Usd
 
     from treegen_cli.exchange.usd import validate_usd
+
     _, sc = scene
     path = tmp_path / "f.usda"
     write_scene(sc, path)
@@ -328,16 +438,19 @@ def test_usd_forest_validator_clean_and_offsets(scene, tmp_path):
     assert len(trees) == len(sc.instances) and all(t.IsInstance() for t in trees)
     text = path.read_text()
     n_protos = text.count("def SkelAnimation")
-    assert n_protos == len({(i.prototype, i.lod) for i in sc.instances})   # prototypes once
+    assert n_protos == len({(i.prototype, i.lod) for i in sc.instances})  # prototypes once
     fps = stage.GetTimeCodesPerSecond()
     for prim, inst in zip(trees, sc.instances):
         tr = prim.GetAttribute("xformOp:translate").Get()
         assert np.allclose(tr, inst.position)
-        anim = next(p for p in Usd.PrimRange(prim, Usd.TraverseInstanceProxies())
-                    if p.GetTypeName() == "SkelAnimation")
+        anim = next(
+            p
+            for p in Usd.PrimRange(prim, Usd.TraverseInstanceProxies())
+            if p.GetTypeName() == "SkelAnimation"
+        )
         samples = anim.GetAttribute("rotations").GetTimeSamples()
         offset = round(inst.time_offset * fps) % round(sc.loop * fps)
-        assert samples[0] == -offset                               # its own phase, no new data
+        assert samples[0] == -offset  # its own phase, no new data
 
 
 def test_run_forest_summary(tmp_path):
@@ -357,20 +470,31 @@ def test_oversized_forest_is_refused_naming_the_flag(tmp_path):
     import sys
 
     species = Path(__file__).resolve().parent.parent / "species" / "palm.txt"
-    layout = {"camera": {"position": [0, -30, 2], "target": [0, 0, 2]},
-              "scatter": [{"species": [{"file": str(species)}], "rectangle": {"min": [-50, -50], "max": [50, 50]},
-                           "count": 300}]}
+    layout = {
+        "camera": {"position": [0, -30, 2], "target": [0, 0, 2]},
+        "scatter": [
+            {
+                "species": [{"file": str(species)}],
+                "rectangle": {"min": [-50, -50], "max": [50, 50]},
+                "count": 300,
+            }
+        ],
+    }
     path = tmp_path / "big.json"
     path.write_text(_json.dumps(layout))
     out = tmp_path / "f.glb"
-    proc = subprocess.run([sys.executable, "-m", "treegen_cli", "forest", str(path), "-o", str(out),
-                           "--max-trees", "100"], capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, "-m", "treegen_cli", "forest", str(path), "-o", str(out), "--max-trees", "100"],
+        capture_output=True,
+        text=True,
+    )
     assert proc.returncode == 2, proc.stderr
     assert "--max-trees" in proc.stderr and "scatter[0]" in proc.stderr
     assert "Traceback" not in proc.stderr and not out.exists()
 
 
 # ----------------------------------------------------------------------------- on Dask
+
 
 def test_dask_prototypes_equal_the_in_process_build_byte_for_byte(scene, tmp_path):
     """The `scene` fixture built its prototypes on an embedded 2-worker Dask cluster; built
@@ -380,7 +504,7 @@ def test_dask_prototypes_equal_the_in_process_build_byte_for_byte(scene, tmp_pat
     assert (on_dask.cluster, here.cluster) == ("2 local worker(s)", "this process")
     (tmp_path / "dask").mkdir()
     (tmp_path / "here").mkdir()
-    for suffix in (".glb", ".usda"):     # (.usda: texture files are named after the stem)
+    for suffix in (".glb", ".usda"):  # (.usda: texture files are named after the stem)
         a, b = tmp_path / "dask" / f"f{suffix}", tmp_path / "here" / f"f{suffix}"
         write_scene(on_dask, a)
         write_scene(here, b)
@@ -397,19 +521,36 @@ def dask_scheduler():
     import subprocess
 
     root = Path(__file__).resolve().parents[1]
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
-        [str(root), *filter(None, [os.environ.get("PYTHONPATH")])])}
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join([str(root), *filter(None, [os.environ.get("PYTHONPATH")])]),
+    }
     env.pop("DASK_SCHEDULER_ADDRESS", None)
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     address = f"tcp://127.0.0.1:{port}"
-    common = dict(env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                  start_new_session=True)
-    procs = [subprocess.Popen(["dask", "scheduler", "--host", "127.0.0.1", "--port", str(port),
-                               "--no-dashboard"], **common),
-             subprocess.Popen(["dask", "worker", address, "--nthreads", "1", "--nworkers", "1",
-                               "--host", "127.0.0.1", "--no-dashboard"], **common)]
+    common = dict(env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    procs = [
+        subprocess.Popen(
+            ["dask", "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"], **common
+        ),
+        subprocess.Popen(
+            [
+                "dask",
+                "worker",
+                address,
+                "--nthreads",
+                "1",
+                "--nworkers",
+                "1",
+                "--host",
+                "127.0.0.1",
+                "--no-dashboard",
+            ],
+            **common,
+        ),
+    ]
     try:
         yield address, env
     finally:
@@ -429,24 +570,45 @@ def test_forest_on_a_dask_scheduler_writes_the_in_process_bytes(dask_scheduler, 
     layout = write_layout(tmp_path, layout_dict(scatter=[]))
     (tmp_path / "remote").mkdir()
     (tmp_path / "here").mkdir()
-    for suffix, args, extra_env in ((".glb", ["--scheduler", address], {}),
-                                    (".usda", [], {"DASK_SCHEDULER_ADDRESS": address})):
+    for suffix, args, extra_env in (
+        (".glb", ["--scheduler", address], {}),
+        (".usda", [], {"DASK_SCHEDULER_ADDRESS": address}),
+    ):
         remote, here = tmp_path / "remote" / f"f{suffix}", tmp_path / "here" / f"f{suffix}"
-        proc = subprocess.run([sys.executable, "-m", "treegen_cli", "forest", str(layout),
-                               "-o", str(remote), *args, "--json"],
-                              capture_output=True, text=True, env={**env, **extra_env})
+        proc = subprocess.run(
+            [sys.executable, "-m", "treegen_cli", "forest", str(layout), "-o", str(remote), *args, "--json"],
+            capture_output=True,
+            text=True,
+            env={**env, **extra_env},
+        )
         assert proc.returncode == 0, proc.stderr
         s = json.loads(proc.stdout)
         assert s["prototypes"] == 2 and s["cluster"] == f"1 worker(s) at {address}"
         run_forest(layout, here, workers=1, progress=False)
         assert remote.read_bytes() == here.read_bytes(), suffix
-    proc = subprocess.run([sys.executable, "-m", "treegen_cli", "forest", str(layout), "-o",
-                           str(tmp_path / "x.glb"), "--scheduler", address, "--workers", "2"],
-                          capture_output=True, text=True, env=env)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "treegen_cli",
+            "forest",
+            str(layout),
+            "-o",
+            str(tmp_path / "x.glb"),
+            "--scheduler",
+            address,
+            "--workers",
+            "2",
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+    )
     assert proc.returncode == 2 and "--workers 2: only for the embedded cluster" in proc.stderr
 
 
 # ----------------------------------------------------------------------------- a forest to walk through
+
 
 def no_camera(**over) -> dict:
     d = layout_dict(**over)
@@ -469,7 +631,7 @@ def walk(tmp_path_factory):
 def test_default_forest_needs_no_camera_and_carries_every_lod(walk):
     layout, sc, _ = walk
     assert layout.camera is None and sc.all_lods
-    assert [i.source for i in sc.instances] == [p.source for p in layout.placements]   # layout order
+    assert [i.source for i in sc.instances] == [p.source for p in layout.placements]  # layout order
     assert {i.lod for i in sc.instances} == {0}
     # each prototype ends in its impostor, as `treegen make` builds it (--no-impostor: not)
     for a in sc.prototypes:
@@ -492,7 +654,7 @@ def test_gltf_instance_references_every_shared_lod_mesh_skin_and_clip(walk):
     gltf, _blob = read_gltf(files[".glb"])
     nodes, skins = gltf["nodes"], gltf["skins"]
     n_lods = [len(a.lods) for a in sc.prototypes]
-    assert len(gltf["meshes"]) == sum(n_lods)                    # prototypes × LODs, shared
+    assert len(gltf["meshes"]) == sum(n_lods)  # prototypes × LODs, shared
     roots = [r for r in gltf["scenes"][0]["nodes"] if "mesh" in nodes[r]]
     assert len(roots) == len(sc.instances)
     driven = {c["target"]["node"] for c in gltf["animations"][0]["channels"]}
@@ -500,16 +662,17 @@ def test_gltf_instance_references_every_shared_lod_mesh_skin_and_clip(walk):
     for r, inst in zip(roots, sc.instances):
         ids = nodes[r]["extensions"]["MSFT_lod"]["ids"]
         lods = [r, *ids]
-        assert len(lods) == n_lods[inst.prototype] > 1               # every LOD, on every tree
+        assert len(lods) == n_lods[inst.prototype] > 1  # every LOD, on every tree
         meshes = [nodes[n]["mesh"] for n in lods]
-        assert meshes_of.setdefault(inst.prototype, meshes) == meshes   # the prototype's meshes
-        for k, n in enumerate(lods):      # each LOD: its own rig, placed like the tree, animated
+        assert meshes_of.setdefault(inst.prototype, meshes) == meshes  # the prototype's meshes
+        for k, n in enumerate(lods):  # each LOD: its own rig, placed like the tree, animated
             joints = skins[nodes[n]["skin"]]["joints"]
             assert len(joints) == len(sc.prototypes[inst.prototype].lods[k].skeleton.names)
             place = next(p for p in nodes if skins[nodes[n]["skin"]]["skeleton"] in p.get("children", []))
             assert place["name"] == f"{nodes[n]['name']}_place"
-            assert np.allclose(place.get("translation", [0, 0, 0]),
-                               [inst.position[0], inst.position[2], -inst.position[1]])
+            assert np.allclose(
+                place.get("translation", [0, 0, 0]), [inst.position[0], inst.position[2], -inst.position[1]]
+            )
             assert driven & set(joints) or k == n_lods[inst.prototype] - 1
     # the project's reader follows the first tree's MSFT_lod chain: exactly its prototype's LODs
     first = sc.prototypes[sc.instances[0].prototype]
@@ -524,26 +687,31 @@ def test_usd_instance_has_the_lod_variant_set_and_stays_instanced(walk):
     from pxr import Usd, UsdGeom
 
     from treegen_cli.exchange.usd import validate_usd
+
     _, sc, files = walk
-    assert validate_usd(files[".usda"]) == []                   # under every variant, too
+    assert validate_usd(files[".usda"]) == []  # under every variant, too
     stage = Usd.Stage.Open(str(files[".usda"]))
     protos = stage.GetPrimAtPath(f"/{sc.name}/Prototypes").GetAllChildren()
-    assert len(protos) == len(sc.prototypes)                     # one prim per prototype
+    assert len(protos) == len(sc.prototypes)  # one prim per prototype
     trees = stage.GetPrimAtPath(f"/{sc.name}/Trees").GetChildren()
 
     def shown(tree):
-        return [p.GetName() for p in Usd.PrimRange(tree, Usd.TraverseInstanceProxies())
-                if p.GetParent().GetName() == "LODs"
-                and UsdGeom.Imageable(p).ComputeVisibility() != UsdGeom.Tokens.invisible]
+        return [
+            p.GetName()
+            for p in Usd.PrimRange(tree, Usd.TraverseInstanceProxies())
+            if p.GetParent().GetName() == "LODs"
+            and UsdGeom.Imageable(p).ComputeVisibility() != UsdGeom.Tokens.invisible
+        ]
 
     for tree, inst in zip(trees, sc.instances):
         vset = tree.GetVariantSets().GetVariantSet("LOD")
         names = [f"LOD{k}" for k in range(len(sc.prototypes[inst.prototype].lods))]
         assert tree.IsInstance() and vset.GetVariantNames() == names
         assert vset.GetVariantSelection() == "LOD0" and shown(tree) == ["LOD0"]
-        skel_roots = [p for p in Usd.PrimRange(tree, Usd.TraverseInstanceProxies())
-                      if p.GetTypeName() == "SkelRoot"]
-        assert len(skel_roots) == len(names)                     # every LOD is in the tree
+        skel_roots = [
+            p for p in Usd.PrimRange(tree, Usd.TraverseInstanceProxies()) if p.GetTypeName() == "SkelRoot"
+        ]
+        assert len(skel_roots) == len(names)  # every LOD is in the tree
     # an engine switches one tree; it stays an instance and the others keep theirs
     last = trees[-1]
     last.GetVariantSets().GetVariantSet("LOD").SetVariantSelection("LOD2")
@@ -569,7 +737,7 @@ def test_walk_forest_is_validator_clean_and_loads_in_godot_and_three(walk):
     except clients.ClientMissing as e:
         pytest.skip(str(e))
     assert g["imported"], (g["reason"], g.get("log_tail"))
-    assert not g["errors"], g["errors"]                          # no "Skin bind ... no bone"
+    assert not g["errors"], g["errors"]  # no "Skin bind ... no bone"
     assert len(g["skeletons"]) == sum(per_tree)
     bones = {s["path"]: s["bone_count"] for s in g["skeletons"]}
     assert len(g["mesh_instances"]) == sum(per_tree)
@@ -579,7 +747,7 @@ def test_walk_forest_is_validator_clean_and_loads_in_godot_and_three(walk):
     assert anim["name"] == "wind_loop" and anim["loop"] and anim["tracks"] == anim["tracks_resolved"]
     assert anim["bones_moved"] > 0 and anim["loop_closes"]
     assert three["loaded"] and not three["warnings"], three.get("error") or three["warnings"]
-    assert len(three["skeletons"]) == len(sc.instances)          # LOD0 of each (no MSFT_lod)
+    assert len(three["skeletons"]) == len(sc.instances)  # LOD0 of each (no MSFT_lod)
     (clip,) = three["animations"]
     assert clip["bones_moved"] > 0 and clip["loop_closes"]
 
@@ -587,8 +755,9 @@ def test_walk_forest_is_validator_clean_and_loads_in_godot_and_three(walk):
 def _geometry_bytes(path: Path) -> int:
     """The file's bytes less its embedded PNGs (stored alike by every --compress)."""
     gltf, _ = read_gltf(path)
-    return path.stat().st_size - sum(gltf["bufferViews"][i["bufferView"]]["byteLength"]
-                                     for i in gltf.get("images", []))
+    return path.stat().st_size - sum(
+        gltf["bufferViews"][i["bufferView"]]["byteLength"] for i in gltf.get("images", [])
+    )
 
 
 def test_compressed_walk_forest_is_validator_clean_and_plays_in_three(walk, tmp_path):
@@ -611,15 +780,15 @@ def test_compressed_walk_forest_is_validator_clean_and_plays_in_three(walk, tmp_
         write_scene(sc, path, gltf_options(layout, c))
         gltf, _ = read_gltf(path)
         need = {"KHR_mesh_quantization", "KHR_texture_transform"} | (
-            {"EXT_meshopt_compression"} if c == "meshopt" else set())
+            {"EXT_meshopt_compression"} if c == "meshopt" else set()
+        )
         assert set(gltf["extensionsRequired"]) == need
-        assert len(gltf["meshes"]) == sum(len(a.lods) for a in sc.prototypes)   # still shared
+        assert len(gltf["meshes"]) == sum(len(a.lods) for a in sc.prototypes)  # still shared
         try:
             report = validate_gltf(path)
         except ValidatorUnavailable as e:
             pytest.skip(str(e))
-        assert report["issues"]["numErrors"] == 0 and report["issues"]["numWarnings"] == 0, \
-            summary(report)
+        assert report["issues"]["numErrors"] == 0 and report["issues"]["numWarnings"] == 0, summary(report)
         r = clients.three_load(path, poses=4, timeout=300)
         assert r["loaded"] and not r["warnings"], r.get("error") or r["warnings"]
         assert len(r["skeletons"]) == len(base["skeletons"]) == len(sc.instances)
@@ -634,12 +803,25 @@ def test_compressed_walk_forest_is_validator_clean_and_plays_in_three(walk, tmp_
 def test_forest_compress_refused_for_usd(tmp_path):
     import subprocess
     import sys
+
     layout = write_layout(tmp_path, no_camera(scatter=[]))
     out = tmp_path / "out"
     out.mkdir()
-    proc = subprocess.run([sys.executable, "-m", "treegen_cli", "forest", str(layout), "-o",
-                           str(out / "f.usdc"), "--compress", "meshopt"], capture_output=True,
-                          text=True)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "treegen_cli",
+            "forest",
+            str(layout),
+            "-o",
+            str(out / "f.usdc"),
+            "--compress",
+            "meshopt",
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert proc.returncode == 2, proc.stderr
     assert proc.stderr.count("\n") == 1, proc.stderr
     assert "--compress meshopt is for .glb/.gltf only (USD has no such encoding" in proc.stderr
@@ -651,7 +833,7 @@ def test_camera_orders_the_walk_forest_nearest_first(scene, tmp_path):
     walk_sc = build_scene(layout, workers=1, progress=False)
     eff = [i.distance / i.scale for i in walk_sc.instances]
     assert eff == sorted(eff) and walk_sc.all_lods
-    key = lambda i: (i.source, i.prototype, i.lod, i.variant)   # noqa: E731
+    key = lambda i: (i.source, i.prototype, i.lod, i.variant)  # noqa: E731
     assert sorted(map(key, walk_sc.instances)) == sorted(map(key, baked.instances))
 
 
@@ -661,14 +843,24 @@ def test_200_trees_with_all_lods_cost_little_more_than_their_prototypes(tmp_path
     from treegen_cli.exchange import export
 
     rush = str(SPECIES / "rush.txt")
-    data = no_camera(instances=[], scatter=[{
-        "species": [{"file": POPLAR}, {"file": PALM}, {"file": rush}],
-        "rectangle": {"min": [-60, -60], "max": [60, 60]}, "count": 200, "min_spacing": 4,
-        "seed": 7, "variants": 1}])
+    data = no_camera(
+        instances=[],
+        scatter=[
+            {
+                "species": [{"file": POPLAR}, {"file": PALM}, {"file": rush}],
+                "rectangle": {"min": [-60, -60], "max": [60, 60]},
+                "count": 200,
+                "min_spacing": 4,
+                "seed": 7,
+                "variants": 1,
+            }
+        ],
+    )
     sc = build_scene(load_layout(write_layout(tmp_path, data)), workers=1, progress=False)
     assert len(sc.instances) == 200 and len(sc.prototypes) == 3
-    assert all(len(a.lods) == 3 + 1 for a in sc.prototypes)           # + the impostor
+    assert all(len(a.lods) == 3 + 1 for a in sc.prototypes)  # + the impostor
     forest = sum(p.stat().st_size for p in write_scene(sc, tmp_path / "f.glb"))
-    own = sum(p.stat().st_size for k, a in enumerate(sc.prototypes)
-              for p in export(a, tmp_path / f"p{k}.glb"))
+    own = sum(
+        p.stat().st_size for k, a in enumerate(sc.prototypes) for p in export(a, tmp_path / f"p{k}.glb")
+    )
     assert forest <= 1.2 * own, (forest, own)

@@ -1,4 +1,5 @@
 """The Weber–Penn generator: formulas on hand-built cases, invariants on every species."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -22,9 +23,21 @@ def _params(levels=2, **top):
     lv.append(LevelParams(length=0.5, curve_res=2, down_angle=30, rotate=140, branches=6))
     lv.append(LevelParams(down_angle=40, rotate=90))
     lv += [LevelParams()] * (10 - len(lv))
-    base = dict(name="hand", shape=4, base_size=0.3, scale=10.0, scale_v=0.0, levels=levels,
-                ratio=0.02, ratio_power=1.2, leaves=0.0, leaf_scale=0.2, leaf_scale_x=0.5,
-                flare=0.0, level=tuple(lv))
+    base = dict(
+        name="hand",
+        shape=4,
+        base_size=0.3,
+        scale=10.0,
+        scale_v=0.0,
+        levels=levels,
+        ratio=0.02,
+        ratio_power=1.2,
+        leaves=0.0,
+        leaf_scale=0.2,
+        leaf_scale_x=0.5,
+        flare=0.0,
+        level=tuple(lv),
+    )
     base.update(top)
     return dataclasses.replace(default_params(), **base)
 
@@ -37,10 +50,22 @@ def _level(p, n, **kw):
 
 # ------------------------------------------------------------------- formulas
 
-@pytest.mark.parametrize("shape,r,expected", [
-    (0, 0.5, 0.6), (1, 0.5, 1.0), (2, 1.0, 1.0), (3, 0.3, 1.0), (4, 0.0, 0.5),
-    (5, 0.35, 0.5), (5, 0.85, 0.5), (6, 1.0, 0.2), (7, 0.0, 0.5), (7, 1.0, 0.5),
-])
+
+@pytest.mark.parametrize(
+    "shape,r,expected",
+    [
+        (0, 0.5, 0.6),
+        (1, 0.5, 1.0),
+        (2, 1.0, 1.0),
+        (3, 0.3, 1.0),
+        (4, 0.0, 0.5),
+        (5, 0.35, 0.5),
+        (5, 0.85, 0.5),
+        (6, 1.0, 0.2),
+        (7, 0.0, 0.5),
+        (7, 1.0, 0.5),
+    ],
+)
 def test_shape_ratio_table(shape, r, expected):
     assert shape_ratio(shape, r) == pytest.approx(expected)
 
@@ -71,7 +96,7 @@ def test_taper_profiles():
     half = taper_radius(1.0, 10.0, 0.5, z)
     assert half[-1] == pytest.approx(0.5)
     periodic = taper_radius(1.0, 10.0, 2.5, np.linspace(0, 10, 400))
-    assert np.any(np.diff(periodic) > 0)            # beads: radius goes up again
+    assert np.any(np.diff(periodic) > 0)  # beads: radius goes up again
     assert np.all(flare_factor(1.0, np.array([0.0, 0.125, 0.5])) == pytest.approx([1.99, 1.0, 1.0]))
 
 
@@ -136,7 +161,7 @@ def test_leaf_quality_keeps_total_area():
 
 def test_whorled_leaves_share_offsets():
     p = _params(levels=2, leaves=12.0)
-    p = _level(p, 2, rotate=-120.0, rotate_v=0.0)           # 3 leaves per whorl
+    p = _level(p, 2, rotate=-120.0, rotate_v=0.0)  # 3 leaves per whorl
     t = generate(p, seed=1)
     assert t.n_leaves % 3 == 0
     # the three leaves of a group attach at the same node and offset: same stem, same node
@@ -184,7 +209,7 @@ def test_helix_for_negative_curve_v():
     t = generate(p, seed=0)
     d = t.node_frame[1:-1, :, 2]
     tilt = np.degrees(np.arccos(np.clip(d[:, 2], -1, 1)))
-    assert np.allclose(tilt, 30.0, atol=1e-6)                 # constant angle to the axis
+    assert np.allclose(tilt, 30.0, atol=1e-6)  # constant angle to the axis
     heading = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
     assert np.all(np.diff(heading) > 0) or np.all(np.diff(heading) < 0)
 
@@ -195,11 +220,13 @@ def test_attraction_up_lifts_and_negative_droops():
         t = generate(p, seed=0)
         tips = t.stem_node_start[t.stem_level == 2] + t.stem_node_count[t.stem_level == 2] - 1
         return t.node_frame[tips, :, 2][:, 2].mean()
+
     assert mean_dir(2.0) > mean_dir(0.0) > mean_dir(-2.0)
 
 
 def test_pruning_keeps_stems_inside_the_envelope():
     from treegen_cli.generate import _inside_envelope
+
     p = _params(levels=3, prune_ratio=1.0, prune_width=0.3, prune_width_peak=0.5)
     t = generate(p, seed=0)
     loose = generate(dataclasses.replace(p, prune_ratio=0.0), seed=0)
@@ -210,6 +237,7 @@ def test_pruning_keeps_stems_inside_the_envelope():
 
 
 # ------------------------------------------------------------------- determinism and limits
+
 
 def test_same_seed_same_arrays_different_seed_differs():
     p = load_params(SPECIES[0].parent / "quaking_aspen.txt")
@@ -240,6 +268,7 @@ def test_global_rng_untouched():
 
 
 # ------------------------------------------------------------------- every species
+
 
 @pytest.fixture(scope="module", params=[s.stem for s in SPECIES])
 def species_tree(request):
@@ -328,8 +357,9 @@ def test_branch_dist_zero_makes_whorls():
     seg_len = whorl.stem_length[0] / 6
     offsets = whorl.stem_offset[whorl.stem_level == 1]
     assert len(np.unique(np.round(offsets, 9))) <= 6
-    on_boundary = np.isclose(offsets / seg_len, np.round(offsets / seg_len)) | \
-        np.isclose(offsets, whorl.stem_length[0] * whorl.params.base_size)
+    on_boundary = np.isclose(offsets / seg_len, np.round(offsets / seg_len)) | np.isclose(
+        offsets, whorl.stem_length[0] * whorl.params.base_size
+    )
     assert np.all(on_boundary)
     assert len(np.unique(np.round(even.stem_offset[even.stem_level == 1], 9))) == 24
 
@@ -337,8 +367,16 @@ def test_branch_dist_zero_makes_whorls():
 def test_split_correction_brings_split_limbs_back_to_their_declination():
     """After a split each member tilts by the split angle and its remaining segments turn back
     by the same amount in total, however many splits it went through."""
-    p = _level(_params(levels=1, attraction_up=0.0), 0, curve_res=12, curve=0.0, curve_v=0.0,
-               seg_splits=0.3, split_angle=30.0, split_angle_v=0.0)
+    p = _level(
+        _params(levels=1, attraction_up=0.0),
+        0,
+        curve_res=12,
+        curve=0.0,
+        curve_v=0.0,
+        seg_splits=0.3,
+        split_angle=30.0,
+        split_angle_v=0.0,
+    )
     t = generate(p, seed=0)
     assert t.stem_clone.sum() >= 3
     tips = t.stem_node_start + t.stem_node_count - 1
@@ -350,33 +388,37 @@ def test_split_correction_brings_split_limbs_back_to_their_declination():
     # a split at the last inner node (11) has no segment left to correct on
     early = last_split <= 10
     assert early.sum() >= 3
-    assert np.all(lean[early] < 1e-4)                  # degrees
-    assert np.any(lean[~early] > 10.0)                 # the uncorrected ones still lean
+    assert np.all(lean[early] < 1e-4)  # degrees
+    assert np.any(lean[~early] > 10.0)  # the uncorrected ones still lean
 
 
 def test_helix_members_keep_their_own_helix_after_a_split():
-    p = _level(_params(levels=1), 0, curve_res=6, curve_v=-30.0, seg_splits=0.5,
-               split_angle=40.0, split_angle_v=0.0)
+    p = _level(
+        _params(levels=1), 0, curve_res=6, curve_v=-30.0, seg_splits=0.5, split_angle=40.0, split_angle_v=0.0
+    )
     t = generate(p, seed=0)
     clones = np.flatnonzero(t.stem_clone)
     assert clones.size
     for c in clones:
-        mine = t.node_frame[t.stem_node_start[c]:t.stem_node_start[c] + t.stem_node_count[c], :, 2]
+        mine = t.node_frame[t.stem_node_start[c] : t.stem_node_start[c] + t.stem_node_count[c], :, 2]
         parent = t.stem_parent[c]
-        first = t.stem_node_start[parent] + (t.stem_node_start[c] - t.stem_node_start[c]) \
-            + int(round(t.node_z[t.stem_node_start[c]] / (t.stem_length[0] / 6))) \
+        first = (
+            t.stem_node_start[parent]
+            + (t.stem_node_start[c] - t.stem_node_start[c])
+            + int(round(t.node_z[t.stem_node_start[c]] / (t.stem_length[0] / 6)))
             - int(round(t.node_z[t.stem_node_start[parent]] / (t.stem_length[0] / 6)))
-        theirs = t.node_frame[first:first + len(mine), :, 2]
+        )
+        theirs = t.node_frame[first : first + len(mine), :, 2]
         # after the split node the member and its origin point in different directions
-        assert np.all(np.einsum("ij,ij->i", mine[1:-1], theirs[1:len(mine) - 1]) < 0.9999)
+        assert np.all(np.einsum("ij,ij->i", mine[1:-1], theirs[1 : len(mine) - 1]) < 0.9999)
 
 
 def test_prune_ratio_blends_pruned_and_free_length():
     """Final length L0 − (L0 − L_fit)·PruneRatio: half pruning lands between none and full."""
     p = _params(levels=2, prune_width=0.25, prune_width_peak=0.5)
-    free, half, full = (generate(dataclasses.replace(p, prune_ratio=r), seed=0) for r in (0, .5, 1))
+    free, half, full = (generate(dataclasses.replace(p, prune_ratio=r), seed=0) for r in (0, 0.5, 1))
     L0, Lh, Lf = (t.stem_length[t.stem_level == 1] for t in (free, half, full))
-    assert len(L0) == len(Lh) == len(Lf)          # nothing pruned away entirely here
+    assert len(L0) == len(Lh) == len(Lf)  # nothing pruned away entirely here
     assert np.all(Lf <= L0 + 1e-12) and np.any(Lf < 0.9 * L0)
     assert np.allclose(Lh, L0 - (L0 - Lf) * 0.5, rtol=1e-9)
 

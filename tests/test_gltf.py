@@ -1,4 +1,5 @@
 """glTF writer and export registry: validator-clean output, real readers, exact re-reads."""
+
 from __future__ import annotations
 
 import os
@@ -17,14 +18,21 @@ from treegen_cli.asset import Asset, Lod
 from treegen_cli.errors import TreegenError
 from treegen_cli.exchange import WRITERS, export as _export, supported_suffixes
 from treegen_cli.prepare import prepare
-from treegen_cli.exchange.gltf import (UNSIGNED_BYTE, UNSIGNED_INT, UNSIGNED_SHORT,
-                                       quat_to_y_up, read_accessor, read_gltf, to_y_up)
+from treegen_cli.exchange.gltf import (
+    UNSIGNED_BYTE,
+    UNSIGNED_INT,
+    UNSIGNED_SHORT,
+    quat_to_y_up,
+    read_accessor,
+    read_gltf,
+    to_y_up,
+)
 from treegen_cli.exchange.validate import summary, validate_gltf
+
 
 def export(asset, path, **opts):
     """Hand-built assets go through the prepare stage, as the pipeline's do."""
     return _export(prepare(asset), path, **opts)
-
 
 
 def _clean(path) -> dict:
@@ -106,8 +114,7 @@ def test_skin_joints_and_inverse_bind(written):
         J = len(lod.skeleton.names)
         assert len(skin["joints"]) == J
         assert [gltf["nodes"][j]["name"] for j in skin["joints"]] == lod.skeleton.names
-        mesh_node = gltf["nodes"][gltf["nodes"].index(
-            next(n for n in gltf["nodes"] if n.get("skin") == k))]
+        mesh_node = gltf["nodes"][gltf["nodes"].index(next(n for n in gltf["nodes"] if n.get("skin") == k))]
         assert "translation" not in mesh_node and "rotation" not in mesh_node
         world = _trs_world(gltf, skin["skeleton"])
         ibm = read_accessor(gltf, blob, skin["inverseBindMatrices"])
@@ -122,7 +129,7 @@ def test_y_up_conversion(written):
         pos = read_accessor(gltf, blob, prim["attributes"]["POSITION"])
         gen = src.positions
         np.testing.assert_array_equal(pos[:, 0], gen[:, 0])
-        np.testing.assert_array_equal(pos[:, 1], gen[:, 2])   # generator z=5 → glTF y=5
+        np.testing.assert_array_equal(pos[:, 1], gen[:, 2])  # generator z=5 → glTF y=5
         np.testing.assert_array_equal(pos[:, 2], -gen[:, 1])
         acc = gltf["accessors"][prim["attributes"]["POSITION"]]
         assert acc["min"] == pos.min(axis=0).tolist() and acc["max"] == pos.max(axis=0).tolist()
@@ -133,8 +140,7 @@ def test_y_up_conversion(written):
     # joints climb in +y in glTF as they climb in +z in the generator
     world = _trs_world(gltf, gltf["skins"][0]["skeleton"])
     top = world[gltf["skins"][0]["joints"][-1]][:3, 3]
-    np.testing.assert_allclose(top, to_y_up(asset.lods[0].skeleton.bind_world[-1][:3, 3]),
-                               atol=1e-6)
+    np.testing.assert_allclose(top, to_y_up(asset.lods[0].skeleton.bind_world[-1][:3, 3]), atol=1e-6)
     assert tip["name"] == "j2"
 
 
@@ -152,15 +158,16 @@ def test_vertex_attributes(written):
         assert gltf["accessors"][prim["indices"]]["componentType"] == UNSIGNED_SHORT
         np.testing.assert_array_equal(read_accessor(gltf, blob, prim["indices"]), src.indices)
         uv = read_accessor(gltf, blob, a["TEXCOORD_0"])
-        np.testing.assert_allclose(uv[:, 1], 1.0 - src.uvs[:, 1])   # glTF's v runs down
+        np.testing.assert_allclose(uv[:, 1], 1.0 - src.uvs[:, 1])  # glTF's v runs down
     views = gltf["bufferViews"]
     assert all(v["byteOffset"] % 4 == 0 for v in views)
-    targets = {gltf["accessors"][i]["bufferView"]: t
-               for prim in gltf["meshes"][0]["primitives"]
-               for i, t in [*((x, 34962) for x in prim["attributes"].values()),
-                            (prim["indices"], 34963)]}
+    targets = {
+        gltf["accessors"][i]["bufferView"]: t
+        for prim in gltf["meshes"][0]["primitives"]
+        for i, t in [*((x, 34962) for x in prim["attributes"].values()), (prim["indices"], 34963)]
+    }
     for i, v in enumerate(views):
-        assert v.get("target") == targets.get(i)   # no target on IBM / animation views
+        assert v.get("target") == targets.get(i)  # no target on IBM / animation views
 
 
 def test_materials(written):
@@ -208,7 +215,7 @@ def test_animation_channels_and_sparse_keys(written):
             q = read_accessor(gltf, blob, s["output"])
             want = quat_to_y_up(clip.rotations[keys, j])
             np.testing.assert_allclose(np.abs(np.einsum("ki,ki->k", q, want)), 1.0, atol=1e-6)
-            assert np.all(np.einsum("ki,ki->k", q[1:], q[:-1]) >= 0)   # no long-way slerp
+            assert np.all(np.einsum("ki,ki->k", q[1:], q[:-1]) >= 0)  # no long-way slerp
             inputs.add(s["input"])
         # LOD0's non-root joints share one key set, LOD1 is dense: one input accessor each
         assert len(inputs) == 1
@@ -270,7 +277,7 @@ def test_posed_mesh_matches_generator_space(written):
     want = to_y_up(np.concatenate(want))
     np.testing.assert_allclose(got, want, atol=1e-5)
     rest = _skin(gltf, blob, 0, 0, {})
-    assert np.abs(got - rest).max() > 0.05   # the key really moves the tree
+    assert np.abs(got - rest).max() > 0.05  # the key really moves the tree
 
 
 def test_msft_lod_and_node_layout(written):
@@ -314,8 +321,7 @@ def test_deterministic_bytes(tmp_path):
 def test_large_indices_and_joints(tmp_path):
     """300 joints → UNSIGNED_SHORT joints; ≥ 65535 vertices → UNSIGNED_INT indices."""
     sk = chain_skeleton(300)
-    asset = Asset("big", list(MATERIALS),
-                  [Lod([bark(sk, 220), leaves(sk, 4)], sk)])
+    asset = Asset("big", list(MATERIALS), [Lod([bark(sk, 220), leaves(sk, 4)], sk)])
     assert len(asset.lods[0].primitives[0].positions) >= 65535
     p = tmp_path / "big.glb"
     export(asset, p)
@@ -334,8 +340,9 @@ def test_large_indices_and_joints(tmp_path):
 
 def test_step_and_explicit_animated(tmp_path):
     asset = synthetic_asset(1)
-    clip = dataclasses.replace(asset.lods[0].clips[0], interpolation="STEP",
-                               animated=np.array([False, False, True]), keys=None)
+    clip = dataclasses.replace(
+        asset.lods[0].clips[0], interpolation="STEP", animated=np.array([False, False, True]), keys=None
+    )
     asset = dataclasses.replace(asset, lods=[dataclasses.replace(asset.lods[0], clips=[clip])])
     p = tmp_path / "step.glb"
     _export(prepare(asset), p)
@@ -373,14 +380,14 @@ def test_atomic_write_leaves_no_temp_files(tmp_path, monkeypatch):
     with pytest.raises(RuntimeError):
         export(synthetic_asset(), tmp_path / "t.glb")
     assert sorted(os.listdir(tmp_path)) == ["t.bin", "t.glb", "t.gltf"]
-    assert (tmp_path / "t.glb").read_bytes() == old     # the previous file is untouched
+    assert (tmp_path / "t.glb").read_bytes() == old  # the previous file is untouched
 
 
 @pytest.mark.parametrize("suffix", [".obj", ".ply"])
 def test_static_exports(tmp_path, suffix):
     asset = synthetic_asset(2)
     p = tmp_path / f"tree{suffix}"
-    assert export(asset, p)[0] == p          # an .obj also writes its .mtl
+    assert export(asset, p)[0] == p  # an .obj also writes its .mtl
     mesh = trimesh.load(p, force="mesh", process=False)
     lod0 = asset.lods[0].primitives
     assert len(mesh.faces) == sum(len(q.indices) // 3 for q in lod0)
@@ -425,8 +432,9 @@ def test_validator_found_from_another_working_folder(tmp_path, monkeypatch):
 def test_a_killed_runs_staging_folder_is_swept_by_the_next_run(tmp_path):
     """A staging folder whose writer process is gone is removed by the next write there; one
     of a live process is left alone."""
-    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
-                          capture_output=True, text=True).stdout.strip()
+    dead = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True
+    ).stdout.strip()
     stale = tmp_path / f".tree.glb.{dead}.abcd1234.tmp"
     stale.mkdir()
     (stale / "tree.glb").write_bytes(b"half")

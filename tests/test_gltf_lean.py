@@ -1,6 +1,7 @@
 """The glTF writer's lean encodings: quantized weights and card UVs that read back exactly (or
 within one quantum), a streamed GLB identical to the in-memory one, validator-clean real trees
 with leaf cards and with leaf outlines."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -13,16 +14,23 @@ from synthetic_tree import synthetic_tree
 from treegen_cli.asset import Asset, Lod, Primitive
 from treegen_cli.exchange import export as _export
 from treegen_cli.prepare import prepare
-from treegen_cli.exchange.gltf import (FLOAT, UNSIGNED_BYTE, UNSIGNED_SHORT, build, glb_bytes,
-                                       read_accessor, read_gltf)
+from treegen_cli.exchange.gltf import (
+    FLOAT,
+    UNSIGNED_BYTE,
+    UNSIGNED_SHORT,
+    build,
+    glb_bytes,
+    read_accessor,
+    read_gltf,
+)
 from treegen_cli.exchange.validate import summary, validate_gltf
 from treegen_cli.mesh import MeshOptions, build_mesh
 from treegen_cli.rig import RigOptions, build_rig
 
+
 def export(asset, path, **opts):
     """Hand-built assets go through the prepare stage, as the pipeline's do."""
     return _export(prepare(asset), path, **opts)
-
 
 
 def _raw(gltf, blob, index):
@@ -41,7 +49,7 @@ def _random_weights(rng, V):
     """Up to four distinct joints per vertex with random weights; some slots unused."""
     w = rng.random((V, 4)).astype(np.float32)
     w[rng.random((V, 4)) < 0.3] = 0.0
-    w[:, 0] += 0.05                                   # every row has some weight
+    w[:, 0] += 0.05  # every row has some weight
     w = -np.sort(-w, axis=1)
     w /= w.sum(axis=1, keepdims=True)
     j = np.where(w > 0, np.arange(4), 0).astype(np.uint16)
@@ -60,11 +68,11 @@ def test_blended_weights_are_ushort_summing_exactly(tmp_path):
     acc = gltf["accessors"][a["WEIGHTS_0"]]
     assert acc["componentType"] == UNSIGNED_SHORT and acc["normalized"] is True
     q = _raw(gltf, blob, a["WEIGHTS_0"]).astype(np.int64)
-    assert np.all(q.sum(axis=1) == 65535)                          # exact, not approximately
+    assert np.all(q.sum(axis=1) == 65535)  # exact, not approximately
     back = read_accessor(gltf, blob, a["WEIGHTS_0"])
-    assert np.abs(back - w).max() <= 2.5 / 65535                   # rounding + residual
+    assert np.abs(back - w).max() <= 2.5 / 65535  # rounding + residual
     joints = read_accessor(gltf, blob, a["JOINTS_0"])
-    assert np.all(joints[q == 0] == 0)                             # unused slots: (0, 0)
+    assert np.all(joints[q == 0] == 0)  # unused slots: (0, 0)
     np.testing.assert_array_equal(joints[q > 0], j[q > 0])
 
 
@@ -121,7 +129,7 @@ def test_real_mesh_is_validator_clean(tmp_path, geometry):
 def test_leaves_always_carry_their_normals(tmp_path):
     """NORMAL is written for flat leaf cards too (Godot computes no normals, Babylon warns and
     regenerates them), and the written normals are the cards' own face normals."""
-    tree = synthetic_tree(leaf_shape=6)                  # folded palm outline: two planes
+    tree = synthetic_tree(leaf_shape=6)  # folded palm outline: two planes
     rig = build_rig(tree, RigOptions(max_joints=5))
     for geometry in ("card", "shape"):
         bark, leaves = build_mesh(tree, rig, MeshOptions(leaf_geometry=geometry))
@@ -136,7 +144,7 @@ def test_leaves_always_carry_their_normals(tmp_path):
         t = pos[tri.reshape(-1, 3)]
         face = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
         face /= np.linalg.norm(face, axis=1, keepdims=True)
-        own = nrm[tri.reshape(-1, 3)]                             # (T, 3 corners, 3)
+        own = nrm[tri.reshape(-1, 3)]  # (T, 3 corners, 3)
         np.testing.assert_allclose(np.broadcast_to(face[:, None], own.shape), own, atol=1e-4)
 
 

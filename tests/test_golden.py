@@ -1,5 +1,6 @@
 """Outputs change only on purpose: every golden case (tests/golden.py) writes the bytes whose
 digest is committed in tests/fixtures/golden.json."""
+
 from __future__ import annotations
 
 import json
@@ -23,4 +24,5 @@ def actual():
 @pytest.mark.parametrize("name", sorted(EXPECTED))
 def test_output_bytes_unchanged(actual, name):
     assert actual[name] == EXPECTED[name], (
-        f"{name} changed; if intended, run `python tests/golden.py --update` in its own commit")
+        f"{name} changed; if intended, run `python tests/golden.py --update` in its own commit"
+    )

@@ -1,6 +1,7 @@
 """Hardening: extreme but legal species give a valid, finite file or a clear refusal; a run
 killed mid-write leaves the previous output intact; oversized meshes and clips are refused
 before they are built; progress and --quiet/--verbose/--json behave when piped."""
+
 from __future__ import annotations
 
 import json
@@ -67,7 +68,8 @@ SMALL = MakeOptions(
     rig=RigOptions(max_joints=24),
     wind=WindOptions(duration=0.5, fps=6),
     lod=None,
-    limits=Limits(max_vertices=2_000_000, max_keys=200_000))
+    limits=Limits(max_vertices=2_000_000, max_keys=200_000),
+)
 
 
 def species(overrides: str):
@@ -76,7 +78,7 @@ def species(overrides: str):
     for line in overrides.strip().splitlines():
         k, v = line.split(None, 1)
         lines[k] = v
-    levels = int(lines["Levels"])         # level keys beyond Levels are an error: drop them
+    levels = int(lines["Levels"])  # level keys beyond Levels are an error: drop them
     lines = {k: v for k, v in lines.items() if not (k[0].isdigit() and int(k[0]) > levels)}
     return parse_params_text("\n".join(f"{k} {v}" for k, v in lines.items()), "extreme.txt")
 
@@ -118,7 +120,7 @@ EXTREME = {
     "levels_0": "Levels 0",
     "levels_1": "Levels 1",
     "levels_max_thin": "Levels 9\n3Branches 1\n4Branches 1\n5Branches 1\n6Branches 1\n"
-                       "7Branches 1\n8Branches 1\n9Branches 1\n2Branches 1\n1Branches 2",
+    "7Branches 1\n8Branches 1\n9Branches 1\n2Branches 1\n1Branches 2",
     "zero_branches": "1Branches 0",
     "zero_leaves": "Leaves 0",
     "fan_leaves": "Leaves -8",
@@ -165,7 +167,7 @@ def test_extreme_parameters_give_a_sound_asset_or_a_clear_refusal(case):
         asset, tree = build_asset(p, 3, SMALL)
     except TreegenError as e:
         msg = str(e)
-        assert "--max-" in msg and msg.isprintable(), msg     # refusals name the flag
+        assert "--max-" in msg and msg.isprintable(), msg  # refusals name the flag
         return
     assert tree.n_stems >= 1
     assert_sound(asset)
@@ -180,8 +182,9 @@ def test_extreme_refusals_happen_where_expected():
     assert np.count_nonzero(tree.stem_clone & (tree.stem_level == 0)) == 8
 
 
-@pytest.mark.parametrize("case", ["levels_0", "huge_curve", "scale_v_above_scale",
-                                  "lobes_large", "zero_leaves"])
+@pytest.mark.parametrize(
+    "case", ["levels_0", "huge_curve", "scale_v_above_scale", "lobes_large", "zero_leaves"]
+)
 def test_extreme_parameters_export_readable_files(case, tmp_path):
     from treegen_cli.exchange import export
     from treegen_cli.exchange.gltf import read_gltf
@@ -196,6 +199,7 @@ def test_extreme_parameters_export_readable_files(case, tmp_path):
     assert validate_usd(usda) == []
     if case in ("huge_curve", "scale_v_above_scale"):
         from treegen_cli.exchange.validate import ValidatorUnavailable, validate_gltf
+
         try:
             issues = validate_gltf(glb)["issues"]
         except ValidatorUnavailable as e:
@@ -213,9 +217,11 @@ def test_scale_v_above_scale_never_gives_a_non_positive_tree():
 
 # ----------------------------------------------------------------------------- atomic writes
 
+
 def treegen(*args, **kw):
-    return subprocess.run([sys.executable, "-m", "treegen_cli", *map(str, args)],
-                          capture_output=True, text=True, cwd=ROOT, **kw)
+    return subprocess.run(
+        [sys.executable, "-m", "treegen_cli", *map(str, args)], capture_output=True, text=True, cwd=ROOT, **kw
+    )
 
 
 def _kill_mid_write(species_file: Path, out: Path, attempts: int = 4) -> list[str]:
@@ -226,17 +232,36 @@ def _kill_mid_write(species_file: Path, out: Path, attempts: int = 4) -> list[st
     before = out.read_bytes() if out.exists() else None
     for _ in range(attempts):
         staged = out.parent / "(none)"
-        proc = subprocess.Popen([sys.executable, "-m", "treegen_cli", "make", str(species_file),
-                                 "-o", str(out), "--no-lod", "--duration", "1", "--fps", "10"],
-                                cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        proc = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "treegen_cli",
+                "make",
+                str(species_file),
+                "-o",
+                str(out),
+                "--no-lod",
+                "--duration",
+                "1",
+                "--fps",
+                "10",
+            ],
+            cwd=ROOT,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
         try:
             while proc.poll() is None:
-                staging = [d for d in out.parent.iterdir()
-                           if d.name.startswith(f".{out.name}.") and d.name.endswith(".tmp")]
+                staging = [
+                    d
+                    for d in out.parent.iterdir()
+                    if d.name.startswith(f".{out.name}.") and d.name.endswith(".tmp")
+                ]
                 if staging:
                     staged = staging[0] / out.name
                     while not staged.exists() and staging[0].exists():
-                        pass                              # tight: the file appears any moment
+                        pass  # tight: the file appears any moment
                     if staged.exists():
                         os.kill(proc.pid, signal.SIGKILL)
                         break
@@ -250,7 +275,7 @@ def _kill_mid_write(species_file: Path, out: Path, attempts: int = 4) -> list[st
         # past its rename (a loaded machine may deschedule this loop between check and kill).
         if proc.returncode == -signal.SIGKILL and staged.exists():
             return sorted(p.name for p in out.parent.iterdir())
-        for d in out.parent.glob(f".{out.name}.*.tmp"):    # a late kill's leftovers
+        for d in out.parent.glob(f".{out.name}.*.tmp"):  # a late kill's leftovers
             shutil.rmtree(d)
         if before is None:
             out.unlink(missing_ok=True)
@@ -266,11 +291,14 @@ def test_a_run_killed_mid_write_leaves_the_previous_file_intact(tmp_path, suffix
     assert proc.returncode == 0, proc.stderr
     before = out.read_bytes()
     left = _kill_mid_write(SPECIES / "black_tupelo.txt", out)
-    assert out.read_bytes() == before                      # byte-identical, not half-written
+    assert out.read_bytes() == before  # byte-identical, not half-written
     # Only the hidden staging folder of the killed run may remain, never a visible partial file.
     assert [n for n in left if not n.startswith(".") and not n.endswith(".png")] == [out.name]
-    assert all(n.startswith(f".{out.name}.") and n.endswith(".tmp") for n in left
-               if n != out.name and not n.endswith(".png"))
+    assert all(
+        n.startswith(f".{out.name}.") and n.endswith(".tmp")
+        for n in left
+        if n != out.name and not n.endswith(".png")
+    )
     # A later run is not disturbed by the leftover and replaces the file.
     proc = treegen("make", SPECIES / "shave_grass.txt", "-o", out, "--no-lod", "--duration", "0.5")
     assert proc.returncode == 0, proc.stderr
@@ -285,9 +313,11 @@ def test_a_run_killed_mid_write_leaves_nothing_when_there_was_no_file(tmp_path):
 
 # ----------------------------------------------------------------------------- limits
 
+
 @pytest.mark.parametrize("name", ["quaking_aspen", "palm"])
-@pytest.mark.parametrize("mesh", [MeshOptions(), MeshOptions(sides=(7, 5), leaf_geometry="shape",
-                                                             rings_per_segment=(3, 2, 1))])
+@pytest.mark.parametrize(
+    "mesh", [MeshOptions(), MeshOptions(sides=(7, 5), leaf_geometry="shape", rings_per_segment=(3, 2, 1))]
+)
 def test_vertex_estimate_matches_the_built_mesh(name, mesh):
     tree = generate(load_params(SPECIES / f"{name}.txt"), 1)
     bark, leaves = estimate_vertices(tree, mesh)
@@ -302,6 +332,7 @@ def test_oversized_mesh_and_clip_are_refused_before_building_naming_the_flag():
     need = sum(estimate_vertices(tree, MeshOptions()))
     opts = MakeOptions(lod=None, wind=WindOptions(duration=1, fps=10))
     from dataclasses import replace
+
     with pytest.raises(TreegenError, match=rf"{need:,} mesh vertices.*--max-vertices"):
         build_asset(p, 0, replace(opts, limits=Limits(max_vertices=need - 1)))
     asset, _ = build_asset(p, 0, replace(opts, limits=Limits(max_vertices=need, max_keys=10**6)))
@@ -310,7 +341,7 @@ def test_oversized_mesh_and_clip_are_refused_before_building_naming_the_flag():
     assert keys == joints * len(asset.lods[0].clips[0].times)
     with pytest.raises(TreegenError, match=rf"{keys:,} joint-keys.*--max-keys"):
         build_asset(p, 0, replace(opts, limits=Limits(max_keys=keys - 1)))
-    assert check_keys(joints, None, Limits(max_keys=0)) == 0      # no wind, no keys
+    assert check_keys(joints, None, Limits(max_keys=0)) == 0  # no wind, no keys
 
 
 def test_cli_refuses_oversized_work_with_exit_2_and_writes_nothing(tmp_path):
@@ -337,8 +368,10 @@ def test_piped_make_prints_no_progress_artefacts(tmp_path):
 
 
 def test_quiet_prints_nothing_on_success_and_errors_still_show(tmp_path):
-    for cmd in (("make", SPECIES / "quaking_aspen.txt", "-o", tmp_path / "a.glb", "-q", *FAST),
-                ("info", SPECIES / "quaking_aspen.txt", "--quiet")):
+    for cmd in (
+        ("make", SPECIES / "quaking_aspen.txt", "-o", tmp_path / "a.glb", "-q", *FAST),
+        ("info", SPECIES / "quaking_aspen.txt", "--quiet"),
+    ):
         proc = treegen(*cmd)
         assert proc.returncode == 0, proc.stderr
         assert proc.stdout == "" and proc.stderr == ""
@@ -351,8 +384,17 @@ def test_verbose_reports_each_stage_on_stderr(tmp_path):
     proc = treegen("make", SPECIES / "quaking_aspen.txt", "-o", tmp_path / "a.glb", "-v", *FAST)
     assert proc.returncode == 0, proc.stderr
     stages = [line.split()[0] for line in proc.stderr.splitlines()]
-    assert stages == ["materials", "generate", "rig", "mesh", "wind", "textures", "prepare", "write",
-                      "counts"]
+    assert stages == [
+        "materials",
+        "generate",
+        "rig",
+        "mesh",
+        "wind",
+        "textures",
+        "prepare",
+        "write",
+        "counts",
+    ]
     assert "nodes" in proc.stderr.splitlines()[-1]
     assert all(line.rstrip().endswith(" s") for line in proc.stderr.splitlines()[:-1])
     assert "\x1b" not in proc.stderr and "\r" not in proc.stderr
@@ -366,8 +408,9 @@ def test_make_json_summary_parses_and_matches_the_file(tmp_path):
     from treegen_cli.exchange.gltf import read_gltf
 
     out = tmp_path / "a.glb"
-    proc = treegen("make", SPECIES / "quaking_aspen.txt", "-o", out, "--json", "--duration", "0.5",
-                   "--fps", "10")
+    proc = treegen(
+        "make", SPECIES / "quaking_aspen.txt", "-o", out, "--json", "--duration", "0.5", "--fps", "10"
+    )
     assert proc.returncode == 0, proc.stderr
     s = json.loads(proc.stdout)
     assert s["file"] == str(out) and s["files"] == [str(out), str(out) + ".impostor.json"]
@@ -375,10 +418,10 @@ def test_make_json_summary_parses_and_matches_the_file(tmp_path):
     assert set(s["stages_s"]) >= {"generate", "rig", "mesh", "wind", "write"}
     # stages are timed inside the whole run: together they cannot exceed it
     assert 0 < sum(s["stages_s"].values()) <= s["seconds"] + 1e-3
-    assert s["keys"] == 6 and s["joint_keys"] == s["joints"] * 6        # 0.5 s × 10 fps + 1
+    assert s["keys"] == 6 and s["joint_keys"] == s["joints"] * 6  # 0.5 s × 10 fps + 1
     gltf, _ = read_gltf(out)
     assert s["joints"] == len(gltf["skins"][0]["joints"])
-    assert len(s["lods"]) == 5 and s["lods"][0]["vertices"] == s["vertices"]   # 4 + the impostor
+    assert len(s["lods"]) == 5 and s["lods"][0]["vertices"] == s["vertices"]  # 4 + the impostor
     assert s["lods"][-1]["triangles"] == 8 and s["lods"][-1]["joints"] == 1
     assert s["triangles"] > 0 and s["vertices"] > s["triangles"] / 2
     # --json output survives --quiet: it was asked for explicitly.
@@ -390,10 +433,22 @@ def test_progress_shows_on_a_terminal_and_is_cleared(tmp_path):
     import pty
 
     master, slave = pty.openpty()
-    proc = subprocess.Popen([sys.executable, "-m", "treegen_cli", "make",
-                             str(SPECIES / "quaking_aspen.txt"), "-o", str(tmp_path / "a.glb"),
-                             *FAST], cwd=ROOT, stdout=subprocess.PIPE, stderr=slave,
-                            stdin=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "treegen_cli",
+            "make",
+            str(SPECIES / "quaking_aspen.txt"),
+            "-o",
+            str(tmp_path / "a.glb"),
+            *FAST,
+        ],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=slave,
+        stdin=subprocess.DEVNULL,
+    )
     os.close(slave)
     seen = b""
     while True:
@@ -408,13 +463,15 @@ def test_progress_shows_on_a_terminal_and_is_cleared(tmp_path):
     proc.wait()
     os.close(master)
     assert proc.returncode == 0
-    assert b"generate" in seen or b"mesh" in seen or b"write" in seen   # the live display
-    assert seen.endswith(b"\x1b[2K") or b"\x1b[?25h" in seen          # cleared, cursor back
-    assert "\x1b" not in out and out.startswith("wrote ")               # stdout stays clean
+    assert b"generate" in seen or b"mesh" in seen or b"write" in seen  # the live display
+    assert seen.endswith(b"\x1b[2K") or b"\x1b[?25h" in seen  # cleared, cursor back
+    assert "\x1b" not in out and out.startswith("wrote ")  # stdout stays clean
 
 
-BLAS_PROBE = ("import sys, treegen_cli, numpy; from threadpoolctl import threadpool_info; "
-              "print(sorted({i.get('architecture') for i in threadpool_info() if i['internal_api'] == 'openblas'}))")
+BLAS_PROBE = (
+    "import sys, treegen_cli, numpy; from threadpoolctl import threadpool_info; "
+    "print(sorted({i.get('architecture') for i in threadpool_info() if i['internal_api'] == 'openblas'}))"
+)
 
 
 def test_openblas_kernel_is_pinned_for_cross_machine_bytes():
@@ -431,7 +488,7 @@ def test_openblas_kernel_is_pinned_for_cross_machine_bytes():
     child = subprocess.run([sys.executable, "-c", BLAS_PROBE], env=env, capture_output=True, text=True)
     assert child.stdout.strip() == f"['{KERNEL}']", child.stderr
     here = {i.get("architecture") for i in threadpool_info() if i["internal_api"] == "openblas"}
-    assert here == {KERNEL}     # conftest imports treegen_cli before numpy, as the CLI does
-    mine = dict(env, OPENBLAS_CORETYPE="Sandybridge")   # the user's own choice wins
+    assert here == {KERNEL}  # conftest imports treegen_cli before numpy, as the CLI does
+    mine = dict(env, OPENBLAS_CORETYPE="Sandybridge")  # the user's own choice wins
     child = subprocess.run([sys.executable, "-c", BLAS_PROBE], env=mine, capture_output=True, text=True)
     assert child.stdout.strip() == "['Sandybridge']", child.stderr

@@ -1,6 +1,7 @@
 """The impostor LOD: the hemi-octahedral atlas (cells where the documented formula puts them,
 showing what it says), the cards cut from it, their sway, and the written files (validator,
 sidecar, preview at the impostor's distance)."""
+
 from __future__ import annotations
 
 import json
@@ -12,8 +13,7 @@ import pytest
 
 from conftest import SPECIES, grown, species_path
 from treegen_cli.drawable import Part, decode_image
-from treegen_cli.impostor import (IMPOSTOR_DEFAULTS, card_cells, cell_direction, cell_of, encode,
-                                  view_basis)
+from treegen_cli.impostor import IMPOSTOR_DEFAULTS, card_cells, cell_direction, cell_of, encode, view_basis
 from treegen_cli.lod import LodOptions, measure_error_px, screen_coverage
 from treegen_cli.params import load_params
 from treegen_cli.pipeline import MakeOptions, build_asset
@@ -29,8 +29,12 @@ LOD_OPTIONS = LodOptions(distances=DISTANCES)
 
 @lru_cache(maxsize=None)
 def _asset(name: str):
-    opts = MakeOptions(rig=RigOptions(max_joints=48), wind=WindOptions(duration=1.0, fps=15.0),
-                       lod=LOD_OPTIONS, impostor=IMPOSTOR_DEFAULTS)
+    opts = MakeOptions(
+        rig=RigOptions(max_joints=48),
+        wind=WindOptions(duration=1.0, fps=15.0),
+        lod=LOD_OPTIONS,
+        impostor=IMPOSTOR_DEFAULTS,
+    )
     asset, _ = build_asset(load_params(species_path(name)), 0, opts, tree=grown(name))
     return asset
 
@@ -39,10 +43,11 @@ def _alpha(asset, col, row):
     imp = asset.lods[-1].impostor
     a = decode_image(imp.albedo.png, 4)[..., 3]
     c = imp.cell
-    return a[row * c:(row + 1) * c, col * c:(col + 1) * c]
+    return a[row * c : (row + 1) * c, col * c : (col + 1) * c]
 
 
 # ------------------------------------------------------------------------ the mapping
+
 
 @pytest.mark.parametrize("grid", [2, 7, 16])
 def test_every_cell_centre_decodes_to_a_direction_that_encodes_back_to_it(grid):
@@ -57,10 +62,10 @@ def test_documented_landmarks():
     """Straight up is the atlas centre; the horizon along ±a, ±b are its four corners."""
     assert np.allclose(encode(np.array([0.0, 0.0, 1.0])), [0.5, 0.5])
     eps = np.array([0.0, 0.0, 1e-9])
-    assert np.allclose(encode(np.array([1.0, 0, 0]) + eps), [1, 0], atol=1e-6)    # +a: top right
-    assert np.allclose(encode(np.array([0, 1.0, 0]) + eps), [1, 1], atol=1e-6)    # +b: bottom right
-    assert np.allclose(encode(np.array([-1.0, 0, 0]) + eps), [0, 1], atol=1e-6)   # −a: bottom left
-    assert np.allclose(encode(np.array([0, -1.0, 0]) + eps), [0, 0], atol=1e-6)   # −b: top left
+    assert np.allclose(encode(np.array([1.0, 0, 0]) + eps), [1, 0], atol=1e-6)  # +a: top right
+    assert np.allclose(encode(np.array([0, 1.0, 0]) + eps), [1, 1], atol=1e-6)  # +b: bottom right
+    assert np.allclose(encode(np.array([-1.0, 0, 0]) + eps), [0, 1], atol=1e-6)  # −a: bottom left
+    assert np.allclose(encode(np.array([0, -1.0, 0]) + eps), [0, 0], atol=1e-6)  # −b: top left
     assert card_cells(16) == [(15, 0), (15, 15)]
 
 
@@ -79,9 +84,15 @@ def _box(centre, half, color=(0.5, 0.5, 0.5)) -> Part:
                 nrm.append(n)
             idx += [base, base + 1, base + 2, base, base + 2, base + 3]
     V = len(pos)
-    return Part("box", np.array(pos, np.float32), np.array(nrm, np.float32),
-                np.array(idx, np.uint32), np.zeros((V, 4), np.int64),
-                np.tile(np.array([1, 0, 0, 0], np.float32), (V, 1)), color)
+    return Part(
+        "box",
+        np.array(pos, np.float32),
+        np.array(nrm, np.float32),
+        np.array(idx, np.uint32),
+        np.zeros((V, 4), np.int64),
+        np.tile(np.array([1, 0, 0, 0], np.float32), (V, 1)),
+        color,
+    )
 
 
 @needs_gl
@@ -105,7 +116,7 @@ def test_a_direction_lands_in_the_cell_the_formula_gives_and_shows_that_view():
         right, up = view_basis(dc)
         x, y = (marker - centre) @ right / radius, (marker - centre) @ up / radius
         if abs(x) < 0.2:
-            continue                       # mirror would overlap the marker itself
+            continue  # mirror would overlap the marker itself
         px = int(col * cell + (0.5 + 0.5 * x) * cell)
         py = int(row * cell + (0.5 - 0.5 * y) * cell)
         mx = int(col * cell + (0.5 - 0.5 * x) * cell)
@@ -139,30 +150,40 @@ def test_a_leaf_card_in_the_atlas_shows_its_texel_times_colour_tint_shade_and_oc
 
     tex = np.zeros((16, 16, 4), np.uint8)
     tex[..., :3] = (200, 120, 60)
-    tex[:, :8, 3] = 255                                     # left half opaque (u < 0.5)
+    tex[:, :8, 3] = 255  # left half opaque (u < 0.5)
     y = np.array([0.0, 0.0, 0.0])
-    pos = np.array([[0, -1, -1], [0, 1, -1], [0, -1, 1], [0, 1, 1]], np.float32)   # x = 0 plane
+    pos = np.array([[0, -1, -1], [0, 1, -1], [0, -1, 1], [0, 1, 1]], np.float32)  # x = 0 plane
     uv = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], np.float32)
     color = (0.8, 0.9, 0.7)
-    leaf = Part("leaves", pos, np.tile(np.float32([1, 0, 0]), (4, 1)),
-                np.array([0, 1, 3, 0, 3, 2], np.uint32), np.zeros((4, 4), np.int64),
-                np.tile(np.float32([1, 0, 0, 0]), (4, 1)), color, double_sided=True, uvs=uv,
-                texture=tex, alpha_cutoff=0.5, wrap=("CLAMP", "CLAMP"))
+    leaf = Part(
+        "leaves",
+        pos,
+        np.tile(np.float32([1, 0, 0]), (4, 1)),
+        np.array([0, 1, 3, 0, 3, 2], np.uint32),
+        np.zeros((4, 4), np.int64),
+        np.tile(np.float32([1, 0, 0, 0]), (4, 1)),
+        color,
+        double_sided=True,
+        uvs=uv,
+        texture=tex,
+        alpha_cutoff=0.5,
+        wrap=("CLAMP", "CLAMP"),
+    )
     grid, cell, radius = 4, 64, 2.0
     albedo, normal = render_atlas(Drawable([leaf], 1), y, radius, grid, cell)
     # the crown is the card itself: its box's half extents (0.05 floor in x) in radius units
     rel = pos / radius
     r = np.linalg.norm(rel / np.array([0.05, 0.5, 0.5]), axis=1)
     t = np.clip((r - 0.1) / 0.9, 0, 1)
-    ao = 0.45 + 0.55 * t * t * (3 - 2 * t)                  # 1 at every corner: r > 1
+    ao = 0.45 + 0.55 * t * t * (3 - 2 * t)  # 1 at every corner: r > 1
     assert np.allclose(ao, 1.0)
     shade = np.asarray(color) * leaf_tint(np.array([0]))[0] * LEAF_SHADE
     expected = _linear_to_srgb(_srgb_to_linear((200, 120, 60)) * shade)
     for d, facing in (((1.0, 0.0, 1e-6), +1), ((-1.0, 0.0, 1e-6), -1)):
         col, row = cell_of(np.array(d), grid)
         right, up = view_basis(cell_direction(col, row, grid))
-        a = albedo[row * cell:(row + 1) * cell, col * cell:(col + 1) * cell]
-        n = normal[row * cell:(row + 1) * cell, col * cell:(col + 1) * cell]
+        a = albedo[row * cell : (row + 1) * cell, col * cell : (col + 1) * cell]
+        n = normal[row * cell : (row + 1) * cell, col * cell : (col + 1) * cell]
         covered = a[..., 3] > 0
         # the opaque half: card y < 0 → this view's x = y·right.y
         xs = (np.arange(cell) + 0.5) / cell * 2 - 1
@@ -173,8 +194,8 @@ def test_a_leaf_card_in_the_atlas_shows_its_texel_times_colour_tint_shade_and_oc
         assert np.abs(a[covered][:, :3] - expected).max() <= 1.5, (a[covered][:3], expected)
         nn = n[covered][:, :3] / 255 * 2 - 1
         assert np.allclose(nn.mean(0), [facing * 1, 0, 0], atol=0.02)
-        depth = n[covered][:, 3] / 255             # 0.5 + 0.5·dot(p − centre, d)/radius
-        dz = cell_direction(col, row, grid)[2]       # the view looks slightly down at the card
+        depth = n[covered][:, 3] / 255  # 0.5 + 0.5·dot(p − centre, d)/radius
+        dz = cell_direction(col, row, grid)[2]  # the view looks slightly down at the card
         assert np.abs(depth - 0.5).max() <= 0.5 * dz / radius + 2 / 255
         assert abs(depth.mean() - 0.5) <= 2 / 255
 
@@ -198,11 +219,12 @@ def test_leaf_ids_tint_shrink_and_png_helpers():
     assert small.shape == (512, 256, 4)
     assert abs(small[..., 3].mean() - img[..., 3].mean()) < 0.6
     assert np.array_equal(small[0, 0], np.round(img[:2, :2].reshape(4, 4).mean(0) + 1e-9))
-    assert shrink(img[:300]).shape == (300, 512, 4)           # 300 rows: no halving fits
+    assert shrink(img[:300]).shape == (300, 512, 4)  # 300 rows: no halving fits
     assert np.array_equal(decode_image(png_bytes_unfiltered(img), 4), img)
 
 
 # ------------------------------------------------------------------------ the asset
+
 
 @needs_gl
 @pytest.mark.parametrize("species", SPECIES)
@@ -219,15 +241,21 @@ def test_impostor_is_the_last_lod_within_budget_and_shows_the_tree(species):
     assert cover == sorted(cover, reverse=True) and cover[-1] == 0.0
     height = float(np.asarray(asset.lods[0].primitives[0].positions)[:, 2].max())
     # the tree is at most switch_px tall on screen where the impostor takes over
-    assert cover[-2] * LOD_OPTIONS.width / LOD_OPTIONS.aspect <= IMPOSTOR_DEFAULTS.switch_px * 1.2 \
+    assert (
+        cover[-2] * LOD_OPTIONS.width / LOD_OPTIONS.aspect <= IMPOSTOR_DEFAULTS.switch_px * 1.2
         or imp.distance == pytest.approx(1.5 * geo[-1].distance)
+    )
     assert cover[-2] == pytest.approx(screen_coverage(height, imp.distance, LOD_OPTIONS), rel=0.25)
     # the cards show the tree: their cells are covered, but not solid squares (rush and
     # shave grass: culms a tenth of an atlas pixel wide, a few pixels are hit)
     for col, row in imp.impostor.cards:
         covered = (_alpha(asset, col, row) > 127).mean()
-        assert (0.003 if species in ("rush", "shave_grass") else 0.02) < covered < 0.8, \
-            (species, col, row, covered)
+        assert (0.003 if species in ("rush", "shave_grass") else 0.02) < covered < 0.8, (
+            species,
+            col,
+            row,
+            covered,
+        )
     mat = next(m for m in asset.materials if m.name == "impostor")
     assert not mat.double_sided and mat.alpha_cutoff == 0.5 and mat.base_texture is imp.impostor.albedo
     # the impostor's clip is decimated within the bound like any LOD's
@@ -247,7 +275,7 @@ def test_top_and_side_views_of_the_aspen():
     top = _alpha(asset, g // 2, g // 2) > 127
     ys, xs = np.nonzero(top)
     w, h = np.ptp(xs) + 1, np.ptp(ys) + 1
-    assert 0.7 < w / h < 1.4                              # round from above
+    assert 0.7 < w / h < 1.4  # round from above
     d = cell_direction(g // 2, g // 2, g)
     right, up = view_basis(d)
     lo, hi = imp.bounds
@@ -257,16 +285,16 @@ def test_top_and_side_views_of_the_aspen():
     assert abs(xs.mean() - ex) < 0.1 * c and abs(ys.mean() - ey) < 0.1 * c
     side = _alpha(asset, *imp.cards[0]) > 127
     ys, xs = np.nonzero(side)
-    assert np.ptp(ys) > 1.3 * np.ptp(xs)                  # a tall, narrow aspen
+    assert np.ptp(ys) > 1.3 * np.ptp(xs)  # a tall, narrow aspen
     dc = cell_direction(*imp.cards[0], g)
     r2, u2 = view_basis(dc)
     base_row = (0.5 - 0.5 * (np.array([0, 0, lo[2]]) - imp.centre) @ u2 / imp.radius) * c
     assert abs(ys.max() - base_row) <= 2
     # normals: the top view's face up, the side view's face the viewer (+a)
     n = decode_image(imp.normal_depth.png, 4)[..., :3].astype(float) / 255 * 2 - 1
-    top_n = n[(g // 2) * c:(g // 2 + 1) * c, (g // 2) * c:(g // 2 + 1) * c][top]
+    top_n = n[(g // 2) * c : (g // 2 + 1) * c, (g // 2) * c : (g // 2 + 1) * c][top]
     col, row = imp.cards[0]
-    side_n = n[row * c:(row + 1) * c, col * c:(col + 1) * c][side]
+    side_n = n[row * c : (row + 1) * c, col * c : (col + 1) * c][side]
     assert top_n[:, 2].mean() > 0.3 and side_n[:, 0].mean() > 0.3
 
 
@@ -279,7 +307,7 @@ def test_cards_ride_one_joint_that_sways_with_the_crown():
     assert (cards.joints == 0).all() and (cards.weights[:, 0] == 1).all()
     (clip,) = imp.clips
     rot = np.asarray(clip.rotations)[:, 0]
-    assert np.ptp(rot, axis=0).max() > 1e-4                   # it moves
+    assert np.ptp(rot, axis=0).max() > 1e-4  # it moves
     # the cards' centre follows the coarse tree's crown (mean leaf position) over the loop
     W = pose_world(imp.skeleton, clip.rotations)
     S = W @ np.linalg.inv(imp.skeleton.bind_world)
@@ -297,6 +325,7 @@ def test_cards_ride_one_joint_that_sways_with_the_crown():
 
 
 # ------------------------------------------------------------------------ the files
+
 
 @needs_gl
 def test_written_glb_validator_clean_sidecar_and_preview_at_distance(tmp_path):
@@ -319,7 +348,7 @@ def test_written_glb_validator_clean_sidecar_and_preview_at_distance(tmp_path):
     assert meta["axes"] == {"a": [1.0, 0.0, 0.0], "b": [0.0, 0.0, -1.0], "up": [0.0, 1.0, 0.0]}
     for key in ("albedo", "normal_depth"):
         view = gltf["bufferViews"][gltf["images"][meta["images"][key]]["bufferView"]]
-        png = blob[view.get("byteOffset", 0):view.get("byteOffset", 0) + view["byteLength"]]
+        png = blob[view.get("byteOffset", 0) : view.get("byteOffset", 0) + view["byteLength"]]
         assert decode_image(png, 4).shape == (1024, 1024, 4)
     # the far LOD as a client draws it: the cards, at the impostor's distance, fill pixels
     scene = exchange.read_drawable(out, lod=4)
@@ -328,24 +357,24 @@ def test_written_glb_validator_clean_sidecar_and_preview_at_distance(tmp_path):
     target = 0.5 * (pts.min(0) + pts.max(0))
     far = s["lods"][-1]["distance_m"]
     height = meta["bounds_max"][1] - meta["bounds_min"][1]
-    fov = 2 * np.degrees(np.arctan(0.6 * height / far))     # the tree fills most of the view
-    cam = Camera(eye=target + direction(-60.0, 5.0) * far, target=target, near=1.0,
-                 far=4 * far, fov_deg=fov)
+    fov = 2 * np.degrees(np.arctan(0.6 * height / far))  # the tree fills most of the view
+    cam = Camera(eye=target + direction(-60.0, 5.0) * far, target=target, near=1.0, far=4 * far, fov_deg=fov)
     with Renderer(scene, 96, 96) as r:
         img = r.render(cam).astype(int)
         bg = r.render(cam, draw_tree=False).astype(int)
     tree = np.abs(img - bg).sum(-1) > 30
     assert tree.sum() > 0.03 * tree.size
     ys, xs = np.nonzero(tree)
-    assert abs(xs.mean() - 48) < 15 and abs(ys.mean() - 48) < 25   # the tree, in the middle
+    assert abs(xs.mean() - 48) < 15 and abs(ys.mean() - 48) < 25  # the tree, in the middle
 
 
 @needs_gl
 def test_lod_files_and_usd_carry_the_impostor(tmp_path):
     from treegen_cli import api
 
-    s = api.make(species_path("rush"), tmp_path / "r.glb", duration=1.0, fps=10.0,
-                 impostor=True, lod_files=True)
+    s = api.make(
+        species_path("rush"), tmp_path / "r.glb", duration=1.0, fps=10.0, impostor=True, lod_files=True
+    )
     names = sorted(p.rsplit("/", 1)[-1] for p in s["files"])
     assert names == sorted([f"r_LOD{k}.glb" for k in range(5)] + ["r_LOD4.glb.impostor.json"])
     s = api.make(species_path("rush"), tmp_path / "u.usda", duration=1.0, fps=10.0, impostor=True)
@@ -358,8 +387,12 @@ def test_lod_files_and_usd_carry_the_impostor(tmp_path):
     stage = Usd.Stage.Open(str(tmp_path / "u.usda"))
     layer_meta = stage.GetRootLayer().customLayerData
     assert json.loads(layer_meta["treegen_impostor"]) == {k: v for k, v in meta.items() if k != "file"}
-    assert len(api.make(species_path("rush"), tmp_path / "n.glb", duration=1.0, fps=10.0,
-                        impostor=False)["lods"]) == 4
+    assert (
+        len(
+            api.make(species_path("rush"), tmp_path / "n.glb", duration=1.0, fps=10.0, impostor=False)["lods"]
+        )
+        == 4
+    )
     # a .usdz packages both atlases (the normal map unreferenced) and stays AR Quick Look-clean
     import arkit_check
     from treegen_cli.exchange.usd import validate_usd
@@ -367,7 +400,9 @@ def test_lod_files_and_usd_carry_the_impostor(tmp_path):
     api.make(species_path("rush"), tmp_path / "z.usdz", duration=1.0, fps=10.0, impostor=True)
     assert validate_usd(tmp_path / "z.usdz") == []
     assert json.loads((tmp_path / "z.usdz.impostor.json").read_text())["images"] == {
-        "albedo": "textures/impostor_albedo.png", "normal_depth": "textures/impostor_normal.png"}
+        "albedo": "textures/impostor_albedo.png",
+        "normal_depth": "textures/impostor_normal.png",
+    }
     if arkit_check.available():
         report = arkit_check.check(tmp_path / "z.usdz")
         assert report["errors"] == [] and report["failed"] == [], report

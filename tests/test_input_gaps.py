@@ -5,6 +5,7 @@ Covered: a directory where a file goes (species, layout, catalogue, -o, --animat
 name without a known extension, `Levels` too deep for the stem limit (blamed on Levels, not on
 the count), implausibly tall or wide trees (`--max-size`), and option ranges worded with the
 CLI flag or catalogue JSON path instead of internal field names (`--wind-speed`, not 'speed')."""
+
 from __future__ import annotations
 
 import json
@@ -19,8 +20,10 @@ import pytest
 from treegen_cli.bundled import species_dir
 
 ROOT = Path(__file__).resolve().parent.parent
-ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(
-    [str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])}
+ENV = {
+    **os.environ,
+    "PYTHONPATH": os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]),
+}
 ASPEN = (species_dir() / "quaking_aspen.txt").read_text()
 
 
@@ -37,13 +40,17 @@ def edited(**keys) -> str:
 INPUTS = {
     "levels9.txt": edited(Levels=9),
     "scale1300.txt": edited(Scale=1300),
-    "tall.txt": edited(Scale=130),                 # trunk ≤ 133 m, branches reach ~155 m
+    "tall.txt": edited(Scale=130),  # trunk ≤ 133 m, branches reach ~155 m
     "wide.txt": edited(Scale=50, _1Length=2, _1DownAngle=90, _1DownAngleV=0),
     "catalogue_fov.json": json.dumps({"entries": [{"species": "rush", "fov": 100, "schedule": "paper"}]}),
     "catalogue_tex.json": json.dumps({"entries": [{"species": "rush", "texture_size": 100}]}),
     "catalogue_size.json": json.dumps({"entries": [{"species": "scale1300.txt"}]}),
-    "forest.json": json.dumps({"camera": {"position": [0, -20, 2], "target": [0, 0, 2]},
-                               "instances": [{"species": "rush", "position": [0, 0]}]}),
+    "forest.json": json.dumps(
+        {
+            "camera": {"position": [0, -20, 2], "target": [0, 0, 2]},
+            "instances": [{"species": "rush", "position": [0, 0]}],
+        }
+    ),
 }
 
 CASES = [
@@ -59,12 +66,16 @@ CASES = [
     (["forest", "forest.json", "-o", "f"], ["-o f: no file extension", ".glb"]),
     (["preview", "rush", "--animate", "loop"], ["--animate loop: no file extension", ".gif"]),
     # Levels too deep: the key and its range, not the stem count alone
-    (["make", "levels9.txt", "-o", "x.glb"], ["levels9.txt: Levels = 9", "--max-stems limit of 200,000",
-                                              "Levels may be 0..9", "at most 5 fits"]),
+    (
+        ["make", "levels9.txt", "-o", "x.glb"],
+        ["levels9.txt: Levels = 9", "--max-stems limit of 200,000", "Levels may be 0..9", "at most 5 fits"],
+    ),
     (["info", "levels9.txt"], ["Levels = 9", "0..9"]),
     # plausibility bound on the tree's size
-    (["make", "scale1300.txt", "-o", "x.glb"], ["scale1300.txt: Scale = 1300", "1,303 m",
-                                                "bound of 150 m", "--max-size"]),
+    (
+        ["make", "scale1300.txt", "-o", "x.glb"],
+        ["scale1300.txt: Scale = 1300", "1,303 m", "bound of 150 m", "--max-size"],
+    ),
     (["info", "tall.txt"], ["Scale = 130 grows a tree", "m tall", "bound of 150 m", "--max-size"]),
     (["make", "wide.txt", "-o", "x.glb"], ["1Length = 2 grows a crown", "m wide", "bound of 150 m"]),
     (["make", "rush", "-o", "x.glb", "--max-size", "0"], ["--max-size 0: the bound must be > 0"]),
@@ -82,8 +93,10 @@ CASES = [
     (["info", "rush", "--seed", "-1"], ["--seed -1: allowed range 0.."]),
     (["info", "rush", "--wind", "--wind-speed", "300"], ["--wind-speed 300: allowed range 0..100"]),
     (["batch", "catalogue_fov.json", "-o", "out", "--dry-run"], ["entries[0].fov 100: ", "fov < 90"]),
-    (["batch", "catalogue_tex.json", "-o", "out", "--dry-run"],
-     ["entries[0].texture_size 100: must be a power of two in [64, 2048]"]),
+    (
+        ["batch", "catalogue_tex.json", "-o", "out", "--dry-run"],
+        ["entries[0].texture_size 100: must be a power of two in [64, 2048]"],
+    ),
 ]
 
 
@@ -99,15 +112,16 @@ def folder(tmp_path_factory) -> Path:
 @pytest.mark.parametrize("args, needles", CASES, ids=[" ".join(a) for a, _ in CASES])
 def test_input_gap_is_one_line_exit_2_naming_what_was_typed(folder, args, needles):
     before = sorted(p.name for p in folder.rglob("*"))
-    proc = subprocess.run([sys.executable, "-m", "treegen_cli", *args], capture_output=True,
-                          text=True, env=ENV, cwd=folder)
+    proc = subprocess.run(
+        [sys.executable, "-m", "treegen_cli", *args], capture_output=True, text=True, env=ENV, cwd=folder
+    )
     assert proc.returncode == 2, proc.stdout + proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("treegen: error: "), proc.stderr
     assert proc.stdout == ""
     for needle in needles:
         assert needle in lines[0], lines[0]
-    assert sorted(p.name for p in folder.rglob("*")) == before          # nothing written
+    assert sorted(p.name for p in folder.rglob("*")) == before  # nothing written
 
 
 def test_internal_field_names_never_reach_the_user(folder):
@@ -115,9 +129,14 @@ def test_internal_field_names_never_reach_the_user(folder):
     from treegen_cli import api
     from treegen_cli.errors import TreegenError
 
-    for options, flag in [({"wind_speed": -1}, "--wind-speed"), ({"wind_dir": 999}, "--wind-dir"),
-                          ({"fov": 0}, "--fov"), ({"duration": 0}, "--duration"),
-                          ({"gust": 5}, "--gust"), ({"turbulence": -1}, "--turbulence")]:
+    for options, flag in [
+        ({"wind_speed": -1}, "--wind-speed"),
+        ({"wind_dir": 999}, "--wind-dir"),
+        ({"fov": 0}, "--fov"),
+        ({"duration": 0}, "--duration"),
+        ({"gust": 5}, "--gust"),
+        ({"turbulence": -1}, "--turbulence"),
+    ]:
         with pytest.raises(TreegenError) as e:
             api.resolve(options)
         assert str(e.value).startswith(flag + " ") and "WindOptions" not in str(e.value)
@@ -128,8 +147,13 @@ def test_internal_field_names_never_reach_the_user(folder):
 
 def test_max_size_overrides_the_bound(folder):
     """The refused tall tree grows with a larger bound, and its reported height is over 150 m."""
-    proc = subprocess.run([sys.executable, "-m", "treegen_cli", "info", "tall.txt", "--json",
-                           "--max-size", "400"], capture_output=True, text=True, env=ENV, cwd=folder)
+    proc = subprocess.run(
+        [sys.executable, "-m", "treegen_cli", "info", "tall.txt", "--json", "--max-size", "400"],
+        capture_output=True,
+        text=True,
+        env=ENV,
+        cwd=folder,
+    )
     assert proc.returncode == 0, proc.stderr
     assert 150 < json.loads(proc.stdout)["height_m"] <= 400
 
@@ -141,4 +165,4 @@ def test_every_bundled_species_fits_the_default_bound():
 
     assert len(SPECIES) >= 15
     for name in SPECIES:
-        check_size(grown(name), DEFAULTS.max_size)          # raises TreegenError if not
+        check_size(grown(name), DEFAULTS.max_size)  # raises TreegenError if not

@@ -2,6 +2,7 @@
 
 Short clips (1 s at 15 fps) and small joint budgets keep the whole file fast.
 """
+
 from __future__ import annotations
 
 import json
@@ -16,9 +17,18 @@ from click.testing import CliRunner
 from synthetic import bark, chain_skeleton, leaves, sway_clip
 from treegen_cli.errors import TreegenError
 from treegen_cli.clip import play_keys as playback
-from treegen_cli.lod import (LodOptions, decimate, lod_table_row, measure_error_px,
-                             near_pixel_size, paper_pixel_size, pixel_size, probes,
-                             screen_coverage, switch_distances)
+from treegen_cli.lod import (
+    LodOptions,
+    decimate,
+    lod_table_row,
+    measure_error_px,
+    near_pixel_size,
+    paper_pixel_size,
+    pixel_size,
+    probes,
+    screen_coverage,
+    switch_distances,
+)
 from treegen_cli.params import load_params
 from treegen_cli.pipeline import MakeOptions, build_asset
 from treegen_cli.rig import RigOptions
@@ -32,8 +42,11 @@ DISTANCES = (0.0, 30.0, 130.0)
 
 @lru_cache(maxsize=None)
 def _asset(name: str, lod: bool = True, schedule: str = "bounded", max_joints: int = 48):
-    opts = MakeOptions(rig=RigOptions(max_joints=max_joints), wind=SHORT,
-                       lod=LodOptions(distances=DISTANCES, schedule=schedule) if lod else None)
+    opts = MakeOptions(
+        rig=RigOptions(max_joints=max_joints),
+        wind=SHORT,
+        lod=LodOptions(distances=DISTANCES, schedule=schedule) if lod else None,
+    )
     asset, _tree = build_asset(load_params(SPECIES_DIR / f"{name}.txt"), 3, opts)
     return asset
 
@@ -55,7 +68,7 @@ def test_pixel_size_forms():
     assert exact == pytest.approx(2 * 130 * np.tan(np.radians(30)) / 1920)
     paper = paper_pixel_size(130.0, LodOptions())
     assert paper == pytest.approx(130 * np.tan(np.radians(60)) / 1920)
-    assert paper / exact == pytest.approx(1.5)            # the paper's form is looser at 60°
+    assert paper / exact == pytest.approx(1.5)  # the paper's form is looser at 60°
     # perspective-true: tighter than the centre pixel, → it far away, 0 inside the sphere
     assert near_pixel_size(130.0, 0.0) == pytest.approx(exact)
     assert near_pixel_size(130.0, 10.0) < exact
@@ -86,14 +99,14 @@ def test_every_lod_within_error_bound(species):
         assert clip.name == ("wind_loop" if k == 0 else f"wind_lod{k}_loop")
         assert lod.distance == DISTANCES[k]
         if lod.distance == 0.0:
-            assert clip.keys is None                          # d → 0: the dense clip
+            assert clip.keys is None  # d → 0: the dense clip
             continue
         err = measure_error_px(lod.skeleton, lod.primitives, _dense(clip), clip, lod.distance)
         assert err <= 1.0 + 1e-9
-        if clip.keys is None:                                 # camera may be inside the tree
+        if clip.keys is None:  # camera may be inside the tree
             continue
         kept = _kept(clip)
-        assert kept[0].all() and kept[-1].all()               # the clip still loops
+        assert kept[0].all() and kept[-1].all()  # the clip still loops
     cover = [lod.screen_coverage for lod in asset.lods]
     assert cover == sorted(cover, reverse=True) and cover[-1] == 0.0
 
@@ -195,7 +208,7 @@ def test_table_rows():
         assert r["max_error_px"] <= 1.0
         assert r["leaf_vertex_updates_per_frame"] < r["leaf_vertices"]
     assert rows[-1]["keys_kept_pct"] < rows[1]["keys_kept_pct"]
-    json.dumps(rows)                                          # plain JSON types
+    json.dumps(rows)  # plain JSON types
 
 
 def test_screen_coverage():
@@ -205,11 +218,22 @@ def test_screen_coverage():
     assert screen_coverage(10.0, 100.0, o) == pytest.approx(10.0 / view_h)
 
 
-@pytest.mark.parametrize("kwargs", [dict(distances=(30.0, 10.0)), dict(distances=()),
-                                    dict(distances=(-1.0,)), dict(fov_deg=0.0), dict(width=0),
-                                    dict(error_px=-1.0), dict(schedule="x"),
-                                    dict(screen=(0.1, 0.5)), dict(screen=(0.5, 0.0)),
-                                    dict(screen=()), dict(schedule="paper", fov_deg=100.0)])
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        dict(distances=(30.0, 10.0)),
+        dict(distances=()),
+        dict(distances=(-1.0,)),
+        dict(fov_deg=0.0),
+        dict(width=0),
+        dict(error_px=-1.0),
+        dict(schedule="x"),
+        dict(screen=(0.1, 0.5)),
+        dict(screen=(0.5, 0.0)),
+        dict(screen=()),
+        dict(schedule="paper", fov_deg=100.0),
+    ],
+)
 def test_bad_options(kwargs):
     with pytest.raises(TreegenError):
         LodOptions(**kwargs)
@@ -221,6 +245,7 @@ def test_written_lods_validate(tmp_path):
 
     def export(a, p):
         return _export(prepare(a), p)
+
     from treegen_cli.exchange.usd import validate_usd
     from treegen_cli.exchange.validate import ValidatorUnavailable, summary, validate_gltf
 
@@ -229,9 +254,10 @@ def test_written_lods_validate(tmp_path):
     export(asset, glb)
     raw = glb.read_bytes()
     n = int.from_bytes(raw[12:16], "little")
-    doc = json.loads(raw[20:20 + n])
-    assert [a["name"] for a in doc["animations"]] == \
-        ["wind_loop"] + [f"wind_lod{k}_loop" for k in range(1, len(DISTANCES))]
+    doc = json.loads(raw[20 : 20 + n])
+    assert [a["name"] for a in doc["animations"]] == ["wind_loop"] + [
+        f"wind_lod{k}_loop" for k in range(1, len(DISTANCES))
+    ]
     assert "MSFT_lod" in doc["extensionsUsed"] and "MSFT_lod" not in doc.get("extensionsRequired", [])
     try:
         report = validate_gltf(glb)
@@ -247,8 +273,19 @@ def test_written_lods_validate(tmp_path):
 def test_cli_info_lod_json():
     from treegen_cli.cli import cli
 
-    res = CliRunner().invoke(cli, ["info", str(SPECIES_DIR / "quaking_aspen.txt"), "--lod", "--json",
-                                   "--lod-distances", "0,130", "--schedule", "bounded-step"])
+    res = CliRunner().invoke(
+        cli,
+        [
+            "info",
+            str(SPECIES_DIR / "quaking_aspen.txt"),
+            "--lod",
+            "--json",
+            "--lod-distances",
+            "0,130",
+            "--schedule",
+            "bounded-step",
+        ],
+    )
     assert res.exit_code == 0, res.output
     rows = json.loads(res.output)["lods"]
     assert [r["distance_m"] for r in rows][:2] == [0.0, 130.0]
@@ -264,8 +301,9 @@ def test_cli_info_lod_json():
         assert imp["impostor"]["grid"] == 16 and imp["impostor"]["atlas_px"] == 1024
         assert 15.0 < imp["impostor"]["card_m"] < 25.0 and imp["impostor"]["atlas_bytes"] > 1e5
         assert rows[1]["screen_coverage"] > 0.0 == imp["screen_coverage"]
-    res = CliRunner().invoke(cli, ["info", str(SPECIES_DIR / "quaking_aspen.txt"), "--lod",
-                                   "--lod-distances", "30,10"])
+    res = CliRunner().invoke(
+        cli, ["info", str(SPECIES_DIR / "quaking_aspen.txt"), "--lod", "--lod-distances", "30,10"]
+    )
     assert res.exit_code != 0
 
 
@@ -273,20 +311,21 @@ def _skinned(lod, rotations: np.ndarray) -> np.ndarray:
     """Every vertex of the LOD under linear blend skinning for each frame: (K, V, 3)."""
     from treegen_cli.skeleton import pose_world
 
-    world = pose_world(lod.skeleton, rotations)                        # (K, J, 4, 4)
+    world = pose_world(lod.skeleton, rotations)  # (K, J, 4, 4)
     skin = world @ np.linalg.inv(np.asarray(lod.skeleton.bind_world))  # (K, J, 4, 4)
     pos = np.concatenate([np.asarray(p.positions, np.float64) for p in lod.primitives])
     jn = np.concatenate([np.asarray(p.joints, np.int64) for p in lod.primitives])
     w = np.concatenate([np.asarray(p.weights, np.float64) for p in lod.primitives])
     out = np.zeros((rotations.shape[0],) + pos.shape)
     for s in range(4):
-        m = skin[:, jn[:, s]]                                          # (K, V, 4, 4)
+        m = skin[:, jn[:, s]]  # (K, V, 4, 4)
         out += w[None, :, s, None] * (np.einsum("kvij,vj->kvi", m[..., :3, :3], pos) + m[..., :3, 3])
     return out
 
 
-def _camera_px(points: np.ndarray, eye: np.ndarray, target: np.ndarray, fov_deg: float,
-               width: int) -> np.ndarray:
+def _camera_px(
+    points: np.ndarray, eye: np.ndarray, target: np.ndarray, fov_deg: float, width: int
+) -> np.ndarray:
     """Pixel coordinates (..., 2) of world points (..., 3) on a pinhole camera at `eye` looking
     at `target` (generator Z up), horizontal fov, `width` pixels; every point must be in front."""
     fwd = (target - eye) / np.linalg.norm(target - eye)
@@ -300,8 +339,9 @@ def _camera_px(points: np.ndarray, eye: np.ndarray, target: np.ndarray, fov_deg:
     return f * np.stack([rel @ right, rel @ up], axis=-1) / z[..., None]
 
 
-@pytest.mark.parametrize("name,schedule", [("quaking_aspen", "bounded"), ("sassafras", "bounded"),
-                                           ("sassafras", "bounded-step")])
+@pytest.mark.parametrize(
+    "name,schedule", [("quaking_aspen", "bounded"), ("sassafras", "bounded"), ("sassafras", "bounded-step")]
+)
 def test_perspective_bound_on_every_vertex(name, schedule):
     """Independent of the probes and the bound's algebra: skin every vertex as an engine would
     (the kept keys played back, composed, linear blend skinning) at every key time and halfway
@@ -318,6 +358,7 @@ def test_perspective_bound_on_every_vertex(name, schedule):
         played = playback(dense, _kept(clip), clip.interpolation)
         # halfway between keys: glTF slerps (LINEAR) or holds (STEP, the dense clip too) each track
         from treegen_cli.quat import slerp
+
         half = np.full(dense[:-1].shape[:2], 0.5)
         if clip.interpolation == "STEP":
             dense_mid, played_mid = dense[:-1], played[:-1]
@@ -330,15 +371,19 @@ def test_perspective_bound_on_every_vertex(name, schedule):
         worst = 0.0
         for az in np.radians([0.0, 90.0, 180.0, 270.0]) + 0.3:
             for el in np.radians([-40.0, 0.0, 35.0, 70.0]):
-                eye = centre + lod.distance * np.array([np.cos(el) * np.cos(az),
-                                                        np.cos(el) * np.sin(az), np.sin(el)])
-                err = np.linalg.norm(_camera_px(a, eye, centre, o.fov_deg, o.width)
-                                     - _camera_px(b, eye, centre, o.fov_deg, o.width), axis=-1)
+                eye = centre + lod.distance * np.array(
+                    [np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)]
+                )
+                err = np.linalg.norm(
+                    _camera_px(a, eye, centre, o.fov_deg, o.width)
+                    - _camera_px(b, eye, centre, o.fov_deg, o.width),
+                    axis=-1,
+                )
                 worst = max(worst, float(err.max()))
         assert worst <= o.error_px + 1e-3, (lod.distance, worst)
-        assert worst > 0.05 * o.error_px          # the clip was really decimated
+        assert worst > 0.05 * o.error_px  # the clip was really decimated
         measured = measure_error_px(lod.skeleton, lod.primitives, _dense(clip), clip, lod.distance, o)
-        assert worst <= measured + 1e-3           # the reported error bounds what a camera sees
+        assert worst <= measured + 1e-3  # the reported error bounds what a camera sees
 
 
 def test_paper_schedule_is_the_paper_rule():
@@ -361,7 +406,7 @@ def test_paper_schedule_is_the_paper_rule():
         want = np.zeros((K, J), dtype=bool)
         want[0] = want[-1] = True
         P = np.zeros(J)
-        for k in range(1, K - 1):                  # the paper's rule, frame by frame
+        for k in range(1, K - 1):  # the paper's rule, frame by frame
             P += step[k - 1]
             hit = P > threshold
             want[k] = hit
@@ -379,8 +424,9 @@ def test_decimation_work_is_linear_in_clip_length():
     params = load_params(SPECIES_DIR / "black_tupelo.txt")
     per = {}
     for duration in (4.0, 12.0):
-        opts = MakeOptions(rig=RigOptions(max_joints=64), lod=None,
-                           wind=WindOptions(duration=duration, fps=15.0))
+        opts = MakeOptions(
+            rig=RigOptions(max_joints=64), lod=None, wind=WindOptions(duration=duration, fps=15.0)
+        )
         lod = build_asset(params, 0, opts)[0].lods[0]
         for d in (60.0, 200.0):
             _clip, rep = decimate(lod.skeleton, lod.primitives, lod.clips[0], d)
@@ -389,7 +435,7 @@ def test_decimation_work_is_linear_in_clip_length():
     # still costs more on a longer clip (known, see the report): bounded, not yet flat.
     assert per[12.0, 60.0] <= 1.25 * per[4.0, 60.0], per
     for d in (60.0, 200.0):
-        assert per[12.0, d] < 6.0, per            # a few passes over the clip, not log2 K
+        assert per[12.0, d] < 6.0, per  # a few passes over the clip, not log2 K
 
 
 def test_screen_coverage_is_not_clamped():

@@ -3,6 +3,7 @@ each switch (rendered with the project's renderer at the switch size).
 
 Assets are built once per species without wind (the geometry is what is tested here).
 """
+
 from __future__ import annotations
 
 from functools import lru_cache
@@ -22,23 +23,33 @@ from treegen_cli.params import load_params
 from treegen_cli.pipeline import MakeOptions, build_asset
 from treegen_cli.rig import build_rig
 
-FRACTIONS = LodOptions().triangles            # (1, 0.5, 0.15, 0.05)
-RENDER_PX = 384       # longest image side: leaves still span a pixel or more at every switch
-COVERAGE_TOL = 0.05   # issue 13: covered area within ±5 % at every switch
-IOU_TARGET = 0.9      # issue 13: silhouette IoU at least this at every switch
+FRACTIONS = LodOptions().triangles  # (1, 0.5, 0.15, 0.05)
+RENDER_PX = 384  # longest image side: leaves still span a pixel or more at every switch
+COVERAGE_TOL = 0.05  # issue 13: covered area within ±5 % at every switch
+IOU_TARGET = 0.9  # issue 13: silhouette IoU at least this at every switch
 # Measured per species (worst switch, RENDER_PX, the view below; bench/lod_pop_bench.py --views 1
 # --max-px 384): (covered area off by at most, IoU at least), a regression guard a little
 # below what the LODs reach, not the target. Cover is within ±5 % but for the oak, palms,
 # poplar, cottonwood and tamarack (5–9 % off); IoU ≥ 0.9 only for the fir, the willow and the rush:
 # kept leaves are fewer and larger, and their scatter differs from LOD0's at the 3-pixel scale;
 # shave grass keeps few whole branches of its whorls at 5 % of the triangles.
-MEASURED = {"balsam_fir": (0.024, 0.926), "black_tupelo": (0.056, 0.863),
-            "ca_black_oak": (0.088, 0.813), "desert_bush": (0.034, 0.734),
-            "eastern_cottonwood": (0.061, 0.792), "european_larch": (0.042, 0.742),
-            "fan_palm": (0.063, 0.784), "lombardy_poplar": (0.075, 0.767), "palm": (0.10, 0.723),
-            "quaking_aspen": (0.038, 0.869), "rush": (0.057, 0.891), "sassafras": (0.041, 0.861),
-            "shave_grass": (0.068, 0.443), "tamarack": (0.069, 0.844),
-            "weeping_willow": (0.05, 0.90)}
+MEASURED = {
+    "balsam_fir": (0.024, 0.926),
+    "black_tupelo": (0.056, 0.863),
+    "ca_black_oak": (0.088, 0.813),
+    "desert_bush": (0.034, 0.734),
+    "eastern_cottonwood": (0.061, 0.792),
+    "european_larch": (0.042, 0.742),
+    "fan_palm": (0.063, 0.784),
+    "lombardy_poplar": (0.075, 0.767),
+    "palm": (0.10, 0.723),
+    "quaking_aspen": (0.038, 0.869),
+    "rush": (0.057, 0.891),
+    "sassafras": (0.041, 0.861),
+    "shave_grass": (0.068, 0.443),
+    "tamarack": (0.069, 0.844),
+    "weeping_willow": (0.05, 0.90),
+}
 
 
 @lru_cache(maxsize=None)
@@ -107,7 +118,7 @@ def test_stratified_pick_spreads_like_the_full_set():
     assert pick.size == n and np.unique(pick).size == n
     assert np.array_equal(pick, stratified_pick(pts, n, 3))
     mid = np.median(pts, axis=0)
-    octant = lambda p: ((p > mid) * [1, 2, 4]).sum(axis=1)   # noqa: E731
+    octant = lambda p: ((p > mid) * [1, 2, 4]).sum(axis=1)  # noqa: E731
     full = np.bincount(octant(pts), minlength=8) / len(pts)
     kept = np.bincount(octant(pts[pick]), minlength=8) / n
     assert np.abs(kept - full).max() < 0.01

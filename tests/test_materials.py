@@ -1,5 +1,6 @@
 """Materials stage: generated textures, colour-only materials, an artist's PNGs, the leaf atlas
 layout the mesh maps leaves into, and the CLI flags."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -13,8 +14,13 @@ import pytest
 from PIL import Image
 
 from treegen_cli.errors import TreegenError
-from treegen_cli.materials import (ALPHA_CUTOFF, LEAF_VARIANTS, MATERIAL_DEFAULTS, MaterialOptions,
-                                   build_materials)
+from treegen_cli.materials import (
+    ALPHA_CUTOFF,
+    LEAF_VARIANTS,
+    MATERIAL_DEFAULTS,
+    MaterialOptions,
+    build_materials,
+)
 from treegen_cli.mesh import FULL_CARD_CELL
 from treegen_cli.params import load_params, parse_params_text
 from treegen_cli.pipeline import MakeOptions, build_asset
@@ -22,7 +28,7 @@ from treegen_cli.textures import atlas_rects, species_colors, srgb8_to_linear
 
 ROOT = Path(__file__).resolve().parent.parent
 SPECIES = ROOT / "species"
-PALM = SPECIES / "fan_palm.txt"          # 28 stems, 2,160 leaves: quick to grow
+PALM = SPECIES / "fan_palm.txt"  # 28 stems, 2,160 leaves: quick to grow
 QUICK = MakeOptions(wind=None, lod=None)
 
 
@@ -35,11 +41,12 @@ def image(texture) -> np.ndarray:
 
 
 def write_png(path, size=(32, 64), mode="RGBA") -> Path:
-    Image.new(mode, size, (200, 120, 40, 255)[:len(mode)]).save(path)
+    Image.new(mode, size, (200, 120, 40, 255)[: len(mode)]).save(path)
     return path
 
 
 # ------------------------------------------------------------------------------ generated
+
 
 @pytest.fixture(scope="module")
 def aspen():
@@ -60,13 +67,16 @@ def test_default_materials_are_textured_leaf_and_bark(aspen):
     # Bark: albedo (sRGB) + normal map (raw data), both repeating, half the leaf size.
     assert bark.base_color == (1.0, 1.0, 1.0, 1.0) and not bark.double_sided
     assert bark.alpha_cutoff is None
-    assert (bark.base_texture.name, bark.base_texture.wrap, bark.base_texture.srgb) == \
-        ("bark", "REPEAT", True)
+    assert (bark.base_texture.name, bark.base_texture.wrap, bark.base_texture.srgb) == (
+        "bark",
+        "REPEAT",
+        True,
+    )
     n = bark.normal_texture
     assert (n.name, n.wrap, n.srgb) == ("bark_normal", "REPEAT", False)
     assert image(bark.base_texture).shape == image(n).shape == (256, 256, 3)
     sizes = [len(t.png) for t in (leaf.base_texture, bark.base_texture, n)]
-    assert sum(sizes) < 600_000                           # a few hundred KB per tree
+    assert sum(sizes) < 600_000  # a few hundred KB per tree
 
 
 def test_leaf_cells_are_the_drawn_atlas_layout(aspen):
@@ -75,15 +85,15 @@ def test_leaf_cells_are_the_drawn_atlas_layout(aspen):
     assert len(m.leaf_cells) == LEAF_VARIANTS
     alpha = image(m.materials[1].base_texture)[..., 3]
     inside = np.zeros(alpha.shape, dtype=bool)
-    for u0, v0, u1, v1 in m.leaf_cells:                    # glTF UVs: row = v · H
-        inside[round(v0 * 512):round(v1 * 512), round(u0 * 512):round(u1 * 512)] = True
-        assert alpha[round(v0 * 512):round(v1 * 512), round(u0 * 512):round(u1 * 512)].any()
+    for u0, v0, u1, v1 in m.leaf_cells:  # glTF UVs: row = v · H
+        inside[round(v0 * 512) : round(v1 * 512), round(u0 * 512) : round(u1 * 512)] = True
+        assert alpha[round(v0 * 512) : round(v1 * 512), round(u0 * 512) : round(u1 * 512)].any()
     assert not alpha[~inside].any()
 
 
 def test_textures_are_deterministic_per_species_and_carry_its_colours(aspen):
     a = build_materials(aspen).materials
-    b = build_materials(dataclasses.replace(aspen)).materials       # equal params, cached or not
+    b = build_materials(dataclasses.replace(aspen)).materials  # equal params, cached or not
     assert [m.base_texture.png for m in a] == [m.base_texture.png for m in b]
     # The species file's LeafColor is the blade's mean colour (opaque texels, linear light).
     leaf_rgb, bark_rgb = species_colors(aspen)
@@ -128,6 +138,7 @@ def test_leafless_species_gets_no_leaf_atlas():
 
 # ------------------------------------------------------------------------------ artist's images
 
+
 def test_custom_textures_are_embedded_as_they_are(aspen, tmp_path):
     leaf_png = write_png(tmp_path / "leaf.png", (48, 96))
     bark_png = write_png(tmp_path / "bark.png", (64, 64), "RGB")
@@ -135,9 +146,9 @@ def test_custom_textures_are_embedded_as_they_are(aspen, tmp_path):
     bark, leaf = m.materials
     assert leaf.base_texture.png == leaf_png.read_bytes()
     assert bark.base_texture.png == bark_png.read_bytes()
-    assert bark.normal_texture is None                    # ours would not match their picture
+    assert bark.normal_texture is None  # ours would not match their picture
     assert leaf.alpha_cutoff == ALPHA_CUTOFF and leaf.base_texture.wrap == "CLAMP"
-    assert m.leaf_cells == FULL_CARD_CELL                  # one leaf, the whole image
+    assert m.leaf_cells == FULL_CARD_CELL  # one leaf, the whole image
     # Only the bark replaced: the generated atlas stays, with its cells.
     only_bark = build_materials(aspen, MaterialOptions(bark_texture=bark_png))
     assert len(only_bark.leaf_cells) == LEAF_VARIANTS
@@ -150,8 +161,12 @@ def test_bad_custom_textures_name_the_flag_and_the_file(aspen, tmp_path):
     Image.new("RGB", (8, 8)).save(jpeg, format="JPEG")
     cut = tmp_path / "cut.png"
     cut.write_bytes(write_png(tmp_path / "big.png", (256, 256), "RGB").read_bytes()[:200])
-    cases = [(tmp_path / "missing.png", "no such file"), (jpeg, "not a PNG image"),
-             (cut, "unreadable PNG"), (tmp_path, "is a directory")]
+    cases = [
+        (tmp_path / "missing.png", "no such file"),
+        (jpeg, "not a PNG image"),
+        (cut, "unreadable PNG"),
+        (tmp_path, "is a directory"),
+    ]
     for flag, field in (("--leaf-texture", "leaf_texture"), ("--bark-texture", "bark_texture")):
         for path, why in cases:
             with pytest.raises(TreegenError) as info:
@@ -164,6 +179,7 @@ def test_bad_custom_textures_name_the_flag_and_the_file(aspen, tmp_path):
 
 # ------------------------------------------------------------------------------ pipeline
 
+
 def leaf_prim(asset, lod=0):
     return next(p for p in asset.lods[lod].primitives if p.name == "leaves")
 
@@ -175,10 +191,11 @@ def test_pipeline_maps_leaves_into_the_atlas_and_uses_the_materials():
     assert asset.materials[1].base_texture is not None
     cells = np.asarray(atlas_rects(LEAF_VARIANTS, 512), dtype=np.float64)
     uv = leaf_prim(asset).uvs.astype(np.float64).reshape(tree.n_leaves, -1, 2)
-    lo = np.column_stack([cells[:, 0], 1 - cells[:, 3]])   # bottom-left cell bounds
+    lo = np.column_stack([cells[:, 0], 1 - cells[:, 3]])  # bottom-left cell bounds
     hi = np.column_stack([cells[:, 2], 1 - cells[:, 1]])
-    inside = np.all((uv[:, None] >= lo[None, :, None] - 1e-6)
-                    & (uv[:, None] <= hi[None, :, None] + 1e-6), axis=(2, 3))
+    inside = np.all(
+        (uv[:, None] >= lo[None, :, None] - 1e-6) & (uv[:, None] <= hi[None, :, None] + 1e-6), axis=(2, 3)
+    )
     assert np.all(inside.sum(axis=1) == 1)
     assert len(np.unique(inside.argmax(axis=1))) == LEAF_VARIANTS
     # Same seed, same file; the textures do not depend on the tree seed (shared by a forest).
@@ -190,11 +207,15 @@ def test_pipeline_maps_leaves_into_the_atlas_and_uses_the_materials():
 
 def test_pipeline_without_textures_or_with_a_custom_leaf_maps_whole_cards(tmp_path):
     params = load_params(PALM)
-    plain, tree = build_asset(params, 0, dataclasses.replace(
-        QUICK, materials=MaterialOptions(textures=False)))
+    plain, tree = build_asset(
+        params, 0, dataclasses.replace(QUICK, materials=MaterialOptions(textures=False))
+    )
     assert all(m.base_texture is None for m in plain.materials)
-    custom, _ = build_asset(params, 0, dataclasses.replace(
-        QUICK, materials=MaterialOptions(leaf_texture=write_png(tmp_path / "l.png"))))
+    custom, _ = build_asset(
+        params,
+        0,
+        dataclasses.replace(QUICK, materials=MaterialOptions(leaf_texture=write_png(tmp_path / "l.png"))),
+    )
     for asset in (plain, custom):
         uv = leaf_prim(asset).uvs.reshape(tree.n_leaves, -1, 2)
         assert uv.min() == 0.0 and uv.max() == 1.0
@@ -210,16 +231,27 @@ def test_species_file_leaf_colour_reaches_the_colour_only_material():
 
 # ------------------------------------------------------------------------------ CLI
 
+
 def treegen(*args):
-    return subprocess.run([sys.executable, "-m", "treegen_cli", *map(str, args)],
-                          capture_output=True, text=True, cwd=ROOT)
+    return subprocess.run(
+        [sys.executable, "-m", "treegen_cli", *map(str, args)], capture_output=True, text=True, cwd=ROOT
+    )
 
 
 def test_cli_texture_flags(tmp_path):
     out = tmp_path / "palm.glb"
     fast = ["--no-wind", "--no-lod"]
-    proc = treegen("make", PALM, "-o", out, *fast, "--texture-size", "64",
-                   "--leaf-texture", write_png(tmp_path / "leaf.png"))
+    proc = treegen(
+        "make",
+        PALM,
+        "-o",
+        out,
+        *fast,
+        "--texture-size",
+        "64",
+        "--leaf-texture",
+        write_png(tmp_path / "leaf.png"),
+    )
     assert proc.returncode == 0, proc.stderr
     assert out.stat().st_size > 0
     proc = treegen("make", PALM, "-o", tmp_path / "plain.glb", *fast, "--no-textures")
@@ -229,12 +261,14 @@ def test_cli_texture_flags(tmp_path):
         assert flag in help_text
 
 
-@pytest.mark.parametrize("args, needles", [
-    (["--leaf-texture", "nope.png"], ["--leaf-texture nope.png", "no such file"]),
-    (["--bark-texture", "species/fan_palm.txt"], ["--bark-texture species/fan_palm.txt",
-                                                  "not a PNG"]),
-    (["--texture-size", "300"], ["--texture-size 300", "power of two in [64, 2048]"]),
-])
+@pytest.mark.parametrize(
+    "args, needles",
+    [
+        (["--leaf-texture", "nope.png"], ["--leaf-texture nope.png", "no such file"]),
+        (["--bark-texture", "species/fan_palm.txt"], ["--bark-texture species/fan_palm.txt", "not a PNG"]),
+        (["--texture-size", "300"], ["--texture-size 300", "power of two in [64, 2048]"]),
+    ],
+)
 def test_cli_bad_texture_flags_exit_2_and_write_nothing(tmp_path, args, needles):
     out = tmp_path / "x.glb"
     proc = treegen("make", PALM, "-o", out, "--no-wind", "--no-lod", *args)

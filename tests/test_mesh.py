@@ -1,4 +1,5 @@
 """Bark tubes and leaf cards: counts from formulas, skin bindings, normals, UVs, leaf area."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -19,8 +20,16 @@ def mesh(tree, budget=256, **opts):
     return rig, prims
 
 
-def expected_bark_counts(tree, sides, rings_per_segment, thin_radius=0.002, thin_sides=3,
-                         point_radius=1e-4, point_ratio=0.02, extra_trunk_rings=0):
+def expected_bark_counts(
+    tree,
+    sides,
+    rings_per_segment,
+    thin_radius=0.002,
+    thin_sides=3,
+    point_radius=1e-4,
+    point_ratio=0.02,
+    extra_trunk_rings=0,
+):
     """Per stem: rings = segments·m + 1 (minus the tip ring of a pointed stem), each with
     sides + 1 vertices, plus one apex; triangles = 2·sides per ring gap + a fan of sides."""
     lev = np.minimum(tree.stem_level, len(sides) - 1)
@@ -48,7 +57,7 @@ def skin(prim, skel, world):
 def descendants(parent, j):
     mask = np.zeros(len(parent), dtype=bool)
     mask[j] = True
-    for i in range(j + 1, len(parent)):           # parents come first
+    for i in range(j + 1, len(parent)):  # parents come first
         mask[i] = mask[parent[i]]
     return mask
 
@@ -66,7 +75,7 @@ def check_prim(prim, n_joints):
     assert prim.normals.shape == (V, 3) and prim.uvs.shape == (V, 2)
     assert prim.joints.shape == (V, 4) and prim.weights.shape == (V, 4)
     assert len(prim.indices) % 3 == 0 and prim.indices.max() < V
-    assert np.isin(np.arange(V), prim.indices).all()           # no stray vertices
+    assert np.isin(np.arange(V), prim.indices).all()  # no stray vertices
     for a in (prim.positions, prim.normals, prim.uvs, prim.weights):
         assert np.isfinite(a).all()
     np.testing.assert_allclose(np.linalg.norm(prim.normals, axis=1), 1.0, atol=1e-5)
@@ -114,7 +123,7 @@ def test_lobes_and_flare_add_trunk_detail():
     p = bark.positions.astype(np.float64)
     r = np.hypot(p[:, 0], p[:, 1])
     base = r[np.abs(p[:, 2]) < 1e-6].max()
-    np.testing.assert_allclose(base, 0.4, rtol=1e-6)             # node radius at the base
+    np.testing.assert_allclose(base, 0.4, rtol=1e-6)  # node radius at the base
     ring1 = r[(p[:, 2] > 0.05) & (p[:, 2] < 0.2)]
     assert ring1.size and np.all(ring1 < 0.4 * 0.99) and np.all(ring1 > 0.0)
 
@@ -126,11 +135,11 @@ def test_trunk_normals_point_outward_and_v_runs_up(lobes, depth):
     bark = build_mesh(tree, rig)[0]
     check_prim(bark, len(rig.joint_node))
     p, n, uv = (a.astype(np.float64) for a in (bark.positions, bark.normals, bark.uvs))
-    ring = np.hypot(p[:, 0], p[:, 1]) > 1e-6                     # all but the tip apex
+    ring = np.hypot(p[:, 0], p[:, 1]) > 1e-6  # all but the tip apex
     radial = p[ring] * [1, 1, 0]
     assert np.all(np.einsum("ij,ij->i", n[ring], radial) > 0)
     # Lobed radius r·(1 + LobeDepth·sin(Lobes·θ)) around the axis.
-    z0 = np.abs(p[:, 2] - 2.0) < 1e-6                            # the ring at trunk node 1
+    z0 = np.abs(p[:, 2] - 2.0) < 1e-6  # the ring at trunk node 1
     r = np.hypot(p[z0, 0], p[z0, 1]) / 0.3
     off_u, off_v = bark_offsets(tree)[0]
     theta = 2 * np.pi * (uv[z0, 0] - off_u)
@@ -168,8 +177,8 @@ def test_every_vertex_bound_and_moving_a_joint_moves_only_its_descendants(budget
         moved = np.linalg.norm(skin(prim, skel, world) - prim.positions, axis=1) > 1e-5
         touched = (desc[prim.joints] & (prim.weights > 0)).any(axis=1)
         only = (desc[prim.joints] | (prim.weights == 0)).all(axis=1)
-        assert not np.any(moved & ~touched)       # nothing outside the subtree moves
-        assert np.all(moved[only])                # geometry wholly on the subtree moves
+        assert not np.any(moved & ~touched)  # nothing outside the subtree moves
+        assert np.all(moved[only])  # geometry wholly on the subtree moves
 
 
 @pytest.mark.parametrize("geometry,P", [("card", 4), ("shape", len(OUTLINES[0].points))])
@@ -180,14 +189,14 @@ def test_leaves_take_their_carrier_rigidly(geometry, P):
     np.testing.assert_array_equal(leaves.joints[:, 0], np.repeat(rig.leaf_joint, P))
     assert np.all(leaves.weights[:, 0] == 1)
     # Normals are the leaf frames' column 2 (flat card, two-sided material).
-    np.testing.assert_allclose(leaves.normals, np.repeat(tree.leaf_frame[:, :, 2], P, axis=0),
-                               atol=1e-6)
+    np.testing.assert_allclose(leaves.normals, np.repeat(tree.leaf_frame[:, :, 2], P, axis=0), atol=1e-6)
     # Card UVs span 0..1 and the blade base sits at leaf_pos.
     assert leaves.uvs.min() >= 0 and leaves.uvs.max() <= 1
     o = CARD if geometry == "card" else OUTLINES[0]
-    base = o.points[:, 1] == 0                    # the base point (outline) or base edge (card)
-    np.testing.assert_allclose(leaves.positions.reshape(-1, P, 3)[:, base].mean(axis=1),
-                               tree.leaf_pos, atol=1e-6)
+    base = o.points[:, 1] == 0  # the base point (outline) or base edge (card)
+    np.testing.assert_allclose(
+        leaves.positions.reshape(-1, P, 3)[:, base].mean(axis=1), tree.leaf_pos, atol=1e-6
+    )
 
 
 @pytest.mark.parametrize("shape", sorted(OUTLINES))
@@ -217,9 +226,11 @@ def test_leaf_cards_are_length_by_width_quads(shape):
     np.testing.assert_allclose(area.sum() * fill_factor(shape), tree.leaf_area.sum(), rtol=1e-4)
     # Corners: base at leaf_pos ± width/2 along frame column 0, tip + length along column 1.
     F = tree.leaf_frame
-    corners = (tree.leaf_pos[:, None, :]
-               + (width[:, None] * CARD.points[None, :, 0])[:, :, None] * F[:, None, :, 0]
-               + (length[:, None] * CARD.points[None, :, 1])[:, :, None] * F[:, None, :, 1])
+    corners = (
+        tree.leaf_pos[:, None, :]
+        + (width[:, None] * CARD.points[None, :, 0])[:, :, None] * F[:, None, :, 0]
+        + (length[:, None] * CARD.points[None, :, 1])[:, :, None] * F[:, None, :, 1]
+    )
     np.testing.assert_allclose(leaves.positions.reshape(-1, 4, 3), corners, atol=1e-5)
     # UVs: the four corners of the 0..1 texture, the same on every card.
     uv = leaves.uvs.reshape(-1, 4, 2)
@@ -228,8 +239,9 @@ def test_leaf_cards_are_length_by_width_quads(shape):
 
 
 def test_merge_influences_merges_sorts_and_normalises():
-    J, W = merge_influences(np.array([[3, 5, 3, 0], [2, 2, 2, 2]]),
-                            np.array([[0.2, 0.3, 0.5, 0.0], [0.25, 0.25, 0.25, 0.25]]))
+    J, W = merge_influences(
+        np.array([[3, 5, 3, 0], [2, 2, 2, 2]]), np.array([[0.2, 0.3, 0.5, 0.0], [0.25, 0.25, 0.25, 0.25]])
+    )
     np.testing.assert_array_equal(J, [[3, 5, 0, 0], [2, 0, 0, 0]])
     np.testing.assert_allclose(W, [[0.7, 0.3, 0, 0], [1, 0, 0, 0]], atol=1e-7)
 
@@ -256,13 +268,14 @@ def test_species_mesh_is_bound_and_keeps_every_stem(species):
     # One apex per stem closes the bark (stems are never dropped), last in the vertex list.
     bark = prims["bark"]
     tips = tree.stem_node_start + tree.stem_node_count - 1
-    apex = bark.positions[-tree.n_stems:].astype(np.float64)
+    apex = bark.positions[-tree.n_stems :].astype(np.float64)
     gap = np.linalg.norm(apex - tree.node_pos[tips], axis=1)
     assert np.all(gap <= 0.5 * tree.node_radius[tips] + 1e-5)
     lobed = tree.params.lobes > 0 and tree.params.lobe_depth != 0
     trunk_sides = max(16, 4 * tree.params.lobes) if lobed else 16
-    V, T = expected_bark_counts(tree, (trunk_sides, 8, 6, 4, 3), (2, 1),
-                                extra_trunk_rings=4 if tree.params.flare > 0 else 0)
+    V, T = expected_bark_counts(
+        tree, (trunk_sides, 8, 6, 4, 3), (2, 1), extra_trunk_rings=4 if tree.params.flare > 0 else 0
+    )
     assert (len(bark.positions), len(bark.indices) // 3) == (V, T)
     area = 0.5 * np.linalg.norm(triangle_normals(prims["leaves"]), axis=1).sum()
     np.testing.assert_allclose(area, np.prod(tree.leaf_size, axis=1).sum(), rtol=1e-3)
@@ -270,9 +283,11 @@ def test_species_mesh_is_bound_and_keeps_every_stem(species):
 
 # ------------------------------------------------------------------------------ texture UVs
 
+
 def atlas_cells(variants=4):
     """A real atlas layout (glTF rects, top-left origin), as the materials stage hands it over."""
     from treegen_cli.textures import leaf_atlas
+
     rects = leaf_atlas(0, (0.16, 0.30, 0.06), size=128, variants=variants).rects
     return tuple(tuple(float(x) for x in r) for r in rects)
 
@@ -292,9 +307,10 @@ def test_leaf_uvs_fill_their_seeded_atlas_cell(geometry):
     # Bottom-left cell bounds: u0..u1, 1 − v1..1 − v0.
     lo = np.column_stack([r[:, 0], 1 - r[:, 3]])
     hi = np.column_stack([r[:, 2], 1 - r[:, 1]])
-    inside = np.all((uv[:, None] >= lo[None, :, None] - 1e-6)
-                    & (uv[:, None] <= hi[None, :, None] + 1e-6), axis=(2, 3))   # (L, cells)
-    assert np.all(inside.sum(axis=1) == 1)                    # one cell per leaf, disjoint
+    inside = np.all(
+        (uv[:, None] >= lo[None, :, None] - 1e-6) & (uv[:, None] <= hi[None, :, None] + 1e-6), axis=(2, 3)
+    )  # (L, cells)
+    assert np.all(inside.sum(axis=1) == 1)  # one cell per leaf, disjoint
     variant = inside.argmax(axis=1)
     # Card u = x + .5, v = y (base at the cell's bottom edge): affine into the leaf's cell.
     want = lo[variant][:, None] + o.uvs[None] * (hi - lo)[variant][:, None]
@@ -305,6 +321,7 @@ def test_leaf_uvs_fill_their_seeded_atlas_cell(geometry):
 
 def test_leaf_variants_are_seeded_by_the_tree():
     from treegen_cli.mesh import leaf_variants
+
     a, b = species_tree("quaking_aspen", seed=1), species_tree("quaking_aspen", seed=2)
     cells = atlas_cells(4)
     u1 = mesh(a, budget=32, leaf_cells=cells)[1]["leaves"].uvs
@@ -356,6 +373,7 @@ def test_bark_v_grows_along_every_stem_within_half_float_range(species):
     the stem's offset, |uv| small enough for half floats (also after glTF's 1 − v), and the
     stems' offsets all different."""
     from treegen_cli.mesh import BARK_MAX_TILES
+
     tree = species_tree(species, seed=0)
     _, prims = mesh(tree, budget=64, leaves=False)
     bark = prims["bark"]
@@ -374,13 +392,12 @@ def test_bark_v_grows_along_every_stem_within_half_float_range(species):
     np.testing.assert_allclose(uv[last, 0] - uv[first, 0], 1.0, atol=1e-5)
     same = ring_stem[1:] == ring_stem[:-1]
     assert np.all(np.diff(v_ring)[same] > 0)
-    apex_v = uv[len(uv) - S:, 1]
+    apex_v = uv[len(uv) - S :, 1]
     ring_top = v_ring[np.cumsum(rings) - 1]
     assert np.all(apex_v >= ring_top - 1e-6)
     # Tiles no taller than the base circumference unless the stem is a long whip.
     tiles = apex_v - v_ring[np.cumsum(rings) - rings]
-    span = tree.node_z[tree.stem_node_start + tree.stem_node_count - 1] \
-        - tree.node_z[tree.stem_node_start]
+    span = tree.node_z[tree.stem_node_start + tree.stem_node_count - 1] - tree.node_z[tree.stem_node_start]
     short = span / (2 * np.pi * tree.stem_radius) < BARK_MAX_TILES - 2
     assert np.all(tiles[short] >= span[short] / (2 * np.pi * tree.stem_radius[short]) - 1e-3)
     assert np.all(tiles <= BARK_MAX_TILES + 1e-3)
@@ -411,7 +428,7 @@ def test_bark_tangents_follow_u_and_their_bitangent_follows_v(lobes, depth):
     e1, e2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
     d1, d2 = UV[:, 1] - UV[:, 0], UV[:, 2] - UV[:, 0]
     det = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
-    ok = np.abs(det) > 1e-9                                   # not the apex fans' slivers
+    ok = np.abs(det) > 1e-9  # not the apex fans' slivers
     dPdu = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) / det[:, None]
     dPdv = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) / det[:, None]
     tv, nv = t[tri[:, 0]], n[tri[:, 0]]

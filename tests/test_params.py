@@ -1,4 +1,5 @@
 """Species files: readers, validation, defaults, writer round trip, and the bundled library."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -47,11 +48,24 @@ def expect_error(text: str, *parts: str, source: str = "sp/x.txt") -> str:
 
 # ------------------------------------------------------------------------------ library
 
+
 def test_library_has_the_required_species():
     names = {p.stem for p in SPECIES}
-    required = {"quaking_aspen", "black_tupelo", "weeping_willow", "ca_black_oak", "sassafras",
-                "lombardy_poplar", "palm", "fan_palm", "european_larch", "tamarack",
-                "eastern_cottonwood", "desert_bush", "balsam_fir"}
+    required = {
+        "quaking_aspen",
+        "black_tupelo",
+        "weeping_willow",
+        "ca_black_oak",
+        "sassafras",
+        "lombardy_poplar",
+        "palm",
+        "fan_palm",
+        "european_larch",
+        "tamarack",
+        "eastern_cottonwood",
+        "desert_bush",
+        "balsam_fir",
+    }
     assert required <= names
     assert len(names) >= 14
 
@@ -64,13 +78,13 @@ def test_every_species_file_loads_and_states_its_source(path):
     head = path.read_text().splitlines()[:3]
     assert all(line.startswith("#") for line in head)
     assert "source" in path.read_text().lower()
-    hash(p)   # immutable and hashable
+    hash(p)  # immutable and hashable
 
 
 def test_paper_values_land_in_the_right_fields():
     aspen = load_params(ROOT / "species/quaking_aspen.txt")
     assert (aspen.shape, aspen.levels, aspen.scale, aspen.scale_v) == (7, 3, 13.0, 3.0)
-    assert aspen.scale0_v == 0.0          # paper, not Arbaro's 0.2
+    assert aspen.scale0_v == 0.0  # paper, not Arbaro's 0.2
     assert [aspen.level[n].curve_res for n in range(4)] == [3, 5, 3, 1]
     assert aspen.level[1].down_angle_v == -50.0
     assert aspen.level[3].rotate == 77.0
@@ -79,7 +93,7 @@ def test_paper_values_land_in_the_right_fields():
     assert (willow.leaves, willow.attraction_up, willow.prune_ratio) == (15.0, -3.0, 1.0)
     assert willow.level[1].rotate == -120.0
     oak = load_params(ROOT / "species/ca_black_oak.txt")
-    assert oak.level[2].curve_v == -30.0   # the helix
+    assert oak.level[2].curve_v == -30.0  # the helix
     assert (oak.base_splits, oak.level[0].seg_splits, oak.flare) == (2, 0.4, 1.2)
 
 
@@ -91,9 +105,14 @@ def test_every_arbaro_file_loads(path):
 
 
 def test_arbaro_conversions_in_library_equal_their_xml():
-    pairs = {"sassafras": "sassafras", "fan_palm": "fanpalm", "tamarack": "tamarack",
-             "european_larch": "european_larch", "desert_bush": "desert_bush",
-             "black_tupelo": "black_tupelo"}   # tupelo: paper == Arbaro
+    pairs = {
+        "sassafras": "sassafras",
+        "fan_palm": "fanpalm",
+        "tamarack": "tamarack",
+        "european_larch": "european_larch",
+        "desert_bush": "desert_bush",
+        "black_tupelo": "black_tupelo",
+    }  # tupelo: paper == Arbaro
     for txt, xml in pairs.items():
         a = load_params(ROOT / f"species/{txt}.txt")
         b = load_params(FIXTURES / f"arbaro/{xml}.xml")
@@ -101,6 +120,7 @@ def test_arbaro_conversions_in_library_equal_their_xml():
 
 
 # ------------------------------------------------------------------------------ formats
+
 
 @pytest.mark.parametrize("stem", ["pair_willow", "pair_small"])
 def test_xml_and_text_with_same_values_give_identical_params(stem):
@@ -115,17 +135,25 @@ def test_pair_small_values():
     p = load_params(FIXTURES / "pair_small.txt")
     assert p.leaf_shape == LEAF_SHAPES["palm"] == 6
     assert p.level[1].branches == 12.5 and p.leaves == -6.0
-    assert p.level[2].rotate == -120.0   # index == Levels: the leaves' level
+    assert p.level[2].rotate == -120.0  # index == Levels: the leaves' level
 
 
 def test_seed_paper_spellings_map_to_weber_penn_keys():
-    seed = parse_params_text("0CurveResolution 5\n0Curve 10\n1Branches 20\n1BranchLength 0.4\n"
-                             "1AngleDown 50\n1AngleRotate 140\n1CurveResolution 4\n")
-    wp = parse_params_text("0CurveRes 5\n0Curve 10\n1Branches 20\n1Length 0.4\n"
-                           "1DownAngle 50\n1Rotate 140\n1CurveRes 4\n")
+    seed = parse_params_text(
+        "0CurveResolution 5\n0Curve 10\n1Branches 20\n1BranchLength 0.4\n"
+        "1AngleDown 50\n1AngleRotate 140\n1CurveResolution 4\n"
+    )
+    wp = parse_params_text(
+        "0CurveRes 5\n0Curve 10\n1Branches 20\n1Length 0.4\n1DownAngle 50\n1Rotate 140\n1CurveRes 4\n"
+    )
     assert seed == wp
-    assert (seed.level[0].curve_res, seed.level[1].length, seed.level[1].down_angle,
-            seed.level[1].rotate, seed.level[1].curve_res) == (5, 0.4, 50.0, 140.0, 4)
+    assert (
+        seed.level[0].curve_res,
+        seed.level[1].length,
+        seed.level[1].down_angle,
+        seed.level[1].rotate,
+        seed.level[1].curve_res,
+    ) == (5, 0.4, 50.0, 140.0, 4)
 
 
 def test_text_syntax_variants():
@@ -152,19 +180,26 @@ def test_utf8_bom_and_xml_with_leading_whitespace():
 
 # ------------------------------------------------------------------------------ defaults
 
+
 def test_defaults_apply_for_absent_keys_and_file_values_win():
     p = parse_params_text("Levels 2\nScale 7\n1Branches 7\n", source="<string>")
     d = default_params("tree")
     assert p == dataclasses.replace(
-        d, levels=2, scale=7.0,
-        level=(d.level[0], dataclasses.replace(d.level[1], branches=7.0)) + d.level[2:])
+        d,
+        levels=2,
+        scale=7.0,
+        level=(d.level[0], dataclasses.replace(d.level[1], branches=7.0)) + d.level[2:],
+    )
     # Arbaro's per-level defaults, level 3's repeated below
     assert d.level[0].length == 1.0 and d.level[1].length == 0.5
     assert [d.level[n].down_angle for n in range(4)] == [0.0, 30.0, 30.0, 30.0]
     assert d.level[9] == d.level[3] == arbaro_level_defaults(7)
     # dataclass top-level defaults are Arbaro's too
-    assert all(getattr(d, f.name) == getattr(Params(), f.name)
-               for f in dataclasses.fields(Params) if f.name not in ("level", "name"))
+    assert all(
+        getattr(d, f.name) == getattr(Params(), f.name)
+        for f in dataclasses.fields(Params)
+        if f.name not in ("level", "name")
+    )
 
 
 def test_levels_above_three_repeat_level_three_unless_given():
@@ -175,6 +210,7 @@ def test_levels_above_three_repeat_level_three_unless_given():
 
 
 # ------------------------------------------------------------------------------ writer
+
 
 def test_params_dict_is_canonical_and_json_ready():
     p = load_params(ROOT / "species/black_tupelo.txt")
@@ -194,6 +230,7 @@ def test_round_trip_through_text(path):
 
 
 # ------------------------------------------------------------------------------ colours
+
 
 def test_leaf_and_bark_colour_are_srgb_hex_stored_linear():
     p = parse_params_text("LeafColor 5a7a2e\nBarkColor = FFFFFF\n")
@@ -217,50 +254,62 @@ def test_colour_round_trips_through_the_writer_for_every_byte():
 
 
 def test_colour_in_arbaro_xml_may_keep_its_hash():
-    xml = ('<arbaro><species name="x"><param name="LeafColor" value="#5a7a2e"/>'
-           '<param name="BarkColor" value="30201a"/></species></arbaro>')
+    xml = (
+        '<arbaro><species name="x"><param name="LeafColor" value="#5a7a2e"/>'
+        '<param name="BarkColor" value="30201a"/></species></arbaro>'
+    )
     p = parse_params_xml(xml)
     assert p.leaf_color == parse_params_text("LeafColor 5a7a2e").leaf_color
     assert params_dict(p)["BarkColor"] == "30201a"
 
 
-@pytest.mark.parametrize("value, parts", [
-    ("#5a7a2e", ["LeafColor has no value", "6 hex digits", "'#'"]),     # '#' starts a comment
-    ("5a7a2", ["LeafColor = '5a7a2' is not a colour", "6 hex digits"]),
-    ("green", ["'green' is not a colour", "e.g. 5a7a2e"]),
-    ("5a7a2e00", ["is not a colour"]),
-    ("0x5a7a2e", ["is not a colour"]),
-])
+@pytest.mark.parametrize(
+    "value, parts",
+    [
+        ("#5a7a2e", ["LeafColor has no value", "6 hex digits", "'#'"]),  # '#' starts a comment
+        ("5a7a2", ["LeafColor = '5a7a2' is not a colour", "6 hex digits"]),
+        ("green", ["'green' is not a colour", "e.g. 5a7a2e"]),
+        ("5a7a2e00", ["is not a colour"]),
+        ("0x5a7a2e", ["is not a colour"]),
+    ],
+)
 def test_colour_errors_are_one_line_naming_file_line_and_key(value, parts):
     expect_error(f"Levels 2\nLeafColor {value}\n", "sp/x.txt:2:", *parts)
 
 
 def test_colour_errors_in_xml_and_duplicates():
-    expect_error('<arbaro><species name="x">\n<param name="BarkColor" value="brown"/>'
-                 '</species></arbaro>', "sp/x.txt:2:", "BarkColor", "not a colour")
+    expect_error(
+        '<arbaro><species name="x">\n<param name="BarkColor" value="brown"/></species></arbaro>',
+        "sp/x.txt:2:",
+        "BarkColor",
+        "not a colour",
+    )
     expect_error("LeafColor 5a7a2e\nleafcolor 5a7a2e\n", ":2:", "duplicate key leafcolor")
     expect_error("LeafColour 5a7a2e\n", "unknown key LeafColour", "did you mean LeafColor?")
 
 
 # ------------------------------------------------------------------------------ errors
 
+
 def test_error_out_of_range_names_file_line_key_range():
-    msg = expect_error("Levels 3\n# c\n1DownAngle = 400\n", "sp/x.txt:3:", "1DownAngle", "400",
-                       "[-180, 180]")
+    msg = expect_error("Levels 3\n# c\n1DownAngle = 400\n", "sp/x.txt:3:", "1DownAngle", "400", "[-180, 180]")
     assert msg == "sp/x.txt:3: 1DownAngle = 400 is out of range [-180, 180]"
 
 
-@pytest.mark.parametrize("text, parts", [
-    ("Shape 9", ["sp/x.txt:1:", "Shape", "[0, 8]"]),
-    ("Scale 0", ["Scale", "(0, inf)"]),
-    ("LeafQuality 1.5", ["LeafQuality", "(0, 1]"]),
-    ("0Taper 3", ["0Taper", "[0, 3)"]),
-    ("Levels 10", ["Levels", "[0, 9]"]),
-    ("Levels 3\n2CurveRes 0", [":2:", "2CurveRes", "[1, 100]"]),
-    ("Levels 2.5", ["Levels", "whole number", "[0, 9]"]),
-    ("Scale inf", ["Scale", "finite"]),
-    ("Scale nan", ["Scale", "finite"]),
-])
+@pytest.mark.parametrize(
+    "text, parts",
+    [
+        ("Shape 9", ["sp/x.txt:1:", "Shape", "[0, 8]"]),
+        ("Scale 0", ["Scale", "(0, inf)"]),
+        ("LeafQuality 1.5", ["LeafQuality", "(0, 1]"]),
+        ("0Taper 3", ["0Taper", "[0, 3)"]),
+        ("Levels 10", ["Levels", "[0, 9]"]),
+        ("Levels 3\n2CurveRes 0", [":2:", "2CurveRes", "[1, 100]"]),
+        ("Levels 2.5", ["Levels", "whole number", "[0, 9]"]),
+        ("Scale inf", ["Scale", "finite"]),
+        ("Scale nan", ["Scale", "finite"]),
+    ],
+)
 def test_error_out_of_range(text, parts):
     expect_error(text, *parts)
 
@@ -272,10 +321,17 @@ def test_error_non_numeric_value():
     expect_error("Levels", ":1:", "Levels", "no value", "[0, 9]")
 
 
-@pytest.mark.parametrize("key, suggestion", [
-    ("1DownAngel", "1DownAngle"), ("Brnaches", None), ("LeafScal", "LeafScale"),
-    ("AtractionUp", "AttractionUp"), ("2CurveRess", "2CurveRes"), ("PruneWidthPeek", "PruneWidthPeak"),
-])
+@pytest.mark.parametrize(
+    "key, suggestion",
+    [
+        ("1DownAngel", "1DownAngle"),
+        ("Brnaches", None),
+        ("LeafScal", "LeafScale"),
+        ("AtractionUp", "AttractionUp"),
+        ("2CurveRess", "2CurveRes"),
+        ("PruneWidthPeek", "PruneWidthPeak"),
+    ],
+)
 def test_error_unknown_key_suggests_the_right_name(key, suggestion):
     msg = expect_error(f"Levels 3\n{key} 1\n", "sp/x.txt:2:", "unknown key", key)
     if suggestion:
@@ -314,21 +370,31 @@ def test_error_empty_and_binary_files():
 
 
 def test_error_malformed_xml_has_line_and_column():
-    msg = expect_error("<arbaro>\n  <species name='a'>\n    <param name='Levels' value='2'>\n"
-                       "  </species>\n</arbaro>\n", "sp/x.txt:4:", "malformed XML", source="sp/x.txt")
+    msg = expect_error(
+        "<arbaro>\n  <species name='a'>\n    <param name='Levels' value='2'>\n  </species>\n</arbaro>\n",
+        "sp/x.txt:4:",
+        "malformed XML",
+        source="sp/x.txt",
+    )
     assert msg.startswith("sp/x.txt:4:")
     expect_error("<arbaro><species", "malformed XML")
 
 
 def test_xml_errors_name_the_param_line():
-    xml = ("<arbaro>\n<species name='t'>\n<param name='Levels' value='2'/>\n"
-           "<param name='1DownAngle' value='400'/>\n</species>\n</arbaro>\n")
+    xml = (
+        "<arbaro>\n<species name='t'>\n<param name='Levels' value='2'/>\n"
+        "<param name='1DownAngle' value='400'/>\n</species>\n</arbaro>\n"
+    )
     assert expect_error(xml, source="t.xml") == "t.xml:4: 1DownAngle = 400 is out of range [-180, 180]"
-    xml = ("<arbaro><species name='t'>\n<param name='Levels' value='2'/>\n"
-           "<param name='1DownAngel' value='40'/>\n</species></arbaro>")
+    xml = (
+        "<arbaro><species name='t'>\n<param name='Levels' value='2'/>\n"
+        "<param name='1DownAngel' value='40'/>\n</species></arbaro>"
+    )
     expect_error(xml, "t.xml:3:", "1DownAngel", "did you mean 1DownAngle?", source="t.xml")
-    xml = ("<arbaro><species>\n<param name='Levels' value='2'/>\n"
-           "<param name='3Length' value='1'/></species></arbaro>")
+    xml = (
+        "<arbaro><species>\n<param name='Levels' value='2'/>\n"
+        "<param name='3Length' value='1'/></species></arbaro>"
+    )
     expect_error(xml, "t.xml:3:", "3Length", "Levels = 2", source="t.xml")
     xml = "<arbaro><species>\n<param name='Scale' value='1'/>\n<param name='Scale' value='2'/></species></arbaro>"
     expect_error(xml, "t.xml:3:", "Scale", "line 2", source="t.xml")
@@ -339,12 +405,16 @@ def test_xml_errors_name_the_param_line():
 
 
 def test_xml_entity_declarations_are_refused():
-    bomb = ('<?xml version="1.0"?>\n<!DOCTYPE lolz [<!ENTITY lol "lol">'
-            '<!ENTITY lol2 "&lol;&lol;&lol;&lol;">]>\n'
-            '<arbaro><species name="&lol2;"/></arbaro>')
+    bomb = (
+        '<?xml version="1.0"?>\n<!DOCTYPE lolz [<!ENTITY lol "lol">'
+        '<!ENTITY lol2 "&lol;&lol;&lol;&lol;">]>\n'
+        '<arbaro><species name="&lol2;"/></arbaro>'
+    )
     expect_error(bomb, "sp/x.txt:2:", "DOCTYPE")
-    ext = ('<?xml version="1.0"?>\n<!DOCTYPE a SYSTEM "file:///etc/passwd">\n'
-           '<arbaro><species name="a"/></arbaro>')
+    ext = (
+        '<?xml version="1.0"?>\n<!DOCTYPE a SYSTEM "file:///etc/passwd">\n'
+        '<arbaro><species name="a"/></arbaro>'
+    )
     expect_error(ext, "DOCTYPE")
     with pytest.raises(TreegenError):
         parse_params_xml(bomb, "b.xml")
@@ -374,11 +444,38 @@ def test_load_params_dispatches_on_content_not_suffix(tmp_path):
 
 # ------------------------------------------------------------------------------ fuzzing
 
-BASE_TEXTS = [(ROOT / "species" / n).read_text() for n in
-              ("quaking_aspen.txt", "weeping_willow.txt", "fan_palm.txt", "balsam_fir.txt")]
+BASE_TEXTS = [
+    (ROOT / "species" / n).read_text()
+    for n in ("quaking_aspen.txt", "weeping_willow.txt", "fan_palm.txt", "balsam_fir.txt")
+]
 BASE_XML = [(FIXTURES / "arbaro" / n).read_text() for n in ("quaking_aspen.xml", "fanpalm.xml")]
-JUNK = st.sampled_from(["=", "#", " ", "\t", "-", "e", "9", ".", "nan", "1e999", "<", ">", "&",
-                        "'", '"', "/>", "\x00", "\u00e9", "Levels", "1", "0x10", "Name", "=="])
+JUNK = st.sampled_from(
+    [
+        "=",
+        "#",
+        " ",
+        "\t",
+        "-",
+        "e",
+        "9",
+        ".",
+        "nan",
+        "1e999",
+        "<",
+        ">",
+        "&",
+        "'",
+        '"',
+        "/>",
+        "\x00",
+        "\u00e9",
+        "Levels",
+        "1",
+        "0x10",
+        "Name",
+        "==",
+    ]
+)
 
 
 @st.composite

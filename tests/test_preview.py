@@ -1,4 +1,5 @@
 """treegen preview and treegen species: real renders (EGL), real files, real readers."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -19,10 +20,11 @@ from treegen_cli.render import Renderer, egl_available, skin_points
 from treegen_cli.species_list import describe, species_dir, species_files
 
 ROOT = Path(__file__).resolve().parent.parent
-SMALL = ROOT / "species" / "fan_palm.txt"          # 28 stems, 2 160 leaves: quick to grow
+SMALL = ROOT / "species" / "fan_palm.txt"  # 28 stems, 2 160 leaves: quick to grow
 
-needs_egl = pytest.mark.skipif(not egl_available(),
-                               reason="no headless OpenGL 3.3 context (EGL) on this machine")
+needs_egl = pytest.mark.skipif(
+    not egl_available(), reason="no headless OpenGL 3.3 context (EGL) on this machine"
+)
 
 
 def run(argv, capsys) -> tuple[int, str, str]:
@@ -45,10 +47,12 @@ def written(tmp_path_factory):
 
 def _rgb(path) -> np.ndarray:
     from PIL import Image
+
     return np.asarray(Image.open(path).convert("RGB"))
 
 
 # ------------------------------------------------------------------------------ stills
+
 
 @needs_egl
 def test_still_has_tree_pixels_with_bark_and_leaf_colours(tmp_path, capsys):
@@ -60,19 +64,19 @@ def test_still_has_tree_pixels_with_bark_and_leaf_colours(tmp_path, capsys):
     # the same view without the tree is the background; the tree is what differs from it
     options = PreviewOptions(width=96, height=128)
     scene = load_scene(SMALL, options)
-    rest = dataclasses.replace(scene, skinning=None)       # stills show the rest pose, no wind
+    rest = dataclasses.replace(scene, skinning=None)  # stills show the rest pose, no wind
     t0 = np.zeros(1)
     with Renderer(scene, 96, 128) as r:
         args = (camera_for(rest, options, t0), rest.pose(t0)[0], *sun_angles(options))
         tree, background = r.render(*args), r.render(*args, draw_tree=False)
-    assert np.array_equal(tree, img)                       # the command draws exactly this
+    assert np.array_equal(tree, img)  # the command draws exactly this
     mask = np.abs(tree.astype(int) - background.astype(int)).sum(-1) > 24
     assert 0.03 < mask.mean() < 0.8
     ys, xs = np.nonzero(mask)
-    assert abs(xs.mean() / 96 - 0.5) < 0.2 and abs(ys.mean() / 128 - 0.5) < 0.25   # framed
+    assert abs(xs.mean() / 96 - 0.5) < 0.2 and abs(ys.mean() / 128 - 0.5) < 0.25  # framed
     r_, g_, b_ = (tree[..., c].astype(int) for c in range(3))
-    leafy = mask & (g_ > 1.15 * r_) & (g_ > 1.3 * b_)      # leaf base colour (0.26, 0.46, 0.13)
-    barky = mask & (r_ > 1.05 * g_) & (g_ > 1.05 * b_)     # bark base colour (0.36, 0.27, 0.19)
+    leafy = mask & (g_ > 1.15 * r_) & (g_ > 1.3 * b_)  # leaf base colour (0.26, 0.46, 0.13)
+    barky = mask & (r_ > 1.05 * g_) & (g_ > 1.05 * b_)  # bark base colour (0.36, 0.27, 0.19)
     assert leafy.sum() > 30 and barky.sum() > 30
 
 
@@ -80,10 +84,26 @@ def test_still_has_tree_pixels_with_bark_and_leaf_colours(tmp_path, capsys):
 def test_preview_of_written_glb_and_usd_matches_in_process_render(written, tmp_path, capsys):
     # the species itself too: grown in-process at LOD 0 it skips the LOD chain (preview.py),
     # and must still be the tree `make` wrote
-    for name, src in (("palm.glb", written / "palm.glb"), ("palm.usdc", written / "palm.usdc"),
-                      ("species", SMALL)):
-        code, out, err = run(["preview", src, "-o", tmp_path / f"{name}.png",
-                              "--size", "64", "--azimuth", "30", "--elevation", "20"], capsys)
+    for name, src in (
+        ("palm.glb", written / "palm.glb"),
+        ("palm.usdc", written / "palm.usdc"),
+        ("species", SMALL),
+    ):
+        code, out, err = run(
+            [
+                "preview",
+                src,
+                "-o",
+                tmp_path / f"{name}.png",
+                "--size",
+                "64",
+                "--azimuth",
+                "30",
+                "--elevation",
+                "20",
+            ],
+            capsys,
+        )
         assert code == 0, err
     a, b = _rgb(tmp_path / "palm.glb.png"), _rgb(tmp_path / "palm.usdc.png")
     c = _rgb(tmp_path / "species.png")
@@ -101,13 +121,14 @@ def test_gif_loops_and_moves(tmp_path, capsys):
     code, out, err = run(["preview", SMALL, "--animate", gif, "--size", "96", "--fps", "2"], capsys)
     assert code == 0, err
     frames = [np.asarray(f.convert("RGB")) for f in ImageSequence.Iterator(Image.open(gif))]
-    assert len(frames) == round(10.0 * 2) + 1                # default 10 s loop, both ends
+    assert len(frames) == round(10.0 * 2) + 1  # default 10 s loop, both ends
     assert all(f.shape == (96, 96, 3) for f in frames)
-    assert np.array_equal(frames[0], frames[-1])             # the loop closes
-    assert all(not np.array_equal(a, b) for a, b in zip(frames, frames[1:]))   # the tree moves
+    assert np.array_equal(frames[0], frames[-1])  # the loop closes
+    assert all(not np.array_equal(a, b) for a, b in zip(frames, frames[1:]))  # the tree moves
 
 
 # ------------------------------------------------------------------------------ loaders
+
 
 def test_skinning_agrees_across_asset_gltf_and_usd(written):
     """The three loaders pose the same skeleton: S_j(t) = W_j(t)·B_j⁻¹ agree in Y-up space."""
@@ -118,8 +139,7 @@ def test_skinning_agrees_across_asset_gltf_and_usd(written):
     t = np.array([0.0, 0.37, 1.5, 2.0, 4.0])
     for lod in range(len(asset.lods)):
         ref = scene_from_asset(asset, lod).pose(t)
-        for scene in (scene_from_gltf(written / "palm.glb", lod),
-                      scene_from_usd(written / "palm.usdc", lod)):
+        for scene in (scene_from_gltf(written / "palm.glb", lod), scene_from_usd(written / "palm.usdc", lod)):
             assert scene.n_joints == ref.shape[1]
             assert np.allclose(scene.pose(t), ref, atol=1e-4)
     # the clip loops: end pose == start pose
@@ -141,7 +161,7 @@ def test_skin_points_identity_and_translation():
     w /= w.sum(1, keepdims=True)
     mats = np.broadcast_to(np.eye(4), (3, 4, 4)).copy()
     assert np.allclose(skin_points(p, joints, w, mats), p)
-    mats[:, :3, 3] = (1.0, 2.0, 3.0)                       # every joint moved alike
+    mats[:, :3, 3] = (1.0, 2.0, 3.0)  # every joint moved alike
     assert np.allclose(skin_points(p, joints, w, mats), p + (1.0, 2.0, 3.0))
 
 
@@ -152,24 +172,28 @@ def test_sample_track_hits_keys_and_holds_ends():
     out = sample_track(times, v, np.array([-1.0, 0.0, 1.0, 2.0, 3.0, 9.0]))
     assert np.allclose(out[[1, 2, 4], 0], q)
     assert np.allclose(out[0, 0], q[0]) and np.allclose(out[5, 0], q[2])
-    assert np.allclose(out[3, 0], [0, 0, np.sin(0.4), np.cos(0.4)])     # slerp halfway
+    assert np.allclose(out[3, 0], [0, 0, np.sin(0.4), np.cos(0.4)])  # slerp halfway
     step = sample_track(times, v, np.array([0.5, 2.9]), "STEP")
     assert np.allclose(step[:, 0], q[:2])
 
 
 # ------------------------------------------------------------------------------ errors
 
-@pytest.mark.parametrize("argv, needle", [
-    (["preview", "nope/missing.txt", "-o", "{d}/x.png"], "no such file"),
-    (["preview", "{d}/tree.obj", "-o", "{d}/x.png"], "unknown input extension"),
-    (["preview", str(SMALL), "-o", "{d}/x.bmp"], "unknown image extension"),
-    (["preview", str(SMALL), "--animate", "{d}/x.mp4"], "unknown animation extension"),
-    (["preview", str(SMALL)], "give an image"),
-    (["preview", str(SMALL), "-o", "{d}/x.png", "--size", "big"], "--size"),
-    (["preview", str(SMALL), "-o", "{d}/x.png", "--lod", "99"], "out of range"),
-    (["preview", "{d}/palm.glb", "-o", "{d}/x.png", "--lod", "7"], "out of range"),
-    (["preview", "{d}/broken.glb", "-o", "{d}/x.png"], "not a readable glTF"),
-])
+
+@pytest.mark.parametrize(
+    "argv, needle",
+    [
+        (["preview", "nope/missing.txt", "-o", "{d}/x.png"], "no such file"),
+        (["preview", "{d}/tree.obj", "-o", "{d}/x.png"], "unknown input extension"),
+        (["preview", str(SMALL), "-o", "{d}/x.bmp"], "unknown image extension"),
+        (["preview", str(SMALL), "--animate", "{d}/x.mp4"], "unknown animation extension"),
+        (["preview", str(SMALL)], "give an image"),
+        (["preview", str(SMALL), "-o", "{d}/x.png", "--size", "big"], "--size"),
+        (["preview", str(SMALL), "-o", "{d}/x.png", "--lod", "99"], "out of range"),
+        (["preview", "{d}/palm.glb", "-o", "{d}/x.png", "--lod", "7"], "out of range"),
+        (["preview", "{d}/broken.glb", "-o", "{d}/x.png"], "not a readable glTF"),
+    ],
+)
 def test_bad_input_is_one_line_exit_2(argv, needle, written, capsys):
     (written / "tree.obj").write_text("v 0 0 0\n")
     (written / "broken.glb").write_bytes(b"glTF\x02\x00\x00\x00garbage")
@@ -185,6 +209,7 @@ def test_lod_out_of_range_raises_treegen_error(written):
 
 
 # ------------------------------------------------------------------------------ species
+
 
 def test_species_lists_every_bundled_file_with_counts(capsys):
     from treegen_cli.generate import generate
@@ -217,9 +242,22 @@ def test_preview_json_summary(tmp_path):
     if not egl_available():
         pytest.skip("no EGL context on this machine")
     out = tmp_path / "p.png"
-    proc = subprocess.run([sys.executable, "-m", "treegen_cli", "preview",
-                           str(Path(__file__).resolve().parent.parent / "species" / "palm.txt"),
-                           "-o", str(out), "--size", "64", "--json"], capture_output=True, text=True)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "treegen_cli",
+            "preview",
+            str(Path(__file__).resolve().parent.parent / "species" / "palm.txt"),
+            "-o",
+            str(out),
+            "--size",
+            "64",
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert proc.returncode == 0, proc.stderr
     summary = _json.loads(proc.stdout)
     assert summary["image"] == str(out) and summary["width"] == 64 and out.exists()
@@ -227,15 +265,23 @@ def test_preview_json_summary(tmp_path):
 
 # ------------------------------------------------------------------------------ textures
 
+
 def _card(uvs=None, **material) -> "Part":
     """A 1 m × 2 m vertical card facing +Z (towards a camera at azimuth −90°, elevation 0)."""
     from treegen_cli.drawable import Part
 
     pos = np.float32([[-0.5, 0, 0], [0.5, 0, 0], [0.5, 2, 0], [-0.5, 2, 0]])
     uv = np.float32([[0, 0], [1, 0], [1, 1], [0, 1]]) if uvs is None else np.float32(uvs)
-    return Part(name="card", positions=pos, normals=np.tile(np.float32([0, 0, 1]), (4, 1)),
-                indices=np.uint32([0, 1, 2, 0, 2, 3]), joints=np.zeros((4, 4), np.int64),
-                weights=np.tile(np.float32([1, 0, 0, 0]), (4, 1)), uvs=uv, **material)
+    return Part(
+        name="card",
+        positions=pos,
+        normals=np.tile(np.float32([0, 0, 1]), (4, 1)),
+        indices=np.uint32([0, 1, 2, 0, 2, 3]),
+        joints=np.zeros((4, 4), np.int64),
+        weights=np.tile(np.float32([1, 0, 0, 0]), (4, 1)),
+        uvs=uv,
+        **material,
+    )
 
 
 def _shoot(part, size=96, sun=(-140.0, 50.0)):
@@ -265,14 +311,15 @@ def _covered(tree, background):
 
 @needs_egl
 def test_cut_out_leaf_covers_less_of_the_card_and_of_its_shadow():
-    rgba, uv = _leaf_rgba(100)                            # 100 → 50 → 25 → 12: odd levels too
+    rgba, uv = _leaf_rgba(100)  # 100 → 50 → 25 → 12: odd levels too
     flat = _card(uv, color=(0.3, 0.5, 0.1), double_sided=True)
-    leaf = _card(uv, color=(1, 1, 1), double_sided=True, texture=rgba, alpha_cutoff=0.5,
-                 wrap=("CLAMP", "CLAMP"))
+    leaf = _card(
+        uv, color=(1, 1, 1), double_sided=True, texture=rgba, alpha_cutoff=0.5, wrap=("CLAMP", "CLAMP")
+    )
     (ft, fb), (lt, lb) = _shoot(flat), _shoot(leaf)
     full, cut = _covered(ft, fb).sum(), _covered(lt, lb).sum()
     assert full > 500
-    assert 0.35 * full < cut < 0.85 * full         # an oval blade on its card: ~ π/4 of it
+    assert 0.35 * full < cut < 0.85 * full  # an oval blade on its card: ~ π/4 of it
     # the shadow pass tests alpha too: the card's shadow on the ground shrinks alike
     shade_flat = (fb.astype(int).sum(-1) < lb.astype(int).sum(-1) - 24).sum()
     assert shade_flat > 50
@@ -287,16 +334,18 @@ def test_bark_texture_shows_and_normal_map_follows_the_opengl_convention():
 
     albedo, normal = bark_textures((0.2, 0.19, 0.17), size=64, seed=1)
     rgba = np.concatenate([albedo, np.full((64, 64, 1), 255, np.uint8)], axis=2)
-    tiles = [[0, 0], [2, 0], [2, 4], [0, 4]]             # REPEAT: two tiles across, four up
+    tiles = [[0, 0], [2, 0], [2, 4], [0, 4]]  # REPEAT: two tiles across, four up
     flat_t, flat_b = _shoot(_card(tiles, color=(0.2, 0.19, 0.17)))
     bark_t, bark_b = _shoot(_card(tiles, color=(1, 1, 1), texture=rgba, normal_map=normal))
     m = _covered(flat_t, flat_b) & _covered(bark_t, bark_b)
     m = m[:, 1:] & m[:, :-1]
 
-    def grain(img):                     # pixel-to-pixel change across the card (not shading)
+    def grain(img):  # pixel-to-pixel change across the card (not shading)
         lum = img.astype(float).sum(-1)
         return np.abs(np.diff(lum, axis=1))[m].mean()
+
     assert grain(bark_t) > 5 * grain(flat_t) + 5
+
     # a constant normal map leaning towards +u is lit by a sun on the +u (+X) side, and the
     # one leaning to −u is not: T = +u, and G = +v (up), the glTF / OpenGL convention
     def lit(r, g):
@@ -304,10 +353,14 @@ def test_bark_texture_shows_and_normal_map_follows_the_opengl_convention():
         nm[...] = (r, g, 200)
         t, b = _shoot(_card(color=(0.5, 0.5, 0.5), normal_map=nm), sun=(0.0, 20.0))
         return t.astype(float)[_covered(t, b)].mean()
+
     assert lit(230, 128) > lit(25, 128) + 20
-    up = lambda g: _shoot(_card(color=(0.5, 0.5, 0.5), normal_map=np.full((4, 4, 3), (128, g, 200), np.uint8)),  # noqa: E731
-                          sun=(-90.0, 80.0))[0].astype(float).mean()
-    assert up(230) > up(25)                               # sun overhead: +v leans to it
+
+    def up(g):
+        card = _card(color=(0.5, 0.5, 0.5), normal_map=np.full((4, 4, 3), (128, g, 200), np.uint8))
+        return _shoot(card, sun=(-90.0, 80.0))[0].astype(float).mean()
+
+    assert up(230) > up(25)  # sun overhead: +v leans to it
 
 
 def test_mips_average_in_linear_light_weighted_by_alpha():
@@ -317,10 +370,18 @@ def test_mips_average_in_linear_light_weighted_by_alpha():
     rgba = np.zeros((128, 96, 4), np.uint8)
     rgba[..., :3] = (40, 90, 20)
     rgba[..., 3] = np.where(rng.random((128, 96)) < 0.3, 255, 0)
-    rgba[rgba[..., 3] == 0, :3] = 0                     # black where transparent: no fringe
+    rgba[rgba[..., 3] == 0, :3] = 0  # black where transparent: no fringe
     levels = mip_chain(rgba, True)
-    assert [lv.shape[:2] for lv in levels] == [(128, 96), (64, 48), (32, 24), (16, 12), (8, 6),
-                                               (4, 3), (2, 1), (1, 1)]        # GL: floor(n / 2)
+    assert [lv.shape[:2] for lv in levels] == [
+        (128, 96),
+        (64, 48),
+        (32, 24),
+        (16, 12),
+        (8, 6),
+        (4, 3),
+        (2, 1),
+        (1, 1),
+    ]  # GL: floor(n / 2)
     odd = mip_chain(np.zeros((45, 63, 3), np.uint8), False)
     assert [lv.shape[:2] for lv in odd] == [(45, 63), (22, 31), (11, 15), (5, 7), (2, 3), (1, 1)]
     # alpha is the plain mean (coverage); colour the mean of the opaque texels only
@@ -340,7 +401,7 @@ def test_tiny_cut_out_leaves_keep_their_share_of_coverage(monkeypatch):
     from treegen_cli.drawable import Part
 
     rgba, uv = _leaf_rgba(128)
-    n = 60                                               # 60 × 60 cards of 1.5 × 3 cm in 2 m
+    n = 60  # 60 × 60 cards of 1.5 × 3 cm in 2 m
     gx, gy = np.meshgrid(np.linspace(-1, 1, n), np.linspace(0.1, 2.1, n))
     corner = np.float32([[-0.0075, 0], [0.0075, 0], [0.0075, 0.03], [-0.0075, 0.03]])
     pos = np.zeros((n * n, 4, 3), np.float32)
@@ -349,21 +410,28 @@ def test_tiny_cut_out_leaves_keep_their_share_of_coverage(monkeypatch):
     V = 4 * n * n
 
     def field(**material):
-        return Part(name="leaves", positions=pos.reshape(-1, 3), indices=idx,
-                    normals=np.tile(np.float32([0, 0, 1]), (V, 1)),
-                    joints=np.zeros((V, 4), np.int64), weights=np.tile(np.float32([1, 0, 0, 0]), (V, 1)),
-                    uvs=np.tile(uv, (n * n, 1)), double_sided=True, **material)
+        return Part(
+            name="leaves",
+            positions=pos.reshape(-1, 3),
+            indices=idx,
+            normals=np.tile(np.float32([0, 0, 1]), (V, 1)),
+            joints=np.zeros((V, 4), np.int64),
+            weights=np.tile(np.float32([1, 0, 0, 0]), (V, 1)),
+            uvs=np.tile(uv, (n * n, 1)),
+            double_sided=True,
+            **material,
+        )
 
     def darkening(part):
         t, b = _shoot(part, size=64)
         return np.abs(t.astype(float) - b.astype(float)).sum(-1).mean()
 
-    flat = darkening(field(color=(0.16, 0.30, 0.06)))         # the atlas's mean colour
+    flat = darkening(field(color=(0.16, 0.30, 0.06)))  # the atlas's mean colour
     cut = dict(color=(1, 1, 1), texture=rgba, alpha_cutoff=0.5, wrap=("CLAMP", "CLAMP"))
     hashed = darkening(field(**cut))
-    blade = float((rgba[..., 3] >= 128).mean()) / float(np.prod(np.ptp(uv, 0)))   # ≈ π/4
+    blade = float((rgba[..., 3] >= 128).mean()) / float(np.prod(np.ptp(uv, 0)))  # ≈ π/4
     assert 0.5 * blade < hashed / flat < 1.3 * blade
-    monkeypatch.setattr(render, "HASH_LOD", 99.0)         # a fixed cutoff all the way down
+    monkeypatch.setattr(render, "HASH_LOD", 99.0)  # a fixed cutoff all the way down
     assert abs(darkening(field(**cut)) / flat - blade) > abs(hashed / flat - blade)
 
 
@@ -371,13 +439,24 @@ def _tiny_asset(material, uvs):
     """A one-card Asset (one joint) with `material` on it."""
     from treegen_cli.asset import Asset, Lod, Primitive, Skeleton
 
-    pos = np.float32([[-0.5, 0, 0], [0.5, 0, 0], [0.5, 0, 2], [-0.5, 0, 2]])   # Z up, faces −Y
-    prim = Primitive(name="leaves", material=material.name, positions=pos,
-                     normals=np.tile(np.float32([0, -1, 0]), (4, 1)), uvs=np.float32(uvs),
-                     indices=np.uint32([0, 1, 2, 0, 2, 3]), joints=np.zeros((4, 4), np.uint16),
-                     weights=np.tile(np.float32([1, 0, 0, 0]), (4, 1)))
-    sk = Skeleton(names=["j0"], parent=np.int32([-1]), rest_translation=np.zeros((1, 3)),
-                  rest_rotation=np.float64([[0, 0, 0, 1]]), bind_world=np.eye(4)[None])
+    pos = np.float32([[-0.5, 0, 0], [0.5, 0, 0], [0.5, 0, 2], [-0.5, 0, 2]])  # Z up, faces −Y
+    prim = Primitive(
+        name="leaves",
+        material=material.name,
+        positions=pos,
+        normals=np.tile(np.float32([0, -1, 0]), (4, 1)),
+        uvs=np.float32(uvs),
+        indices=np.uint32([0, 1, 2, 0, 2, 3]),
+        joints=np.zeros((4, 4), np.uint16),
+        weights=np.tile(np.float32([1, 0, 0, 0]), (4, 1)),
+    )
+    sk = Skeleton(
+        names=["j0"],
+        parent=np.int32([-1]),
+        rest_translation=np.zeros((1, 3)),
+        rest_rotation=np.float64([[0, 0, 0, 1]]),
+        bind_world=np.eye(4)[None],
+    )
     return Asset(name="card", materials=[material], lods=[Lod([prim], sk)])
 
 
@@ -387,8 +466,13 @@ def test_asset_textures_decode_into_parts_and_render_deterministically():
     from treegen_cli.textures import png_bytes
 
     rgba, uv = _leaf_rgba()
-    mat = Material("leaf", (1, 1, 1, 1), double_sided=True, alpha_cutoff=0.5,
-                   base_texture=Texture("leaf", png_bytes(rgba), wrap="CLAMP"))
+    mat = Material(
+        "leaf",
+        (1, 1, 1, 1),
+        double_sided=True,
+        alpha_cutoff=0.5,
+        base_texture=Texture("leaf", png_bytes(rgba), wrap="CLAMP"),
+    )
     scene = scene_from_asset(_tiny_asset(mat, uv))
     part = scene.parts[0]
     assert part.textured and np.array_equal(part.texture, rgba)
@@ -396,6 +480,7 @@ def test_asset_textures_decode_into_parts_and_render_deterministically():
     assert part.wrap == ("CLAMP", "CLAMP") and part.normal_map is None
     options = PreviewOptions(width=64, height=64)
     from treegen_cli.preview import render_still
+
     a, b = render_still(scene, options), render_still(scene_from_asset(_tiny_asset(mat, uv)), options)
     assert np.array_equal(a, b)
 
@@ -408,8 +493,13 @@ def _glb(doc: dict, blob: bytes) -> bytes:
     js += b" " * (-len(js) % 4)
     blob += b"\0" * (-len(blob) % 4)
     total = 12 + 8 + len(js) + 8 + len(blob)
-    return (struct.pack("<4sII", b"glTF", 2, total) + struct.pack("<I4s", len(js), b"JSON") + js
-            + struct.pack("<I4s", len(blob), b"BIN\0") + blob)
+    return (
+        struct.pack("<4sII", b"glTF", 2, total)
+        + struct.pack("<I4s", len(js), b"JSON")
+        + js
+        + struct.pack("<I4s", len(blob), b"BIN\0")
+        + blob
+    )
 
 
 def _textured_gltf(rgba, uv_bl, normal, interleaved=False, image_uri=None):
@@ -419,7 +509,7 @@ def _textured_gltf(rgba, uv_bl, normal, interleaved=False, image_uri=None):
     from treegen_cli.textures import png_bytes
 
     pos = np.float32([[-0.5, 0, 0], [0.5, 0, 0], [0.5, 2, 0], [-0.5, 2, 0]])
-    uv = np.column_stack([uv_bl[:, 0], 1.0 - uv_bl[:, 1]])        # glTF: origin top-left
+    uv = np.column_stack([uv_bl[:, 0], 1.0 - uv_bl[:, 1]])  # glTF: origin top-left
     chunks, views, accessors = [], [], []
 
     def view(data: bytes, **extra) -> int:
@@ -430,32 +520,70 @@ def _textured_gltf(rgba, uv_bl, normal, interleaved=False, image_uri=None):
 
     if interleaved:
         v = view(np.hstack([pos, uv.astype(np.float32)]).astype("<f4").tobytes(), byteStride=20)
-        accessors += [{"bufferView": v, "componentType": 5126, "count": 4, "type": "VEC3",
-                       "min": [-0.5, 0, 0], "max": [0.5, 2, 0]},
-                      {"bufferView": v, "byteOffset": 12, "componentType": 5126, "count": 4,
-                       "type": "VEC2"}]
+        accessors += [
+            {
+                "bufferView": v,
+                "componentType": 5126,
+                "count": 4,
+                "type": "VEC3",
+                "min": [-0.5, 0, 0],
+                "max": [0.5, 2, 0],
+            },
+            {"bufferView": v, "byteOffset": 12, "componentType": 5126, "count": 4, "type": "VEC2"},
+        ]
     else:
-        accessors += [{"bufferView": view(pos.tobytes()), "componentType": 5126, "count": 4,
-                       "type": "VEC3", "min": [-0.5, 0, 0], "max": [0.5, 2, 0]},
-                      {"bufferView": view(np.round(uv * 65535).astype("<u2").tobytes()),
-                       "componentType": 5123, "normalized": True, "count": 4, "type": "VEC2"}]
-    accessors.append({"bufferView": view(np.uint16([0, 1, 2, 0, 2, 3]).tobytes()),
-                      "componentType": 5123, "count": 6, "type": "SCALAR"})
-    images = [{"uri": image_uri} if image_uri else
-              {"bufferView": view(png_bytes(rgba)), "mimeType": "image/png"},
-              {"bufferView": view(png_bytes(normal)), "mimeType": "image/png"}]
+        accessors += [
+            {
+                "bufferView": view(pos.tobytes()),
+                "componentType": 5126,
+                "count": 4,
+                "type": "VEC3",
+                "min": [-0.5, 0, 0],
+                "max": [0.5, 2, 0],
+            },
+            {
+                "bufferView": view(np.round(uv * 65535).astype("<u2").tobytes()),
+                "componentType": 5123,
+                "normalized": True,
+                "count": 4,
+                "type": "VEC2",
+            },
+        ]
+    accessors.append(
+        {
+            "bufferView": view(np.uint16([0, 1, 2, 0, 2, 3]).tobytes()),
+            "componentType": 5123,
+            "count": 6,
+            "type": "SCALAR",
+        }
+    )
+    images = [
+        {"uri": image_uri} if image_uri else {"bufferView": view(png_bytes(rgba)), "mimeType": "image/png"},
+        {"bufferView": view(png_bytes(normal)), "mimeType": "image/png"},
+    ]
     doc = {
-        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
         "nodes": [{"mesh": 0}],
-        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1},
-                                    "indices": 2, "material": 0}]}],
-        "materials": [{"name": "leaf", "doubleSided": True, "alphaMode": "MASK",
-                       "alphaCutoff": 0.4,
-                       "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}},
-                       "normalTexture": {"index": 1, "scale": 0.7}}],
+        "meshes": [
+            {"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1}, "indices": 2, "material": 0}]}
+        ],
+        "materials": [
+            {
+                "name": "leaf",
+                "doubleSided": True,
+                "alphaMode": "MASK",
+                "alphaCutoff": 0.4,
+                "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}},
+                "normalTexture": {"index": 1, "scale": 0.7},
+            }
+        ],
         "samplers": [{"wrapS": 33071, "wrapT": 33071}, {"wrapS": 33648}],
         "textures": [{"source": 0, "sampler": 0}, {"source": 1, "sampler": 1}],
-        "images": images, "accessors": accessors, "bufferViews": views,
+        "images": images,
+        "accessors": accessors,
+        "bufferViews": views,
         "buffers": [{"byteLength": sum(len(c) for c in chunks)}],
     }
     return doc, b"".join(chunks)
@@ -465,11 +593,12 @@ def test_gltf_reader_reads_uvs_textures_and_cut_out_of_a_hand_built_file(tmp_pat
     rgba, uv = _leaf_rgba(64)
     normal = np.zeros((8, 8, 3), np.uint8)
     normal[...] = (128, 128, 255)
-    normal[0, 0] = (200, 90, 220)                           # not symmetric: orientation shows
+    normal[0, 0] = (200, 90, 220)  # not symmetric: orientation shows
     doc, blob = _textured_gltf(rgba, uv, normal)
     (tmp_path / "card.glb").write_bytes(_glb(doc, blob))
     # the same card as .gltf + .bin, floats interleaved with positions, the atlas a PNG file
     from treegen_cli.textures import png_bytes
+
     doc2, blob2 = _textured_gltf(rgba, uv, normal, interleaved=True, image_uri="leaf%20atlas.png")
     doc2["buffers"][0]["uri"] = "card.bin"
     (tmp_path / "card.bin").write_bytes(blob2)
@@ -478,7 +607,7 @@ def test_gltf_reader_reads_uvs_textures_and_cut_out_of_a_hand_built_file(tmp_pat
 
     for name, tol in (("card.glb", 1e-4), ("card.gltf", 1e-6)):
         part = scene_from_gltf(tmp_path / name).parts[0]
-        assert np.allclose(part.uvs, uv, atol=tol), name             # back to bottom-left
+        assert np.allclose(part.uvs, uv, atol=tol), name  # back to bottom-left
         assert np.array_equal(part.texture, rgba) and np.array_equal(part.normal_map, normal)
         assert part.alpha_cutoff == pytest.approx(0.4) and part.double_sided
         assert part.wrap == ("CLAMP", "CLAMP") and part.normal_wrap == ("MIRROR", "REPEAT")
@@ -498,11 +627,22 @@ def test_preview_of_a_textured_glb_shows_the_cut_out(tmp_path, capsys):
     (tmp_path / "full.glb").write_bytes(_glb(doc, blob))
     covered = {}
     for name in ("cut", "full"):
-        code, out, err = run(["preview", tmp_path / f"{name}.glb", "-o", tmp_path / f"{name}.png",
-                              "--size", "64", "--elevation", "0"], capsys)
+        code, out, err = run(
+            [
+                "preview",
+                tmp_path / f"{name}.glb",
+                "-o",
+                tmp_path / f"{name}.png",
+                "--size",
+                "64",
+                "--elevation",
+                "0",
+            ],
+            capsys,
+        )
         assert code == 0, err
         img = _rgb(tmp_path / f"{name}.png").astype(int)
-        covered[name] = (img[..., 1] > img[..., 2] + 45).sum()     # leaf green, not sky or ground
+        covered[name] = (img[..., 1] > img[..., 2] + 45).sum()  # leaf green, not sky or ground
     assert 0.3 * covered["full"] < covered["cut"] < 0.85 * covered["full"]
 
 
@@ -528,7 +668,7 @@ def _textured_usd(path, rgba, uv_bl, normal, face_varying=False):
     mesh = UsdGeom.Mesh.Define(stage, "/Card/Mesh")
     mesh.CreatePointsAttr([(-0.5, 0, 0), (0.5, 0, 0), (0.5, 2, 0), (-0.5, 2, 0)])
     mesh.CreateFaceVertexCountsAttr([4])
-    order = [1, 2, 3, 0] if face_varying else [0, 1, 2, 3]     # corners ≠ points
+    order = [1, 2, 3, 0] if face_varying else [0, 1, 2, 3]  # corners ≠ points
     mesh.CreateFaceVertexIndicesAttr(order)
     mesh.CreateDoubleSidedAttr(True)
     interp = UsdGeom.Tokens.faceVarying if face_varying else UsdGeom.Tokens.vertex
@@ -551,8 +691,10 @@ def _textured_usd(path, rgba, uv_bl, normal, face_varying=False):
     reader.CreateIdAttr("UsdPrimvarReader_float2")
     reader.CreateInput("varname", Sdf.ValueTypeNames.Token).ConnectToSource(var)
     reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
-    for name, file, outputs in (("tex", "leaf.png", (("rgb", "diffuseColor"), ("a", "opacity"))),
-                                ("nrm", "leaf_normal.png", (("rgb", "normal"),))):
+    for name, file, outputs in (
+        ("tex", "leaf.png", (("rgb", "diffuseColor"), ("a", "opacity"))),
+        ("nrm", "leaf_normal.png", (("rgb", "normal"),)),
+    ):
         t = UsdShade.Shader.Define(stage, f"/Card/Looks/leaf/{name}")
         t.CreateIdAttr("UsdUVTexture")
         t.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(f"./textures/{file}")
@@ -563,8 +705,11 @@ def _textured_usd(path, rgba, uv_bl, normal, face_varying=False):
             t.CreateInput("bias", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(-0.7, -0.7, -0.7, 0))
             t.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("raw")
         for out, inp in outputs:
-            kind = Sdf.ValueTypeNames.Float if out == "a" else (
-                Sdf.ValueTypeNames.Normal3f if inp == "normal" else Sdf.ValueTypeNames.Color3f)
+            kind = (
+                Sdf.ValueTypeNames.Float
+                if out == "a"
+                else (Sdf.ValueTypeNames.Normal3f if inp == "normal" else Sdf.ValueTypeNames.Color3f)
+            )
             o = t.CreateOutput(out, Sdf.ValueTypeNames.Float if out == "a" else Sdf.ValueTypeNames.Float3)
             surf.CreateInput(inp, kind).ConnectToSource(o)
     UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(mat)
@@ -597,4 +742,4 @@ def test_usd_reader_reads_st_and_preview_surface_textures(tmp_path):
     (tmp_path / "textures" / "leaf.png").unlink()
     with pytest.raises(TreegenError, match="not found"):
         scene_from_usd(tmp_path / "card.usda")
-    assert scene_from_usd(tmp_path / "card.usdz").parts[0].textured     # packaged: still there
+    assert scene_from_usd(tmp_path / "card.usdz").parts[0].textured  # packaged: still there

@@ -1,4 +1,5 @@
 """Skeleton under a joint budget: hierarchy, rest transforms, bindings (synthetic + species)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -20,7 +21,7 @@ def compose(skel, rotation=None, translation=None) -> np.ndarray:
     local[:, :3, 3] = t
     local[:, 3, 3] = 1.0
     world = np.empty_like(local)
-    for j in range(J):              # a few hundred joints in a test
+    for j in range(J):  # a few hundred joints in a test
         world[j] = local[j] if skel.parent[j] < 0 else world[skel.parent[j]] @ local[j]
     return world
 
@@ -57,8 +58,7 @@ def check_rig(tree, rig, budget):
     js = rig.joint_stem[1:]
     same = rig.joint_stem[skel.parent[1:]] == js
     assert np.all(pn[same] < rig.joint_node[1:][same])
-    assert np.all(np.isin(rig.joint_stem[skel.parent[1:]][~same],
-                          np.concatenate([tree.stem_parent, [0]])))
+    assert np.all(np.isin(rig.joint_stem[skel.parent[1:]][~same], np.concatenate([tree.stem_parent, [0]])))
 
 
 def test_full_budget_puts_a_joint_on_every_segment_start():
@@ -86,7 +86,7 @@ def test_budget_never_exceeded_and_rig_valid(budget):
 
 def test_budget_drops_finest_levels_first_then_coarsens():
     tree = synthetic_tree()
-    lev = lambda rig: tree.stem_level[rig.joint_stem]   # noqa: E731
+    lev = lambda rig: tree.stem_level[rig.joint_stem]  # noqa: E731
     r12 = build_rig(tree, RigOptions(max_joints=12))
     # Level 2 (3 joints in full) does not fit: only its longest stem keeps a base joint.
     assert len(r12.joint_node) == 12
@@ -105,7 +105,7 @@ def test_budget_drops_finest_levels_first_then_coarsens():
 
 def test_coarse_chain_blends_by_node_z():
     tree = synthetic_tree()
-    rig = build_rig(tree, RigOptions(max_joints=3))     # trunk joints on nodes 0 and 2
+    rig = build_rig(tree, RigOptions(max_joints=3))  # trunk joints on nodes 0 and 2
     assert list(rig.joint_node) == [0, 2]
     # Trunk node 1 (z = 2) lies halfway between joints at z = 0 and z = 4.
     assert list(rig.node_joints[1]) == [0, 1]
@@ -133,7 +133,7 @@ def test_jointless_stem_moves_with_the_drawn_bark_of_a_coarse_chain(monkeypatch)
     for _ in range(5):
         turn = Rotation.from_rotvec(rng.normal(0.0, 0.6, (2, 3))).as_matrix()
         skin = np.tile(np.eye(4), (2, 1, 1))
-        for j in range(2):                  # joint j turns about its pivot, children follow
+        for j in range(2):  # joint j turns about its pivot, children follow
             p = tree.node_pos[rig.joint_node[j]]
             m = np.eye(4)
             m[:3, :3], m[:3, 3] = turn[j], p - turn[j] @ p
@@ -181,4 +181,4 @@ def test_species_rig_under_several_budgets(species):
         rig = build_rig(tree, RigOptions(max_joints=budget))
         check_rig(tree, rig, budget)
         if full_joint_count(tree) > budget:
-            assert len(rig.joint_node) > budget // 2   # the budget is used, not wasted
+            assert len(rig.joint_node) > budget // 2  # the budget is used, not wasted

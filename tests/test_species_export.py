@@ -1,5 +1,6 @@
 """Every bundled species through the whole pipeline into both formats, checked by the real
 validators (Khronos glTF-Validator, pxr.UsdValidation) and read back by trimesh and pxr."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -67,7 +68,7 @@ def test_trimesh_reads_back_the_counts(built):
     scene = trimesh.load(out, force="scene", process=False)
     verts = sum(len(g.vertices) for g in scene.geometry.values())
     tris = sum(len(g.faces) for g in scene.geometry.values())
-    prims = [p for lod in asset.lods for p in lod.primitives]   # trimesh loads every LOD's mesh
+    prims = [p for lod in asset.lods for p in lod.primitives]  # trimesh loads every LOD's mesh
     assert verts == sum(len(p.positions) for p in prims)
     assert tris == sum(len(p.indices) // 3 for p in prims)
 

@@ -1,5 +1,6 @@
 """Static formats: .obj keeps UVs, groups and materials (an .mtl with the same textures as the
 skinned formats), .ply the rest-pose geometry; both Y up by default, metres."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -34,8 +35,13 @@ def parse_mtl(path):
 
 
 def test_obj_files_and_names(obj):
-    assert [f.name for f in obj] == ["tree.obj", "tree.mtl", "tree_bark.png", "tree_bark_normal.png",
-                                     "tree_leaf.png"]
+    assert [f.name for f in obj] == [
+        "tree.obj",
+        "tree.mtl",
+        "tree_bark.png",
+        "tree_bark_normal.png",
+        "tree_leaf.png",
+    ]
     tex = synthetic_textures()
     for name, t in tex.items():
         assert (obj[0].parent / f"tree_{name}.png").read_bytes() == t.png
@@ -46,11 +52,12 @@ def test_mtl_has_both_materials_with_existing_textures(obj):
     assert set(mtl) == {"bark", "leaf"}
     for m in mtl.values():
         assert (obj[0].parent / m["map_Kd"]).is_file()
-    assert mtl["leaf"]["map_d"] == mtl["leaf"]["map_Kd"] == "tree_leaf.png"   # alpha cut-out
+    assert mtl["leaf"]["map_d"] == mtl["leaf"]["map_Kd"] == "tree_leaf.png"  # alpha cut-out
     assert mtl["bark"]["map_Bump"].split()[-1] == "tree_bark_normal.png"
     assert "map_d" not in mtl["bark"]
-    np.testing.assert_allclose([float(v) for v in mtl["bark"]["Kd"].split()],
-                               textured_asset().materials[0].base_color[:3])
+    np.testing.assert_allclose(
+        [float(v) for v in mtl["bark"]["Kd"].split()], textured_asset().materials[0].base_color[:3]
+    )
 
 
 def test_trimesh_loads_groups_with_uvs_and_textures(obj):
@@ -67,8 +74,9 @@ def test_trimesh_loads_groups_with_uvs_and_textures(obj):
         want = np.c_[to_y_up(prim.positions.astype(np.float64)), prim.uvs]
         got = np.c_[g.vertices, g.visual.uv]
         assert len(got) == len(want)
-        np.testing.assert_allclose(np.unique(got.round(5), axis=0), np.unique(want.round(5), axis=0),
-                                   atol=2e-5)
+        np.testing.assert_allclose(
+            np.unique(got.round(5), axis=0), np.unique(want.round(5), axis=0), atol=2e-5
+        )
 
 
 def test_obj_plain_parse_groups_and_indices(obj):
@@ -80,7 +88,11 @@ def test_obj_plain_parse_groups_and_indices(obj):
     assert sum(ln.startswith("vt ") for ln in lines) == n
     assert sum(ln.startswith("vn ") for ln in lines) == n
     assert [ln for ln in lines if ln.startswith(("g ", "usemtl "))] == [
-        "g bark", "usemtl bark", "g leaves", "usemtl leaf"]
+        "g bark",
+        "usemtl bark",
+        "g leaves",
+        "usemtl leaf",
+    ]
     faces = [ln for ln in lines if ln.startswith("f ")]
     assert len(faces) == sum(len(p.indices) // 3 for p in prims)
     idx = np.array([[int(c.split("/")[0]) for c in f.split()[1:]] for f in faces])
@@ -91,12 +103,15 @@ def test_up_axis_z_keeps_generator_space_and_metres(tmp_path):
     asset = synthetic_asset()
     export(prepare(dataclasses.replace(asset, up_axis="z")), tmp_path / "z.obj")
     export(prepare(asset), tmp_path / "y.obj")
+
     def verts(p):
-        return np.array([[float(v) for v in ln.split()[1:]] for ln in p.read_text().splitlines()
-                         if ln.startswith("v ")])
+        return np.array(
+            [[float(v) for v in ln.split()[1:]] for ln in p.read_text().splitlines() if ln.startswith("v ")]
+        )
+
     vz, vy = verts(tmp_path / "z.obj"), verts(tmp_path / "y.obj")
     np.testing.assert_allclose(vy, to_y_up(vz), atol=1e-6)
-    assert vz[:, 2].max() > 4.0 and vy[:, 1].max() > 4.0        # the same height, up either way
+    assert vz[:, 2].max() > 4.0 and vy[:, 1].max() > 4.0  # the same height, up either way
 
 
 def test_untextured_obj_writes_colours_only(tmp_path):
@@ -120,8 +135,11 @@ def test_ply_rest_pose(tmp_path):
     mesh = trimesh.load(path, process=False)
     n = sum(len(p.positions) for p in asset.lods[0].primitives)
     assert len(mesh.vertices) == n
-    np.testing.assert_allclose(mesh.vertices[:len(asset.lods[0].primitives[0].positions)],
-                               to_y_up(asset.lods[0].primitives[0].positions), atol=1e-5)
+    np.testing.assert_allclose(
+        mesh.vertices[: len(asset.lods[0].primitives[0].positions)],
+        to_y_up(asset.lods[0].primitives[0].positions),
+        atol=1e-5,
+    )
 
 
 # --------------------------------------------------------------------------- command line
@@ -136,8 +154,9 @@ PALM = ROOT / "species" / "fan_palm.txt"
 
 
 def treegen(*args):
-    return subprocess.run([sys.executable, "-m", "treegen_cli", *map(str, args)],
-                          capture_output=True, text=True, cwd=ROOT)
+    return subprocess.run(
+        [sys.executable, "-m", "treegen_cli", *map(str, args)], capture_output=True, text=True, cwd=ROOT
+    )
 
 
 def test_cli_static_format_implies_no_wind(tmp_path):
@@ -146,7 +165,12 @@ def test_cli_static_format_implies_no_wind(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert "static format: no wind or LODs" in proc.stdout
     assert sorted(p.name for p in tmp_path.iterdir()) == [
-        "palm.mtl", "palm.obj", "palm_bark.png", "palm_bark_normal.png", "palm_leaf.png"]
+        "palm.mtl",
+        "palm.obj",
+        "palm_bark.png",
+        "palm_bark_normal.png",
+        "palm_leaf.png",
+    ]
     s = json.loads(treegen("make", PALM, "-o", tmp_path / "palm.ply", "--json").stdout)
     assert s["keys"] == 0 and len(s["lods"]) == 1
     assert "wind" not in s["stages_s"] and "lod" not in s["stages_s"]
@@ -157,15 +181,20 @@ def test_cli_up_axis_z_for_gltf_is_a_user_error(tmp_path):
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert [ln for ln in proc.stderr.splitlines() if ln.strip()] == [
         f"treegen: error: {tmp_path / 'palm.glb'}: glTF is always Y up; up axis z needs one of "
-        ".obj .ply .usda .usdc .usdz"]
+        ".obj .ply .usda .usdc .usdz"
+    ]
     assert not list(tmp_path.iterdir())
 
 
 def test_cli_up_axis_reaches_the_usd_writer(tmp_path):
     from pxr import Usd, UsdGeom
 
-    for name, args, up in (("a.usdz", [], "Y"), ("b.usdz", ["--up-axis", "z"], "Z"),
-                           ("c.usdc", [], "Z"), ("d.usda", ["--up-axis", "y"], "Y")):
+    for name, args, up in (
+        ("a.usdz", [], "Y"),
+        ("b.usdz", ["--up-axis", "z"], "Z"),
+        ("c.usdc", [], "Z"),
+        ("d.usda", ["--up-axis", "y"], "Y"),
+    ):
         proc = treegen("make", PALM, "-o", tmp_path / name, "--duration", "1", "--fps", "5", *args)
         assert proc.returncode == 0, proc.stderr
         assert UsdGeom.GetStageUpAxis(Usd.Stage.Open(str(tmp_path / name))) == up, name

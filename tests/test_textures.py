@@ -1,4 +1,5 @@
 """Generated leaf atlas and bark textures: coverage, layout, UVs, tiling, normals, PNG bytes."""
+
 from __future__ import annotations
 
 import hashlib
@@ -25,8 +26,7 @@ BARK = (0.13, 0.09, 0.06)
 def atlases():
     """One 256² atlas per LeafShape (aspects as the shipped species use them)."""
     aspect = {1: 0.2, 5: 1.0, 6: 0.06, 7: 1.0}
-    return {s: T.leaf_atlas(s, GREEN, size=256, seed=3, aspect=aspect.get(s, 0.5))
-            for s in OUTLINES}
+    return {s: T.leaf_atlas(s, GREEN, size=256, seed=3, aspect=aspect.get(s, 0.5)) for s in OUTLINES}
 
 
 @pytest.fixture(scope="module")
@@ -44,13 +44,14 @@ def cell_pixels(atlas, k):
 def outline_centroid(shape):
     """Area-weighted centroid of the outline's triangles in card UVs (u = x + .5, v = y)."""
     o = outline(shape)
-    tri = o.uvs[o.triangles]                                   # (T, 3, 2)
+    tri = o.uvs[o.triangles]  # (T, 3, 2)
     e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
     a = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
     return (tri.mean(axis=1) * a[:, None]).sum(axis=0) / a.sum()
 
 
 # ------------------------------------------------------------------------------ leaf atlas
+
 
 @pytest.mark.parametrize("shape", sorted(OUTLINES))
 def test_alpha_coverage_matches_fill_factor(atlases, shape):
@@ -84,7 +85,7 @@ def test_outline_centroid_maps_onto_the_blade(atlases, shape):
         assert u0 < uv[0] < u1 and v0 < uv[1] < v1
         x0, y0, x1, y1 = cell_pixels(at, k)
         a = at.rgba[y0:y1, x0:x1, 3].astype(np.float64)
-        assert at.rgba[int(uv[1] * h), int(uv[0] * w), 3] > 200     # on the blade
+        assert at.rgba[int(uv[1] * h), int(uv[0] * w), 3] > 200  # on the blade
         ys, xs = np.mgrid[y0:y1, x0:x1] + 0.5
         cu, cv = (a * xs).sum() / a.sum() / w, (a * ys).sum() / a.sum() / h
         assert cu == pytest.approx(uv[0], abs=1.5 / w)
@@ -98,12 +99,12 @@ def test_rects_inside_unit_square_padded_and_disjoint(variants):
     assert r.shape == (variants, 4)
     assert np.all(r >= 0) and np.all(r <= 1)
     assert np.all(r[:, 0] < r[:, 2]) and np.all(r[:, 1] < r[:, 3])
-    assert np.all(r[:, :2] * 256 >= 2) and np.all(r[:, 2:] * 256 <= 254)   # padded from edges
+    assert np.all(r[:, :2] * 256 >= 2) and np.all(r[:, 2:] * 256 <= 254)  # padded from edges
     for i in range(variants):
         for j in range(i + 1, variants):
             gap_u = max(r[j, 0] - r[i, 2], r[i, 0] - r[j, 2])
             gap_v = max(r[j, 1] - r[i, 3], r[i, 1] - r[j, 3])
-            assert max(gap_u, gap_v) * 256 >= 4            # two padding bands between cards
+            assert max(gap_u, gap_v) * 256 >= 4  # two padding bands between cards
 
 
 def test_card_uvs_map_card_corners_to_rect_corners(atlases):
@@ -126,7 +127,7 @@ def test_card_uvs_in_the_asset_convention_round_trip_through_the_gltf_flip(atlas
     var = rng.integers(0, at.variants, 200)
     gltf = T.card_uvs(uv, var, at)
     asset = T.card_uvs(uv, var, at, origin="bottom-left")
-    flipped = np.float32(1.0) - asset[:, 1]                   # what gltf.py writes
+    flipped = np.float32(1.0) - asset[:, 1]  # what gltf.py writes
     np.testing.assert_allclose(flipped, gltf[:, 1], atol=1e-6)
     np.testing.assert_array_equal(asset[:, 0], gltf[:, 0])
     with pytest.raises(ValueError):
@@ -147,11 +148,12 @@ def test_card_uvs_vectorised_over_mixed_variants(atlases):
 def test_card_uvs_on_the_mesh_card_uvs():
     """mesh.py's cards carry the outline's uvs; mapped, every vertex stays in its cell."""
     from treegen_cli.mesh import CARD
+
     at = T.leaf_atlas(2, GREEN, size=128)
     uv = np.tile(CARD.uvs, (3, 1))
     var = np.repeat([0, 1, 3], len(CARD.uvs))
     got = T.card_uvs(uv, var, at)
-    assert np.allclose(got[0], [at.rects[0, 0], at.rects[0, 3]])   # first CARD point: base left
+    assert np.allclose(got[0], [at.rects[0, 0], at.rects[0, 3]])  # first CARD point: base left
 
 
 def rgb_key(px):
@@ -165,11 +167,11 @@ def test_transparent_texels_carry_blade_colour(atlases):
     so bilinear and mip filtering never pull in black or white."""
     for shape, at in atlases.items():
         w = at.rgba.shape[1]
-        cw = w // 2                                            # 4 variants: a 2 × 2 grid
+        cw = w // 2  # 4 variants: a 2 × 2 grid
         for k in range(at.variants):
             x0, y0, x1, y1 = cell_pixels(at, k)
             pad = x0 % cw
-            cell = at.rgba[y0 - pad:y1 + pad, x0 - pad:x1 + pad]
+            cell = at.rgba[y0 - pad : y1 + pad, x0 - pad : x1 + pad]
             solid = cell[..., 3] >= 128
             clear = cell[..., 3] == 0
             assert clear.any() or shape == 4
@@ -194,9 +196,9 @@ def test_variants_differ_and_carry_veins(atlases):
             x0, y0, x1, y1 = cell_pixels(at, k)
             cells.append(T.srgb8_to_linear(at.rgba[y0:y1, x0:x1, :3]))
         means = np.array([c[at.rgba[y0:y1, x0:x1, 3] >= 128].mean(axis=0) for c in cells])
-        assert np.ptp(means, axis=0).max() > 0.005           # colour jitter between variants
+        assert np.ptp(means, axis=0).max() > 0.005  # colour jitter between variants
         lum = cells[0][..., 1][at.rgba[y0:y1, x0:x1, 3] >= 128]
-        assert lum.std() > 0.03 * lum.mean()                  # not a flat fill (veins, shading)
+        assert lum.std() > 0.03 * lum.mean()  # not a flat fill (veins, shading)
 
 
 def test_midrib_is_lighter_than_the_blade_beside_it():
@@ -205,7 +207,7 @@ def test_midrib_is_lighter_than_the_blade_beside_it():
     g = T.srgb8_to_linear(at.rgba[y0:y1, x0:x1, 1])
     mid = (x1 - x0) // 2
     rows = slice((y1 - y0) // 4, (y1 - y0) // 2)
-    assert g[rows, mid - 1:mid + 1].mean() > 1.1 * g[rows, mid - 25:mid - 15].mean()
+    assert g[rows, mid - 1 : mid + 1].mean() > 1.1 * g[rows, mid - 25 : mid - 15].mean()
 
 
 def test_square_leaf_is_a_full_card():
@@ -232,6 +234,7 @@ def test_leaf_atlas_rejects_bad_input():
 
 
 # ------------------------------------------------------------------------------ bark
+
 
 def seam_stats(img, axis):
     """(wrap-around seam difference, median and max of the interior neighbour differences),
@@ -291,7 +294,7 @@ def test_normal_map_decodes_to_unit_vectors_facing_out(bark):
     length = np.linalg.norm(n, axis=-1)
     assert np.abs(length - 1.0).max() < 0.02
     assert n[..., 2].min() > 0.0
-    assert n[..., 2].mean() > 0.8                             # mostly facing out, not noise
+    assert n[..., 2].mean() > 0.8  # mostly facing out, not noise
 
 
 def test_normal_map_is_opengl_convention():
@@ -332,6 +335,7 @@ def test_bark_same_pattern_at_every_resolution():
 
 # ------------------------------------------------------------------------------ PNG bytes
 
+
 def test_png_bytes_deterministic_and_seeded():
     a1 = T.png_bytes(T.leaf_atlas(0, GREEN, 128, seed=1).rgba)
     a2 = T.png_bytes(T.leaf_atlas(0, GREEN, 128, seed=1).rgba)
@@ -364,6 +368,7 @@ def test_png_bytes_rejects_other_arrays():
 
 # ------------------------------------------------------------------------------ colours
 
+
 def test_species_colors_by_name_then_shape_then_default():
     leaf, bark = T.species_colors(replace(default_params("quaking_aspen"), leaf_shape=0))
     assert leaf == T.DEFAULT_LEAF_COLOR["quaking_aspen"]
@@ -390,23 +395,29 @@ def test_species_textures_bundle():
     assert set(pngs) == {"leaf", "bark", "bark_normal"}
     assert pngs == T.species_textures(p, seed=1, leaf_size=128, bark_size=64, variants=2).pngs()
     solid = tex.leaf.rgba[..., 3] >= 128
-    np.testing.assert_allclose(T.srgb8_to_linear(tex.leaf.rgba[..., :3][solid]).mean(axis=0),
-                               T.DEFAULT_LEAF_COLOR["weeping_willow"], rtol=0.04)
+    np.testing.assert_allclose(
+        T.srgb8_to_linear(tex.leaf.rgba[..., :3][solid]).mean(axis=0),
+        T.DEFAULT_LEAF_COLOR["weeping_willow"],
+        rtol=0.04,
+    )
 
 
 def test_png_bytes_identical_in_a_fresh_interpreter():
     """Same bytes from another process (other hash seed, fresh imports): nothing depends on
     interpreter state."""
-    code = ("import hashlib\n"
-            "from treegen_cli import textures as T\n"
-            "from treegen_cli.params import default_params\n"
-            "t = T.species_textures(default_params('oak'), 3, 128, 64)\n"
-            "print(hashlib.sha256(b''.join(t.pngs().values())).hexdigest())\n")
+    code = (
+        "import hashlib\n"
+        "from treegen_cli import textures as T\n"
+        "from treegen_cli.params import default_params\n"
+        "t = T.species_textures(default_params('oak'), 3, 128, 64)\n"
+        "print(hashlib.sha256(b''.join(t.pngs().values())).hexdigest())\n"
+    )
     env = dict(os.environ, PYTHONHASHSEED="12345")
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
-                         check=True).stdout.strip()
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    ).stdout.strip()
     here = T.species_textures(default_params("oak"), 3, 128, 64)
     assert out == hashlib.sha256(b"".join(here.pngs().values())).hexdigest()
 
@@ -414,5 +425,6 @@ def test_png_bytes_identical_in_a_fresh_interpreter():
 @pytest.mark.parametrize("variants,size", [(1, 64), (4, 512), (4, 500), (5, 256), (9, 300)])
 def test_atlas_rects_is_the_layout_leaf_atlas_draws(variants, size):
     """The layout alone (for UV mapping before the pixels exist) is exactly the atlas's."""
-    np.testing.assert_array_equal(T.atlas_rects(variants, size),
-                                  T.leaf_atlas(0, GREEN, size, variants, seed=1).rects)
+    np.testing.assert_array_equal(
+        T.atlas_rects(variants, size), T.leaf_atlas(0, GREEN, size, variants, seed=1).rects
+    )

@@ -1,5 +1,6 @@
 """USD writer: files re-read through pxr (UsdSkel queries, UsdValidation, UsdLod) must say
 what the Asset says."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -19,10 +20,10 @@ from treegen_cli.prepare import prepare  # noqa: E402
 
 FORMATS = ("usda", "usdc", "usdz")
 
+
 def write_usd(asset, path, **opts):
     """Hand-built assets go through the prepare stage, as the pipeline's do."""
     return _write_usd(prepare(asset, bounds=True), path, **opts)
-
 
 
 @pytest.fixture(scope="module")
@@ -123,7 +124,7 @@ def test_skeleton_round_trip(written, lods):
         joints = list(skel.GetJointsAttr().Get())
         assert len(joints) == len(lod.skeleton.names)
         assert joints[0] == "j0"
-        for j, p in enumerate(joints[1:], 1):   # each joint's parent path is an earlier joint
+        for j, p in enumerate(joints[1:], 1):  # each joint's parent path is an earlier joint
             parent = p.rsplit("/", 1)[0]
             assert parent in joints[:j]
             assert joints.index(parent) == lod.skeleton.parent[j]
@@ -148,10 +149,12 @@ def test_meshes_round_trip(written, fmt):
             np.testing.assert_array_equal(mesh.GetFaceVertexIndicesAttr().Get(), prim.indices)
             assert mesh.GetOrientationAttr().Get() == UsdGeom.Tokens.rightHanded
             assert mesh.GetNormalsInterpolation() == UsdGeom.Tokens.vertex
-            np.testing.assert_allclose(mesh.GetNormalsAttr().Get(), stage_axes(stage, prim.normals),
-                                       atol=1e-7)
-            np.testing.assert_allclose(mesh.GetPointsAttr().Get(), stage_axes(stage, prim.positions),
-                                       atol=1e-6)
+            np.testing.assert_allclose(
+                mesh.GetNormalsAttr().Get(), stage_axes(stage, prim.normals), atol=1e-7
+            )
+            np.testing.assert_allclose(
+                mesh.GetPointsAttr().Get(), stage_axes(stage, prim.positions), atol=1e-6
+            )
             st = UsdGeom.PrimvarsAPI(mesh).GetPrimvar("st")
             assert st.GetTypeName() == "texCoord2f[]"
             np.testing.assert_allclose(st.Get(), prim.uvs)
@@ -232,7 +235,7 @@ def test_animated_skinning_matches_numpy_lbs(written):
         moved = np.einsum("vk,vkij,vj->vi", prim.weights, skin[prim.joints], p)[:, :3]
         pts = Vt.Vec3fArray(UsdGeom.Mesh(targets[prim.name].GetPrim()).GetPointsAttr().Get())
         assert targets[prim.name].ComputeSkinnedPoints(xforms, pts, Usd.TimeCode(frame))
-        assert np.abs(moved - prim.positions).max() > 0.01          # it really moves
+        assert np.abs(moved - prim.positions).max() > 0.01  # it really moves
         np.testing.assert_allclose(np.array(pts), stage_axes(stage, moved), atol=1e-4)
 
 
@@ -267,10 +270,11 @@ def test_lod_root_and_variant_set(written):
     assert vset.GetVariantNames() == ["LOD0", "LOD1", "LOD2"]
     for k in range(3):
         vset.SetVariantSelection(f"LOD{k}")
-        vis = [UsdGeom.Imageable(stage.GetPrimAtPath(lods_prim.GetPath().AppendChild(n)))
-               .ComputeVisibility() for n in items]
-        assert vis == [UsdGeom.Tokens.inherited if i == k else UsdGeom.Tokens.invisible
-                       for i in range(3)]
+        vis = [
+            UsdGeom.Imageable(stage.GetPrimAtPath(lods_prim.GetPath().AppendChild(n))).ComputeVisibility()
+            for n in items
+        ]
+        assert vis == [UsdGeom.Tokens.inherited if i == k else UsdGeom.Tokens.invisible for i in range(3)]
         assert all(stage.GetPrimAtPath(lods_prim.GetPath().AppendChild(n)).IsActive() for n in items)
 
 
@@ -317,13 +321,19 @@ def test_extra_clips_are_sibling_animations_and_empty_primitives_are_valid(tmp_p
     """Only the first clip drives the skeleton; a primitive without vertices stays valid."""
     asset = synthetic_asset(lods=1)
     lod = asset.lods[0]
-    calm = dataclasses.replace(lod.clips[0], name="calm", keys=None,
-                               rotations=np.repeat(lod.skeleton.rest_rotation[None], 9, 0))
-    empty = dataclasses.replace(lod.primitives[1], name="twigs",
-                                positions=np.zeros((0, 3), np.float32),
-                                normals=np.zeros((0, 3), np.float32), uvs=np.zeros((0, 2), np.float32),
-                                indices=np.zeros(0, np.uint32), joints=np.zeros((0, 4), np.uint16),
-                                weights=np.zeros((0, 4), np.float32))
+    calm = dataclasses.replace(
+        lod.clips[0], name="calm", keys=None, rotations=np.repeat(lod.skeleton.rest_rotation[None], 9, 0)
+    )
+    empty = dataclasses.replace(
+        lod.primitives[1],
+        name="twigs",
+        positions=np.zeros((0, 3), np.float32),
+        normals=np.zeros((0, 3), np.float32),
+        uvs=np.zeros((0, 2), np.float32),
+        indices=np.zeros(0, np.uint32),
+        joints=np.zeros((0, 4), np.uint16),
+        weights=np.zeros((0, 4), np.float32),
+    )
     lod = dataclasses.replace(lod, clips=[lod.clips[0], calm], primitives=[*lod.primitives, empty])
     path = tmp_path / "two clips.usda"
     write_usd(dataclasses.replace(asset, name="two clips", lods=[lod]), path)
@@ -348,7 +358,7 @@ def test_validator_looks_inside_non_default_variants(tmp_path):
     vset.AddVariant("LOD0")
     vset.AddVariant("LOD1")
     vset.SetVariantSelection("LOD1")
-    with vset.GetVariantEditContext():   # a binding without MaterialBindingAPI, only in LOD1
+    with vset.GetVariantEditContext():  # a binding without MaterialBindingAPI, only in LOD1
         UsdGeom.Mesh.Define(stage, "/a/m").GetPrim().CreateRelationship("material:binding").SetTargets(["/a"])
     vset.SetVariantSelection("LOD0")
     stage.Save()
@@ -364,6 +374,7 @@ def test_usd_and_gltf_agree(tmp_path):
 
     def export(a, p):
         return _export(prepare(a), p)
+
     from treegen_cli.exchange.gltf import quat_to_y_up, read_accessor, read_gltf
 
     asset = synthetic_asset(lods=1)
@@ -389,8 +400,9 @@ def test_usd_and_gltf_agree(tmp_path):
 
     joint_nodes = gltf["skins"][0]["joints"]
     (anim,) = gltf["animations"]
-    usd_anim = UsdSkel.Animation(stage.GetPrimAtPath(
-        lod_paths(stage, 1)[0].AppendChild(asset.lods[0].clips[0].name)))
+    usd_anim = UsdSkel.Animation(
+        stage.GetPrimAtPath(lod_paths(stage, 1)[0].AppendChild(asset.lods[0].clips[0].name))
+    )
     gltf_joints = sorted(joint_nodes.index(c["target"]["node"]) for c in anim["channels"])
     usd_joints = [list(sq.GetJointOrder()).index(p) for p in usd_anim.GetJointsAttr().Get()]
     assert gltf_joints == sorted(usd_joints)
@@ -415,8 +427,9 @@ def test_rotation_samples_stay_on_one_hemisphere(tmp_path):
     path = tmp_path / "flip.usda"
     write_usd(dataclasses.replace(asset, lods=[lod]), path)
     stage = Usd.Stage.Open(str(path))
-    attr = UsdSkel.Animation(stage.GetPrimAtPath(
-        lod_paths(stage, 1)[0].AppendChild(clip.name))).GetRotationsAttr()
+    attr = UsdSkel.Animation(
+        stage.GetPrimAtPath(lod_paths(stage, 1)[0].AppendChild(clip.name))
+    ).GetRotationsAttr()
     samples = np.array([np.array(attr.Get(t)) for t in attr.GetTimeSamples()])
     assert len(samples) == len(clip.times)
     assert (np.einsum("kji,kji->kj", samples[1:], samples[:-1]) > 0).all()
@@ -428,7 +441,7 @@ def test_skel_root_extent_holds_every_animated_frame(written):
     for path, lod in zip(lod_paths(stage, 3), asset.lods):
         lo, hi = np.array(UsdSkel.Root(stage.GetPrimAtPath(path)).GetExtentAttr().Get())
         sq, binding = skel_query(stage, path)
-        for frame in range(len(lod.clips[0].times) * 2 - 1):   # keys and half-way between
+        for frame in range(len(lod.clips[0].times) * 2 - 1):  # keys and half-way between
             code = frame / 2
             xforms = sq.ComputeSkinningTransforms(Usd.TimeCode(code))
             for target in binding.GetSkinningTargets():
@@ -443,8 +456,18 @@ def test_skel_root_extent_holds_every_animated_frame(written):
 from synthetic import synthetic_textures, textured_asset  # noqa: E402
 import arkit_check  # noqa: E402
 
-ARKIT_PRIM_TYPES = {"", "Scope", "Xform", "Material", "Shader", "Mesh", "SkelRoot", "Skeleton",
-                    "SkelAnimation", "GeomSubset"}     # the subset of ARKit's list trees need
+ARKIT_PRIM_TYPES = {
+    "",
+    "Scope",
+    "Xform",
+    "Material",
+    "Shader",
+    "Mesh",
+    "SkelRoot",
+    "Skeleton",
+    "SkelAnimation",
+    "GeomSubset",
+}  # the subset of ARKit's list trees need
 
 
 @pytest.fixture(scope="module")
@@ -463,8 +486,9 @@ def textured(tmp_path_factory):
 
 
 def shader(stage, material, name):
-    return UsdShade.Shader(stage.GetPrimAtPath(
-        stage.GetDefaultPrim().GetPath().AppendPath(f"Looks/{material}/{name}")))
+    return UsdShade.Shader(
+        stage.GetPrimAtPath(stage.GetDefaultPrim().GetPath().AppendPath(f"Looks/{material}/{name}"))
+    )
 
 
 def source(inp):
@@ -527,10 +551,11 @@ def test_usdz_is_ar_ready_in_process(textured, lods):
                 files.append(f.Get())
     assert files and all(".usdz[" in a.resolvedPath for a in files)
     assert all(Ar.GetResolver().Resolve(a.resolvedPath) for a in files)
-    if lods > 1:   # the variant set stays the portable LOD switch
+    if lods > 1:  # the variant set stays the portable LOD switch
         lods_prim = stage.GetDefaultPrim().GetChild("LODs")
         assert lods_prim.GetVariantSets().GetVariantSet("LOD").GetVariantNames() == [
-            f"LOD{k}" for k in range(lods)]
+            f"LOD{k}" for k in range(lods)
+        ]
 
 
 def test_lod_schemas_only_outside_usdz(textured):
@@ -552,8 +577,12 @@ def test_textures_inside_the_usdz(textured):
         files = textured[lods, "usdz"]
         assert [f.name for f in files] == [f"tree{lods}.usdz"]
         z = Sdf.ZipFile.Open(str(files[0]))
-        assert z.GetFileNames() == ["synthetic.usdc", "textures/bark.png",
-                                    "textures/bark_normal.png", "textures/leaf.png"]
+        assert z.GetFileNames() == [
+            "synthetic.usdc",
+            "textures/bark.png",
+            "textures/bark_normal.png",
+            "textures/leaf.png",
+        ]
         for name, t in tex.items():
             info = z.GetFileInfo(f"textures/{name}.png")
             assert info.size == len(t.png) and info.compressionMethod == 0
@@ -565,8 +594,12 @@ def test_textures_beside_usda_usdc(textured, fmt):
     """Flat siblings <stem>_<name>.png in the same folder, referenced "./<stem>_<name>.png"."""
     tex = synthetic_textures()
     files = textured[1, fmt]
-    assert [f.name for f in files] == [f"tree1.{fmt}", "tree1_bark.png", "tree1_bark_normal.png",
-                                       "tree1_leaf.png"]
+    assert [f.name for f in files] == [
+        f"tree1.{fmt}",
+        "tree1_bark.png",
+        "tree1_bark_normal.png",
+        "tree1_leaf.png",
+    ]
     for name, t in tex.items():
         assert (files[0].parent / f"tree1_{name}.png").read_bytes() == t.png
     stage = Usd.Stage.Open(str(files[0]))
@@ -595,7 +628,7 @@ def test_bark_normal_map_is_raw_and_scaled_to_minus_one_one(textured, fmt):
     stage = Usd.Stage.Open(str(textured[1, fmt][0]))
     surf = shader(stage, "bark", "PreviewSurface")
     assert source(surf.GetInput("normal")) == ("normalTexture", "rgb")
-    assert not surf.GetInput("opacityThreshold")                 # bark is opaque
+    assert not surf.GetInput("opacityThreshold")  # bark is opaque
     assert not surf.GetInput("opacity").HasConnectedSource()
     n = shader(stage, "bark", "normalTexture")
     assert tuple(n.GetInput("scale").Get()) == (2, 2, 2, 1)
@@ -623,8 +656,9 @@ def test_texture_names_are_unique_and_shared_once(tmp_path):
     asset = textured_asset()
     bark, leaf = asset.materials
     other = replace(leaf.base_texture, png=bark.base_texture.png, name="bark")
-    asset = replace(asset, materials=[bark, replace(leaf, base_texture=other,
-                                                    normal_texture=bark.normal_texture)])
+    asset = replace(
+        asset, materials=[bark, replace(leaf, base_texture=other, normal_texture=bark.normal_texture)]
+    )
     files = export(prepare(asset), tmp_path / "t.usda")
     assert [f.name for f in files] == ["t.usda", "t_bark.png", "t_bark_1.png", "t_bark_normal.png"]
     assert validate_usd(files[0]) == []
@@ -664,15 +698,18 @@ def test_up_axis_y_stands_the_same_tree_up_along_y(tmp_path, fmt):
             for name in pz:
                 np.testing.assert_allclose(py[name], to_y_up(pz[name]), atol=1e-4)
         rest = skinned_points(y, path, 0.0)["bark"]
-        assert rest[:, 1].max() > 4.0 and abs(rest[:, 1].min()) < 0.01   # trunk base at 0, up +Y
+        assert rest[:, 1].max() > 4.0 and abs(rest[:, 1].min()) < 0.01  # trunk base at 0, up +Y
         lo, hi = np.array(UsdSkel.Root(y.GetPrimAtPath(path)).GetExtentAttr().Get())
         zlo, zhi = np.array(UsdSkel.Root(z.GetPrimAtPath(path)).GetExtentAttr().Get())
         np.testing.assert_allclose(hi - lo, (zhi - zlo)[[0, 2, 1]], atol=1e-6)
     heur = UsdLod.DistanceHeuristic(y.GetPrimAtPath(y.GetDefaultPrim().GetPath().AppendChild("LODHeuristic")))
     if fmt != "usdz":
-        zheur = UsdLod.DistanceHeuristic(z.GetPrimAtPath(z.GetDefaultPrim().GetPath().AppendChild("LODHeuristic")))
-        np.testing.assert_allclose(heur.GetCenterAttr().Get(), to_y_up(np.array(zheur.GetCenterAttr().Get())),
-                                   atol=1e-6)
+        zheur = UsdLod.DistanceHeuristic(
+            z.GetPrimAtPath(z.GetDefaultPrim().GetPath().AppendChild("LODHeuristic"))
+        )
+        np.testing.assert_allclose(
+            heur.GetCenterAttr().Get(), to_y_up(np.array(zheur.GetCenterAttr().Get())), atol=1e-6
+        )
 
 
 def test_read_drawable_stands_a_y_up_usdz_upright(textured):
@@ -710,19 +747,28 @@ def test_textured_forest_validates(tmp_path, fmt):
     names = [f.name for f in files]
     if fmt == "usdz":
         from pxr import Sdf
+
         assert names == ["grove.usdz"]
         assert Sdf.ZipFile.Open(str(files[0])).GetFileNames() == [
-            "grove.usdc", "textures/synthetic_s0_bark.png", "textures/synthetic_s0_bark_normal.png",
-            "textures/synthetic_s0_leaf.png"]
+            "grove.usdc",
+            "textures/synthetic_s0_bark.png",
+            "textures/synthetic_s0_bark_normal.png",
+            "textures/synthetic_s0_leaf.png",
+        ]
         if arkit_check.available():
             report = arkit_check.check(files[0])
             assert report["errors"] == [] and report["failed"] == [], report
     else:
-        assert names == [f"grove.{fmt}", "grove_synthetic_s0_bark.png",
-                         "grove_synthetic_s0_bark_normal.png", "grove_synthetic_s0_leaf.png"]
+        assert names == [
+            f"grove.{fmt}",
+            "grove_synthetic_s0_bark.png",
+            "grove_synthetic_s0_bark_normal.png",
+            "grove_synthetic_s0_leaf.png",
+        ]
     stage = Usd.Stage.Open(str(files[0]))
     tree = stage.GetPrimAtPath("/grove/Trees/tree0")
-    np.testing.assert_allclose(tree.GetAttribute("xformOp:translate").Get(),
-                               stage_axes(stage, [3.0, -4.0, 0.5]))
+    np.testing.assert_allclose(
+        tree.GetAttribute("xformOp:translate").Get(), stage_axes(stage, [3.0, -4.0, 0.5])
+    )
     up = "Y" if fmt == "usdz" else "Z"
     assert tree.GetAttribute(f"xformOp:rotate{up}").Get() == 30.0

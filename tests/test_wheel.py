@@ -5,6 +5,7 @@ The venv sees the environment's pinned dependencies (--system-site-packages) so 
 downloaded at install time; `--no-index` makes pip prove the wheel's pins are met by them. The
 test checks that the venv's own copy of treegen_cli is what runs, not this checkout or an
 editable install elsewhere."""
+
 from __future__ import annotations
 
 import json
@@ -31,7 +32,7 @@ def _glb_chunks(path: Path) -> tuple[dict, int]:
     assert (magic, version, length) == (b"glTF", 2, len(data))
     json_len, json_type = struct.unpack_from("<II", data, 12)
     assert json_type == 0x4E4F534A and json_len % 4 == 0
-    doc = json.loads(data[20:20 + json_len])
+    doc = json.loads(data[20 : 20 + json_len])
     bin_len, bin_type = struct.unpack_from("<II", data, 20 + json_len)
     assert bin_type == 0x004E4942 and 28 + json_len + bin_len == len(data)
     return doc, bin_len
@@ -41,8 +42,9 @@ def test_wheel_installs_into_a_fresh_venv_and_makes_a_tree_by_name(tmp_path):
     # build from a copy, so the checkout gets no build/ or *.egg-info
     src = tmp_path / "src"
     src.mkdir()
-    shutil.copytree(ROOT / "treegen_cli", src / "treegen_cli",
-                    ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+    shutil.copytree(
+        ROOT / "treegen_cli", src / "treegen_cli", ignore=shutil.ignore_patterns("__pycache__", "*.pyc")
+    )
     for name in ("pyproject.toml", "README.md"):
         shutil.copy(ROOT / name, src / name)
     dist = tmp_path / "dist"
@@ -58,11 +60,22 @@ def test_wheel_installs_into_a_fresh_venv_and_makes_a_tree_by_name(tmp_path):
     env["PATH"] = f"{venv / 'bin'}{os.pathsep}{env.get('PATH', '')}"
     empty = tmp_path / "empty"
     empty.mkdir()
-    where = _run([python, "-c", "import treegen_cli, treegen_cli.bundled as b; "
-                  "print(treegen_cli.__file__); print(len(b.bundled_names()))"], env=env, cwd=empty)
+    where = _run(
+        [
+            python,
+            "-c",
+            "import treegen_cli, treegen_cli.bundled as b; "
+            "print(treegen_cli.__file__); print(len(b.bundled_names()))",
+        ],
+        env=env,
+        cwd=empty,
+    )
     module, count = where.stdout.split()
-    site = Path(_run([python, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
-                     env=env, cwd=empty).stdout.strip())
+    site = Path(
+        _run(
+            [python, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"], env=env, cwd=empty
+        ).stdout.strip()
+    )
     assert Path(module).is_relative_to(site) and site.is_relative_to(venv)
     assert int(count) == len(list((ROOT / "treegen_cli" / "species").glob("*.txt")))
 
@@ -71,4 +84,4 @@ def test_wheel_installs_into_a_fresh_venv_and_makes_a_tree_by_name(tmp_path):
     doc, bin_len = _glb_chunks(empty / "x.glb")
     assert doc["asset"]["version"] == "2.0" and doc["buffers"][0]["byteLength"] <= bin_len
     assert doc["skins"] and doc["animations"][0]["name"] == "wind_loop"
-    assert "MSFT_lod" in doc.get("extensionsUsed", [])                # the default 4 LODs
+    assert "MSFT_lod" in doc.get("extensionsUsed", [])  # the default 4 LODs

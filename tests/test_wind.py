@@ -1,4 +1,5 @@
 """Physical plausibility of the baked wind (issue 4): directions, scaling, loops, bounds."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -155,8 +156,9 @@ def make_tree_and_rig(jointed_twig: bool = False) -> tuple[Tree, Rig]:
         node_joints=np.stack([node_carrier, node_carrier], axis=1).astype(np.uint16),
         node_weights=np.tile(np.array([1.0, 0.0], dtype=np.float32), (len(pos), 1)),
         leaf_joint=node_carrier[tree.leaf_node].astype(np.uint16),
-        stem_joint=np.array([0] + [carrier(int(tree.stem_parent_node[s])) for s in range(1, 4)],
-                            dtype=np.int32),
+        stem_joint=np.array(
+            [0] + [carrier(int(tree.stem_parent_node[s])) for s in range(1, 4)], dtype=np.int32
+        ),
     )
     return tree, rig
 
@@ -233,7 +235,7 @@ def test_root_rocks_in_place(tree_rig):
 def test_mean_tip_displacement_points_downwind(tree_rig, direction_deg):
     tree, rig = tree_rig
     clip = bake_wind(tree, rig, WindOptions(speed=8.0, direction_deg=direction_deg, **FAST), seed=5)
-    disp = _tip_displacement(clip, rig)[:-1].mean(axis=0)            # (T, 3), one period
+    disp = _tip_displacement(clip, rig)[:-1].mean(axis=0)  # (T, 3), one period
     phi = np.deg2rad(direction_deg)
     wind_dir = np.array([np.cos(phi), np.sin(phi), 0.0])
     assert np.all(disp @ wind_dir > 0.0)
@@ -262,12 +264,20 @@ def test_static_wind_solves_the_coupled_system(tree_rig):
     tree, rig = tree_rig
     opts = WindOptions(speed=5.0, gust=0.0, turbulence=0.0, stem_drag_coefficient=0.0, **FAST)
     theta = wind_angles(tree, rig, opts, seed=0)
-    assert np.allclose(theta, theta[:, :1], atol=1e-15)              # steady: constant in time
+    assert np.allclose(theta, theta[:, :1], atol=1e-15)  # steady: constant in time
     loads, dyn, parent = _model(tree, rig, opts)
     # hand: drag of every leaf about every ancestor joint of its carrier
     centre = tree.leaf_pos + 0.5 * tree.leaf_size[:, :1] * tree.leaf_frame[:, :, 1]
     soften = (1.0 + (5.0 / opts.reconfig_speed) ** 2) ** (0.5 * opts.vogel_exponent)
-    force = 0.5 * AIR_DENSITY * opts.drag_coefficient * soften * tree.leaf_area[:, None] * 25.0 * np.array([1.0, 0, 0])
+    force = (
+        0.5
+        * AIR_DENSITY
+        * opts.drag_coefficient
+        * soften
+        * tree.leaf_area[:, None]
+        * 25.0
+        * np.array([1.0, 0, 0])
+    )
     torque = np.zeros((parent.shape[0], 1, 3))
     for i, j in enumerate(rig.leaf_joint.astype(int)):
         a = j
@@ -290,7 +300,9 @@ def _mass_points(tree, rig, opts):
     length = np.linalg.norm(b - a, axis=1)
     wood = opts.wood_density * np.pi * length * (r0**2 + r0 * r1 + r1**2) / 3.0
     leaf = opts.leaf_areal_density * tree.leaf_area
-    x = np.concatenate([0.5 * (a + b), tree.leaf_pos + 0.5 * tree.leaf_size[:, :1] * tree.leaf_frame[:, :, 1]])
+    x = np.concatenate(
+        [0.5 * (a + b), tree.leaf_pos + 0.5 * tree.leaf_size[:, :1] * tree.leaf_frame[:, :, 1]]
+    )
     u = np.concatenate([(b - a) / length[:, None], np.zeros((tree.n_leaves, 3))])
     rod = np.concatenate([wood * length**2 / 12.0, np.zeros(tree.n_leaves)])
     owner = np.concatenate([carrier[seg], rig.leaf_joint.astype(int)])
@@ -313,7 +325,7 @@ def test_mass_matrix_is_the_kinetic_energy(tree_rig):
     for _ in range(3):
         qdot = rng.normal(size=dyn.mass.shape[0])
         full = qdot.reshape(-1, 2)
-        w = np.einsum("jca,ja->jc", dyn.basis, full)                  # world angular rates
+        w = np.einsum("jca,ja->jc", dyn.basis, full)  # world angular rates
         energy = 0.0
         for i in range(x.shape[0]):
             v, spin, a = np.zeros(3), np.zeros(3), owner[i]
@@ -322,7 +334,7 @@ def test_mass_matrix_is_the_kinetic_energy(tree_rig):
                 spin += w[a]
                 a = parent[a]
             energy += 0.5 * m[i] * v @ v + 0.5 * rod[i] * np.sum(np.cross(spin, u[i]) ** 2)
-        assert np.isclose(0.5 * qdot @ dyn.mass @ qdot, energy, rtol=1e-6)   # M has a 1e-9 floor
+        assert np.isclose(0.5 * qdot @ dyn.mass @ qdot, energy, rtol=1e-6)  # M has a 1e-9 floor
 
 
 def test_gravity_stiffness_is_the_potential_energy_curvature(tree_rig):
@@ -346,7 +358,7 @@ def test_gravity_stiffness_is_the_potential_energy_curvature(tree_rig):
                 chain.append(a)
                 a = parent[a]
             p = x[i]
-            for a in chain:                                            # innermost joint first
+            for a in chain:  # innermost joint first
                 p = loads.pivot[a] + Rotation.from_rotvec(theta[a]).apply(p - loads.pivot[a])
             total += 9.81 * m[i] * p[2]
         return total
@@ -354,8 +366,21 @@ def test_gravity_stiffness_is_the_potential_energy_curvature(tree_rig):
     n = dyn.mass.shape[0]
     h = 1e-4
     e = np.eye(n) * h
-    hess = np.array([[(potential(e[i] + e[j]) - potential(e[i] - e[j]) - potential(-e[i] + e[j])
-                       + potential(-e[i] - e[j])) / (4 * h * h) for j in range(n)] for i in range(n)])
+    hess = np.array(
+        [
+            [
+                (
+                    potential(e[i] + e[j])
+                    - potential(e[i] - e[j])
+                    - potential(-e[i] + e[j])
+                    + potential(-e[i] - e[j])
+                )
+                / (4 * h * h)
+                for j in range(n)
+            ]
+            for i in range(n)
+        ]
+    )
     springs = np.repeat(_springs(loads, rig, opts.anchorage), 2)
     geometric = dyn.stiffness - np.diag(springs)
     assert np.allclose(geometric, hess, rtol=1e-3, atol=1e-3 * np.abs(hess).max())
@@ -390,21 +415,22 @@ def test_gale_stays_bounded_and_finite(tree_rig, elastic_modulus):
     dev = _deviation(clip, rig.skeleton)
     assert dev.max() <= np.deg2rad(opts.max_angle_deg) + 1e-9
     world = pose_world(rig.skeleton, clip.rotations)[:, :, :3, :3]
-    turn = Rotation.from_matrix((world @ np.swapaxes(rig.skeleton.bind_world[None, :, :3, :3], -1, -2)
-                                 ).reshape(-1, 3, 3)).magnitude()
-    assert turn.max() <= 1.05 * np.deg2rad(opts.max_bend_deg)          # chains bound in world space
+    turn = Rotation.from_matrix(
+        (world @ np.swapaxes(rig.skeleton.bind_world[None, :, :3, :3], -1, -2)).reshape(-1, 3, 3)
+    ).magnitude()
+    assert turn.max() <= 1.05 * np.deg2rad(opts.max_bend_deg)  # chains bound in world space
     if elastic_modulus < 1e9:
-        assert dev.max() > 0.8 * np.deg2rad(opts.max_angle_deg)      # the bound is doing work
+        assert dev.max() > 0.8 * np.deg2rad(opts.max_angle_deg)  # the bound is doing work
 
 
 def test_seam_is_smooth(tree_rig):
     """First key == last key, and the step across the seam looks like any interior step."""
     tree, rig = tree_rig
     clip = bake_wind(tree, rig, WindOptions(speed=10.0, **FAST), seed=9)
-    q = clip.rotations[:-1]                                          # one period, (n, J, 4)
-    step = np.diff(np.concatenate([q, q[:1]]), axis=0)               # includes the seam step
-    second = step - np.roll(step, 1, axis=0)                         # second difference, periodic
-    seam = np.linalg.norm(second[0], axis=1)                         # across keys n−1, 0, 1
+    q = clip.rotations[:-1]  # one period, (n, J, 4)
+    step = np.diff(np.concatenate([q, q[:1]]), axis=0)  # includes the seam step
+    second = step - np.roll(step, 1, axis=0)  # second difference, periodic
+    seam = np.linalg.norm(second[0], axis=1)  # across keys n−1, 0, 1
     interior = np.linalg.norm(second[1:], axis=2).max(axis=0)
     moving = interior > 0
     assert np.all(seam[moving] <= interior[moving] * 1.0001)
@@ -432,7 +458,7 @@ def test_wind_field_statistics_and_periodicity():
     assert np.allclose(v.mean(axis=1), [5.0, 0.0, 0.0], atol=1e-9)
     assert np.all((v[:, :, 0].std(axis=1) > 0.3 * 0.4 * 5.0) & (v[:, :, 0].std(axis=1) < 0.4 * 5.0))
     assert np.all(v[:, :, 0] > 0.0)
-    assert np.all(v[:, :, 1].std(axis=1) < v[:, :, 0].std(axis=1))   # lateral smaller
+    assert np.all(v[:, :, 1].std(axis=1) < v[:, :, 0].std(axis=1))  # lateral smaller
     # frozen turbulence: the downwind point sees the upwind point's series 1 s later
     shift = int(round(5.0 / 5.0 * 30))
     assert np.allclose(np.roll(v[1, :, 0], shift), v[2, :, 0])
@@ -459,7 +485,9 @@ def test_loads_sum_over_subtree(tree_rig):
     wood = opts.wood_density * np.pi * length * (r0**2 + r0 * r1 + r1**2) / 3.0
     leaf = opts.leaf_areal_density * tree.leaf_area
     assert np.isclose(loads.mass[0], wood.sum() + leaf.sum())
-    centre = np.concatenate([0.5 * (a + b), tree.leaf_pos + 0.5 * tree.leaf_size[:, :1] * tree.leaf_frame[:, :, 1]])
+    centre = np.concatenate(
+        [0.5 * (a + b), tree.leaf_pos + 0.5 * tree.leaf_size[:, :1] * tree.leaf_frame[:, :, 1]]
+    )
     m = np.concatenate([wood, leaf])
     expected = np.sum(m * np.sum((centre - loads.pivot[0]) ** 2, axis=1)) + np.sum(wood * length**2 / 12)
     assert np.isclose(loads.inertia[0], expected)
@@ -489,7 +517,7 @@ def test_generated_species_sways_downwind_and_loops():
         from treegen_cli.generate import generate
         from treegen_cli.params import load_params
         from treegen_cli.rig import RigOptions, build_rig
-    except ImportError as exc:   # generator not landed in this checkout yet
+    except ImportError as exc:  # generator not landed in this checkout yet
         pytest.skip(f"generator unavailable: {exc}")
     from pathlib import Path
 
@@ -568,8 +596,11 @@ def _leaf_motion(tree, rig, clip, every: int = 13) -> np.ndarray:
     """(K, L', 3) positions of every `every`-th leaf base, carried by its joint."""
     world = pose_world(rig.skeleton, clip.rotations)
     j = rig.leaf_joint[::every].astype(int)
-    local = np.einsum("lab,lb->la", np.linalg.inv(rig.skeleton.bind_world[j]),
-                      np.c_[tree.leaf_pos[::every], np.ones(len(j))])
+    local = np.einsum(
+        "lab,lb->la",
+        np.linalg.inv(rig.skeleton.bind_world[j]),
+        np.c_[tree.leaf_pos[::every], np.ones(len(j))],
+    )
     return np.einsum("klab,lb->kla", world[:, j], local)[..., :3]
 
 
@@ -580,7 +611,7 @@ def test_storms_lean_downwind_without_a_trunk_kink(paper_trees, species):
     differ by at most a few degrees (the trunk bends smoothly, no elbow)."""
     tree, rig = paper_trees[species]
     parent = rig.skeleton.parent.astype(np.int64)
-    trunk = np.flatnonzero((rig.joint_stem == 0) & (parent >= 0))       # the trunk's own chain
+    trunk = np.flatnonzero((rig.joint_stem == 0) & (parent >= 0))  # the trunk's own chain
     trunk = trunk[rig.joint_stem[parent[trunk]] == 0]
     area = tree.leaf_area[::13]
     for speed in (8.0, 12.0, 25.0):

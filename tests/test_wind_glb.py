@@ -6,6 +6,7 @@ from rest (99th percentile ≤ 30°); the trunk's resonance, read from the veloc
 crown's sway under turbulence, lies in 0.15–0.6 Hz and agrees with `info --wind` within 15 %;
 leaves move visibly in a gentle breeze; loops are seamless; zero wind is the rest pose.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -22,7 +23,7 @@ from treegen_cli.wind import WindOptions, wind_report
 
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = ["quaking_aspen", "black_tupelo", "weeping_willow", "ca_black_oak"]
-LONG = dict(duration=360.0, fps=4.0)          # 1/360 Hz resolution for the spectrum
+LONG = dict(duration=360.0, fps=4.0)  # 1/360 Hz resolution for the spectrum
 
 
 def _make(tmp: Path, species: str, **wind) -> Path:
@@ -64,8 +65,10 @@ class Scene:
             if ch["target"]["path"] != "rotation":
                 continue
             s = a["samplers"][ch["sampler"]]
-            tracks[ch["target"]["node"]] = (read_accessor(self.gltf, self.blob, s["input"]),
-                                            read_accessor(self.gltf, self.blob, s["output"]))
+            tracks[ch["target"]["node"]] = (
+                read_accessor(self.gltf, self.blob, s["input"]),
+                read_accessor(self.gltf, self.blob, s["output"]),
+            )
         times = np.unique(np.concatenate([t for t, _ in tracks.values()]))
         out = np.broadcast_to(self.q, (len(times), len(self.joints), 4)).copy()
         for j, n in enumerate(self.joints):
@@ -76,7 +79,7 @@ class Scene:
             i2 = np.minimum(i + 1, len(kt) - 1)
             u = np.where(i2 > i, (times - kt[i]) / np.maximum(kt[i2] - kt[i], 1e-12), 0.0)
             qa, qb = kv[i], kv[i2] * np.sign(np.sum(kv[i] * kv[i2], axis=1, keepdims=True))
-            q = qa * (1 - u[:, None]) + qb * u[:, None]       # nlerp: within 1e-3 of slerp here
+            q = qa * (1 - u[:, None]) + qb * u[:, None]  # nlerp: within 1e-3 of slerp here
             out[:, j] = q / np.linalg.norm(q, axis=1, keepdims=True)
         return times, out
 
@@ -104,7 +107,7 @@ class Scene:
         leaf_mat = [m["name"] for m in self.gltf["materials"]].index("leaf")
         prim = next(p for p in self.gltf["meshes"][0]["primitives"] if p["material"] == leaf_mat)
         attr = prim["attributes"]
-        get = lambda k: read_accessor(self.gltf, self.blob, attr[k])[::every]   # noqa: E731
+        get = lambda k: read_accessor(self.gltf, self.blob, attr[k])[::every]  # noqa: E731
         return get("POSITION").astype(float), get("JOINTS_0").astype(int), get("WEIGHTS_0").astype(float)
 
     def skin_mean(self, world: np.ndarray, pos, joints, weights) -> np.ndarray:
@@ -118,7 +121,7 @@ class Scene:
 
     def skin(self, world: np.ndarray, pos, joints, weights) -> np.ndarray:
         """(K, V, 3) skinned positions: Σ w · (world · inverse bind) · v."""
-        m = world @ self.ibm[None]                                            # (K, J, 4, 4)
+        m = world @ self.ibm[None]  # (K, J, 4, 4)
         v = np.c_[pos, np.ones(len(pos))]
         out = np.zeros((world.shape[0], len(pos), 3))
         for k in range(joints.shape[1]):
@@ -146,7 +149,7 @@ def test_no_joint_folds_at_12_m_s(gale, species):
     turn = _joint_turns(Scene(gale[species]))
     assert turn.max() <= 45.0
     assert np.percentile(turn[:, 1:], 99) <= 30.0
-    assert turn.max() > 1.0                                   # and the wind does move it
+    assert turn.max() > 1.0  # and the wind does move it
 
 
 @pytest.mark.parametrize("species", PAPER)
@@ -165,27 +168,41 @@ def test_trunk_resonance_in_the_field_range_and_as_info_says(gale, species):
     times, rot = scene.rotations()
     pos, joints, weights = scene.leaf_vertices(every=1)
     crown = scene.skin_mean(scene.world(rot[:-1]), pos, joints, weights)[:, [0, 2]]
-    velocity = np.diff(np.concatenate([crown, crown[:1]]), axis=0)         # periodic
+    velocity = np.diff(np.concatenate([crown, crown[:1]]), axis=0)  # periodic
     power = (np.abs(np.fft.rfft(velocity, axis=0)) ** 2).sum(axis=1)
     f = np.fft.rfftfreq(len(velocity), times[1] - times[0])
-    smooth = np.convolve(power, np.ones(15) / 15, mode="same")          # ±0.02 Hz
+    smooth = np.convolve(power, np.ones(15) / 15, mode="same")  # ±0.02 Hz
     band = f > 0.1
     peak = f[band][np.argmax(smooth[band])]
     assert 0.15 <= peak <= 0.6, peak
 
     params = load_params(ROOT / "species" / f"{species}.txt")
     from treegen_cli.generate import generate
+
     tree = generate(params, 0)
     info = wind_report(tree, build_rig(tree), WindOptions(speed=12.0, **LONG))
     assert abs(peak - info["sway_hz"]) <= 0.15 * info["sway_hz"], (peak, info["sway_hz"])
 
 
-@pytest.mark.parametrize("species", ["quaking_aspen", "black_tupelo", pytest.param(
-    "weeping_willow", marks=pytest.mark.xfail(strict=True, reason=(
-        "median 2.1 cm, and joints are not what limits it: 2.2 cm with 900 joints, 1.9-2.4 cm "
-        "with the budget spent by visible motion (bench/wind_bench.py --joints). Its level-2 "
-        "strands are 8 m rods 5 cm thick at the base (Weber-Penn radii) that barely bend at "
-        "4 m/s; the leaves hang on 59,625 twigs of 0.57 m, far more than any joint budget")))])
+@pytest.mark.parametrize(
+    "species",
+    [
+        "quaking_aspen",
+        "black_tupelo",
+        pytest.param(
+            "weeping_willow",
+            marks=pytest.mark.xfail(
+                strict=True,
+                reason=(
+                    "median 2.1 cm, and joints are not what limits it: 2.2 cm with 900 joints, 1.9-2.4 cm "
+                    "with the budget spent by visible motion (bench/wind_bench.py --joints). Its level-2 "
+                    "strands are 8 m rods 5 cm thick at the base (Weber-Penn radii) that barely bend at "
+                    "4 m/s; the leaves hang on 59,625 twigs of 0.57 m, far more than any joint budget"
+                ),
+            ),
+        ),
+    ],
+)
 def test_leaves_move_in_a_gentle_breeze(tmp_path, species):
     """4 m/s: the median leaf vertex moves at least 5 cm from rest at some time of the loop."""
     scene = Scene(_make(tmp_path, species, speed=4.0))
@@ -217,7 +234,7 @@ def test_jointless_stems_stay_on_their_parents_bark(gale):
     scene = Scene(gale["quaking_aspen"])
     bark = [m["name"] for m in scene.gltf["materials"]].index("bark")
     prim = next(p for p in scene.gltf["meshes"][0]["primitives"] if p["material"] == bark)
-    get = lambda k: read_accessor(scene.gltf, scene.blob, prim["attributes"][k])   # noqa: E731
+    get = lambda k: read_accessor(scene.gltf, scene.blob, prim["attributes"][k])  # noqa: E731
     pos, joints, weights = get("POSITION").astype(float), get("JOINTS_0").astype(int), get("WEIGHTS_0")
 
     # ring layout: (stem, u) per ring; a pointed tip drops its last ring
@@ -235,7 +252,7 @@ def test_jointless_stems_stay_on_their_parents_bark(gale):
     assert stems.size > 100
 
     _, rot = scene.rotations()
-    skin = scene.world(rot[::12]) @ scene.ibm[None]                         # (K, J, 4, 4), 30 s apart
+    skin = scene.world(rot[::12]) @ scene.ibm[None]  # (K, J, 4, 4), 30 s apart
     n_j = skin.shape[1]
 
     def ring_centre(rings: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -253,8 +270,8 @@ def test_jointless_stems_stay_on_their_parents_bark(gale):
 
     base = tree.node_pos[tree.stem_node_start[stems]]
     child_rest, child = ring_centre(first_ring[stems])
-    y_up = base[:, [0, 2, 1]] * [1.0, 1.0, -1.0]                        # glTF is Y-up
-    assert np.allclose(child_rest, y_up, atol=1e-4)                    # the layout is the file's
+    y_up = base[:, [0, 2, 1]] * [1.0, 1.0, -1.0]  # glTF is Y-up
+    assert np.allclose(child_rest, y_up, atol=1e-4)  # the layout is the file's
     # the parent's rings around the attach point: u of the attach on the parent's axis
     a = tree.stem_parent_node[stems]
     parent = tree.node_stem[a]
@@ -262,7 +279,7 @@ def test_jointless_stems_stay_on_their_parents_bark(gale):
     ab = tree.node_pos[b] - tree.node_pos[a]
     t = np.clip(np.sum((base - tree.node_pos[a]) * ab, axis=1) / np.sum(ab * ab, axis=1), 0, 1)
     ua = (a - tree.stem_node_start[parent]) + t
-    key = rs * 1000.0 + u                                              # rings sorted by (stem, u)
+    key = rs * 1000.0 + u  # rings sorted by (stem, u)
     lo = np.searchsorted(key, parent * 1000.0 + ua + 1e-9, side="right") - 1
     hi = np.minimum(lo + 1, np.r_[first_ring[1:], len(rs)][parent] - 1)
     lo_rest, lo_now = ring_centre(lo)

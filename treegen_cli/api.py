@@ -17,6 +17,7 @@ options always writes the same bytes whichever door it came in by.
 `exchange.export` (the writer the suffix picks, staged and renamed atomically) →
 `make_summary`.
 """
+
 from __future__ import annotations
 
 import os
@@ -33,8 +34,9 @@ from .generate import generate
 from .limits import MAX_TREES, estimate_triangles  # noqa: F401  (MAX_TREES: forest's default)
 from .lod import PAPER_DISTANCES, lod_table_row, schedule_rows
 from .mesh import MESH_DEFAULTS
-from .options import (DEFAULTS, GROUPS, UNSET_FREE, Resolved, cli_name,  # noqa: F401  (re-exported)
-                      resolve)
+
+# re-exported: api is the one door (api.DEFAULTS, api.resolve, ...)
+from .options import DEFAULTS, GROUPS, UNSET_FREE, Resolved, cli_name, resolve  # noqa: F401
 from .params import Params, load_params
 from .pipeline import MakeOptions, Timings, build_asset
 from .prepare import split_lods
@@ -44,8 +46,7 @@ from .tree import tree_stats
 from .wind import wind_report
 
 
-def check_output(output: str | os.PathLike, up_axis: str | None = None,
-                 flag: str | None = None) -> Path:
+def check_output(output: str | os.PathLike, up_axis: str | None = None, flag: str | None = None) -> Path:
     """Refuse an output name whose suffix no writer handles (or a folder), or an up axis its
     format cannot carry, before any work is done; `flag` ("-o") names the option in messages."""
     path = check_suffix(output, flag=flag)
@@ -55,8 +56,9 @@ def check_output(output: str | os.PathLike, up_axis: str | None = None,
 
 def build(params, species, job: Resolved, timings=None):
     """Grow, rig, mesh and animate one tree; user errors are reported against `species`."""
-    return in_file(species, build_asset, params, job.seed, job.options,
-                   timings if timings is not None else Timings())
+    return in_file(
+        species, build_asset, params, job.seed, job.options, timings if timings is not None else Timings()
+    )
 
 
 def write(asset, tree, output, timings, t0: float, job: Resolved | None = None) -> dict:
@@ -65,22 +67,26 @@ def write(asset, tree, output, timings, t0: float, job: Resolved | None = None) 
     values = job.values if job is not None else DEFAULTS
     gltf = job.options.gltf if job is not None else GLTF_DEFAULTS
     asset = replace(asset, up_axis=values["up_axis"])
-    written = timings.run("write", export_parts, split_lods(asset), output, gltf) \
-        if values["lod_files"] else timings.run("write", export, asset, output, gltf)
+    written = (
+        timings.run("write", export_parts, split_lods(asset), output, gltf)
+        if values["lod_files"]
+        else timings.run("write", export, asset, output, gltf)
+    )
     return make_summary(asset, tree, written, timings.stages, time.perf_counter() - t0)
 
 
 # ------------------------------------------------------------------------------------- make
 
+
 @dataclass(frozen=True)
 class MakeJob:
     """One checked `make` request, nothing built yet: what `run_make` needs."""
 
-    species: str | os.PathLike     # as given: user errors in the species file name it
+    species: str | os.PathLike  # as given: user errors in the species file name it
     output: Path
     params: Params
     job: Resolved
-    t0: float                      # when the request arrived (the summary's seconds)
+    t0: float  # when the request arrived (the summary's seconds)
 
     @property
     def static(self) -> bool:
@@ -98,8 +104,9 @@ class MakeJob:
         return o.lod.count * per_lod + 3 + (o.impostor is not None)
 
 
-def plan_make(species: str | os.PathLike, output: str | os.PathLike, options: dict,
-              flag: str | None = None) -> MakeJob:
+def plan_make(
+    species: str | os.PathLike, output: str | os.PathLike, options: dict, flag: str | None = None
+) -> MakeJob:
     """Check the output name, resolve `options` (missing ones: a --profile, then DEFAULTS)
     and parse the species file; every refusal comes before any work."""
     t0 = time.perf_counter()
@@ -115,7 +122,8 @@ def run_make(make_job: MakeJob, timings=None) -> dict:
     summary = write(asset, tree, make_job.output, timings, make_job.t0, make_job.job)
     current_reporter().detail(
         f"  counts    stems per level {tree_stats(tree)['stems_per_level']}, "
-        f"{tree.n_nodes:,} nodes, {tree.n_leaves:,} leaves, {len(asset.lods)} LOD(s)")
+        f"{tree.n_nodes:,} nodes, {tree.n_leaves:,} leaves, {len(asset.lods)} LOD(s)"
+    )
     return summary
 
 
@@ -128,35 +136,52 @@ def make(species: str | os.PathLike, output: str | os.PathLike, **options) -> di
 
 def make_summary(asset, tree, written, stages: dict, seconds: float) -> dict:
     """`treegen make --json`: what was written and how big, per LOD, and seconds per stage."""
+
     def lod_row(lod):
         clip = lod.clips[0] if lod.clips else None
         keys = 0 if clip is None else len(clip.times)
-        joint_keys = 0 if clip is None else (
-            sum(len(k) for k in clip.keys) if clip.keys is not None else keys * len(lod.skeleton.names))
-        return {"distance_m": lod.distance,
-                "vertices": sum(len(p.positions) for p in lod.primitives),
-                "triangles": sum(len(p.indices) // 3 for p in lod.primitives),
-                "joints": len(lod.skeleton.names), "keys": keys, "joint_keys": joint_keys,
-                "decimated": clip is not None and clip.keys is not None}
+        joint_keys = (
+            0
+            if clip is None
+            else (sum(len(k) for k in clip.keys) if clip.keys is not None else keys * len(lod.skeleton.names))
+        )
+        return {
+            "distance_m": lod.distance,
+            "vertices": sum(len(p.positions) for p in lod.primitives),
+            "triangles": sum(len(p.indices) // 3 for p in lod.primitives),
+            "joints": len(lod.skeleton.names),
+            "keys": keys,
+            "joint_keys": joint_keys,
+            "decimated": clip is not None and clip.keys is not None,
+        }
 
     lods = [lod_row(lod) for lod in asset.lods]
-    return {"file": str(written[0]), "files": [str(p) for p in written],
-            "bytes": sum(p.stat().st_size for p in written),
-            "species": asset.name, "seed": tree.seed, "stems": tree.n_stems,
-            "leaves": tree.n_leaves, **{k: lods[0][k] for k in ("vertices", "triangles", "joints",
-                                                               "keys", "joint_keys")},
-            "lods": lods, "seconds": round(seconds, 4),
-            "stages_s": {k: round(v, 4) for k, v in stages.items()}}
+    return {
+        "file": str(written[0]),
+        "files": [str(p) for p in written],
+        "bytes": sum(p.stat().st_size for p in written),
+        "species": asset.name,
+        "seed": tree.seed,
+        "stems": tree.n_stems,
+        "leaves": tree.n_leaves,
+        **{k: lods[0][k] for k in ("vertices", "triangles", "joints", "keys", "joint_keys")},
+        "lods": lods,
+        "seconds": round(seconds, 4),
+        "stages_s": {k: round(v, 4) for k, v in stages.items()},
+    }
 
 
 # ------------------------------------------------------------------------------------- info
 
-def info(species: str | os.PathLike, lod: bool = False, wind: bool = False,
-         triangles: int | None = None, **options) -> dict:
+
+def info(
+    species: str | os.PathLike, lod: bool = False, wind: bool = False, triangles: int | None = None, **options
+) -> dict:
     """`treegen info --json`: grow `species` and report stems, leaves, sizes and LOD0
     triangles; with `triangles` the budget plan `make --triangles` would build; with `lod` a
     row per LOD and the paper's Table 3 side by side; with `wind` the wind model's numbers.
     Only the options a report uses are validated (a LOD option without `lod` is ignored)."""
+
     def given(group: str) -> dict:
         return {k: v for k, v in options.items() if k in GROUPS[group]}
 
@@ -168,18 +193,23 @@ def info(species: str | os.PathLike, lod: bool = False, wind: bool = False,
     t0 = time.perf_counter()
     tree = in_file(path, generate, params, seed, generate_options)
     seconds = time.perf_counter() - t0
-    current_reporter().detail(f"  generate  {seconds:8.3f} s  ({tree.n_stems:,} stems, "
-                              f"{tree.n_nodes:,} nodes, {tree.n_leaves:,} leaves)")
+    current_reporter().detail(
+        f"  generate  {seconds:8.3f} s  ({tree.n_stems:,} stems, "
+        f"{tree.n_nodes:,} nodes, {tree.n_leaves:,} leaves)"
+    )
     stats = tree_stats(tree) | {"generate_s": round(seconds, 4), "file": str(path)}
     stats["triangles"] = _triangle_rows(path, params, seed, tree, triangles, generate_options)
     if lod:
         lod_options = resolve(given("lod")).options.lod
-        assert lod_options is not None              # no_lod is not an info option
+        assert lod_options is not None  # no_lod is not an info option
         from .impostor import IMPOSTOR_DEFAULTS
-        from .render import egl_available          # lazy: GL only when the impostor is drawn
+        from .render import egl_available  # lazy: GL only when the impostor is drawn
 
-        make_options = MakeOptions(generate=generate_options, lod=lod_options,  # as `make` builds it
-                                   impostor=IMPOSTOR_DEFAULTS if egl_available() else None)
+        make_options = MakeOptions(
+            generate=generate_options,
+            lod=lod_options,  # as `make` builds it
+            impostor=IMPOSTOR_DEFAULTS if egl_available() else None,
+        )
         asset, _tree = in_file(path, build_asset, params, seed, make_options, Timings(), tree)
         stats["lods"] = [lod_table_row(level, lod_options) for level in asset.lods]
         stats["schedules"] = schedule_rows(asset.lods[0], PAPER_DISTANCES, lod_options)
@@ -195,18 +225,47 @@ def _triangle_rows(species, params, seed, tree, triangles, generate_options) -> 
     bark, leaves = estimate_triangles(tree, MESH_DEFAULTS)
     out: dict = {"lod0": bark + leaves, "bark": bark, "leaves": leaves}
     if triangles is not None:
-        plan = in_file(species, plan_budget, params, seed, MESH_DEFAULTS,
-                       BudgetOptions(triangles=triangles), generate_options)
-        out["budget"] = {"triangles": plan.triangles, "bark": plan.bark, "leaves": plan.leaves,
-                         "levels": plan.levels, "curve_scale": plan.curve_scale,
-                         "sides": list(plan.mesh.sides),
-                         "rings_per_segment": list(plan.mesh.rings_per_segment),
-                         "leaf_quality_factor": round(plan.leaf_factor, 6),
-                         "minimum": plan.minimum, "maximum": plan.maximum,
-                         "plan": plan.describe()}
+        plan = in_file(
+            species,
+            plan_budget,
+            params,
+            seed,
+            MESH_DEFAULTS,
+            BudgetOptions(triangles=triangles),
+            generate_options,
+        )
+        out["budget"] = {
+            "triangles": plan.triangles,
+            "bark": plan.bark,
+            "leaves": plan.leaves,
+            "levels": plan.levels,
+            "curve_scale": plan.curve_scale,
+            "sides": list(plan.mesh.sides),
+            "rings_per_segment": list(plan.mesh.rings_per_segment),
+            "leaf_quality_factor": round(plan.leaf_factor, 6),
+            "minimum": plan.minimum,
+            "maximum": plan.maximum,
+            "plan": plan.describe(),
+        }
     return out
 
 
-__all__ = ["DEFAULTS", "MAX_TREES", "MakeJob", "Resolved", "TreegenError", "build", "check_output",
-           "cli_name", "forest_schema_text", "info", "make", "make_summary", "plan_make",
-           "resolve", "run_forest", "run_make", "write"]
+__all__ = [
+    "DEFAULTS",
+    "MAX_TREES",
+    "MakeJob",
+    "Resolved",
+    "TreegenError",
+    "build",
+    "check_output",
+    "cli_name",
+    "forest_schema_text",
+    "info",
+    "make",
+    "make_summary",
+    "plan_make",
+    "resolve",
+    "run_forest",
+    "run_make",
+    "write",
+]

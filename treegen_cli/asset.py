@@ -6,6 +6,7 @@ is filled in by prepare.py before any writer sees it.
 Everything is in generator space (metres, Z up, right-handed); each writer converts to its
 format's axes (glTF: Y up). Quaternions are (x, y, z, w), scipy's order.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -17,21 +18,21 @@ import numpy as np
 class Texture:
     """An image a material samples, already encoded (PNG bytes, deterministic)."""
 
-    name: str                              # file stem when written beside a file: "leaf", "bark", "bark_normal"
+    name: str  # file stem when written beside a file: "leaf", "bark", "bark_normal"
     png: bytes
-    wrap: str = "REPEAT"                   # "REPEAT" (bark: tiles) or "CLAMP" (leaf atlas cells)
-    srgb: bool = True                      # colour data (sRGB) or raw data (normal maps)
+    wrap: str = "REPEAT"  # "REPEAT" (bark: tiles) or "CLAMP" (leaf atlas cells)
+    srgb: bool = True  # colour data (sRGB) or raw data (normal maps)
 
 
 @dataclass(frozen=True)
 class Material:
-    name: str                              # "bark" / "leaf"
-    base_color: tuple[float, float, float, float]   # linear RGBA; multiplies base_texture
+    name: str  # "bark" / "leaf"
+    base_color: tuple[float, float, float, float]  # linear RGBA; multiplies base_texture
     roughness: float = 0.9
     metallic: float = 0.0
     double_sided: bool = False
-    alpha_cutoff: float | None = None      # alpha-tested cut-out (MASK) below this alpha
-    base_texture: Texture | None = None    # sRGB colour (+ alpha for cut-outs)
+    alpha_cutoff: float | None = None  # alpha-tested cut-out (MASK) below this alpha
+    base_texture: Texture | None = None  # sRGB colour (+ alpha for cut-outs)
     normal_texture: Texture | None = None  # tangent space, OpenGL/glTF convention (+Y up)
 
 
@@ -39,34 +40,34 @@ class Material:
 class Primitive:
     """One triangle list with one material, skinned to the LOD's skeleton."""
 
-    name: str                              # "bark" / "leaves"
-    material: str                          # Material.name
-    positions: np.ndarray                  # float32 (V, 3), rest pose, generator space
-    normals: np.ndarray                    # float32 (V, 3), unit
-    uvs: np.ndarray                        # float32 (V, 2)
-    indices: np.ndarray                    # uint32 (T*3,), counter-clockwise front faces
-    joints: np.ndarray                     # uint16 (V, 4), indices into Skeleton joints
-    weights: np.ndarray                    # float32 (V, 4), rows sum to 1, unused slots 0
-    flat_normals: bool = False             # True: every vertex normal is the face normal of
-                                           # each triangle using it (planar leaf cards), so a
-                                           # writer may omit normals (glTF clients then compute
-                                           # exactly these flat normals)
-    tangents: np.ndarray | None = None     # float32 (V, 4) for normal-mapped primitives (bark):
-                                           # xyz unit, along +u, orthogonal to the normal; w = ±1
-                                           # with w·cross(normal, xyz) along +v (up in the image),
-                                           # glTF's TANGENT convention
+    name: str  # "bark" / "leaves"
+    material: str  # Material.name
+    positions: np.ndarray  # float32 (V, 3), rest pose, generator space
+    normals: np.ndarray  # float32 (V, 3), unit
+    uvs: np.ndarray  # float32 (V, 2)
+    indices: np.ndarray  # uint32 (T*3,), counter-clockwise front faces
+    joints: np.ndarray  # uint16 (V, 4), indices into Skeleton joints
+    weights: np.ndarray  # float32 (V, 4), rows sum to 1, unused slots 0
+    flat_normals: bool = False  # True: every vertex normal is the face normal of
+    # each triangle using it (planar leaf cards), so a
+    # writer may omit normals (glTF clients then compute
+    # exactly these flat normals)
+    tangents: np.ndarray | None = None  # float32 (V, 4) for normal-mapped primitives (bark):
+    # xyz unit, along +u, orthogonal to the normal; w = ±1
+    # with w·cross(normal, xyz) along +v (up in the image),
+    # glTF's TANGENT convention
 
 
 @dataclass(frozen=True, eq=False)
 class Skeleton:
     """Joints ordered parent-before-child; joint 0 is the root at the trunk base."""
 
-    names: list[str]                       # unique, path-safe ("j0", "j1", ...)
-    parent: np.ndarray                     # int32 (J,), -1 for the root
-    rest_translation: np.ndarray           # float64 (J, 3), local (in the parent's frame)
-    rest_rotation: np.ndarray              # float64 (J, 4), local quaternion xyzw
-    bind_world: np.ndarray                 # float64 (J, 4, 4), world matrix of each joint at
-                                           # rest (rigid); inverse bind matrix = inv(bind_world)
+    names: list[str]  # unique, path-safe ("j0", "j1", ...)
+    parent: np.ndarray  # int32 (J,), -1 for the root
+    rest_translation: np.ndarray  # float64 (J, 3), local (in the parent's frame)
+    rest_rotation: np.ndarray  # float64 (J, 4), local quaternion xyzw
+    bind_world: np.ndarray  # float64 (J, 4, 4), world matrix of each joint at
+    # rest (rigid); inverse bind matrix = inv(bind_world)
 
     def inverse_bind(self) -> np.ndarray:
         """inv(bind_world) (J, 4, 4) as the rigid inverse [Rᵀ | −Rᵀt], in elementwise arithmetic:
@@ -86,18 +87,18 @@ class Clip:
     """Baked joint rotations. `keys[j]` selects which of `times` joint j keeps (LOD schedule);
     None keeps every key. Translations and scales stay at rest."""
 
-    name: str                              # "wind_loop", "wind_lod1_loop", ...
-    times: np.ndarray                      # float64 (K,), seconds, starts at 0
-    rotations: np.ndarray                  # float64 (K, J, 4), local quaternions xyzw
-    interpolation: str = "LINEAR"          # "LINEAR" or "STEP"
-    keys: list[np.ndarray] | None = None   # per joint: sorted int indices into times
-    animated: np.ndarray | None = None     # bool (J,): joints that get a channel (None: all
-                                           # joints whose rotation ever leaves rest)
+    name: str  # "wind_loop", "wind_lod1_loop", ...
+    times: np.ndarray  # float64 (K,), seconds, starts at 0
+    rotations: np.ndarray  # float64 (K, J, 4), local quaternions xyzw
+    interpolation: str = "LINEAR"  # "LINEAR" or "STEP"
+    keys: list[np.ndarray] | None = None  # per joint: sorted int indices into times
+    animated: np.ndarray | None = None  # bool (J,): joints that get a channel (None: all
+    # joints whose rotation ever leaves rest)
     timeline: tuple[np.ndarray, np.ndarray] | None = None
-                                           # prepared: (frames (U,), rotations (U, M, 4)) of the
-                                           # animated joints (the root if none) keyed together at
-                                           # the union of their kept keys, each playing its own
-                                           # track (formats with one time list per animation)
+    # prepared: (frames (U,), rotations (U, M, 4)) of the
+    # animated joints (the root if none) keyed together at
+    # the union of their kept keys, each playing its own
+    # track (formats with one time list per animation)
 
 
 @dataclass(frozen=True, eq=False)
@@ -106,11 +107,11 @@ class Impostor:
     the sphere (centre, radius) on a hemi-octahedral layout, for engines with impostor shaders.
     Generator space; the writers state it in their file's axes."""
 
-    albedo: Texture                        # sRGB + coverage alpha (also the cards' texture)
-    normal_depth: Texture                  # rgb: (a, b, up) normal · 0.5 + 0.5; a: depth
-    grid: int                              # views per side
-    cell: int                              # pixels per view
-    centre: np.ndarray                     # (3,) metres
+    albedo: Texture  # sRGB + coverage alpha (also the cards' texture)
+    normal_depth: Texture  # rgb: (a, b, up) normal · 0.5 + 0.5; a: depth
+    grid: int  # views per side
+    cell: int  # pixels per view
+    centre: np.ndarray  # (3,) metres
     radius: float
     bounds: tuple[np.ndarray, np.ndarray]  # rest-pose (min, max) of the geometry rendered
     cards: tuple[tuple[int, int], ...] = ()  # (column, row) of the cells the cards show
@@ -122,23 +123,23 @@ class Lod:
     primitives: list[Primitive]
     skeleton: Skeleton
     clips: list[Clip] = field(default_factory=list)
-    distance: float = 0.0                  # metres from which this LOD is used
-    screen_coverage: float = 1.0           # MSFT_screencoverage hint (fraction of screen height)
+    distance: float = 0.0  # metres from which this LOD is used
+    screen_coverage: float = 1.0  # MSFT_screencoverage hint (fraction of screen height)
     bounds: tuple[np.ndarray, np.ndarray] | None = None
-                                           # prepared: (min, max) of the skinned geometry at rest
-                                           # and at every key of every clip
-    impostor: Impostor | None = None       # set on an impostor LOD (cards cut from the atlas)
+    # prepared: (min, max) of the skinned geometry at rest
+    # and at every key of every clip
+    impostor: Impostor | None = None  # set on an impostor LOD (cards cut from the atlas)
 
 
 @dataclass(frozen=True, eq=False)
 class Asset:
     name: str
     materials: list[Material]
-    lods: list[Lod]                        # lods[0] is the full-detail tree
+    lods: list[Lod]  # lods[0] is the full-detail tree
     extras: dict = field(default_factory=dict)  # provenance (species, seed, treegen version)
-    up_axis: str | None = None             # "y" / "z": the file's up axis where the format has
-                                           # a choice (USD, OBJ); None: the format's default
-                                           # (Y for .usdz and .obj, Z for .usda/.usdc)
+    up_axis: str | None = None  # "y" / "z": the file's up axis where the format has
+    # a choice (USD, OBJ); None: the format's default
+    # (Y for .usdz and .obj, Z for .usda/.usdc)
 
 
 @dataclass(frozen=True)
@@ -148,12 +149,12 @@ class Instance:
 
     prototype: int
     position: tuple[float, float, float]
-    rotation_deg: float                    # about +Z
+    rotation_deg: float  # about +Z
     scale: float
     lod: int = 0
     time_offset: float = 0.0
-    distance: float = 0.0                  # to the layout's camera, m
-    source: str = ""                       # JSON path of the layout entry that placed it
+    distance: float = 0.0  # to the layout's camera, m
+    source: str = ""  # JSON path of the layout entry that placed it
     variant: int = 0
 
 
@@ -164,11 +165,11 @@ class Forest:
     name: str
     prototypes: list[Asset]
     instances: list[Instance]
-    all_lods: bool = False                 # every instance carries every LOD (else its own)
+    all_lods: bool = False  # every instance carries every LOD (else its own)
     phase_variants: int = 4
-    loop: float = 0.0                      # clip period, s (0: static)
+    loop: float = 0.0  # clip period, s (0: static)
     timings: dict = field(default_factory=dict)
-    cluster: str = ""                      # where the prototypes were built (summary)
+    cluster: str = ""  # where the prototypes were built (summary)
     # prepared: per (prototype, LOD) used, the first clip started at each phase variant
     variants: dict[tuple[int, int], list[Clip]] = field(default_factory=dict)
     # prepared: each prototype with its clips played over two periods (room for per-instance

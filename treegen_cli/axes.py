@@ -1,6 +1,7 @@
 """Axis conventions: the generator works Z up (metres, right-handed, like the Weber–Penn paper);
 glTF, OBJ and the preview are Y up. One change of axes C, used by every format that needs it.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -26,5 +27,3 @@ def matrix_to_y_up(m: np.ndarray) -> np.ndarray:
     c = np.eye(4)
     c[:3, :3] = Z_UP_TO_Y_UP
     return c @ np.asarray(m, dtype=np.float64) @ c.T
-
-

@@ -6,6 +6,7 @@ float32 keys, so a tree built on one node of a cluster would not match the same 
 another. Every AVX2 CPU runs the Haswell kernel, so treegen asks for it there. Set
 OPENBLAS_CORETYPE yourself to choose otherwise; other architectures are left alone.
 """
+
 from __future__ import annotations
 
 import os
@@ -13,7 +14,7 @@ import platform
 import sys
 
 KERNEL = "Haswell"
-NEEDS = {"avx2", "fma"}     # the instructions the Haswell kernel uses
+NEEDS = {"avx2", "fma"}  # the instructions the Haswell kernel uses
 
 
 def _cpu_flags() -> set[str]:

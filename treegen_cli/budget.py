@@ -20,6 +20,7 @@ candidate; candidates whose total cannot land in [(1 − tolerance)·N, N] are s
 budget is never exceeded. A budget below every candidate is refused naming the smallest one
 the species reaches; a budget above the finest candidate builds that one.
 """
+
 from __future__ import annotations
 
 import math
@@ -58,17 +59,16 @@ class BudgetOptions:
     range, is the bark's share of the budget."""
 
     triangles: int | None = None
-    tolerance: float = 0.10       # LOD0 lands in [(1 − tolerance)·triangles, triangles]
+    tolerance: float = 0.10  # LOD0 lands in [(1 − tolerance)·triangles, triangles]
     leaf_quality: tuple[float, float] = (1.0 / 256.0, 4.0)
-    side_scales: tuple[float, ...] = (2.0, 1.75, 1.5, 1.25, 1.0, 0.85, 0.7, 0.6, 0.5, 0.4,
-                                      0.3, 0.0)
+    side_scales: tuple[float, ...] = (2.0, 1.75, 1.5, 1.25, 1.0, 0.85, 0.7, 0.6, 0.5, 0.4, 0.3, 0.0)
     fixed_sides: bool = False
     rings: tuple[tuple[int, ...], ...] = ((2, 1), (1,))
     min_levels: int = 2
     curve_scales: tuple[float, ...] = (1.0, 0.5, 0.25)
     bark_share: tuple[float, float] = (0.2, 0.8)
-    drop_cost: float = 0.7        # a dropped level weighs as much as a bark share off by ×2
-    curve_cost: float = 0.2       # per halving of CurveRes
+    drop_cost: float = 0.7  # a dropped level weighs as much as a bark share off by ×2
+    curve_cost: float = 0.2  # per halving of CurveRes
 
     def __post_init__(self) -> None:
         if self.triangles is not None and not 1 <= self.triangles <= 100_000_000:
@@ -89,26 +89,28 @@ class Plan:
     bark: int
     leaves: int
     levels: int
-    leaf_factor: float          # × the species' LeafQuality
-    curve_scale: float          # × every branch level's CurveRes
-    minimum: int                # fewest triangles any candidate reaches
-    maximum: int                # most triangles among the candidates searched
+    leaf_factor: float  # × the species' LeafQuality
+    curve_scale: float  # × every branch level's CurveRes
+    minimum: int  # fewest triangles any candidate reaches
+    maximum: int  # most triangles among the candidates searched
 
     def describe(self) -> str:
         sides = ",".join(str(s) for s in self.mesh.sides)
-        return (f"{self.triangles:,} triangles ({self.bark:,} bark, {self.leaves:,} leaves): "
-                f"{self.levels} stem levels, CurveRes ×{self.curve_scale:g}, sides {sides}, "
-                f"LeafQuality ×{self.leaf_factor:.3g}")
+        return (
+            f"{self.triangles:,} triangles ({self.bark:,} bark, {self.leaves:,} leaves): "
+            f"{self.levels} stem levels, CurveRes ×{self.curve_scale:g}, sides {sides}, "
+            f"LeafQuality ×{self.leaf_factor:.3g}"
+        )
 
 
 @dataclass(frozen=True)
 class _Candidate:
-    tree: int                   # index into candidates()
-    cost: float                 # restructuring: levels dropped, CurveRes coarsened
+    tree: int  # index into candidates()
+    cost: float  # restructuring: levels dropped, CurveRes coarsened
     mesh: MeshOptions
     bark: int
     factor: float
-    leaves: int                 # leaf count
+    leaves: int  # leaf count
     total: int
 
 
@@ -118,8 +120,11 @@ def _scaled_sides(sides: tuple[int, ...], k: float) -> tuple[int, ...]:
 
 def _mesh_ladder(mesh: MeshOptions, options: BudgetOptions, coarsen: bool) -> list[MeshOptions]:
     """Mesh options to try: sides scaled down (coarsen) or up, fewer rings only to coarsen."""
-    scales = (1.0,) if options.fixed_sides else tuple(
-        k for k in options.side_scales if (k <= 1.0 if coarsen else k >= 1.0))
+    scales = (
+        (1.0,)
+        if options.fixed_sides
+        else tuple(k for k in options.side_scales if (k <= 1.0 if coarsen else k >= 1.0))
+    )
     rings_options = options.rings if coarsen else options.rings[:1]
     out: list[MeshOptions] = []
     for k in scales:
@@ -134,8 +139,7 @@ def _leaf_count(per_unit: float, factor: float) -> int:
     return int(math.floor(per_unit * factor + 0.5))
 
 
-def _leaves_per_unit(small, params: Params, fmin: float,
-                     generate_options: GenerateOptions) -> float:
+def _leaves_per_unit(small, params: Params, fmin: float, generate_options: GenerateOptions) -> float:
     """Leaves per unit of LeafQuality factor, counted on `small` (grown at factor `fmin`). A
     species whose leaves all round away at `fmin` (a few dozen leaves in all) is counted again
     at factor 1: taken for leafless, its budget plan left them out and the build, which grows
@@ -152,13 +156,21 @@ def _fewer_levels(params: Params, levels: int) -> Params:
 def _coarser_curves(params: Params, scale: float) -> Params:
     """`params` with every branch level's CurveRes (segments per stem) × scale, at least 1;
     the trunk keeps its own."""
-    level = tuple(lp if n == 0 else replace(lp, curve_res=max(1, int(round(lp.curve_res * scale))))
-                  for n, lp in enumerate(params.level))
+    level = tuple(
+        lp if n == 0 else replace(lp, curve_res=max(1, int(round(lp.curve_res * scale))))
+        for n, lp in enumerate(params.level)
+    )
     return replace(params, level=level)
 
 
-def candidates(params: Params, seed: int, options: BudgetOptions, coarsen: bool,
-               generate_options: GenerateOptions = GENERATE_DEFAULTS, first=None):
+def candidates(
+    params: Params,
+    seed: int,
+    options: BudgetOptions,
+    coarsen: bool,
+    generate_options: GenerateOptions = GENERATE_DEFAULTS,
+    first=None,
+):
     """The trees every candidate's size is counted on: per (CurveRes scale, levels dropped),
     the species so changed (`Leaves` keeping the count, keep_leaf_count) grown once with
     the fewest leaves (LeafQuality × the lower bound: stems cost the same, leaves next to
@@ -176,34 +188,40 @@ def candidates(params: Params, seed: int, options: BudgetOptions, coarsen: bool,
         for drop in drops:
             p = _fewer_levels(pc, params.levels - drop) if drop else pc
             small = replace(p, leaf_quality=p.leaf_quality * fmin)
-            t = generate(small, seed, generate_options) if base is None else \
-                base if drop == 0 else regrow_leaves(base, small, generate_options)
+            t = (
+                generate(small, seed, generate_options)
+                if base is None
+                else base
+                if drop == 0
+                else regrow_leaves(base, small, generate_options)
+            )
             base = t if base is None else base
             out.append((c, drop, p, t, _leaves_per_unit(t, p, fmin, generate_options)))
     return out
 
 
-def plan_budget(params: Params, seed: int, mesh: MeshOptions,
-                options: BudgetOptions = DEFAULTS,
-                generate_options: GenerateOptions = GENERATE_DEFAULTS,
-                ) -> Plan:
+def plan_budget(
+    params: Params,
+    seed: int,
+    mesh: MeshOptions,
+    options: BudgetOptions = DEFAULTS,
+    generate_options: GenerateOptions = GENERATE_DEFAULTS,
+) -> Plan:
     """Choose CurveRes, levels, sides, rings and LeafQuality for LOD0 to land in
     [(1 − tolerance)·triangles, triangles] (see the module doc)."""
     T = options.triangles
     if T is None:
         raise ValueError("plan_budget needs options.triangles")
     fmin, fmax = options.leaf_quality
-    first = generate(replace(params, leaf_quality=params.leaf_quality * fmin), seed,
-                     generate_options)
+    first = generate(replace(params, leaf_quality=params.leaf_quality * fmin), seed, generate_options)
     tri_per_leaf = len(leaf_outline(first, mesh).triangles) if mesh.leaves else 0
     bark0 = estimate_triangles(first, mesh)[0]
-    leaves0 = tri_per_leaf * _leaf_count(_leaves_per_unit(first, params, fmin, generate_options),
-                                         1.0)
+    leaves0 = tri_per_leaf * _leaf_count(_leaves_per_unit(first, params, fmin, generate_options), 1.0)
     lo, hi = options.bark_share
     share = min(max(bark0 / max(bark0 + leaves0, 1), lo), hi)
-    coarsen = T < bark0 + leaves0          # over budget: coarsen; under it: refine
+    coarsen = T < bark0 + leaves0  # over budget: coarsen; under it: refine
     trees = candidates(params, seed, options, coarsen, generate_options, first)
-    aim = T * (1.0 - 0.5 * options.tolerance)   # the middle of [(1 − tolerance)·T, T]
+    aim = T * (1.0 - 0.5 * options.tolerance)  # the middle of [(1 − tolerance)·T, T]
 
     found: list[_Candidate] = []
     minimum, maximum = bark0 + leaves0, bark0 + leaves0
@@ -225,20 +243,30 @@ def plan_budget(params: Params, seed: int, mesh: MeshOptions,
         raise TreegenError(
             f"species '{params.name}' cannot come down to --triangles {T:,}: the fewest "
             f"triangles it reaches at LOD0 is {minimum:,} (fewest levels, segments, sides and "
-            f"leaves); use --triangles {minimum} or more")
+            f"leaves); use --triangles {minimum} or more"
+        )
     fits = [c for c in found if (1.0 - options.tolerance) * T <= c.total <= T]
-    if fits:                               # the bark's share, least restructuring
+    if fits:  # the bark's share, least restructuring
         target_bark = aim if leaves0 == 0 else share * aim
-        best = min(fits, key=lambda c: (abs(math.log(max(c.bark, 1) / target_bark)) + c.cost,
-                                        abs(c.total - aim)))
-    else:                                  # the nearest below T (the largest when T is above all)
+        best = min(
+            fits, key=lambda c: (abs(math.log(max(c.bark, 1) / target_bark)) + c.cost, abs(c.total - aim))
+        )
+    else:  # the nearest below T (the largest when T is above all)
         best = min(found, key=lambda c: (c.total > T, abs(c.total - aim), c.cost))
-    return _realise(params, trees, best, tri_per_leaf, generate_options, minimum, maximum,
-                    options, T)
+    return _realise(params, trees, best, tri_per_leaf, generate_options, minimum, maximum, options, T)
 
 
-def _realise(params, trees, best: _Candidate, tri_per_leaf: int, generate_options,
-             minimum: int, maximum: int, options: BudgetOptions, T: int) -> Plan:
+def _realise(
+    params,
+    trees,
+    best: _Candidate,
+    tri_per_leaf: int,
+    generate_options,
+    minimum: int,
+    maximum: int,
+    options: BudgetOptions,
+    T: int,
+) -> Plan:
     """The chosen candidate as species parameters, its leaves regrown to count them exactly
     (corrected once or twice for rounding), leaf area matched to the species' own tree."""
     c, drop, p, t, per_unit = trees[best.tree]
@@ -246,20 +274,27 @@ def _realise(params, trees, best: _Candidate, tri_per_leaf: int, generate_option
     fmin, fmax = options.leaf_quality
     if tri_per_leaf and per_unit:
         for _ in range(3):
-            grown = regrow_leaves(t, replace(p, leaf_quality=params.leaf_quality * factor),
-                                  generate_options)
+            grown = regrow_leaves(t, replace(p, leaf_quality=params.leaf_quality * factor), generate_options)
             want = (T * (1.0 - 0.5 * options.tolerance) - best.bark) / tri_per_leaf
             total = best.bark + tri_per_leaf * grown.n_leaves
-            if grown.n_leaves == 0 or (1.0 - options.tolerance) * T <= total <= T \
-                    or not fmin < factor < fmax:
+            if grown.n_leaves == 0 or (1.0 - options.tolerance) * T <= total <= T or not fmin < factor < fmax:
                 break
             factor = min(max(factor * want / grown.n_leaves, fmin), fmax)
         p = replace(p, leaf_quality=params.leaf_quality * factor)
-        if drop or c != 1.0:               # same total leaf area as the species' own tree
+        if drop or c != 1.0:  # same total leaf area as the species' own tree
             area, full = float(np.sum(grown.leaf_area)), float(np.sum(trees[0][3].leaf_area))
             if area > 0 and full > 0:
                 p = replace(p, leaf_scale=p.leaf_scale * math.sqrt(full / area))
     leaves = tri_per_leaf * grown.n_leaves if tri_per_leaf else 0
-    return Plan(params=p, mesh=best.mesh, triangles=best.bark + leaves, bark=best.bark,
-                leaves=leaves, levels=p.levels, leaf_factor=factor if leaves else 1.0,
-                curve_scale=c, minimum=minimum, maximum=maximum)
+    return Plan(
+        params=p,
+        mesh=best.mesh,
+        triangles=best.bark + leaves,
+        bark=best.bark,
+        leaves=leaves,
+        levels=p.levels,
+        leaf_factor=factor if leaves else 1.0,
+        curve_scale=c,
+        minimum=minimum,
+        maximum=maximum,
+    )

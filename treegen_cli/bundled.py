@@ -11,6 +11,7 @@ A path that exists always wins; otherwise a bare name (no folder part), with or 
 suffix, is looked up among the bundled species. The species live in the package so that a
 wheel installed anywhere carries them (the repository's `species/` is a link to this folder).
 """
+
 from __future__ import annotations
 
 import difflib
@@ -19,7 +20,7 @@ from pathlib import Path
 
 from .errors import TreegenError
 
-SUFFIXES = (".txt", ".xml")     # species files: Weber–Penn text or Arbaro XML (params.py)
+SUFFIXES = (".txt", ".xml")  # species files: Weber–Penn text or Arbaro XML (params.py)
 LIST_HINT = "`treegen species` lists the bundled ones"
 
 
@@ -49,7 +50,7 @@ def bundled_species(name: str) -> Path | None:
     """The bundled file `name` (a bare name, suffix optional) stands for, or None."""
     if not name or "/" in name or os.sep in name or (os.altsep and os.altsep in name):
         return None
-    stem = name[:-len(Path(name).suffix)] if Path(name).suffix.lower() in SUFFIXES else name
+    stem = name[: -len(Path(name).suffix)] if Path(name).suffix.lower() in SUFFIXES else name
     by_key = {_key(n): p for n, p in bundled_names().items()}
     return by_key.get(_key(stem))
 
@@ -57,11 +58,11 @@ def bundled_species(name: str) -> Path | None:
 def close_matches(name: str, n: int = 3) -> list[str]:
     """Bundled names close to `name`'s stem, best first (for 'did you mean')."""
     stem = Path(str(name).replace("\\", "/")).name
-    stem = stem[:-len(Path(stem).suffix)] if Path(stem).suffix.lower() in SUFFIXES else stem
+    stem = stem[: -len(Path(stem).suffix)] if Path(stem).suffix.lower() in SUFFIXES else stem
     names = sorted(bundled_names())
     keys = {_key(x): x for x in names}
     hits = difflib.get_close_matches(_key(stem), list(keys), n=n, cutoff=0.5)
-    hits += [k for k in keys if _key(stem) and _key(stem) in k and k not in hits][:n - len(hits)]
+    hits += [k for k in keys if _key(stem) and _key(stem) in k and k not in hits][: n - len(hits)]
     return [keys[h] for h in hits]
 
 
@@ -69,12 +70,10 @@ def not_found(subject: str, value: str) -> TreegenError:
     """The one-line refusal for a species argument that is neither a file nor a bundled name."""
     hits = close_matches(value)
     hint = f"did you mean {', '.join(hits)}? ({LIST_HINT})" if hits else LIST_HINT
-    return TreegenError(f"{subject} not found (no such file, and no bundled species by that "
-                        f"name); {hint}")
+    return TreegenError(f"{subject} not found (no such file, and no bundled species by that name); {hint}")
 
 
-def resolve_species(value: str | os.PathLike, base: Path | None = None,
-                    subject: str | None = None) -> Path:
+def resolve_species(value: str | os.PathLike, base: Path | None = None, subject: str | None = None) -> Path:
     """The species file `value` names: an existing path (relative to `base` if given, else to
     the working folder) first, then a bundled name. Otherwise a one-line TreegenError that
     starts with `subject` (default: "species 'VALUE'"; layouts and catalogues pass their JSON
@@ -84,12 +83,14 @@ def resolve_species(value: str | os.PathLike, base: Path | None = None,
     path = Path(base, text) if base is not None else Path(text)
     try:
         is_dir, is_file = path.is_dir(), path.is_file()
-    except (OSError, ValueError):        # e.g. a NUL byte or an over-long name
+    except (OSError, ValueError):  # e.g. a NUL byte or an over-long name
         is_dir = is_file = False
     if is_dir:
-        raise TreegenError(f"{subject} is a directory; expected a species file "
-                           f"({' '.join(SUFFIXES)}) or a bundled species name such as "
-                           f"quaking_aspen ({LIST_HINT})")
+        raise TreegenError(
+            f"{subject} is a directory; expected a species file "
+            f"({' '.join(SUFFIXES)}) or a bundled species name such as "
+            f"quaking_aspen ({LIST_HINT})"
+        )
     if is_file:
         return path
     hit = bundled_species(text)

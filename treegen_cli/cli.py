@@ -1,6 +1,7 @@
 """The `treegen` command line: the root group, its commands (one module each in commands/),
 and the entry point, which turns every user error into one line on stderr and exit 2.
 """
+
 from __future__ import annotations
 
 import sys
@@ -30,7 +31,7 @@ for command in (info, make, forest, batch, preview, species):
 
 def main(argv: list[str] | None = None) -> None:
     """Entry point: run the CLI, turning user errors into one line and exit code 2."""
-    add_output_options(cli)     # -q/--quiet, -v/--verbose on every registered command
+    add_output_options(cli)  # -q/--quiet, -v/--verbose on every registered command
     try:
         cli.main(args=argv, prog_name="treegen", standalone_mode=False)
     except TreegenError as e:

@@ -4,6 +4,7 @@ Everything that reads or reshapes a baked `Clip` lives here, so wind (which bake
 (which decimates), the forest (which shifts phases), the preview (which samples files) and
 the export preparation (which resamples for USD) share one copy of each rule.
 """
+
 from __future__ import annotations
 
 from dataclasses import replace
@@ -29,7 +30,7 @@ def kept_mask(clip: Clip) -> np.ndarray:
     if clip.keys is None:
         return np.ones((K, J), dtype=bool)
     kept = np.zeros((K, J), dtype=bool)
-    for j, kj in enumerate(clip.keys):       # per joint (hundreds), not per key
+    for j, kj in enumerate(clip.keys):  # per joint (hundreds), not per key
         kept[np.asarray(kj, dtype=np.int64), j] = True
     kept[0] = kept[-1] = True
     return kept
@@ -57,12 +58,14 @@ def playback(clip: Clip) -> np.ndarray:
     rot = np.asarray(clip.rotations, float)
     if clip.keys is None:
         return rot
-    return play_keys(rot / np.linalg.norm(rot, axis=-1, keepdims=True), kept_mask(clip),
-                     clip.interpolation.upper())
+    return play_keys(
+        rot / np.linalg.norm(rot, axis=-1, keepdims=True), kept_mask(clip), clip.interpolation.upper()
+    )
 
 
-def sample_track(times: np.ndarray, values: np.ndarray, t: np.ndarray,
-                 interpolation: str = "LINEAR", rotation: bool = True) -> np.ndarray:
+def sample_track(
+    times: np.ndarray, values: np.ndarray, t: np.ndarray, interpolation: str = "LINEAR", rotation: bool = True
+) -> np.ndarray:
     """Keys (K,), values (K, M, n) → (T, M, n) at times t (T,), held at the ends. LINEAR
     rotations slerp, other paths lerp; STEP holds the previous key (glTF semantics)."""
     times = np.asarray(times, dtype=np.float64)
@@ -74,11 +77,12 @@ def sample_track(times: np.ndarray, values: np.ndarray, t: np.ndarray,
     if interpolation == "STEP":
         return values[np.clip(np.searchsorted(times, t, side="right") - 1, 0, K - 1)]
     if interpolation != "LINEAR":
-        raise TreegenError(f"animation interpolation '{interpolation}' is not supported "
-                           "(LINEAR and STEP are)")
+        raise TreegenError(
+            f"animation interpolation '{interpolation}' is not supported (LINEAR and STEP are)"
+        )
     i = np.clip(np.searchsorted(times, t, side="right") - 1, 0, K - 2)
     u = (t - times[i]) / np.maximum(times[i + 1] - times[i], 1e-12)
-    a, b = values[i], values[i + 1]                           # (T, M, n)
+    a, b = values[i], values[i + 1]  # (T, M, n)
     if not rotation:
         return a + (b - a) * u[:, None, None]
     T, M = a.shape[:2]
@@ -132,8 +136,10 @@ def phase_rotate(clip: Clip, shift: int) -> Clip:
     rot = np.concatenate([body, body[:1]])
     keys = None
     if clip.keys is not None:
-        keys = [np.unique(np.r_[(np.asarray(k, int)[np.asarray(k, int) < n] - shift) % n, 0, n])
-                for k in clip.keys]
+        keys = [
+            np.unique(np.r_[(np.asarray(k, int)[np.asarray(k, int) < n] - shift) % n, 0, n])
+            for k in clip.keys
+        ]
     return replace(clip, rotations=rot, keys=keys)
 
 
@@ -146,12 +152,19 @@ def repeat_clip(clip: Clip, times: int = 2) -> Clip:
     if n <= 0 or times <= 1:
         return clip
     period = float(clip.times[-1] - clip.times[0])
-    t = np.concatenate([clip.times[:n] + r * period for r in range(times)]
-                       + [clip.times[-1:] + (times - 1) * period])
+    t = np.concatenate(
+        [clip.times[:n] + r * period for r in range(times)] + [clip.times[-1:] + (times - 1) * period]
+    )
     rot = np.concatenate([clip.rotations[:n]] * times + [clip.rotations[-1:]])
     keys = None
     if clip.keys is not None:
-        keys = [np.unique(np.concatenate([np.asarray(k, int)[np.asarray(k, int) < n] + r * n
-                                          for r in range(times)] + [[0, times * n]]))
-                for k in clip.keys]
+        keys = [
+            np.unique(
+                np.concatenate(
+                    [np.asarray(k, int)[np.asarray(k, int) < n] + r * n for r in range(times)]
+                    + [[0, times * n]]
+                )
+            )
+            for k in clip.keys
+        ]
     return replace(clip, times=t, rotations=rot, keys=keys)

@@ -4,6 +4,7 @@ pose them (`skinning(t)`: per-joint matrices S_j(t) = W_j(t)·B_j⁻¹, as an en
 Built from an in-memory Asset here, or from a written file by the exchange readers (glTF,
 UsdSkel), so the preview and the tests see exactly what a file's skin and animation do.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -22,20 +23,20 @@ class Part:
     """One skinned triangle list with one material (Y up)."""
 
     name: str
-    positions: np.ndarray       # float32 (V, 3), rest pose
-    normals: np.ndarray         # float32 (V, 3)
-    indices: np.ndarray         # uint32 (T*3,)
-    joints: np.ndarray          # (V, 4) ints, into the scene's skinning matrices
-    weights: np.ndarray         # float32 (V, 4)
-    color: tuple[float, float, float]   # linear base colour (multiplies `texture`)
+    positions: np.ndarray  # float32 (V, 3), rest pose
+    normals: np.ndarray  # float32 (V, 3)
+    indices: np.ndarray  # uint32 (T*3,)
+    joints: np.ndarray  # (V, 4) ints, into the scene's skinning matrices
+    weights: np.ndarray  # float32 (V, 4)
+    color: tuple[float, float, float]  # linear base colour (multiplies `texture`)
     double_sided: bool = False  # leaves: lit from both faces, light passes through
-    uvs: np.ndarray | None = None         # float32 (V, 2), origin bottom-left (OpenGL/USD)
-    texture: np.ndarray | None = None     # uint8 (H, W, 4) sRGB colour + straight alpha, top row first
+    uvs: np.ndarray | None = None  # float32 (V, 2), origin bottom-left (OpenGL/USD)
+    texture: np.ndarray | None = None  # uint8 (H, W, 4) sRGB colour + straight alpha, top row first
     normal_map: np.ndarray | None = None  # uint8 (H, W, 3) tangent space, +Y = +v (OpenGL/glTF)
-    normal_scale: float = 1.0             # glTF normalTexture.scale: strength of the bumps
-    alpha_cutoff: float | None = None     # cut-out: discard where alpha < this (None: opaque)
-    opacity: float = 1.0                  # base colour alpha factor (multiplies texture alpha)
-    wrap: tuple[str, str] = ("REPEAT", "REPEAT")         # texture's (u, v): REPEAT CLAMP MIRROR
+    normal_scale: float = 1.0  # glTF normalTexture.scale: strength of the bumps
+    alpha_cutoff: float | None = None  # cut-out: discard where alpha < this (None: opaque)
+    opacity: float = 1.0  # base colour alpha factor (multiplies texture alpha)
+    wrap: tuple[str, str] = ("REPEAT", "REPEAT")  # texture's (u, v): REPEAT CLAMP MIRROR
     normal_wrap: tuple[str, str] = ("REPEAT", "REPEAT")  # normal map's (u, v)
 
     @property
@@ -77,7 +78,7 @@ class Drawable:
 
     parts: list[Part]
     n_joints: int
-    duration: float = 0.0                                    # wind loop length, s (0: static)
+    duration: float = 0.0  # wind loop length, s (0: static)
     skinning: Callable[[np.ndarray], np.ndarray] | None = None
     label: str = ""
 
@@ -99,10 +100,10 @@ def z_up_to_y_up() -> np.ndarray:
 class Channel:
     """One animated property of some joints, all on the same key times."""
 
-    joints: np.ndarray          # (M,) joint indices
-    path: str                   # "rotation" | "translation" | "scale"
-    times: np.ndarray           # (K,) seconds
-    values: np.ndarray          # (K, M, 4 or 3)
+    joints: np.ndarray  # (M,) joint indices
+    path: str  # "rotation" | "translation" | "scale"
+    times: np.ndarray  # (K,) seconds
+    values: np.ndarray  # (K, M, 4 or 3)
     interpolation: str = "LINEAR"
 
 
@@ -111,12 +112,12 @@ class PoseRig:
     """Enough of a skeleton to pose it: rest TRS per joint, the world matrix above each root
     joint, inverse binds and channels. `to_world` maps the source's axes to Y up."""
 
-    parent: np.ndarray          # (J,) −1 where the parent is not a joint
-    translation: np.ndarray     # (J, 3)
-    rotation: np.ndarray        # (J, 4) xyzw
-    scale: np.ndarray           # (J, 3)
-    root_world: np.ndarray      # (J, 4, 4): world of the non-joint parent (identity if none)
-    inverse_bind: np.ndarray    # (J, 4, 4)
+    parent: np.ndarray  # (J,) −1 where the parent is not a joint
+    translation: np.ndarray  # (J, 3)
+    rotation: np.ndarray  # (J, 4) xyzw
+    scale: np.ndarray  # (J, 3)
+    root_world: np.ndarray  # (J, 4, 4): world of the non-joint parent (identity if none)
+    inverse_bind: np.ndarray  # (J, 4, 4)
     channels: list[Channel] = field(default_factory=list)
     to_world: np.ndarray = field(default_factory=lambda: np.eye(4))
 
@@ -128,12 +129,15 @@ class PoseRig:
         """(T, J, 4, 4) skinning matrices in Y-up world space at times t."""
         t = np.atleast_1d(np.asarray(t, dtype=np.float64))
         T, J = len(t), len(self.parent)
-        pose = {"translation": np.broadcast_to(self.translation, (T, J, 3)).copy(),
-                "rotation": np.broadcast_to(self.rotation, (T, J, 4)).copy(),
-                "scale": np.broadcast_to(self.scale, (T, J, 3)).copy()}
+        pose = {
+            "translation": np.broadcast_to(self.translation, (T, J, 3)).copy(),
+            "rotation": np.broadcast_to(self.rotation, (T, J, 4)).copy(),
+            "scale": np.broadcast_to(self.scale, (T, J, 3)).copy(),
+        }
         for c in self.channels:
-            pose[c.path][:, c.joints] = sample_track(c.times, c.values, t, c.interpolation,
-                                                     rotation=c.path == "rotation")
+            pose[c.path][:, c.joints] = sample_track(
+                c.times, c.values, t, c.interpolation, rotation=c.path == "rotation"
+            )
         local = trs(pose["translation"], pose["rotation"], pose["scale"])
         world = forward(self.parent, local, self.root_world)
         skin = world @ self.inverse_bind
@@ -146,7 +150,7 @@ def from_asset(asset, lod: int = 0, label: str = "") -> Drawable:
     L = asset.lods[lod]
     mats = {m.name: m for m in asset.materials}
     parts = []
-    decoded: dict[int, np.ndarray] = {}      # a Texture shared by materials is decoded once
+    decoded: dict[int, np.ndarray] = {}  # a Texture shared by materials is decoded once
 
     def image(tex, channels):
         if tex is None:
@@ -162,18 +166,25 @@ def from_asset(asset, lod: int = 0, label: str = "") -> Drawable:
         has_uv = uvs is not None and len(uvs) == len(p.positions)
         base = m.base_texture if m and has_uv else None
         normal = m.normal_texture if m and has_uv else None
-        parts.append(Part(
-            name=p.name, positions=to_y_up(p.positions).astype(np.float32),
-            normals=to_y_up(p.normals).astype(np.float32),
-            indices=np.asarray(p.indices, np.uint32), joints=np.asarray(p.joints),
-            weights=np.asarray(p.weights, np.float32),
-            color=tuple(m.base_color[:3]) if m else (0.6, 0.6, 0.6),
-            double_sided=bool(m and m.double_sided),
-            uvs=np.asarray(uvs, np.float32) if has_uv else None,
-            texture=image(base, 4), normal_map=image(normal, 3),
-            alpha_cutoff=m.alpha_cutoff if m else None,
-            opacity=float(m.base_color[3]) if m and len(m.base_color) > 3 else 1.0,
-            wrap=_wrap(base), normal_wrap=_wrap(normal)))
+        parts.append(
+            Part(
+                name=p.name,
+                positions=to_y_up(p.positions).astype(np.float32),
+                normals=to_y_up(p.normals).astype(np.float32),
+                indices=np.asarray(p.indices, np.uint32),
+                joints=np.asarray(p.joints),
+                weights=np.asarray(p.weights, np.float32),
+                color=tuple(m.base_color[:3]) if m else (0.6, 0.6, 0.6),
+                double_sided=bool(m and m.double_sided),
+                uvs=np.asarray(uvs, np.float32) if has_uv else None,
+                texture=image(base, 4),
+                normal_map=image(normal, 3),
+                alpha_cutoff=m.alpha_cutoff if m else None,
+                opacity=float(m.base_color[3]) if m and len(m.base_color) > 3 else 1.0,
+                wrap=_wrap(base),
+                normal_wrap=_wrap(normal),
+            )
+        )
     sk = L.skeleton
     J = len(sk.names)
     channels = []
@@ -181,20 +192,38 @@ def from_asset(asset, lod: int = 0, label: str = "") -> Drawable:
         clip = L.clips[0]
         rot = np.asarray(clip.rotations, dtype=np.float64)
         if clip.keys is None:
-            channels.append(Channel(np.arange(J), "rotation", np.asarray(clip.times), rot,
-                                    clip.interpolation))
+            channels.append(
+                Channel(np.arange(J), "rotation", np.asarray(clip.times), rot, clip.interpolation)
+            )
         else:
-            for j, keys in enumerate(clip.keys):     # joints (hundreds), each its own schedule
+            for j, keys in enumerate(clip.keys):  # joints (hundreds), each its own schedule
                 keys = np.asarray(keys, dtype=np.int64)
-                channels.append(Channel(np.array([j]), "rotation", np.asarray(clip.times)[keys],
-                                        rot[keys, j:j + 1], clip.interpolation))
-    rig = PoseRig(parent=np.asarray(sk.parent), translation=np.asarray(sk.rest_translation),
-                  rotation=np.asarray(sk.rest_rotation), scale=np.ones((J, 3)),
-                  root_world=np.broadcast_to(np.eye(4), (J, 4, 4)),
-                  inverse_bind=sk.inverse_bind(),
-                  channels=channels, to_world=z_up_to_y_up())
-    return Drawable(parts=parts, n_joints=J, duration=rig.duration,
-                 skinning=rig.skinning if channels else None, label=label or asset.name)
+                channels.append(
+                    Channel(
+                        np.array([j]),
+                        "rotation",
+                        np.asarray(clip.times)[keys],
+                        rot[keys, j : j + 1],
+                        clip.interpolation,
+                    )
+                )
+    rig = PoseRig(
+        parent=np.asarray(sk.parent),
+        translation=np.asarray(sk.rest_translation),
+        rotation=np.asarray(sk.rest_rotation),
+        scale=np.ones((J, 3)),
+        root_world=np.broadcast_to(np.eye(4), (J, 4, 4)),
+        inverse_bind=sk.inverse_bind(),
+        channels=channels,
+        to_world=z_up_to_y_up(),
+    )
+    return Drawable(
+        parts=parts,
+        n_joints=J,
+        duration=rig.duration,
+        skinning=rig.skinning if channels else None,
+        label=label or asset.name,
+    )
 
 
 def _wrap(tex) -> tuple[str, str]:
@@ -219,5 +248,3 @@ def vertex_normals(pos: np.ndarray, idx: np.ndarray) -> np.ndarray:
         np.add.at(n, tri[:, k], fn)
     length = np.linalg.norm(n, axis=1, keepdims=True)
     return (n / np.where(length > 0, length, 1.0)).astype(np.float32)
-
-

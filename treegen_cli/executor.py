@@ -9,6 +9,7 @@ processes, not threads). With an address: the same jobs go to an existing cluste
 workers must see the same file system paths (outputs are written by the workers).
 Closing the block closes the client and, if embedded, the cluster and its processes.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -37,11 +38,13 @@ def default_workers() -> int:
 # (profiler: every 10 ms; loop tick: 20 ms; memory monitor: 100 ms). On a busy machine the
 # loop thread is then often preempted holding the GIL and the build waits (measured: 8
 # prototypes of forest_130m, 2 workers on a loaded 2-core box, 33-38 s → 28-29 s).
-QUIET = {"distributed.worker.profile.enabled": False,
-         "distributed.admin.tick.interval": "1s",
-         "distributed.admin.system-monitor.interval": "5s",
-         "distributed.admin.system-monitor.gil.enabled": False,
-         "distributed.worker.memory.monitor-interval": "2s"}
+QUIET = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.tick.interval": "1s",
+    "distributed.admin.system-monitor.interval": "5s",
+    "distributed.admin.system-monitor.gil.enabled": False,
+    "distributed.worker.memory.monitor-interval": "2s",
+}
 
 
 @contextlib.contextmanager
@@ -57,9 +60,11 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
         try:
             client = Client(address, timeout="10s", set_as_default=False)
         except (OSError, TimeoutError, ValueError) as e:
-            raise TreegenError(f"--scheduler {address}: cannot connect to a Dask scheduler "
-                               f"({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}); "
-                               "start one with `dask scheduler`") from None
+            raise TreegenError(
+                f"--scheduler {address}: cannot connect to a Dask scheduler "
+                f"({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}); "
+                "start one with `dask scheduler`"
+            ) from None
         try:
             n = check_workers(client, address)
             yield client, f"{n} worker(s) at {address}"
@@ -76,9 +81,14 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
         with dask.config.set(config):
             # the scheduler's HTTP server (health routes) always starts; on a free port, so a
             # busy 8787 (someone's dashboard) costs no "Port 8787 is already in use" warning
-            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, silence_logs=logging.CRITICAL,
-                                   scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
+            cluster = LocalCluster(
+                n_workers=n,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                silence_logs=logging.CRITICAL,
+                scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+            )
     finally:
         signal.signal(signal.SIGINT, previous)
     try:
@@ -95,6 +105,7 @@ def treegen_version() -> str:
     """Run on each worker by check_workers (by reference: it fails where treegen_cli is
     not importable, which is the point)."""
     from . import __version__
+
     return __version__
 
 
@@ -107,17 +118,23 @@ def check_workers(client, address: str, wait_s: float = 30.0) -> int:
     try:
         client.wait_for_workers(1, timeout=wait_s)
     except TimeoutError:
-        raise TreegenError(f"--scheduler {address}: no worker joined within {wait_s:g} s; start "
-                           f"some with `dask worker {address}`") from None
+        raise TreegenError(
+            f"--scheduler {address}: no worker joined within {wait_s:g} s; start "
+            f"some with `dask worker {address}`"
+        ) from None
     found = client.run(treegen_version, on_error="return")
     for worker, v in sorted(found.items()):
         if isinstance(v, BaseException):
-            raise TreegenError(f"--scheduler {address}: worker {worker} cannot run treegen "
-                               f"({type(v).__name__}: {v}); install treegen {__version__} "
-                               "on every worker") from None
+            raise TreegenError(
+                f"--scheduler {address}: worker {worker} cannot run treegen "
+                f"({type(v).__name__}: {v}); install treegen {__version__} "
+                "on every worker"
+            ) from None
         if v != __version__:
-            raise TreegenError(f"--scheduler {address}: worker {worker} has treegen {v}, this "
-                               f"is {__version__}; install the same version on every worker")
+            raise TreegenError(
+                f"--scheduler {address}: worker {worker} has treegen {v}, this "
+                f"is {__version__}; install the same version on every worker"
+            )
     return len(found)
 
 
@@ -125,6 +142,7 @@ def worker_name() -> str:
     """The Dask worker running this task (its address), or 'local' outside one."""
     try:
         from distributed import get_worker
+
         return str(get_worker().address)
     except (ImportError, ValueError):
         return "local"
@@ -145,8 +163,9 @@ def tune_worker_malloc() -> None:
     _tuned = True
     try:
         import ctypes
+
         libc = ctypes.CDLL("libc.so.6")
-        libc.mallopt(-3, 32 * 1024 * 1024)      # M_MMAP_THRESHOLD: glibc's own upper bound
-        libc.mallopt(-1, 64 * 1024 * 1024)      # M_TRIM_THRESHOLD: twice it, as glibc adapts
+        libc.mallopt(-3, 32 * 1024 * 1024)  # M_MMAP_THRESHOLD: glibc's own upper bound
+        libc.mallopt(-1, 64 * 1024 * 1024)  # M_TRIM_THRESHOLD: twice it, as glibc adapts
     except (OSError, AttributeError):
         pass

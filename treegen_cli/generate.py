@@ -8,6 +8,7 @@ Splits ("clones") join the active set of the level when they appear.
 Randomness: one `numpy.random.Generator` per (seed, level, purpose), so pruning can regrow a
 level with exactly the same random draws and nothing touches the global RNG.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -31,15 +32,16 @@ class GenerateOptions:
     max_leaves: int = 2_000_000
     leaf_quality: float | None = None
     levels: int | None = None
-    prune_steps: int = 7          # bisection steps when fitting a stem into the envelope
-    max_size: float = 150.0       # metres of height or crown width (plausibility bound: the
-                                  # tallest living tree is ~116 m, the widest crowns ~80 m)
+    prune_steps: int = 7  # bisection steps when fitting a stem into the envelope
+    max_size: float = 150.0  # metres of height or crown width (plausibility bound: the
+    # tallest living tree is ~116 m, the widest crowns ~80 m)
 
 
 DEFAULTS = GenerateOptions()
 
 
 # ---------------------------------------------------------------------------- rotations
+
 
 def _rot_axis(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
     """Rotation matrices (n, 3, 3) about unit axes (n, 3) by angles (n,) radians (Rodrigues)."""
@@ -115,28 +117,29 @@ def _spread(rng: np.random.Generator, n, variation) -> np.ndarray:
 
 # ---------------------------------------------------------------------------- level batches
 
+
 @dataclass
 class _Level:
     """Stems of one level before they are grown: start pose plus the values growth needs."""
 
-    pos: np.ndarray          # (M, 3)
-    frame: np.ndarray        # (M, 3, 3)
-    length: np.ndarray       # (M,)
-    radius: np.ndarray       # (M,)
-    parent: np.ndarray       # (M,) global stem index
+    pos: np.ndarray  # (M, 3)
+    frame: np.ndarray  # (M, 3, 3)
+    length: np.ndarray  # (M,)
+    radius: np.ndarray  # (M,)
+    parent: np.ndarray  # (M,) global stem index
     parent_node: np.ndarray  # (M,) global node index
-    offset: np.ndarray       # (M,)
+    offset: np.ndarray  # (M,)
 
 
 @dataclass
 class _Grown:
     """A grown level: stems (originals first, then clones in creation order) and their nodes."""
 
-    stem_parent: np.ndarray      # local index of the split origin for clones, -1 otherwise
-    stem_origin: np.ndarray      # local index of the original stem a clone belongs to
-    stem_first_seg: np.ndarray   # segment index of the stem's first node
-    node_stem: np.ndarray        # local stem index per node, grouped by stem, base to tip
-    node_seg: np.ndarray         # segment index of the node (z = seg · seg_len)
+    stem_parent: np.ndarray  # local index of the split origin for clones, -1 otherwise
+    stem_origin: np.ndarray  # local index of the original stem a clone belongs to
+    stem_first_seg: np.ndarray  # segment index of the stem's first node
+    node_stem: np.ndarray  # local stem index per node, grouped by stem, base to tip
+    node_seg: np.ndarray  # segment index of the node (z = seg · seg_len)
     node_pos: np.ndarray
     node_frame: np.ndarray
 
@@ -154,7 +157,7 @@ def _grow_level(p: Params, level: int, batch: _Level, length: np.ndarray, seed: 
     act = np.arange(m)
     pos = batch.pos.copy()
     frame = batch.frame.copy()
-    correction = np.zeros(m)          # per-segment rotation undoing a split's tilt
+    correction = np.zeros(m)  # per-segment rotation undoing a split's tilt
     stems = {"parent": np.full(m, -1), "origin": np.arange(m), "first": np.zeros(m, dtype=np.int64)}
     n_stems = m
     rec_stem, rec_seg, rec_pos, rec_frame = [], [], [], []
@@ -208,13 +211,13 @@ def _grow_level(p: Params, level: int, batch: _Level, length: np.ndarray, seed: 
             if counts.any():
                 before, act_before = frame, act
                 frame, act, correction, n_new = _split(
-                    rng, p, level, seg, res, counts, act, frame, correction, n_stems,
-                    stems)
+                    rng, p, level, seg, res, counts, act, frame, correction, n_stems, stems
+                )
                 pos = np.concatenate([pos, np.repeat(pos[counts > 0], counts[counts > 0], axis=0)])
                 n_stems += n_new
                 if helix:
                     src = np.concatenate([np.arange(a), np.repeat(np.arange(a), counts)])
-                    turn = np.einsum("nij,nkj->nik", frame, before[src])   # new · oldᵀ
+                    turn = np.einsum("nij,nkj->nik", frame, before[src])  # new · oldᵀ
                     axis = np.einsum("nij,nj->ni", turn, helix_axis[act_before[src]])
                     helix_axis = np.concatenate([helix_axis, np.zeros((n_new, 3))])
                     helix_axis[act] = axis
@@ -233,13 +236,17 @@ def _grow_level(p: Params, level: int, batch: _Level, length: np.ndarray, seed: 
     node_seg = np.concatenate(rec_seg)
     order = np.lexsort((node_seg, node_stem))
     return _Grown(
-        stem_parent=stems["parent"], stem_origin=stems["origin"], stem_first_seg=stems["first"],
-        node_stem=node_stem[order], node_seg=node_seg[order],
-        node_pos=np.concatenate(rec_pos)[order], node_frame=np.concatenate(rec_frame)[order])
+        stem_parent=stems["parent"],
+        stem_origin=stems["origin"],
+        stem_first_seg=stems["first"],
+        node_stem=node_stem[order],
+        node_seg=node_seg[order],
+        node_pos=np.concatenate(rec_pos)[order],
+        node_frame=np.concatenate(rec_frame)[order],
+    )
 
 
-def _split(rng, p, level, seg, res, counts, act, frame, correction, n_stems,
-           stems):
+def _split(rng, p, level, seg, res, counts, act, frame, correction, n_stems, stems):
     """Split the active stems with counts[i] > 0 into counts[i] + 1 members.
 
     Each member tilts by max(0, nSplitAngle ± nSplitAngleV − declination) and fans out about
@@ -251,14 +258,15 @@ def _split(rng, p, level, seg, res, counts, act, frame, correction, n_stems,
     k = counts[splitting]
     n_new = int(k.sum())
     new_local = np.arange(n_stems, n_stems + n_new)
-    src = np.repeat(splitting, k)                 # index into active set of each clone's origin
+    src = np.repeat(splitting, k)  # index into active set of each clone's origin
     stems["parent"] = np.concatenate([stems["parent"], act[src]])
     stems["origin"] = np.concatenate([stems["origin"], stems["origin"][act[src]]])
     stems["first"] = np.concatenate([stems["first"], np.full(n_new, seg)])
 
     # members: the original (member 0) and its clones (members 1..k)
-    member_idx = np.concatenate([np.zeros(splitting.shape[0], dtype=np.int64),
-                                 np.arange(n_new) - np.repeat(np.cumsum(k) - k, k) + 1])
+    member_idx = np.concatenate(
+        [np.zeros(splitting.shape[0], dtype=np.int64), np.arange(n_new) - np.repeat(np.cumsum(k) - k, k) + 1]
+    )
     group_k = np.concatenate([k, np.repeat(k, k)])
     f = np.concatenate([frame[splitting], frame[src]])
     d = f[:, :, 2]
@@ -280,11 +288,11 @@ def _split(rng, p, level, seg, res, counts, act, frame, correction, n_stems,
 
     frame = frame.copy()
     frame[splitting] = f[: splitting.shape[0]]
-    frame = np.concatenate([frame, f[splitting.shape[0]:]])
+    frame = np.concatenate([frame, f[splitting.shape[0] :]])
     # corrections add up over successive splits; a clone carries its origin's so far
     correction = np.concatenate([correction, correction[act[src]]])
     correction[act[splitting]] += corr[: splitting.shape[0]]
-    correction[new_local] += corr[splitting.shape[0]:]
+    correction[new_local] += corr[splitting.shape[0] :]
     act = np.concatenate([act, new_local])
     return frame, act, correction, n_new
 
@@ -293,13 +301,15 @@ def _inside_envelope(p: Params, scale_tree: float, pts: np.ndarray) -> np.ndarra
     """True where points (n, 3) lie inside the pruning envelope (tree coordinates)."""
     r = np.hypot(pts[:, 0], pts[:, 1]) / scale_tree
     rel = (scale_tree - pts[:, 2]) / (scale_tree * max(1.0 - p.base_size, 1e-6))
-    env = p.prune_width * shape_ratio(ENVELOPE, rel, p.prune_width_peak,
-                                      p.prune_power_low, p.prune_power_high)
+    env = p.prune_width * shape_ratio(
+        ENVELOPE, rel, p.prune_width_peak, p.prune_power_low, p.prune_power_high
+    )
     return (r <= env) & (rel >= 0.0) & (rel <= 1.0)
 
 
-def _grow_pruned(p: Params, level: int, batch: _Level, scale_tree: float, seed: int,
-                 steps: int) -> tuple[_Level, _Grown, np.ndarray]:
+def _grow_pruned(
+    p: Params, level: int, batch: _Level, scale_tree: float, seed: int, steps: int
+) -> tuple[_Level, _Grown, np.ndarray]:
     """Grow a level; with PruneRatio > 0 shorten stems that leave the envelope (bisection on
     each stem's length with the same random draws), final L0 − (L0 − L_fit)·PruneRatio.
     Stems pruned away entirely (no length fits) are removed, as in the paper."""
@@ -307,11 +317,13 @@ def _grow_pruned(p: Params, level: int, batch: _Level, scale_tree: float, seed: 
     grown = _grow_level(p, level, batch, length, seed)
     if p.prune_ratio <= 0.0 or level == 0:
         return batch, grown, length
+
     def outside_by_stem(g: _Grown) -> np.ndarray:
         bad = ~_inside_envelope(p, scale_tree, g.node_pos)
         out = np.zeros(batch.pos.shape[0], dtype=bool)
         np.logical_or.at(out, g.stem_origin[g.node_stem], bad)
         return out
+
     out = outside_by_stem(grown)
     if not out.any():
         return batch, grown, length
@@ -347,14 +359,22 @@ def _keep_originals(batch: _Level, grown: _Grown, length: np.ndarray, keep: np.n
         stem_parent=np.where(parent >= 0, local[np.maximum(parent, 0)], -1),
         stem_origin=new_origin[grown.stem_origin[stem_keep]],
         stem_first_seg=grown.stem_first_seg[stem_keep],
-        node_stem=local[grown.node_stem[node_keep]], node_seg=grown.node_seg[node_keep],
-        node_pos=grown.node_pos[node_keep], node_frame=grown.node_frame[node_keep])
-    trimmed = _Level(**{f: getattr(batch, f)[keep] for f in
-                        ("pos", "frame", "length", "radius", "parent", "parent_node", "offset")})
+        node_stem=local[grown.node_stem[node_keep]],
+        node_seg=grown.node_seg[node_keep],
+        node_pos=grown.node_pos[node_keep],
+        node_frame=grown.node_frame[node_keep],
+    )
+    trimmed = _Level(
+        **{
+            f: getattr(batch, f)[keep]
+            for f in ("pos", "frame", "length", "radius", "parent", "parent_node", "offset")
+        }
+    )
     return trimmed, kept, length[keep]
 
 
 # ---------------------------------------------------------------------------- the generator
+
 
 class _Builder:
     """Accumulates levels into the Tree's global arrays."""
@@ -388,7 +408,7 @@ def estimate_counts(p: Params, leaf_quality: float | None = None, levels: int | 
         lp = p.level[level]
         grow = (1.0 + lp.seg_splits) ** max(int(lp.curve_res) - 1, 0)
         if level == 0:
-            grow *= 1 + min(p.base_splits, 8)     # the generator splits at most 8 ways
+            grow *= 1 + min(p.base_splits, 8)  # the generator splits at most 8 ways
         return originals * min(grow, 1e6)
 
     originals = [max(1, int(round(p.level[0].branches))) if p.level[0].branches > 0 else 1]
@@ -414,10 +434,12 @@ def _refuse(kind: str, count: float, limit: int, flag: str, p: Params, levels: i
         raise TreegenError(
             f"Levels = {p.levels} would grow about {int(count):,} {kind}, over the {flag} limit "
             f"of {limit:,}; Levels may be 0..{MAX_LEVELS} and at most {max(fits)} fits this "
-            f"species' nBranches (or raise {flag} N)")
+            f"species' nBranches (or raise {flag} N)"
+        )
     raise TreegenError(
         f"species '{p.name}' would grow about {int(count):,} {kind}, over the limit of {limit:,}; "
-        f"raise it with {flag} N (or lower the species' Branches/Leaves/LeafQuality)")
+        f"raise it with {flag} N (or lower the species' Branches/Leaves/LeafQuality)"
+    )
 
 
 def check_trunk(p: Params, options: GenerateOptions = DEFAULTS) -> None:
@@ -429,7 +451,8 @@ def check_trunk(p: Params, options: GenerateOptions = DEFAULTS) -> None:
         raise TreegenError(
             f"Scale = {p.scale:g} (ScaleV {p.scale_v:g}, 0Length {lp0.length:g}) makes a trunk up "
             f"to {trunk:,.0f} m long, over the plausibility bound of {options.max_size:g} m; "
-            f"lower Scale, or raise the bound with --max-size METRES")
+            f"lower Scale, or raise the bound with --max-size METRES"
+        )
 
 
 def check_size(tree: Tree, max_size: float) -> None:
@@ -445,12 +468,14 @@ def check_size(tree: Tree, max_size: float) -> None:
     if not height <= max_size:
         raise TreegenError(
             f"Scale = {p.scale:g} grows a tree {height:,.1f} m tall (seed {tree.seed}), over the "
-            f"plausibility bound of {max_size:g} m" + fix.format("Scale or 0Length"))
+            f"plausibility bound of {max_size:g} m" + fix.format("Scale or 0Length")
+        )
     if not width <= max_size:
         raise TreegenError(
             f"Scale = {p.scale:g} with 1Length = {p.level[1].length:g} grows a crown {width:,.1f} m "
             f"wide (seed {tree.seed}), over the plausibility bound of {max_size:g} m"
-            + fix.format("Scale or 1Length"))
+            + fix.format("Scale or 1Length")
+        )
 
 
 def _prepare(p: Params, options: GenerateOptions) -> tuple[Params, int]:
@@ -477,8 +502,11 @@ def generate(p: Params, seed: int = 0, options: GenerateOptions = DEFAULTS) -> T
 
     # trunks (Arbaro: 0Branches trunks, spread within 0BranchDist·scale around the origin)
     trunks = max(1, int(round(lp0.branches))) if lp0.branches > 0 else 1
-    rot = (np.arange(trunks) * (lp0.rotate if lp0.rotate != 0 else 360.0 / trunks)
-           + _spread(rng, trunks, lp0.rotate_v) + rng.uniform(0, 360.0))
+    rot = (
+        np.arange(trunks) * (lp0.rotate if lp0.rotate != 0 else 360.0 / trunks)
+        + _spread(rng, trunks, lp0.rotate_v)
+        + rng.uniform(0, 360.0)
+    )
     down = lp0.down_angle + _spread(rng, trunks, lp0.down_angle_v) if trunks > 1 else np.zeros(1)
     down = np.broadcast_to(down, (trunks,)).astype(float)
     dist = lp0.branch_dist * scale_tree * np.sqrt(rng.uniform(0, 1, trunks)) if trunks > 1 else np.zeros(1)
@@ -488,9 +516,15 @@ def generate(p: Params, seed: int = 0, options: GenerateOptions = DEFAULTS) -> T
     # a trunk is never shorter than a millimetre per metre of tree (0Length 0 is legal)
     length0 = np.maximum(_vary(rng, lp0.length, lp0.length_v, trunks), 1e-3) * scale_tree
     radius0 = length0 * p.ratio * _vary(rng, p.scale0, p.scale0_v, trunks)
-    batch = _Level(pos=pos0, frame=frame0, length=length0, radius=radius0,
-                   parent=np.full(trunks, -1), parent_node=np.full(trunks, -1),
-                   offset=np.zeros(trunks))
+    batch = _Level(
+        pos=pos0,
+        frame=frame0,
+        length=length0,
+        radius=radius0,
+        parent=np.full(trunks, -1),
+        parent_node=np.full(trunks, -1),
+        offset=np.zeros(trunks),
+    )
 
     out = _Builder()
     leaves = None
@@ -515,29 +549,54 @@ def generate(p: Params, seed: int = 0, options: GenerateOptions = DEFAULTS) -> T
         s_rad = batch.radius[origin]
         node_radius = taper_radius(s_rad[grown.node_stem], s_len[grown.node_stem], lp.taper, node_z)
         if level == 0:
-            node_radius = node_radius * flare_factor(p.flare, node_z / np.maximum(s_len[grown.node_stem], 1e-12))
+            node_radius = node_radius * flare_factor(
+                p.flare, node_z / np.maximum(s_len[grown.node_stem], 1e-12)
+            )
         # clones hang off the node of their split origin; originals off the batch's parent node
         clone = grown.stem_parent >= 0
         parent = np.where(clone, g0 + grown.stem_parent, batch.parent[origin])
         split_node = node_start[np.maximum(grown.stem_parent, 0)] + (
-            grown.stem_first_seg - grown.stem_first_seg[np.maximum(grown.stem_parent, 0)])
+            grown.stem_first_seg - grown.stem_first_seg[np.maximum(grown.stem_parent, 0)]
+        )
         parent_node = np.where(clone, split_node, batch.parent_node[origin])
         offset = np.where(clone, grown.stem_first_seg * seg_len, batch.offset[origin])
-        out.add(stem_level=np.full(n_local, level), stem_parent=parent, stem_parent_node=parent_node,
-                stem_offset=offset, stem_length=s_len, stem_radius=s_rad, stem_clone=clone,
-                stem_node_start=node_start, stem_node_count=counts,
-                node_stem=g0 + grown.node_stem, node_pos=grown.node_pos,
-                node_frame=grown.node_frame, node_radius=node_radius, node_z=node_z)
+        out.add(
+            stem_level=np.full(n_local, level),
+            stem_parent=parent,
+            stem_parent_node=parent_node,
+            stem_offset=offset,
+            stem_length=s_len,
+            stem_radius=s_rad,
+            stem_clone=clone,
+            stem_node_start=node_start,
+            stem_node_count=counts,
+            node_stem=g0 + grown.node_stem,
+            node_pos=grown.node_pos,
+            node_frame=grown.node_frame,
+            node_radius=node_radius,
+            node_z=node_z,
+        )
         out.n_stems += n_local
         out.n_nodes += grown.node_pos.shape[0]
 
-        ctx = _LevelContext(level=level, g0=g0, node_start=node_start, counts=counts,
-                            first_seg=grown.stem_first_seg, origin=origin, length=s_len,
-                            seg_len=seg_len, radius=s_rad, offset_on_parent=batch.offset[origin],
-                            parent_length=_parent_length(out, batch.parent[origin]),
-                            node_pos=grown.node_pos, node_frame=grown.node_frame,
-                            node_radius=node_radius, node_z=node_z,
-                            n_originals=batch.pos.shape[0])
+        ctx = _LevelContext(
+            level=level,
+            g0=g0,
+            node_start=node_start,
+            counts=counts,
+            first_seg=grown.stem_first_seg,
+            origin=origin,
+            length=s_len,
+            seg_len=seg_len,
+            radius=s_rad,
+            offset_on_parent=batch.offset[origin],
+            parent_length=_parent_length(out, batch.parent[origin]),
+            node_pos=grown.node_pos,
+            node_frame=grown.node_frame,
+            node_radius=node_radius,
+            node_z=node_z,
+            n_originals=batch.pos.shape[0],
+        )
         last = level == max(n_levels, 1) - 1
         if not last:
             batch = _children(p, ctx, seed, scale_tree, options, total_stems)
@@ -549,17 +608,25 @@ def generate(p: Params, seed: int = 0, options: GenerateOptions = DEFAULTS) -> T
             break
 
     tree = Tree(
-        params=p, seed=seed, scale=float(scale_tree),
-        stem_level=out.cat("stem_level", np.int8), stem_parent=out.cat("stem_parent", np.int32),
+        params=p,
+        seed=seed,
+        scale=float(scale_tree),
+        stem_level=out.cat("stem_level", np.int8),
+        stem_parent=out.cat("stem_parent", np.int32),
         stem_parent_node=out.cat("stem_parent_node", np.int32),
-        stem_offset=out.cat("stem_offset", np.float64), stem_length=out.cat("stem_length", np.float64),
-        stem_radius=out.cat("stem_radius", np.float64), stem_clone=out.cat("stem_clone", bool),
+        stem_offset=out.cat("stem_offset", np.float64),
+        stem_length=out.cat("stem_length", np.float64),
+        stem_radius=out.cat("stem_radius", np.float64),
+        stem_clone=out.cat("stem_clone", bool),
         stem_node_start=out.cat("stem_node_start", np.int32),
         stem_node_count=out.cat("stem_node_count", np.int32),
-        node_stem=out.cat("node_stem", np.int32), node_pos=out.cat("node_pos", np.float64, (3,)),
+        node_stem=out.cat("node_stem", np.int32),
+        node_pos=out.cat("node_pos", np.float64, (3,)),
         node_frame=out.cat("node_frame", np.float64, (3, 3)),
-        node_radius=out.cat("node_radius", np.float64), node_z=out.cat("node_z", np.float64),
-        **_leaf_fields(leaves))
+        node_radius=out.cat("node_radius", np.float64),
+        node_z=out.cat("node_z", np.float64),
+        **_leaf_fields(leaves),
+    )
     check_size(tree, options.max_size)
     return tree
 
@@ -567,12 +634,17 @@ def generate(p: Params, seed: int = 0, options: GenerateOptions = DEFAULTS) -> T
 def _leaf_fields(leaves: dict | None) -> dict:
     """The Tree's leaf arrays from `_leaves`' output (None: a tree without leaves)."""
     if leaves is None:
-        leaves = {k: np.zeros((0,) + t) for k, t in
-                  (("stem", ()), ("node", ()), ("pos", (3,)), ("frame", (3, 3)), ("size", (2,)))}
-    return dict(leaf_stem=leaves["stem"].astype(np.int32), leaf_node=leaves["node"].astype(np.int32),
-                leaf_pos=leaves["pos"].astype(np.float64),
-                leaf_frame=leaves["frame"].astype(np.float64),
-                leaf_size=leaves["size"].astype(np.float64))
+        leaves = {
+            k: np.zeros((0,) + t)
+            for k, t in (("stem", ()), ("node", ()), ("pos", (3,)), ("frame", (3, 3)), ("size", (2,)))
+        }
+    return dict(
+        leaf_stem=leaves["stem"].astype(np.int32),
+        leaf_node=leaves["node"].astype(np.int32),
+        leaf_pos=leaves["pos"].astype(np.float64),
+        leaf_frame=leaves["frame"].astype(np.float64),
+        leaf_size=leaves["size"].astype(np.float64),
+    )
 
 
 def _parent_length(out: _Builder, parent: np.ndarray) -> np.ndarray:
@@ -674,8 +746,9 @@ def _assign_members(ctx: _LevelContext, rng, origin_of: np.ndarray, z: np.ndarra
     return order[pick]
 
 
-def _children(p: Params, ctx: _LevelContext, seed: int, scale_tree: float,
-              options: GenerateOptions, stems_so_far: int) -> _Level:
+def _children(
+    p: Params, ctx: _LevelContext, seed: int, scale_tree: float, options: GenerateOptions, stems_so_far: int
+) -> _Level:
     """Place the next level's stems on this level's stems (counts, offsets, angles, sizes)."""
     child_level = ctx.level + 1
     lp = p.level[child_level]
@@ -709,8 +782,9 @@ def _children(p: Params, ctx: _LevelContext, seed: int, scale_tree: float,
     Lp = L[orig]
     if ctx.level == 0:
         rel = (Lp - z) / np.maximum(Lp - base[orig], 1e-12)
-        ratio = shape_ratio(p.shape, np.clip(rel, 0.0, 1.0), p.prune_width_peak,
-                            p.prune_power_low, p.prune_power_high)
+        ratio = shape_ratio(
+            p.shape, np.clip(rel, 0.0, 1.0), p.prune_width_peak, p.prune_power_low, p.prune_power_high
+        )
         length = Lp * length_child_max * ratio
     else:
         length = length_child_max * (Lp - 0.6 * z)
@@ -718,12 +792,20 @@ def _children(p: Params, ctx: _LevelContext, seed: int, scale_tree: float,
     radius = ctx.radius[orig] * (length / np.maximum(Lp, 1e-12)) ** p.ratio_power
     radius = np.minimum(radius, prad)
     keep = (length > 1e-4) & (radius > 0)
-    return _Level(pos=pos[keep], frame=frame[keep], length=length[keep], radius=radius[keep],
-                  parent=(ctx.g0 + stem)[keep], parent_node=pnode[keep], offset=z[keep])
+    return _Level(
+        pos=pos[keep],
+        frame=frame[keep],
+        length=length[keep],
+        radius=radius[keep],
+        parent=(ctx.g0 + stem)[keep],
+        parent_node=pnode[keep],
+        offset=z[keep],
+    )
 
 
-def _leaves(p: Params, ctx: _LevelContext, seed: int, n_levels: int, options: GenerateOptions,
-            scale_tree: float):
+def _leaves(
+    p: Params, ctx: _LevelContext, seed: int, n_levels: int, options: GenerateOptions, scale_tree: float
+):
     """Leaves on the last stem level, oriented by the leaf level's angles and LeafBend."""
     lp = p.level[min(n_levels, len(p.level) - 1)]
     rng = np.random.default_rng([seed, n_levels, _LEAVES])
@@ -757,9 +839,13 @@ def _leaves(p: Params, ctx: _LevelContext, seed: int, n_levels: int, options: Ge
         g = j // group
         frac = (g + 0.5) / np.maximum(n_groups[orig], 1)
         z = z_lo[orig] + (L[orig] - z_lo[orig]) * frac
-        twist = np.where(g % 2 == 0, 0.0, 180.0 / group)   # successive whorls interleave
-        rot = rng.uniform(0, 360.0, n.shape[0])[orig] + (j % group) * (360.0 / group) + twist \
+        twist = np.where(g % 2 == 0, 0.0, 180.0 / group)  # successive whorls interleave
+        rot = (
+            rng.uniform(0, 360.0, n.shape[0])[orig]
+            + (j % group) * (360.0 / group)
+            + twist
             + _spread(rng, orig.shape[0], lp.rotate_v)
+        )
         # a whorl stays on one member: pick per group, then repeat
         first = j % group == 0
         stem = np.repeat(_assign_members(ctx, rng, orig[first], z[first]), group)
@@ -787,8 +873,8 @@ def _leaves(p: Params, ctx: _LevelContext, seed: int, n_levels: int, options: Ge
     sr, cr, sd, cd = np.sin(r), np.cos(r), np.sin(d), np.cos(d)
     local_z = np.stack([sd * sr, -sd * cr, cd], axis=1)
     local_y = np.stack([-sr * cd, cr * cd, sd], axis=1)
-    direction = np.einsum("nij,nj->ni", pframe, local_z)    # blade length axis
-    normal = np.einsum("nij,nj->ni", pframe, local_y)       # blade faces the parent's "up" side
+    direction = np.einsum("nij,nj->ni", pframe, local_z)  # blade length axis
+    normal = np.einsum("nij,nj->ni", pframe, local_y)  # blade faces the parent's "up" side
     stalk = direction.copy()
 
     length = p.leaf_scale / np.sqrt(quality)
@@ -808,8 +894,7 @@ def _leaves(p: Params, ctx: _LevelContext, seed: int, n_levels: int, options: Ge
     leaf_frame = np.stack([width_axis, direction, normal], axis=2)
     blade_pos = pos + stalk * (p.leaf_stem_len * length)
     size = np.tile([length, width], (k, 1))
-    return {"stem": ctx.g0 + stem, "node": pnode, "pos": blade_pos, "frame": leaf_frame,
-            "size": size}
+    return {"stem": ctx.g0 + stem, "node": pnode, "pos": blade_pos, "frame": leaf_frame, "size": size}
 
 
 def regrow_leaves(tree: Tree, p: Params, options: GenerateOptions = DEFAULTS) -> Tree:
@@ -818,9 +903,13 @@ def regrow_leaves(tree: Tree, p: Params, options: GenerateOptions = DEFAULTS) ->
     LODs. Stems of the kept levels come from the same random streams, so they are taken from
     `tree` as they are and only the leaves grow again: same arrays, a fraction of the time."""
     p, n_levels = _prepare(p, options)
-    if n_levels > tree.params.levels or replace(p, leaves=tree.params.leaves,
-                                                leaf_quality=tree.params.leaf_quality,
-                                                levels=tree.params.levels) != tree.params:
+    if (
+        n_levels > tree.params.levels
+        or replace(
+            p, leaves=tree.params.leaves, leaf_quality=tree.params.leaf_quality, levels=tree.params.levels
+        )
+        != tree.params
+    ):
         return generate(p, tree.seed, options)
     present = int(tree.stem_level.max()) if tree.n_stems else 0
     last = min(max(n_levels, 1) - 1, present)
@@ -831,7 +920,7 @@ def regrow_leaves(tree: Tree, p: Params, options: GenerateOptions = DEFAULTS) ->
     lvl = np.arange(g0, n_stems)
     clone = tree.stem_clone[lvl]
     origin = np.where(clone, tree.stem_parent[lvl] - g0, np.arange(lvl.shape[0]))
-    while True:                                   # clones of clones: jump to the original
+    while True:  # clones of clones: jump to the original
         nxt = np.where(clone[origin], origin[origin], origin)
         if np.array_equal(nxt, origin):
             break
@@ -839,27 +928,45 @@ def regrow_leaves(tree: Tree, p: Params, options: GenerateOptions = DEFAULTS) ->
     res = max(1, int(p.level[last].curve_res))
     length = tree.stem_length[lvl]
     seg_len = length / res
-    first_seg = np.rint(tree.node_z[tree.stem_node_start[lvl]] / np.maximum(seg_len, 1e-300)
-                        ).astype(np.int64)
+    first_seg = np.rint(tree.node_z[tree.stem_node_start[lvl]] / np.maximum(seg_len, 1e-300)).astype(np.int64)
     orig_parent = tree.stem_parent[g0 + origin]
     parent_length = np.where(orig_parent >= 0, tree.stem_length[np.maximum(orig_parent, 0)], 1.0)
-    ctx = _LevelContext(level=last, g0=g0, node_start=tree.stem_node_start[lvl].astype(np.int64),
-                        counts=tree.stem_node_count[lvl].astype(np.int64), first_seg=first_seg,
-                        origin=origin, length=length, seg_len=seg_len,
-                        radius=tree.stem_radius[lvl], offset_on_parent=tree.stem_offset[g0 + origin],
-                        parent_length=parent_length, node_pos=tree.node_pos[n0:n_nodes],
-                        node_frame=tree.node_frame[n0:n_nodes],
-                        node_radius=tree.node_radius[n0:n_nodes], node_z=tree.node_z[n0:n_nodes],
-                        n_originals=int(np.count_nonzero(~clone)))
+    ctx = _LevelContext(
+        level=last,
+        g0=g0,
+        node_start=tree.stem_node_start[lvl].astype(np.int64),
+        counts=tree.stem_node_count[lvl].astype(np.int64),
+        first_seg=first_seg,
+        origin=origin,
+        length=length,
+        seg_len=seg_len,
+        radius=tree.stem_radius[lvl],
+        offset_on_parent=tree.stem_offset[g0 + origin],
+        parent_length=parent_length,
+        node_pos=tree.node_pos[n0:n_nodes],
+        node_frame=tree.node_frame[n0:n_nodes],
+        node_radius=tree.node_radius[n0:n_nodes],
+        node_z=tree.node_z[n0:n_nodes],
+        n_originals=int(np.count_nonzero(~clone)),
+    )
     leaves = _leaves(p, ctx, tree.seed, n_levels, options, tree.scale) if n_levels >= 1 else None
     s, n = slice(0, n_stems), slice(0, n_nodes)
     return replace(
-        tree, params=p,
-        stem_level=tree.stem_level[s], stem_parent=tree.stem_parent[s],
-        stem_parent_node=tree.stem_parent_node[s], stem_offset=tree.stem_offset[s],
-        stem_length=tree.stem_length[s], stem_radius=tree.stem_radius[s],
-        stem_clone=tree.stem_clone[s], stem_node_start=tree.stem_node_start[s],
-        stem_node_count=tree.stem_node_count[s], node_stem=tree.node_stem[n],
-        node_pos=tree.node_pos[n], node_frame=tree.node_frame[n], node_radius=tree.node_radius[n],
+        tree,
+        params=p,
+        stem_level=tree.stem_level[s],
+        stem_parent=tree.stem_parent[s],
+        stem_parent_node=tree.stem_parent_node[s],
+        stem_offset=tree.stem_offset[s],
+        stem_length=tree.stem_length[s],
+        stem_radius=tree.stem_radius[s],
+        stem_clone=tree.stem_clone[s],
+        stem_node_start=tree.stem_node_start[s],
+        stem_node_count=tree.stem_node_count[s],
+        node_stem=tree.node_stem[n],
+        node_pos=tree.node_pos[n],
+        node_frame=tree.node_frame[n],
+        node_radius=tree.node_radius[n],
         node_z=tree.node_z[n],
-        **_leaf_fields(leaves))
+        **_leaf_fields(leaves),
+    )

@@ -23,6 +23,7 @@ quad through the centre in its view's plane showing that cell, one face each way
 behind, a card shows the mirror image, the true silhouette from there. The cards ride one joint at the trunk base whose rotation is the trunk's world rotation at the crown's height
 (decimated for the impostor's distance like any LOD clip), so the tree keeps swaying.
 """
+
 from __future__ import annotations
 
 import math
@@ -44,28 +45,36 @@ class ImpostorOptions:
     high) below which the impostor is used; at 1.5 × cell an atlas texel spans 1.5 pixels there.
     The switch is never nearer than min_factor × the last geometric LOD's distance."""
 
-    grid: int = 16                   # views per side of the atlas (engine plug-ins' 16 × 16)
-    cell: int = 64                   # pixels per view: a 1024 × 1024 atlas
+    grid: int = 16  # views per side of the atlas (engine plug-ins' 16 × 16)
+    cell: int = 64  # pixels per view: a 1024 × 1024 atlas
     switch_px: float = 96.0
     min_factor: float = 1.5
-    max_leaf_cards: int = 600        # leaves drawn into the atlas (coverage kept: larger cards)
-    max_bark_triangles: int = 600    # the widest bark triangles drawn (twigs are < 0.2 px)
+    max_leaf_cards: int = 600  # leaves drawn into the atlas (coverage kept: larger cards)
+    max_bark_triangles: int = 600  # the widest bark triangles drawn (twigs are < 0.2 px)
     alpha_cutoff: float = 0.5
 
     def __post_init__(self) -> None:
         if not 2 <= self.grid <= 64 or not 8 <= self.cell <= 512 or self.grid * self.cell > 8192:
-            raise TreegenError(f"impostor atlas {self.grid}×{self.grid} views of {self.cell} px: "
-                               "grid in 2..64, cell in 8..512 px, at most 8192 px a side")
-        if not (self.switch_px > 0 and self.min_factor >= 1 and self.max_leaf_cards >= 1
-                and self.max_bark_triangles >= 1):
-            raise TreegenError("impostor: switch_px > 0, min_factor >= 1, max_leaf_cards and "
-                               "max_bark_triangles >= 1")
+            raise TreegenError(
+                f"impostor atlas {self.grid}×{self.grid} views of {self.cell} px: "
+                "grid in 2..64, cell in 8..512 px, at most 8192 px a side"
+            )
+        if not (
+            self.switch_px > 0
+            and self.min_factor >= 1
+            and self.max_leaf_cards >= 1
+            and self.max_bark_triangles >= 1
+        ):
+            raise TreegenError(
+                "impostor: switch_px > 0, min_factor >= 1, max_leaf_cards and max_bark_triangles >= 1"
+            )
 
 
 IMPOSTOR_DEFAULTS = ImpostorOptions()
 
 
 # ------------------------------------------------------------------ hemi-octahedral mapping
+
 
 def encode(d: np.ndarray) -> np.ndarray:
     """Unit directions (…, 3) in (a, b, up), up ≥ 0 → atlas (u, v) in [0, 1]², v from the top."""
@@ -99,6 +108,7 @@ def view_basis(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 # --------------------------------------------------------------------------------- the atlas
 
+
 def sphere(lod: Lod) -> tuple[np.ndarray, float]:
     """Centre (the rest-pose box centre) and radius (farthest vertex, +1 %) of a LOD."""
     pts = np.concatenate([np.asarray(p.positions, np.float64) for p in lod.primitives if len(p.positions)])
@@ -119,11 +129,17 @@ def _fewer_leaves(prim: Primitive, cap: int) -> Primitive:
     quads = np.asarray(prim.positions, np.float64)[verts].reshape(-1, 4, 3)
     mid = quads.mean(1, keepdims=True)
     pos = (mid + (quads - mid) * math.sqrt(k)).reshape(-1, 3).astype(np.float32)
-    first = np.asarray(prim.indices[:6], np.int64)           # the cards' shared index pattern
+    first = np.asarray(prim.indices[:6], np.int64)  # the cards' shared index pattern
     idx = (first[None, :] + 4 * np.arange(len(keep))[:, None]).ravel().astype(np.uint32)
-    return replace(prim, positions=pos, normals=np.asarray(prim.normals)[verts],
-                   uvs=np.asarray(prim.uvs)[verts], indices=idx,
-                   joints=np.asarray(prim.joints)[verts], weights=np.asarray(prim.weights)[verts])
+    return replace(
+        prim,
+        positions=pos,
+        normals=np.asarray(prim.normals)[verts],
+        uvs=np.asarray(prim.uvs)[verts],
+        indices=idx,
+        joints=np.asarray(prim.joints)[verts],
+        weights=np.asarray(prim.weights)[verts],
+    )
 
 
 def _widest_bark(prim: Primitive, cap: int) -> Primitive:
@@ -144,12 +160,11 @@ def _dilate(rgba: np.ndarray, grid: int, cell: int) -> np.ndarray:
     cell's colour sum needs no mask.)"""
     a = rgba.reshape(grid, cell, grid, cell, 4)
     seen = rgba[..., 3] > 0
-    total = a[..., :3].sum(axis=1, dtype=np.uint32).sum(axis=2)            # (grid, grid, 3)
+    total = a[..., :3].sum(axis=1, dtype=np.uint32).sum(axis=2)  # (grid, grid, 3)
     count = np.maximum(seen.reshape(grid, cell, grid, cell).sum(axis=(1, 3), dtype=np.uint32), 1)
     fill = ((total + count[..., None] // 2) // count[..., None]).astype(np.uint8)
     out = rgba.copy()
-    np.copyto(out[..., :3], np.repeat(np.repeat(fill, cell, axis=0), cell, axis=1),
-              where=~seen[..., None])
+    np.copyto(out[..., :3], np.repeat(np.repeat(fill, cell, axis=0), cell, axis=1), where=~seen[..., None])
     return out
 
 
@@ -169,29 +184,39 @@ def _atlas_parts(prims: list[Primitive], materials: list[Material]) -> list:
         if tex is not None and id(tex) not in decoded:
             decoded[id(tex)] = decode_image(tex.png, 4, f"texture {tex.name!r}")
         wrap = tex.wrap if tex is not None and tex.wrap in ("REPEAT", "CLAMP", "MIRROR") else "REPEAT"
-        parts.append(Part(
-            name=p.name, positions=np.asarray(p.positions, np.float32),
-            normals=np.asarray(p.normals, np.float32), indices=np.asarray(p.indices, np.uint32),
-            joints=np.asarray(p.joints), weights=np.asarray(p.weights, np.float32),
-            color=(m.base_color[0], m.base_color[1], m.base_color[2]) if m is not None
-            else (0.6, 0.6, 0.6),
-            double_sided=bool(m is not None and m.double_sided),
-            uvs=np.asarray(p.uvs, np.float32) if has_uv else None,
-            texture=None if tex is None else decoded[id(tex)],
-            alpha_cutoff=m.alpha_cutoff if m is not None else None,
-            opacity=float(m.base_color[3]) if m is not None and len(m.base_color) > 3 else 1.0,
-            wrap=(wrap, wrap)))
+        parts.append(
+            Part(
+                name=p.name,
+                positions=np.asarray(p.positions, np.float32),
+                normals=np.asarray(p.normals, np.float32),
+                indices=np.asarray(p.indices, np.uint32),
+                joints=np.asarray(p.joints),
+                weights=np.asarray(p.weights, np.float32),
+                color=(m.base_color[0], m.base_color[1], m.base_color[2])
+                if m is not None
+                else (0.6, 0.6, 0.6),
+                double_sided=bool(m is not None and m.double_sided),
+                uvs=np.asarray(p.uvs, np.float32) if has_uv else None,
+                texture=None if tex is None else decoded[id(tex)],
+                alpha_cutoff=m.alpha_cutoff if m is not None else None,
+                opacity=float(m.base_color[3]) if m is not None and len(m.base_color) > 3 else 1.0,
+                wrap=(wrap, wrap),
+            )
+        )
     return parts
 
 
-def render_views(lod: Lod, materials: list[Material], centre: np.ndarray, radius: float,
-                 options: ImpostorOptions) -> tuple[np.ndarray, np.ndarray]:
+def render_views(
+    lod: Lod, materials: list[Material], centre: np.ndarray, radius: float, options: ImpostorOptions
+) -> tuple[np.ndarray, np.ndarray]:
     """The two atlases (albedo + alpha, normals + depth) of `lod`'s rest pose."""
     from .drawable import Drawable
     from .impostor_render import render_atlas
 
-    prims = [_widest_bark(_fewer_leaves(p, options.max_leaf_cards), options.max_bark_triangles)
-             for p in lod.primitives]
+    prims = [
+        _widest_bark(_fewer_leaves(p, options.max_leaf_cards), options.max_bark_triangles)
+        for p in lod.primitives
+    ]
     scene = Drawable(parts=_atlas_parts(prims, materials), n_joints=1)
     albedo, normal = render_atlas(scene, centre, radius, options.grid, options.cell)
     return _dilate(albedo, options.grid, options.cell), normal
@@ -199,7 +224,7 @@ def render_views(lod: Lod, materials: list[Material], centre: np.ndarray, radius
 
 # --------------------------------------------------------------------------------- the cards
 
-CARD_AXES = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0))   # horizon views along +a and +b
+CARD_AXES = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0))  # horizon views along +a and +b
 
 
 def card_cells(grid: int) -> list[tuple[int, int]]:
@@ -220,7 +245,7 @@ def cards(centre: np.ndarray, radius: float, grid: int) -> Primitive:
     nrm: list[np.ndarray] = []
     uv: list[np.ndarray] = []
     idx: list[np.ndarray] = []
-    for col, row in card_cells(grid):                    # two cards
+    for col, row in card_cells(grid):  # two cards
         d = cell_direction(col, row, grid)
         right, up = view_basis(d)
         offset = corners[:, :1] * right + corners[:, 1:] * up
@@ -233,22 +258,26 @@ def cards(centre: np.ndarray, radius: float, grid: int) -> Primitive:
             nrm.append(n / np.linalg.norm(n, axis=1, keepdims=True))
             uv.append(np.stack([u, 1.0 - v_top], 1))
     V = 4 * len(pos)
-    return Primitive(name="impostor", material="impostor",
-                     positions=np.concatenate(pos).astype(np.float32),
-                     normals=np.concatenate(nrm).astype(np.float32),
-                     uvs=np.concatenate(uv).astype(np.float32),
-                     indices=np.concatenate(idx).astype(np.uint32),
-                     joints=np.zeros((V, 4), np.uint16),
-                     weights=np.tile(np.array([1, 0, 0, 0], np.float32), (V, 1)))
+    return Primitive(
+        name="impostor",
+        material="impostor",
+        positions=np.concatenate(pos).astype(np.float32),
+        normals=np.concatenate(nrm).astype(np.float32),
+        uvs=np.concatenate(uv).astype(np.float32),
+        indices=np.concatenate(idx).astype(np.uint32),
+        joints=np.zeros((V, 4), np.uint16),
+        weights=np.tile(np.array([1, 0, 0, 0], np.float32), (V, 1)),
+    )
 
 
 # ----------------------------------------------------------------------------------- the sway
+
 
 def trunk_sway(lod: Lod, height: float) -> tuple[Skeleton, Clip | None]:
     """One joint at the trunk base (LOD `lod`'s root) whose rotation is the world rotation,
     relative to rest, of the highest trunk joint at or below `height` (the crown's centre)."""
     sk = lod.skeleton
-    chain = [0]                                           # the trunk: trunk_* joints from the root
+    chain = [0]  # the trunk: trunk_* joints from the root
     names, parent = sk.names, np.asarray(sk.parent)
     while True:
         kids = [j for j in np.flatnonzero(parent == chain[-1]) if names[j].startswith("trunk")]
@@ -257,33 +286,39 @@ def trunk_sway(lod: Lod, height: float) -> tuple[Skeleton, Clip | None]:
         chain.append(int(kids[0]))
     z = np.asarray(sk.bind_world)[chain, 2, 3]
     top = chain[int(np.flatnonzero(z <= height)[-1])] if (z <= height).any() else 0
-    path = chain[:chain.index(top) + 1]
-    one = Skeleton(names=[names[0]], parent=np.array([-1], np.int32),
-                   rest_translation=np.asarray(sk.rest_translation)[:1].copy(),
-                   rest_rotation=np.asarray(sk.rest_rotation)[:1].copy(),
-                   bind_world=np.asarray(sk.bind_world)[:1].copy())
+    path = chain[: chain.index(top) + 1]
+    one = Skeleton(
+        names=[names[0]],
+        parent=np.array([-1], np.int32),
+        rest_translation=np.asarray(sk.rest_translation)[:1].copy(),
+        rest_rotation=np.asarray(sk.rest_rotation)[:1].copy(),
+        bind_world=np.asarray(sk.bind_world)[:1].copy(),
+    )
     if not lod.clips:
         return one, None
     clip = lod.clips[0]
     rot = np.asarray(clip.rotations, np.float64)
     world, rest = rot[:, path[0]], np.asarray(sk.rest_rotation, np.float64)[path[0]]
-    for j in path[1:]:                                    # world rotation = product down the chain
+    for j in path[1:]:  # world rotation = product down the chain
         world = quat_mul(world, rot[:, j])
         rest = quat_mul(rest, np.asarray(sk.rest_rotation, np.float64)[j])
     inv_rest = rest * np.array([-1, -1, -1, 1.0])
-    delta = quat_mul(world, inv_rest[None])               # world swing relative to rest
+    delta = quat_mul(world, inv_rest[None])  # world swing relative to rest
     local = unit_quat(quat_mul(delta, np.asarray(sk.rest_rotation, np.float64)[0][None]))
-    return one, Clip(name=clip.name, times=np.asarray(clip.times), rotations=local[:, None, :],
-                     interpolation=clip.interpolation)
+    return one, Clip(
+        name=clip.name,
+        times=np.asarray(clip.times),
+        rotations=local[:, None, :],
+        interpolation=clip.interpolation,
+    )
 
 
 # ----------------------------------------------------------------------------------- the stage
 
-def switch_distance(height: float, last: float, lod_options: LodOptions,
-                    options: ImpostorOptions) -> float:
+
+def switch_distance(height: float, last: float, lod_options: LodOptions, options: ImpostorOptions) -> float:
     """Metres from which the tree is at most switch_px tall on screen (and ≥ min_factor × last)."""
-    d = screen_distance(height, options.switch_px, lod_options,
-                        of=lod_options.width / lod_options.aspect)
+    d = screen_distance(height, options.switch_px, lod_options, of=lod_options.width / lod_options.aspect)
     return float(max(d, options.min_factor * last, 1e-3))
 
 
@@ -296,9 +331,15 @@ def atlas_source(full: Lod, coarse: Lod) -> Lod:
     return replace(coarse, primitives=bark + leaves, clips=[])
 
 
-def build_impostor(full: Lod, coarse: Lod, materials: list[Material],
-                   lod_options: LodOptions, distance: float, clip_name: str,
-                   options: ImpostorOptions = IMPOSTOR_DEFAULTS) -> tuple[Lod, Material]:
+def build_impostor(
+    full: Lod,
+    coarse: Lod,
+    materials: list[Material],
+    lod_options: LodOptions,
+    distance: float,
+    clip_name: str,
+    options: ImpostorOptions = IMPOSTOR_DEFAULTS,
+) -> tuple[Lod, Material]:
     """The impostor LOD (cards + atlas) of a tree whose full-detail LOD is `full` and coarsest
     geometric LOD `coarse` (its skeleton and clip give the sway), used from `distance`."""
     source = atlas_source(full, coarse)
@@ -310,16 +351,27 @@ def build_impostor(full: Lod, coarse: Lod, materials: list[Material],
     normal_tex = Texture("impostor_normal", png(normal), wrap="CLAMP", srgb=False)
     prim = cards(centre, radius, options.grid)
     skel, dense = trunk_sway(coarse, float(centre[2]))
-    clips = [] if dense is None else \
-        [decimate(skel, [prim], dense, distance, lod_options, clip_name)[0]]
+    clips = [] if dense is None else [decimate(skel, [prim], dense, distance, lod_options, clip_name)[0]]
     lo = np.concatenate([p.positions for p in source.primitives]).min(0)
     hi = np.concatenate([p.positions for p in source.primitives]).max(0)
-    imp = Impostor(albedo=albedo_tex, normal_depth=normal_tex, grid=options.grid,
-                   cell=options.cell, centre=centre, radius=radius,
-                   bounds=(lo.astype(np.float64), hi.astype(np.float64)),
-                   cards=tuple(card_cells(options.grid)), alpha_cutoff=options.alpha_cutoff)
-    material = Material(name="impostor", base_color=(1.0, 1.0, 1.0, 1.0), roughness=0.95,
-                        alpha_cutoff=options.alpha_cutoff,
-                        base_texture=albedo_tex)
-    return Lod(primitives=[prim], skeleton=skel, clips=clips, distance=distance,
-               screen_coverage=0.0, impostor=imp), material
+    imp = Impostor(
+        albedo=albedo_tex,
+        normal_depth=normal_tex,
+        grid=options.grid,
+        cell=options.cell,
+        centre=centre,
+        radius=radius,
+        bounds=(lo.astype(np.float64), hi.astype(np.float64)),
+        cards=tuple(card_cells(options.grid)),
+        alpha_cutoff=options.alpha_cutoff,
+    )
+    material = Material(
+        name="impostor",
+        base_color=(1.0, 1.0, 1.0, 1.0),
+        roughness=0.95,
+        alpha_cutoff=options.alpha_cutoff,
+        base_texture=albedo_tex,
+    )
+    return Lod(
+        primitives=[prim], skeleton=skel, clips=clips, distance=distance, screen_coverage=0.0, impostor=imp
+    ), material

@@ -17,6 +17,7 @@ so their program is lean: colour, tint and occlusion come per vertex (leaf_shadi
 gl_FragCoord, and they sample a 256² copy of the leaf atlas (shrink). Bark, a few hundred long
 triangles, keeps its occlusion per pixel.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -61,7 +62,9 @@ vec3 project(vec3 pos) {                          // sets gl_Position; returns t
 """
 
 # Bark: few triangles (the coarsest LOD's widest), long ones, so its occlusion is per pixel.
-_BARK_VS = _VIEW + """
+_BARK_VS = (
+    _VIEW
+    + """
 in vec3 in_pos;
 in vec3 in_normal;
 in vec2 in_uv;
@@ -76,6 +79,7 @@ void main() {
     v_rel = (in_pos - centre) / radius;
 }
 """
+)
 
 _BARK_FS = """
 #version 330
@@ -109,7 +113,9 @@ void main() {
 # Leaves: hundreds of thousands of few-pixel cards (most of the atlas's cost, fragment work on
 # llvmpipe), so everything that is constant over a leaf comes in per vertex: `in_shade` =
 # base colour × the leaf's tint × LEAF_SHADE × the occlusion at the vertex (leaf_shading).
-_LEAF_VS = _VIEW + """
+_LEAF_VS = (
+    _VIEW
+    + """
 in vec3 in_pos;
 in vec3 in_normal;
 in vec2 in_uv;
@@ -125,6 +131,7 @@ void main() {
     v_shade = in_shade;
 }
 """
+)
 
 _LEAF_FS = """
 #version 330
@@ -175,12 +182,14 @@ def leaf_tint(leaf: np.ndarray) -> np.ndarray:
     x *= np.uint32(0x846CA68B)
     x ^= x >> np.uint32(16)
     h = x.astype(np.float32) / np.float32(4294967295.0)
-    return np.float32(1.0) + np.float32(0.5) * (h[:, None] * np.array([0.3, 0.4, 0.2], np.float32)
-                                               - np.array([0.15, 0.2, 0.2], np.float32))
+    return np.float32(1.0) + np.float32(0.5) * (
+        h[:, None] * np.array([0.3, 0.4, 0.2], np.float32) - np.array([0.15, 0.2, 0.2], np.float32)
+    )
 
 
-def leaf_shading(p, centre: np.ndarray, radius: float, crown_centre: np.ndarray,
-                 crown_radius: np.ndarray) -> np.ndarray:
+def leaf_shading(
+    p, centre: np.ndarray, radius: float, crown_centre: np.ndarray, crown_radius: np.ndarray
+) -> np.ndarray:
     """(V, 3) float32 `in_shade` of a leaf part: colour × tint × LEAF_SHADE × occlusion."""
     rel = (np.asarray(p.positions, np.float64) - centre) / radius
     tint = leaf_tint(leaf_ids(p.indices, len(p.positions)))
@@ -197,14 +206,13 @@ def _texture(ctx, image: np.ndarray, wrap):
     if img.shape[2] == 3:
         img = np.concatenate([img, np.full(img.shape[:2] + (1,), 255, np.uint8)], axis=2)
     h, w = img.shape[:2]
-    tex = ctx.texture((w, h), 4, np.ascontiguousarray(img[::-1]).tobytes(),
-                      internal_format=GL_SRGB8_ALPHA8)
+    tex = ctx.texture((w, h), 4, np.ascontiguousarray(img[::-1]).tobytes(), internal_format=GL_SRGB8_ALPHA8)
     tex.repeat_x, tex.repeat_y = (m == "REPEAT" for m in wrap)
     tex.filter = (ctx.LINEAR, ctx.LINEAR)
     return tex
 
 
-LEAF_TEXTURE_PX = 256   # the leaf atlas is box-filtered down to this side for the views
+LEAF_TEXTURE_PX = 256  # the leaf atlas is box-filtered down to this side for the views
 
 
 def shrink(image: np.ndarray, side: int = LEAF_TEXTURE_PX) -> np.ndarray:
@@ -237,16 +245,18 @@ def _buffer(ctx, array, dtype: str):
     return ctx.buffer(np.ascontiguousarray(array, dtype).tobytes())
 
 
-def render_atlas(scene: Drawable, centre: np.ndarray, radius: float, grid: int,
-                 cell: int) -> tuple[np.ndarray, np.ndarray]:
+def render_atlas(
+    scene: Drawable, centre: np.ndarray, radius: float, grid: int, cell: int
+) -> tuple[np.ndarray, np.ndarray]:
     """(albedo RGBA, normal + depth RGBA) uint8 atlases of `scene`'s rest pose (generator
     space: pass a Drawable whose parts are Z up), top row first. Double-sided parts are
     leaves (the lean program), the others bark."""
     try:
         ctx = _context()
-    except TreegenError as e:          # the default make must say what to do without EGL
-        raise TreegenError(f"impostor: {str(e).removeprefix('preview: ')} "
-                           "(make it with --no-impostor)") from None
+    except TreegenError as e:  # the default make must say what to do without EGL
+        raise TreegenError(
+            f"impostor: {str(e).removeprefix('preview: ')} (make it with --no-impostor)"
+        ) from None
     try:
         bark = ctx.program(vertex_shader=_BARK_VS, fragment_shader=_BARK_FS)
         leaf = ctx.program(vertex_shader=_LEAF_VS, fragment_shader=_LEAF_FS)
@@ -259,12 +269,15 @@ def render_atlas(scene: Drawable, centre: np.ndarray, radius: float, grid: int,
         ctx.viewport = (0, 0, size, size)
         fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         ctx.enable(ctx.DEPTH_TEST)
-        ctx.enable_direct(0x8DB9)                       # GL_FRAMEBUFFER_SRGB: linear → sRGB
+        ctx.enable_direct(0x8DB9)  # GL_FRAMEBUFFER_SRGB: linear → sRGB
         ctx.disable(ctx.CULL_FACE)
         c = np.asarray(centre, np.float64)
         leaves = [p.positions for p in scene.parts if p.double_sided and len(p.positions)]
-        crown = np.concatenate(leaves).astype(np.float64) if leaves else \
-            np.concatenate([p.positions for p in scene.parts])
+        crown = (
+            np.concatenate(leaves).astype(np.float64)
+            if leaves
+            else np.concatenate([p.positions for p in scene.parts])
+        )
         clo, chi = (crown.min(0) - c) / radius, (crown.max(0) - c) / radius
         crown_centre, crown_radius = 0.5 * (clo + chi), np.maximum(0.5 * (chi - clo), 0.05)
         for prog in (bark, leaf):
@@ -279,9 +292,11 @@ def render_atlas(scene: Drawable, centre: np.ndarray, radius: float, grid: int,
             if not len(p.indices) or (p.double_sided and p.opacity <= 0):
                 continue
             uvs = p.uvs if p.uvs is not None else np.zeros((len(p.positions), 2), np.float32)
-            bufs = [(_buffer(ctx, p.positions, "f4"), "3f", "in_pos"),
-                    (_buffer(ctx, p.normals, "f4"), "3f", "in_normal"),
-                    (_buffer(ctx, uvs, "f4"), "2f", "in_uv")]
+            bufs = [
+                (_buffer(ctx, p.positions, "f4"), "3f", "in_pos"),
+                (_buffer(ctx, p.normals, "f4"), "3f", "in_normal"),
+                (_buffer(ctx, uvs, "f4"), "2f", "in_uv"),
+            ]
             cut = p.alpha_cutoff if p.textured and p.alpha_cutoff is not None else -1.0
             if p.double_sided:
                 prog = leaf
@@ -298,8 +313,9 @@ def render_atlas(scene: Drawable, centre: np.ndarray, radius: float, grid: int,
                 _set(prog, "base_color", tuple(float(x) for x in p.color))
             if tex is not None:
                 tex.use(location=0)
-            vao = ctx.vertex_array(prog, bufs, index_buffer=_buffer(ctx, p.indices, "u4"),
-                                   index_element_size=4)
+            vao = ctx.vertex_array(
+                prog, bufs, index_buffer=_buffer(ctx, p.indices, "u4"), index_element_size=4
+            )
             vao.render(instances=grid * grid)
         out = []
         for k in range(2):

@@ -20,6 +20,7 @@ equal to the drawn area for shape geometry, and card area × fill_factor for car
 | 6    | palm              | two elliptic halves folded up 30° along the midrib  | 16    | 12   |
 | 7    | star              | five-lobed (palmate) star fanned from its centre    | 11    | 10   |
 """
+
 from __future__ import annotations
 
 import math
@@ -35,11 +36,11 @@ class LeafOutline:
     """One blade in card space; triangles counter-clockwise seen from +normal."""
 
     name: str
-    points: np.ndarray     # float64 (P, 3): x (width units), y (length units), z (normal)
-    normals: np.ndarray    # float64 (P, 3), unit
-    uvs: np.ndarray        # float64 (P, 2), 0..1 across the card
+    points: np.ndarray  # float64 (P, 3): x (width units), y (length units), z (normal)
+    normals: np.ndarray  # float64 (P, 3), unit
+    uvs: np.ndarray  # float64 (P, 2), 0..1 across the card
     triangles: np.ndarray  # int32 (T, 3)
-    area: float            # true area of the triangles for a 1 × 1 card
+    area: float  # true area of the triangles for a 1 × 1 card
 
 
 def _rows(rows: list[tuple[float, float, float]]):
@@ -49,7 +50,7 @@ def _rows(rows: list[tuple[float, float, float]]):
     by one or two triangles, all counter-clockwise in the x–y plane.
     """
     pts: list[tuple[float, float]] = []
-    row_idx: list[tuple[int, int]] = []     # (left vertex, right vertex); equal for a point
+    row_idx: list[tuple[int, int]] = []  # (left vertex, right vertex); equal for a point
     for y, xl, xr in rows:
         if xl == xr:
             pts.append((xl, y))
@@ -86,8 +87,13 @@ def _area(p: np.ndarray, t: np.ndarray) -> float:
     return float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
 
 
-def _outline(name: str, p2: np.ndarray, tris: np.ndarray,
-             z: np.ndarray | None = None, normals: np.ndarray | None = None) -> LeafOutline:
+def _outline(
+    name: str,
+    p2: np.ndarray,
+    tris: np.ndarray,
+    z: np.ndarray | None = None,
+    normals: np.ndarray | None = None,
+) -> LeafOutline:
     pts = np.zeros((len(p2), 3))
     pts[:, :2] = p2
     uvs = np.column_stack([p2[:, 0] + 0.5, p2[:, 1]])
@@ -106,8 +112,10 @@ def _flat(name: str, rows) -> LeafOutline:
 def _palm(fold_deg: float = 30.0) -> LeafOutline:
     """Two elliptic halves, each tilted up by fold_deg about the midrib (y axis)."""
     ell = _inscribed(8)
-    halves = [[(y, xl, 0.0) for y, xl, _ in ell],    # left half: x ≤ 0
-              [(y, 0.0, xr) for y, _, xr in ell]]    # right half: x ≥ 0
+    halves = [
+        [(y, xl, 0.0) for y, xl, _ in ell],  # left half: x ≤ 0
+        [(y, 0.0, xr) for y, _, xr in ell],
+    ]  # right half: x ≥ 0
     a = math.radians(fold_deg)
     all_p2, all_p3, all_n, all_t = [], [], [], []
     base = 0
@@ -123,7 +131,7 @@ def _palm(fold_deg: float = 30.0) -> LeafOutline:
 def _star(lobes: int = 5, inner: float = 0.45) -> LeafOutline:
     """A palmate star around the card centre, fanned from a centre vertex (not y-monotone)."""
     k = np.arange(2 * lobes)
-    ang = math.pi / 2 + math.pi * k / lobes               # a lobe points to the tip
+    ang = math.pi / 2 + math.pi * k / lobes  # a lobe points to the tip
     rad = np.where(k % 2 == 0, 0.5, 0.5 * inner)
     ring = np.column_stack([rad * np.cos(ang), 0.5 + rad * np.sin(ang)])
     p2 = np.vstack([[0.0, 0.5], ring])
@@ -150,7 +158,8 @@ def outline(leaf_shape: int) -> LeafOutline:
         return OUTLINES[int(leaf_shape)]
     except KeyError:
         raise TreegenError(
-            f"LeafShape {leaf_shape}: no such leaf shape (allowed 0..{max(OUTLINES)})") from None
+            f"LeafShape {leaf_shape}: no such leaf shape (allowed 0..{max(OUTLINES)})"
+        ) from None
 
 
 def fill_factor(leaf_shape: int) -> float:

@@ -8,6 +8,7 @@ size is joints × frames. Each refusal names the estimate and the flag that rais
     check_mesh(tree, MeshOptions(), Limits(max_vertices=1_000_000))   # before build_mesh
     check_keys(n_joints, WindOptions(), Limits())                      # before bake_wind
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -16,7 +17,7 @@ import numpy as np
 
 from .errors import TreegenError
 
-MAX_TREES = 100_000      # trees a forest layout may place (treegen forest --max-trees)
+MAX_TREES = 100_000  # trees a forest layout may place (treegen forest --max-trees)
 
 
 @dataclass(frozen=True)
@@ -40,9 +41,8 @@ def _rings_sides(tree, options) -> tuple[np.ndarray, np.ndarray]:
     rings = segments * _per_level(options.rings_per_segment, level) + 1
     p = tree.params
     if p.flare > 0 and options.flare_rings > 0:
-        rings = rings + np.where((level == 0) & ~tree.stem_clone.astype(bool),
-                                 options.flare_rings, 0)
-    rings = rings - pointed_tips(tree, options)   # a pointed tip closes on its apex, no ring
+        rings = rings + np.where((level == 0) & ~tree.stem_clone.astype(bool), options.flare_rings, 0)
+    rings = rings - pointed_tips(tree, options)  # a pointed tip closes on its apex, no ring
     return rings, stem_sides(tree, options)
 
 
@@ -98,7 +98,8 @@ def check_mesh(tree, options, limits: Limits = LIMITS_DEFAULTS) -> int:
         raise TreegenError(
             f"species '{tree.params.name}' would need about {total:,} mesh vertices "
             f"({bark:,} bark, {leaves:,} leaves), over the limit of {limits.max_vertices:,}; "
-            f"raise it with --max-vertices N (or use fewer --sides / lower LeafQuality)")
+            f"raise it with --max-vertices N (or use fewer --sides / lower LeafQuality)"
+        )
     return total
 
 
@@ -110,5 +111,6 @@ def check_keys(n_joints: int, wind, limits: Limits = LIMITS_DEFAULTS) -> int:
         raise TreegenError(
             f"the wind clip would hold about {total:,} joint-keys ({n_joints:,} joints × "
             f"{frames:,} keys), over the limit of {limits.max_keys:,}; raise it with "
-            f"--max-keys N (or lower --max-joints, --fps or --duration)")
+            f"--max-keys N (or lower --max-joints, --fps or --duration)"
+        )
     return total

@@ -29,6 +29,7 @@ Geometric LODs (lod_budget.py): per LOD index a coarser tree cut from LOD0's wit
 `triangles` × LOD0's triangles — fewer sides, thin stems dropped, a stratified subset of the
 leaves scaled to cover what all of them covered (lod_leaves.py) — and a smaller joint budget.
 """
+
 from __future__ import annotations
 
 import math
@@ -60,50 +61,67 @@ class LodOptions:
     fov_deg: float = 60.0
     width: int = 1920
     error_px: float = 1.0
-    schedule: str = "bounded"                  # see the module doc
+    schedule: str = "bounded"  # see the module doc
     aspect: float = 16.0 / 9.0
     sides: tuple[tuple[int, ...], ...] = ((16, 8, 6, 4, 3), (8, 6, 4, 3), (6, 4, 3), (4, 3))
     joint_fraction: tuple[float, ...] = (1.0, 0.5, 0.25, 0.125)  # × the joint budget
     triangles: tuple[float, ...] = (1.0, 0.5, 0.15, 0.05)  # × LOD0's triangles (lod_budget.py)
-    max_iterations: int = 200                  # playback-check refinement rounds per level
+    max_iterations: int = 200  # playback-check refinement rounds per level
 
     def __post_init__(self) -> None:
         d = self.distances
         if d is not None:
             shown = ",".join(f"{x:g}" for x in d) or "(none)"
             if not d or any(not math.isfinite(x) or x < 0 for x in d) or list(d) != sorted(d):
-                raise OptionError("distances", shown, "give one or more ascending distances in "
-                                                      "metres, each >= 0", "--lod-distances")
+                raise OptionError(
+                    "distances",
+                    shown,
+                    "give one or more ascending distances in metres, each >= 0",
+                    "--lod-distances",
+                )
             if len(set(d)) != len(d):
                 raise OptionError("distances", shown, "distances repeat", "--lod-distances")
         s = self.screen
-        if (d is None and not s) or any(not (math.isfinite(x) and 0.0 < x <= 100.0) for x in s) \
-                or list(s) != sorted(s, reverse=True) or len(set(s)) != len(s):
-            raise OptionError("screen", ",".join(f"{x:g}" for x in s) or "(none)",
-                              "give descending fractions of the screen height, each in (0, 100], "
-                              "e.g. 0.5,0.25,0.1", "--lod-screen")
+        if (
+            (d is None and not s)
+            or any(not (math.isfinite(x) and 0.0 < x <= 100.0) for x in s)
+            or list(s) != sorted(s, reverse=True)
+            or len(set(s)) != len(s)
+        ):
+            raise OptionError(
+                "screen",
+                ",".join(f"{x:g}" for x in s) or "(none)",
+                "give descending fractions of the screen height, each in (0, 100], e.g. 0.5,0.25,0.1",
+                "--lod-screen",
+            )
         if not 0.0 < self.fov_deg < 180.0:
-            raise OptionError("fov_deg", self.fov_deg, "the horizontal field of view must be in "
-                                                        "(0, 180) degrees", "--fov")
+            raise OptionError(
+                "fov_deg", self.fov_deg, "the horizontal field of view must be in (0, 180) degrees", "--fov"
+            )
         if self.schedule == "paper" and self.fov_deg >= 90.0:
-            raise OptionError("fov_deg", self.fov_deg, "the paper's tan(fov) form needs fov < 90 "
-                                                        "degrees", "--fov")
+            raise OptionError(
+                "fov_deg", self.fov_deg, "the paper's tan(fov) form needs fov < 90 degrees", "--fov"
+            )
         if not 1 <= self.width <= 1_000_000:
-            raise OptionError("width", self.width, "screen width must be in 1..1000000 pixels",
-                              "--width")
+            raise OptionError("width", self.width, "screen width must be in 1..1000000 pixels", "--width")
         if not (math.isfinite(self.error_px) and 0.0 <= self.error_px <= 1000.0):
             raise OptionError("error_px", self.error_px, "allowed range 0..1000 pixels", "--error-px")
         if self.schedule not in SCHEDULES:
             raise OptionError("schedule", self.schedule, f"use one of {', '.join(SCHEDULES)}", "--schedule")
         if not (self.aspect > 0 and self.max_iterations >= 1):
             raise TreegenError("LOD aspect must be > 0 and max_iterations >= 1")
-        if (min(self.joint_fraction) <= 0 or max(self.joint_fraction) > 1
-                or min(min(s) for s in self.sides) < 3):
+        if (
+            min(self.joint_fraction) <= 0
+            or max(self.joint_fraction) > 1
+            or min(min(s) for s in self.sides) < 3
+        ):
             raise TreegenError("LOD tables: joint_fraction in (0, 1], sides >= 3")
         t = self.triangles
         if not t or any(not (math.isfinite(x) and 0.0 < x <= 1.0) for x in t):
-            raise TreegenError(f"--lod-triangles {','.join(f'{x:g}' for x in t) or '(none)'}: "
-                               "give fractions of LOD0's triangles, each in (0, 1]")
+            raise TreegenError(
+                f"--lod-triangles {','.join(f'{x:g}' for x in t) or '(none)'}: "
+                "give fractions of LOD0's triangles, each in (0, 1]"
+            )
 
     @property
     def interpolation(self) -> str:
@@ -138,8 +156,9 @@ def switch_distances(height: float, options: LodOptions = LOD_DEFAULTS) -> tuple
     return (0.0,) + tuple(screen_distance(height, s, options) for s in options.screen)
 
 
-def screen_distance(height: float, share: float, options: LodOptions = LOD_DEFAULTS,
-                    of: float = 1.0) -> float:
+def screen_distance(
+    height: float, share: float, options: LodOptions = LOD_DEFAULTS, of: float = 1.0
+) -> float:
     """Metres from which a tree `height` metres tall fills `share` of `of` of the screen
     height: a fraction (of = 1, `--lod-screen`) or pixels (of = width / aspect, the
     impostor's switch_px). height · of / (share · 2·tan(fov_y/2))."""
@@ -180,6 +199,7 @@ def screen_coverage(height: float, distance: float, options: LodOptions = LOD_DE
 
 # ---------------------------------------------------------------------------- geometry probes
 
+
 @dataclass(frozen=True, eq=False)
 class Probes:
     """Representative points: `local` (P, 3) in the bind frame of joint `joint` (P,); `rest`
@@ -204,26 +224,26 @@ def _hull_vertices(points: np.ndarray) -> np.ndarray:
     except (QhullError, ValueError):
         if n <= 4096:
             return np.arange(n)
-        return ConvexHull(points, qhull_options="QJ").vertices     # flat: joggled corners
+        return ConvexHull(points, qhull_options="QJ").vertices  # flat: joggled corners
 
 
 def _box_corners(x: np.ndarray, owner: np.ndarray, J: int) -> tuple[np.ndarray, np.ndarray]:
     """Per joint, the 8 corners of a box around its points, aligned with their principal axes
     (a tight box for a branch's elongated cloud). Returns (joint (P,), corner positions (P, 3))."""
-    order = np.argsort(owner.astype(np.uint16), kind="stable")   # radix sort: joints < 65536
+    order = np.argsort(owner.astype(np.uint16), kind="stable")  # radix sort: joints < 65536
     bounds = np.searchsorted(owner[order], np.arange(J + 1))
     xs = x[order]
     signs = np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], dtype=bool)
     joints, corners = [], []
-    for j in range(J):                             # a few hundred joints, numpy within each
-        pts = xs[bounds[j]:bounds[j + 1]].astype(np.float64)
+    for j in range(J):  # a few hundred joints, numpy within each
+        pts = xs[bounds[j] : bounds[j + 1]].astype(np.float64)
         if not len(pts):
             continue
         mean = pts.mean(axis=0)
         d = pts - mean
-        _, axes = np.linalg.eigh(d.T @ d + np.eye(3) * 1e-12)   # columns: principal axes
+        _, axes = np.linalg.eigh(d.T @ d + np.eye(3) * 1e-12)  # columns: principal axes
         u = d @ axes
-        ext = np.where(signs, u.max(axis=0), u.min(axis=0))      # (8, 3)
+        ext = np.where(signs, u.max(axis=0), u.min(axis=0))  # (8, 3)
         joints.append(np.full(8, j))
         corners.append(mean + ext @ axes.T)
     return np.concatenate(joints), np.concatenate(corners)
@@ -245,12 +265,14 @@ def probes(skeleton: Skeleton, primitives: list[Primitive], exact: bool = False)
     parent = np.asarray(skeleton.parent, dtype=np.int64)
     J = bind.shape[0]
     pivot = bind[:, :3, 3]
-    pts, own = [pivot.astype(np.float32), pivot[parent >= 0].astype(np.float32)], \
-        [np.arange(J), parent[parent >= 0]]
+    pts, own = (
+        [pivot.astype(np.float32), pivot[parent >= 0].astype(np.float32)],
+        [np.arange(J), parent[parent >= 0]],
+    )
     for prim in primitives:
         w = np.asarray(prim.weights)
         jn = np.asarray(prim.joints)
-        for s in range(jn.shape[1]):               # ≤ 4 influence slots
+        for s in range(jn.shape[1]):  # ≤ 4 influence slots
             use = w[:, s] > 0
             if use.all():
                 pts.append(np.asarray(prim.positions, dtype=np.float32))
@@ -264,8 +286,8 @@ def probes(skeleton: Skeleton, primitives: list[Primitive], exact: bool = False)
         order = np.argsort(owner, kind="stable")
         bounds = np.searchsorted(owner[order], np.arange(J + 1))
         picks = []
-        for j in range(J):                        # one qhull call per joint (≤ a few hundred)
-            rows = order[bounds[j]:bounds[j + 1]]
+        for j in range(J):  # one qhull call per joint (≤ a few hundred)
+            rows = order[bounds[j] : bounds[j + 1]]
             if rows.size:
                 picks.append(rows[_hull_vertices(x[rows].astype(np.float64))])
         pick = np.concatenate(picks)
@@ -273,7 +295,7 @@ def probes(skeleton: Skeleton, primitives: list[Primitive], exact: bool = False)
         joint_of, corners = _box_corners(x, owner, J)
         x = np.concatenate([x, corners.astype(np.float32)])
         owner = np.concatenate([owner, joint_of])
-        pick = x.shape[0] - corners.shape[0] + np.arange(corners.shape[0])   # 8 per joint
+        pick = x.shape[0] - corners.shape[0] + np.arange(corners.shape[0])  # 8 per joint
     joint, rest = owner[pick], x[pick].astype(np.float64)
     inv = skeleton.inverse_bind()[joint]
     local = np.einsum("pij,pj->pi", inv[:, :3, :3], rest) + inv[:, :3, 3]
@@ -296,18 +318,19 @@ def probe_world(world: np.ndarray, pr: Probes) -> np.ndarray:
 
 # ---------------------------------------------------------------------------- decimation
 
+
 @dataclass(frozen=True)
 class DecimationReport:
     distance: float
-    threshold_m: float           # movement allowed per point (error_px on the nearest screen)
-    keys_dense: int              # K × J
-    keys_kept: int               # Σ_j |keys[j]|
-    max_error_px: float          # perspective-true, on box corners bounding every vertex
-    iterations: int              # playback-check rounds that added keys (all levels)
+    threshold_m: float  # movement allowed per point (error_px on the nearest screen)
+    keys_dense: int  # K × J
+    keys_kept: int  # Σ_j |keys[j]|
+    max_error_px: float  # perspective-true, on box corners bounding every vertex
+    iterations: int  # playback-check rounds that added keys (all levels)
     seconds: float
-    radius_m: float = 0.0        # farthest any vertex gets from the centre over the clip
+    radius_m: float = 0.0  # farthest any vertex gets from the centre over the clip
     schedule: str = "bounded"
-    work: int = 0                # joint-frames posed and checked, all rounds and levels
+    work: int = 0  # joint-frames posed and checked, all rounds and levels
 
     @property
     def kept_fraction(self) -> float:
@@ -318,10 +341,10 @@ def _chain(nxt: np.ndarray) -> np.ndarray:
     """Bool (K, J): frame 0 and its successors under the per-joint map nxt (K, J) (nxt > row,
     nxt[K−1] = K−1), found by pointer doubling: log2 K gathers, no loop over keys."""
     K, J = nxt.shape
-    pos = np.zeros((K, J), dtype=np.int64)                       # pos[t]: the t-th kept key
+    pos = np.zeros((K, J), dtype=np.int64)  # pos[t]: the t-th kept key
     t, cols = np.arange(K), np.arange(J)[None, :]
     table, bit = nxt, 0
-    while (1 << bit) < K:                                        # nxt^t(0) = Π nxt^(2^bit)
+    while (1 << bit) < K:  # nxt^t(0) = Π nxt^(2^bit)
         rows = ((t >> bit) & 1).astype(bool)
         pos[rows] = table[pos[rows], cols]
         table = table[table, cols]
@@ -343,16 +366,15 @@ def _walk(step: np.ndarray, threshold: float) -> np.ndarray:
     S = np.zeros((K, J))
     np.cumsum(step, axis=0, out=S[1:])
     span = float(S[-1].max()) + threshold + 1.0
-    off = np.arange(J) * span                                    # joints side by side, sorted
-    nxt = np.searchsorted((S + off).T.ravel(), (S + threshold + off).T.ravel(),
-                          side="right").reshape(J, K).T
-    return _chain(np.minimum(nxt - np.arange(J) * K, K - 1))     # no later key: the last frame
+    off = np.arange(J) * span  # joints side by side, sorted
+    nxt = np.searchsorted((S + off).T.ravel(), (S + threshold + off).T.ravel(), side="right").reshape(J, K).T
+    return _chain(np.minimum(nxt - np.arange(J) * K, K - 1))  # no later key: the last frame
 
 
 def _schedule(rotations: np.ndarray, reach: np.ndarray, threshold: float) -> np.ndarray:
     """The paper's rule: per joint accumulate P, the movement its own rotation gives the
     geometry it carries (angular step × reach), keep a key when P > threshold, reset P."""
-    step = quat_angle(rotations[1:], rotations[:-1]) * reach[None]    # (K−1, J) metres
+    step = quat_angle(rotations[1:], rotations[:-1]) * reach[None]  # (K−1, J) metres
     return _walk(step, threshold)
 
 
@@ -393,8 +415,7 @@ class _Model:
     def of(cls, skeleton: Skeleton, pr: Probes) -> "_Model":
         J = len(skeleton.names)
         parent = np.asarray(skeleton.parent, dtype=np.int64)
-        hom = np.concatenate([pr.local.reshape(J, 8, 3).transpose(0, 2, 1), np.ones((J, 1, 8))],
-                             axis=1)
+        hom = np.concatenate([pr.local.reshape(J, 8, 3).transpose(0, 2, 1), np.ones((J, 1, 8))], axis=1)
         anc = _ancestors(parent)
         pivot = np.asarray(skeleton.bind_world)[:, :3, 3]
         corners = pr.rest.reshape(J, 8, 3)
@@ -407,8 +428,15 @@ class _Playback:
     rotations, composed world matrices and the corner errors (squared, (K, J)). Adding keys to
     some joints re-plays those joints and re-poses only them and their descendants."""
 
-    def __init__(self, m: _Model, rot: np.ndarray, kept: np.ndarray, interpolation: str,
-                 dense_world: np.ndarray, work: int = 0):
+    def __init__(
+        self,
+        m: _Model,
+        rot: np.ndarray,
+        kept: np.ndarray,
+        interpolation: str,
+        dense_world: np.ndarray,
+        work: int = 0,
+    ):
         self.m, self.rot, self.kept, self.interp, self.dense_world = m, rot, kept, interpolation, dense_world
         self.rec = play_keys(rot, kept, interpolation)
         self.world = pose_world(m.skeleton, self.rec)
@@ -427,8 +455,8 @@ class _Playback:
         span = np.zeros((K + 1, J), dtype=np.int32)
         np.add.at(span, (prev + 1, nj), 1)
         np.add.at(span, (nxt, nj), -1)
-        mask = np.cumsum(span[:K], axis=0) > 0                    # (K, J) pairs to redo
-        for level in m.levels[1:]:                                # children follow parents
+        mask = np.cumsum(span[:K], axis=0) > 0  # (K, J) pairs to redo
+        for level in m.levels[1:]:  # children follow parents
             mask[:, level] |= mask[:, m.parent[level]]
         rest_t = np.asarray(m.skeleton.rest_translation)
         for level in m.levels:
@@ -447,8 +475,15 @@ class _Playback:
         self.work += len(kk)
 
 
-def _refine(m: _Model, rot: np.ndarray, dense_world: np.ndarray, kept: np.ndarray,
-            limit: float, interpolation: str, max_iterations: int) -> tuple[np.ndarray, int, int]:
+def _refine(
+    m: _Model,
+    rot: np.ndarray,
+    dense_world: np.ndarray,
+    kept: np.ndarray,
+    limit: float,
+    interpolation: str,
+    max_iterations: int,
+) -> tuple[np.ndarray, int, int]:
     """Add keys to `kept` (bool (K, J), modified) until every corner on every frame is within
     `limit` metres of the dense pose: each round, every failing frame blames the ancestor whose
     own rotation error moves the failing joint's corners most, and per blamed joint only the
@@ -459,29 +494,29 @@ def _refine(m: _Model, rot: np.ndarray, dense_world: np.ndarray, kept: np.ndarra
     play = _Playback(m, rot, kept, interpolation, dense_world)
     rounds = 0
     while (play.err2 > limit2).any():
-        if rounds >= max_iterations:              # give up gracefully: key the frames fully
+        if rounds >= max_iterations:  # give up gracefully: key the frames fully
             kept[np.flatnonzero((play.err2 > limit2).any(axis=1))] = True
             play = _Playback(m, rot, kept, interpolation, dense_world, play.work)
         else:
             kk, jj = np.nonzero(play.err2 > limit2)
-            a = m.anc[jj]                                               # (n, D)
+            a = m.anc[jj]  # (n, D)
             blame = quat_angle(play.rec[kk[:, None], a], rot[kk[:, None], a]) * m.lever[jj]
             pick = blame.argmax(axis=1)
             rows = np.arange(len(jj))
             best, best_c = a[rows, pick], blame[rows, pick]
-            cols, col = np.unique(best, return_inverse=True)      # only the blamed joints
+            cols, col = np.unique(best, return_inverse=True)  # only the blamed joints
             sub = kept[:, cols]
             seg = np.cumsum(sub, axis=0)[kk, col]
             group = col.astype(np.int64) * (K + 1) + seg
             order = np.lexsort((-best_c, group))
             first = order[np.r_[True, group[order][1:] != group[order][:-1]]]
             nk, nj, nc = kk[first], best[first], col[first]
-            if kept[nk, nj].all():               # nothing left to blame (rounding): key frames
+            if kept[nk, nj].all():  # nothing left to blame (rounding): key frames
                 kept[np.unique(kk)] = True
                 play = _Playback(m, rot, kept, interpolation, dense_world, play.work)
                 rounds += 1
                 continue
-            k = np.arange(K)[:, None]                  # the new keys' neighbouring kept keys
+            k = np.arange(K)[:, None]  # the new keys' neighbouring kept keys
             prev = np.maximum.accumulate(np.where(sub, k, 0), axis=0)[nk, nc]
             nxt = np.minimum.accumulate(np.where(sub, k, K - 1)[::-1], axis=0)[::-1][nk, nc]
             kept[nk, nj] = True
@@ -490,8 +525,9 @@ def _refine(m: _Model, rot: np.ndarray, dense_world: np.ndarray, kept: np.ndarra
     return play.err2, rounds, play.work
 
 
-def _bounded(m: _Model, rot: np.ndarray, dense_world: np.ndarray, limit: float,
-             interpolation: str, max_iterations: int) -> tuple[np.ndarray, np.ndarray, int, int]:
+def _bounded(
+    m: _Model, rot: np.ndarray, dense_world: np.ndarray, limit: float, interpolation: str, max_iterations: int
+) -> tuple[np.ndarray, np.ndarray, int, int]:
     """Kept keys (K, J) whose playback keeps every corner within `limit` metres, coarse to fine:
     the keys found on every other frame seed the check on all frames, recursively, so each
     level needs a few rounds and the total cost is about twice one pass over the clip — linear
@@ -502,8 +538,9 @@ def _bounded(m: _Model, rot: np.ndarray, dense_world: np.ndarray, limit: float,
     rounds = work = 0
     if K > 33:
         sub = np.unique(np.r_[np.arange(0, K, 2), K - 1])
-        sub_kept, _, rounds, work = _bounded(m, rot[sub], dense_world[sub], limit, interpolation,
-                                             max_iterations)
+        sub_kept, _, rounds, work = _bounded(
+            m, rot[sub], dense_world[sub], limit, interpolation, max_iterations
+        )
         kept[sub] = sub_kept
     err2, r, w = _refine(m, rot, dense_world, kept, limit, interpolation, max_iterations)
     return kept, err2, rounds + r, work + w
@@ -518,13 +555,19 @@ def _view_radius(primitives: list[Primitive], world: np.ndarray, hom: np.ndarray
         return 0.0
     allp = np.concatenate(pts)
     centre = 0.5 * (allp.min(0) + allp.max(0))
-    x = np.matmul(world[..., :3, :], hom) - centre[:, None]                # (K, J, 3, 8)
+    x = np.matmul(world[..., :3, :], hom) - centre[:, None]  # (K, J, 3, 8)
     return float(np.sqrt(np.einsum("kjac,kjac->kjc", x, x).max()))
 
 
-def decimate(skeleton: Skeleton, primitives: list[Primitive], dense: Clip, distance: float,
-             options: LodOptions = LOD_DEFAULTS, name: str | None = None,
-             pr: Probes | None = None) -> tuple[Clip, DecimationReport]:
+def decimate(
+    skeleton: Skeleton,
+    primitives: list[Primitive],
+    dense: Clip,
+    distance: float,
+    options: LodOptions = LOD_DEFAULTS,
+    name: str | None = None,
+    pr: Probes | None = None,
+) -> tuple[Clip, DecimationReport]:
     """The dense clip with a per-joint key schedule for a LOD used from `distance` (see the
     module doc for the schedules). "bounded*": the playback stays within options.error_px
     pixels on every vertex and frame, perspective-true; distance 0, error_px 0 or a camera
@@ -540,8 +583,9 @@ def decimate(skeleton: Skeleton, primitives: list[Primitive], dense: Clip, dista
 
     def dense_clip(radius: float = 0.0, threshold: float = 0.0):
         clip = replace(dense, name=name, interpolation=interp, keys=None)
-        return clip, DecimationReport(distance, threshold, K * J, K * J, 0.0, 0,
-                                      time.perf_counter() - t0, radius, options.schedule)
+        return clip, DecimationReport(
+            distance, threshold, K * J, K * J, 0.0, 0, time.perf_counter() - t0, radius, options.schedule
+        )
 
     if distance <= 0.0 or options.error_px <= 0.0 or K <= 2:
         return dense_clip()
@@ -560,17 +604,32 @@ def decimate(skeleton: Skeleton, primitives: list[Primitive], dense: Clip, dista
         threshold = options.error_px * near
         if threshold <= 0.0:
             return dense_clip(radius)
-        kept, err2, rounds, work = _bounded(m, rot, dense_world, threshold, interp,
-                                            options.max_iterations)
+        kept, err2, rounds, work = _bounded(m, rot, dense_world, threshold, interp, options.max_iterations)
     keys = [np.flatnonzero(kept[:, j]) for j in range(J)]
     clip = replace(dense, name=name, interpolation=interp, keys=keys)
     error = float(np.sqrt(err2.max()) / near) if near > 0 else math.inf
-    return clip, DecimationReport(distance, threshold, K * J, int(kept.sum()), error, rounds,
-                                  time.perf_counter() - t0, radius, options.schedule, work)
+    return clip, DecimationReport(
+        distance,
+        threshold,
+        K * J,
+        int(kept.sum()),
+        error,
+        rounds,
+        time.perf_counter() - t0,
+        radius,
+        options.schedule,
+        work,
+    )
 
 
-def measure_error_px(skeleton: Skeleton, primitives: list[Primitive], dense: Clip, clip: Clip,
-                     distance: float, options: LodOptions = LOD_DEFAULTS) -> float:
+def measure_error_px(
+    skeleton: Skeleton,
+    primitives: list[Primitive],
+    dense: Clip,
+    clip: Clip,
+    distance: float,
+    options: LodOptions = LOD_DEFAULTS,
+) -> float:
     """Max on-screen error (pixels, perspective-true as in the module doc: any camera at
     `distance` from the centre of the rest bounds) of `clip`'s playback against `dense`, on the
     corners of each joint's convex hull (the exact maximum of the world error) — an
@@ -583,8 +642,9 @@ def measure_error_px(skeleton: Skeleton, primitives: list[Primitive], dense: Cli
     x = probe_world(pose_world(skeleton, play_keys(rot, kept_mask(clip), clip.interpolation)), pr)
     pts = np.concatenate([np.asarray(p.positions, np.float64) for p in primitives])
     centre = 0.5 * (pts.min(0) + pts.max(0))
-    radius = float(max(np.linalg.norm(dense_x - centre, axis=2).max(),
-                       np.linalg.norm(x - centre, axis=2).max()))
+    radius = float(
+        max(np.linalg.norm(dense_x - centre, axis=2).max(), np.linalg.norm(x - centre, axis=2).max())
+    )
     near = near_pixel_size(distance, radius, options)
     err = float(np.linalg.norm(x - dense_x, axis=2).max())
     return err / near if near > 0 else math.inf
@@ -596,6 +656,7 @@ def measure_error_px(skeleton: Skeleton, primitives: list[Primitive], dense: Cli
 
 
 # ---------------------------------------------------------------------------- the paper's table
+
 
 def leaf_vertex_joints(lod: Lod) -> np.ndarray:
     """Leaf vertices carried per joint (J,), from the "leaves" primitive's first influence."""
@@ -627,7 +688,7 @@ def leaf_updates(lod: Lod) -> tuple[int, float]:
     return int(per_joint.sum()), float(np.sum(kept * per_joint) / K)
 
 
-PAPER_DISTANCES = (30.0, 130.0)     # the paper's Table 3
+PAPER_DISTANCES = (30.0, 130.0)  # the paper's Table 3
 
 
 def animation_bytes(clip: Clip | None, n_joints: int) -> int:
@@ -657,14 +718,20 @@ def schedule_rows(lod: Lod, distances=PAPER_DISTANCES, options: LodOptions = LOD
             clip, rep = decimate(lod.skeleton, lod.primitives, dense, d, opts, pr=pr)
             err = measure_error_px(lod.skeleton, lod.primitives, dense, clip, d, opts)
             _, updates = leaf_updates(replace(lod, clips=[clip]))
-            rows.append({"distance_m": float(d), "schedule": schedule,
-                         "keys_kept": rep.keys_kept, "keys_dense": rep.keys_dense,
-                         "keys_kept_pct": round(100.0 * rep.kept_fraction, 2),
-                         "animation_bytes": animation_bytes(clip, J),
-                         "animation_bytes_dense": animation_bytes(dense, J),
-                         "max_error_px": round(err, 4),
-                         "leaf_vertex_updates_per_frame": round(updates, 1),
-                         "seconds": round(rep.seconds, 4)})
+            rows.append(
+                {
+                    "distance_m": float(d),
+                    "schedule": schedule,
+                    "keys_kept": rep.keys_kept,
+                    "keys_dense": rep.keys_dense,
+                    "keys_kept_pct": round(100.0 * rep.kept_fraction, 2),
+                    "animation_bytes": animation_bytes(clip, J),
+                    "animation_bytes_dense": animation_bytes(dense, J),
+                    "max_error_px": round(err, 4),
+                    "leaf_vertex_updates_per_frame": round(updates, 1),
+                    "seconds": round(rep.seconds, 4),
+                }
+            )
     return rows
 
 
@@ -697,8 +764,12 @@ def lod_table_row(lod: Lod, options: LodOptions = LOD_DEFAULTS) -> dict:
         "screen_coverage": round(float(lod.screen_coverage), 4),
     }
     imp = lod.impostor
-    if imp is not None:                 # the last LOD: crossed cards cut from a view atlas
-        row["impostor"] = {"grid": imp.grid, "cell_px": imp.cell,
-                           "atlas_px": imp.grid * imp.cell, "card_m": round(2.0 * imp.radius, 3),
-                           "atlas_bytes": len(imp.albedo.png) + len(imp.normal_depth.png)}
+    if imp is not None:  # the last LOD: crossed cards cut from a view atlas
+        row["impostor"] = {
+            "grid": imp.grid,
+            "cell_px": imp.cell,
+            "atlas_px": imp.grid * imp.cell,
+            "card_m": round(2.0 * imp.radius, 3),
+            "atlas_bytes": len(imp.albedo.png) + len(imp.normal_depth.png),
+        }
     return row

@@ -15,6 +15,7 @@ Each LOD is cut from LOD0's tree (lod_leaves.py), in this order:
     plan = plan_lod(tree, bark0, leaf0, budget=0.15 * (bark0 + leaf0), mesh=mesh_k, px=0.03)
     # Result: plan.tree (pruned, thinned), plan.bark_estimate + plan.leaf_triangles <= budget
 """
+
 from __future__ import annotations
 
 import math
@@ -29,18 +30,18 @@ from .mesh import MeshOptions
 from .tree import Tree
 
 
-REGION_PX = 4.0         # cells (pixels at the switch) over which a LOD keeps LOD0's area
-REGION_CLIP = 4.0       # a region's leaves grow at most this much more (or less) than the crown's
-MIN_RADIUS_PX = 0.5      # stems thinner than this many pixels at the LOD's distance are dropped
+REGION_PX = 4.0  # cells (pixels at the switch) over which a LOD keeps LOD0's area
+REGION_CLIP = 4.0  # a region's leaves grow at most this much more (or less) than the crown's
+MIN_RADIUS_PX = 0.5  # stems thinner than this many pixels at the LOD's distance are dropped
 
 
 @dataclass(frozen=True, eq=False)
 class LodPlan:
     tree: Tree
-    bark_estimate: int          # upper bound on the bark triangles the mesh will have
+    bark_estimate: int  # upper bound on the bark triangles the mesh will have
     leaf_triangles: int
-    area_factor: float          # kept leaves' blade area × this, on average
-    mesh: MeshOptions | None = None   # the mesh options to draw it with
+    area_factor: float  # kept leaves' blade area × this, on average
+    mesh: MeshOptions | None = None  # the mesh options to draw it with
 
 
 def capped_sides(table: tuple[int, ...], cap: tuple[int, ...]) -> tuple[int, ...]:
@@ -52,8 +53,7 @@ def capped_sides(table: tuple[int, ...], cap: tuple[int, ...]) -> tuple[int, ...
 def keep_stems(tree: Tree, per_stem: np.ndarray, budget: float, min_radius: float = 0.0) -> np.ndarray:
     """Stems kept thickest first (trunks always) while their triangles fit `budget` and their
     base radius is at least `min_radius`; closed under ancestors."""
-    order = np.lexsort((np.arange(tree.n_stems), -tree.stem_radius,
-                        (tree.stem_level != 0).astype(np.int8)))
+    order = np.lexsort((np.arange(tree.n_stems), -tree.stem_radius, (tree.stem_level != 0).astype(np.int8)))
     total = np.cumsum(per_stem[order])
     keep = np.zeros(tree.n_stems, dtype=bool)
     keep[order[total <= budget]] = True
@@ -61,16 +61,19 @@ def keep_stems(tree: Tree, per_stem: np.ndarray, budget: float, min_radius: floa
     return stem_closure(tree, keep)
 
 
-def plan_lod(tree: Tree, bark0: int, leaf0: int, budget: float, mesh: MeshOptions,
-             px: float) -> LodPlan:
+def plan_lod(tree: Tree, bark0: int, leaf0: int, budget: float, mesh: MeshOptions, px: float) -> LodPlan:
     """LOD `tree` within `budget` triangles for `mesh` (see the module doc). `bark0`, `leaf0`:
     LOD0's bark and leaf triangles; `px`: metres a pixel spans at the LOD's switch distance."""
     min_radius = MIN_RADIUS_PX * px
     total0 = bark0 + leaf0
     p = tree.params
-    if p.lobes > 0 and p.lobe_depth != 0 and tree.n_stems and \
-            abs(p.lobe_depth) * float(tree.stem_radius[0]) < min_radius:
-        tree = replace(tree, params=replace(p, lobe_depth=0.0))   # lobes under a pixel: round
+    if (
+        p.lobes > 0
+        and p.lobe_depth != 0
+        and tree.n_stems
+        and abs(p.lobe_depth) * float(tree.stem_radius[0]) < min_radius
+    ):
+        tree = replace(tree, params=replace(p, lobe_depth=0.0))  # lobes under a pixel: round
     per_stem = bark_triangles(tree, mesh)
     if budget >= total0 and per_stem.sum() <= bark0:
         return LodPlan(tree, int(per_stem.sum()), leaf0, 1.0)
@@ -83,12 +86,13 @@ def plan_lod(tree: Tree, bark0: int, leaf0: int, budget: float, mesh: MeshOption
     thin = thin_leaves(pruned, n_keep, 1.0)
     leaf, radius = cover_factors(tree, thin, px)
     mesh_thin = mesh
-    if radius != 1.0:     # thicker stems draw the same rings; sides cut to the bark table's
+    if radius != 1.0:  # thicker stems draw the same rings; sides cut to the bark table's
         thin = thicken(thin, radius)
         mesh_thin = replace(mesh, thin_radius=mesh.thin_radius * radius)
     bark = int(bark_triangles(thin, mesh_thin).sum())
-    return LodPlan(grow_leaves(thin, leaf), bark, int(round(n_keep * per_leaf)),
-                   float(np.mean(leaf)), mesh_thin)
+    return LodPlan(
+        grow_leaves(thin, leaf), bark, int(round(n_keep * per_leaf)), float(np.mean(leaf)), mesh_thin
+    )
 
 
 def cover_factors(full: Tree, thin: Tree, px: float) -> tuple[np.ndarray | float, float]:
@@ -129,7 +133,9 @@ def _seen(tree: Tree, leaves: bool) -> tuple[np.ndarray, np.ndarray]:
     d = tree.node_pos[seg + 1] - tree.node_pos[seg]
     length = np.linalg.norm(d, axis=1)
     width = tree.node_radius[seg] + tree.node_radius[seg + 1]
-    return tree.node_pos[seg] + 0.5 * d, width * length * np.sqrt(1.0 - 0.5 * (d[:, 2] / np.maximum(length, 1e-12)) ** 2)
+    return tree.node_pos[seg] + 0.5 * d, width * length * np.sqrt(
+        1.0 - 0.5 * (d[:, 2] / np.maximum(length, 1e-12)) ** 2
+    )
 
 
 def regional_factors(full: Tree, thin: Tree, cell: float) -> np.ndarray:
@@ -139,7 +145,7 @@ def regional_factors(full: Tree, thin: Tree, cell: float) -> np.ndarray:
     pts = [_seen(full, True), _seen(full, False), _seen(thin, False), _seen(thin, True)]
     lo = np.min([p.min(0) for p, _ in pts if len(p)], axis=0)
     keys = np.concatenate([np.floor((p - lo) / cell).astype(np.int64) for p, _ in pts])
-    _, flat = np.unique(keys, axis=0, return_inverse=True)     # occupied cells only
+    _, flat = np.unique(keys, axis=0, return_inverse=True)  # occupied cells only
     flat = flat.reshape(-1)
     n = int(flat.max()) + 1 if flat.size else 1
     ends = np.cumsum([len(p) for p, _ in pts])
@@ -167,11 +173,20 @@ def lod_tree(tree: Tree, k: int, lod0, previous, rig_options, mesh_options, opti
     table = options.sides[min(k, len(options.sides) - 1)]
     mesh = replace(mesh_options, sides=capped_sides(table, mesh_options.sides))
     frac = options.joint_fraction[min(k, len(options.joint_fraction) - 1)]
-    rig = replace(rig_options, max_joints=max(1, int(round(rig_options.max_joints * frac)))) \
-        if frac < 1.0 else rig_options
+    rig = (
+        replace(rig_options, max_joints=max(1, int(round(rig_options.max_joints * frac))))
+        if frac < 1.0
+        else rig_options
+    )
     from .lod import pixel_size
 
     px = pixel_size(options.distances[k], options)
-    plan = plan_lod(tree, _triangles(lod0, "bark"), _triangles(lod0, "leaves"),
-                    lod_budget(k, lod0, previous, options), mesh, px)
+    plan = plan_lod(
+        tree,
+        _triangles(lod0, "bark"),
+        _triangles(lod0, "leaves"),
+        lod_budget(k, lod0, previous, options),
+        mesh,
+        px,
+    )
     return plan.tree, rig, plan.mesh or mesh

@@ -13,6 +13,7 @@ of areas (or cells the size of a leaf) misses; stems thinner than a pixel count 
     stems, blades = stem_area(lod, grid), Blades(lod, grid.px, 0.25)
     f = solve_factor(lambda f: grid.cover(stems + blades.area(grid, f)), target, 0.25, 8.0)
 """
+
 from __future__ import annotations
 
 import math
@@ -23,15 +24,15 @@ import numpy as np
 from .leafshapes import fill_factor
 from .tree import Tree
 
-AZIMUTHS = (0.0, 90.0)   # side views, degrees about Z (orthographic: 180° mirrors 0°)
-SAMPLES_PER_PX = 1.5     # sample points per pixel of blade or stem extent
-MAX_ALONG = 64           # samples per stem segment, at most
-MAX_ACROSS = 8           # samples across a stem, at most
-MAX_BLADE = 64           # samples along a blade, at most (and across it)
-MAX_SAMPLES = 300_000    # blade samples of a whole crown, about: a crown of many blades is
-                         # measured in cells coarser than a pixel (cell_size)
-MAX_CELLS = 1024         # cells across the tree, at most (a near switch is measured coarser)
-MARGIN = 0.25            # the grid reaches this share of the tree's size beyond its bounds
+AZIMUTHS = (0.0, 90.0)  # side views, degrees about Z (orthographic: 180° mirrors 0°)
+SAMPLES_PER_PX = 1.5  # sample points per pixel of blade or stem extent
+MAX_ALONG = 64  # samples per stem segment, at most
+MAX_ACROSS = 8  # samples across a stem, at most
+MAX_BLADE = 64  # samples along a blade, at most (and across it)
+MAX_SAMPLES = 300_000  # blade samples of a whole crown, about: a crown of many blades is
+# measured in cells coarser than a pixel (cell_size)
+MAX_CELLS = 1024  # cells across the tree, at most (a near switch is measured coarser)
+MARGIN = 0.25  # the grid reaches this share of the tree's size beyond its bounds
 
 
 def _axes() -> tuple[np.ndarray, np.ndarray]:
@@ -71,7 +72,7 @@ class Grid:
     `px` metres, `shape` (nu, nw). Points outside land in the border cells."""
 
     px: float
-    origin: np.ndarray          # (V, 2)
+    origin: np.ndarray  # (V, 2)
     shape: tuple[int, int]
 
     @staticmethod
@@ -109,7 +110,7 @@ def _segments(tree: Tree, px: float, radius_factor: float):
     p0, p1 = tree.node_pos[seg], tree.node_pos[seg + 1]
     d = p1 - p0
     length = np.linalg.norm(d, axis=1)
-    width = (tree.node_radius[seg] + tree.node_radius[seg + 1]) * radius_factor   # 2 × mean radius
+    width = (tree.node_radius[seg] + tree.node_radius[seg + 1]) * radius_factor  # 2 × mean radius
     n = np.clip(np.ceil(SAMPLES_PER_PX * length / max(px, 1e-12)), 1, MAX_ALONG).astype(np.int64)
     m = np.clip(np.ceil(SAMPLES_PER_PX * width / max(px, 1e-12)), 1, MAX_ACROSS).astype(np.int64)
     nm = n * m
@@ -119,7 +120,7 @@ def _segments(tree: Tree, px: float, radius_factor: float):
     across = (k % m[which] + 0.5) / m[which] - 0.5
     view, side = _axes()
     axis = d / np.maximum(length, 1e-12)[:, None]
-    sin = np.sqrt(np.maximum(1.0 - (view @ axis.T) ** 2, 0.0))           # (V, seg)
+    sin = np.sqrt(np.maximum(1.0 - (view @ axis.T) ** 2, 0.0))  # (V, seg)
     # across the stem on screen: perpendicular to its projected axis
     au, aw = side @ axis.T, np.broadcast_to(axis[:, 2], sin.shape)
     norm = np.maximum(np.hypot(au, aw), 1e-12)
@@ -148,25 +149,26 @@ class Blades:
         self.length, self.width, self.share = tree.leaf_size[:, 0], tree.leaf_size[:, 1], length_share
         # sample spacing for blades grown by `reach` (a typical factor)
         r = max(reach, 1e-6)
-        na = _counts(float(np.median(self.length)) * r ** length_share, px, MAX_BLADE)
+        na = _counts(float(np.median(self.length)) * r**length_share, px, MAX_BLADE)
         nw = _counts(float(np.median(self.width)) * r ** (1 - length_share), px, MAX_BLADE)
         # the card's box, thinned by the fill factor: what the renderer's hashed cut-out
         # covers once a texel spans a pixel or more
         ia, iw = np.divmod(np.arange(na * nw), nw)
-        self.s = (ia + 0.5) / na - 0.5          # along the blade, from its middle
-        self.t = (iw + 0.5) / nw - 0.5          # across it
+        self.s = (ia + 0.5) / na - 0.5  # along the blade, from its middle
+        self.t = (iw + 0.5) / nw - 0.5  # across it
         mid = tree.leaf_pos + (0.5 * self.length)[:, None] * F[:, :, 1]
         view, _ = _axes()
         self.mu, self.mw = _project(mid)
         self.lu, self.lw = _project(F[:, :, 1])
         self.wu, self.ww = _project(F[:, :, 0])
-        self.seen = np.abs(view @ F[:, :, 2].T) * (self.length * self.width
-                                                   * fill_factor(tree.params.leaf_shape) / self.s.size)
+        self.seen = np.abs(view @ F[:, :, 2].T) * (
+            self.length * self.width * fill_factor(tree.params.leaf_shape) / self.s.size
+        )
 
     def area(self, grid: Grid, factor) -> np.ndarray:
         """(V, cells) area of the blades grown by `factor` in area about their middles."""
         f = np.broadcast_to(np.asarray(factor, dtype=np.float64), self.length.shape)
-        ls = (self.length * f ** self.share)[None, :, None] * self.s
+        ls = (self.length * f**self.share)[None, :, None] * self.s
         ws = (self.width * f ** (1.0 - self.share))[None, :, None] * self.t
         u = self.mu[:, :, None] + ls * self.lu[:, :, None] + ws * self.wu[:, :, None]
         w = self.mw[:, :, None] + ls * self.lw[:, :, None] + ws * self.ww[:, :, None]
@@ -183,8 +185,7 @@ def tree_area(tree: Tree, grid: Grid) -> np.ndarray:
     return area
 
 
-def solve_factor(cover_at, target: float, lo: float, hi: float, tol: float = 0.005,
-                 steps: int = 10) -> float:
+def solve_factor(cover_at, target: float, lo: float, hi: float, tol: float = 0.005, steps: int = 10) -> float:
     """The factor in [lo, hi] at which the increasing `cover_at` meets `target` (within `tol`
     of it): regula falsi on log(factor), Illinois variant, ending at the clamp if out of reach."""
     a, b = math.log(lo), math.log(hi)

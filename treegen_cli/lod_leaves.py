@@ -13,6 +13,7 @@ fifth of its cover. Here a LOD is cut from LOD0's own tree instead:
 
     lod = thin_leaves(prune_stems(tree, keep), n_keep=len // 4, area_factor=...)
 """
+
 from __future__ import annotations
 
 from dataclasses import replace
@@ -21,9 +22,9 @@ import numpy as np
 
 from .tree import Tree
 
-LENGTH_SHARE = 0.25       # of a kept leaf's growth in area (log), the share taken in length:
-                          # blades widen more than they lengthen, so the crown's reach stays
-GRID = 24                 # cells per side of the stratification grid over the leaves' bounds
+LENGTH_SHARE = 0.25  # of a kept leaf's growth in area (log), the share taken in length:
+# blades widen more than they lengthen, so the crown's reach stays
+GRID = 24  # cells per side of the stratification grid over the leaves' bounds
 
 
 def stem_closure(tree: Tree, keep: np.ndarray) -> np.ndarray:
@@ -32,7 +33,7 @@ def stem_closure(tree: Tree, keep: np.ndarray) -> np.ndarray:
     keep[tree.stem_level == 0] = True
     parent = tree.stem_parent
     has = parent >= 0
-    while True:                                # one pass per generation (levels, clone chains)
+    while True:  # one pass per generation (levels, clone chains)
         nxt = keep & np.where(has, keep[np.maximum(parent, 0)], True)
         if np.array_equal(nxt, keep):
             return keep
@@ -63,14 +64,20 @@ def prune_stems(tree: Tree, keep: np.ndarray) -> Tree:
         stem_level=tree.stem_level[s],
         stem_parent=np.where(parent >= 0, new_stem[np.maximum(parent, 0)], -1).astype(np.int32),
         stem_parent_node=np.where(pnode >= 0, new_node[np.maximum(pnode, 0)], -1).astype(np.int32),
-        stem_offset=tree.stem_offset[s], stem_length=tree.stem_length[s],
-        stem_radius=tree.stem_radius[s], stem_clone=tree.stem_clone[s],
+        stem_offset=tree.stem_offset[s],
+        stem_length=tree.stem_length[s],
+        stem_radius=tree.stem_radius[s],
+        stem_clone=tree.stem_clone[s],
         stem_node_start=new_node[tree.stem_node_start[s]].astype(np.int32),
         stem_node_count=tree.stem_node_count[s],
         node_stem=new_stem[tree.node_stem[node_keep]].astype(np.int32),
-        node_pos=tree.node_pos[node_keep], node_frame=tree.node_frame[node_keep],
-        node_radius=tree.node_radius[node_keep], node_z=tree.node_z[node_keep],
-        leaf_stem=new_stem[stem].astype(np.int32), leaf_node=new_node[node].astype(np.int32))
+        node_pos=tree.node_pos[node_keep],
+        node_frame=tree.node_frame[node_keep],
+        node_radius=tree.node_radius[node_keep],
+        node_z=tree.node_z[node_keep],
+        leaf_stem=new_stem[stem].astype(np.int32),
+        leaf_node=new_node[node].astype(np.int32),
+    )
 
 
 def stratified_pick(points: np.ndarray, n_keep: int, seed: int) -> np.ndarray:
@@ -86,7 +93,7 @@ def stratified_pick(points: np.ndarray, n_keep: int, seed: int) -> np.ndarray:
     lo, hi = points.min(0), points.max(0)
     cell = np.floor((points - lo) / np.maximum(hi - lo, 1e-12) * (GRID - 1e-9)).astype(np.int64)
     cid = (cell[:, 0] * GRID + cell[:, 1]) * GRID + cell[:, 2]
-    order = np.lexsort((rng.random(n), cid))              # by cell, random within a cell
+    order = np.lexsort((rng.random(n), cid))  # by cell, random within a cell
     sc = cid[order]
     start = np.flatnonzero(np.r_[True, sc[1:] != sc[:-1]])
     rank = np.arange(n) - np.repeat(start, np.diff(np.r_[start, n]))
@@ -108,9 +115,14 @@ def thin_leaves(tree: Tree, n_keep: int, area_factor, seed: int = 0) -> Tree:
     if tree.n_leaves == 0:
         return tree
     pick = stratified_pick(tree.leaf_pos, n_keep, tree.seed if seed == 0 else seed)
-    kept = replace(tree, leaf_stem=tree.leaf_stem[pick], leaf_node=tree.leaf_node[pick],
-                   leaf_pos=tree.leaf_pos[pick], leaf_frame=tree.leaf_frame[pick],
-                   leaf_size=tree.leaf_size[pick])
+    kept = replace(
+        tree,
+        leaf_stem=tree.leaf_stem[pick],
+        leaf_node=tree.leaf_node[pick],
+        leaf_pos=tree.leaf_pos[pick],
+        leaf_frame=tree.leaf_frame[pick],
+        leaf_size=tree.leaf_size[pick],
+    )
     return grow_leaves(kept, area_factor)
 
 
@@ -120,7 +132,7 @@ def grow_leaves(tree: Tree, area_factor) -> Tree:
     f = np.maximum(np.broadcast_to(np.asarray(area_factor, dtype=np.float64), (tree.n_leaves,)), 0.0)
     if not tree.n_leaves or np.all(f == 1.0):
         return tree
-    grow = np.stack([f ** LENGTH_SHARE, f ** (1.0 - LENGTH_SHARE)], axis=1)   # (length, width)
+    grow = np.stack([f**LENGTH_SHARE, f ** (1.0 - LENGTH_SHARE)], axis=1)  # (length, width)
     size, frame = tree.leaf_size, tree.leaf_frame
     # grown about the blade's middle, not its base: the leaf stays where it was
     pos = tree.leaf_pos - (0.5 * (grow[:, 0] - 1.0) * size[:, 0])[:, None] * frame[:, :, 1]

@@ -25,6 +25,7 @@ Textures depend on the species only, not on the tree seed: every tree of a speci
 prototypes, other --seed values) gets identical images, so writers can share them, and they
 are built once per process per species and size (an LRU cache).
 """
+
 from __future__ import annotations
 
 import io
@@ -41,23 +42,23 @@ from .mesh import FULL_CARD_CELL
 from .params import Params
 from .textures import atlas_rects, species_colors, species_textures
 
-TEXTURE_SIZES = (64, 2048)      # --texture-size range, powers of two (mip chains, old GPUs)
-ALPHA_CUTOFF = 0.5              # leaf alpha test: the atlas alpha is anti-aliased coverage
-LEAF_VARIANTS = 4               # leaves in the generated atlas (2 × 2 cells)
+TEXTURE_SIZES = (64, 2048)  # --texture-size range, powers of two (mip chains, old GPUs)
+ALPHA_CUTOFF = 0.5  # leaf alpha test: the atlas alpha is anti-aliased coverage
+LEAF_VARIANTS = 4  # leaves in the generated atlas (2 × 2 cells)
 BARK_ROUGHNESS = 0.92
 LEAF_ROUGHNESS = 0.7
 WHITE = (1.0, 1.0, 1.0, 1.0)
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-Cells = tuple[tuple[float, float, float, float], ...]   # (u0, v0, u1, v1) per leaf variant
+Cells = tuple[tuple[float, float, float, float], ...]  # (u0, v0, u1, v1) per leaf variant
 
 
 @dataclass(frozen=True)
 class MaterialOptions:
-    textures: bool = True               # False: colour-only materials (--no-textures)
-    texture_size: int = 512             # leaf atlas side in texels; bark maps are half of it
-                                        # (bark is noise that tiles around every stem anyway)
-    leaf_texture: Path | None = None    # an artist's PNG, used as is (one cell: the whole card)
-    bark_texture: Path | None = None    # an artist's PNG bark albedo, used as is, REPEAT
+    textures: bool = True  # False: colour-only materials (--no-textures)
+    texture_size: int = 512  # leaf atlas side in texels; bark maps are half of it
+    # (bark is noise that tiles around every stem anyway)
+    leaf_texture: Path | None = None  # an artist's PNG, used as is (one cell: the whole card)
+    bark_texture: Path | None = None  # an artist's PNG bark albedo, used as is, REPEAT
 
 
 MATERIAL_DEFAULTS = MaterialOptions()
@@ -98,8 +99,10 @@ def check_options(options: MaterialOptions) -> None:
     if not (isinstance(n, int) and lo <= n <= hi and n & (n - 1) == 0):
         raise TreegenError(f"--texture-size {n}: must be a power of two in [{lo}, {hi}]")
     if not options.textures:
-        for flag, path in (("--leaf-texture", options.leaf_texture),
-                           ("--bark-texture", options.bark_texture)):
+        for flag, path in (
+            ("--leaf-texture", options.leaf_texture),
+            ("--bark-texture", options.bark_texture),
+        ):
             if path is not None:
                 raise TreegenError(f"{flag} {path}: cannot be combined with --no-textures")
 
@@ -119,13 +122,12 @@ def read_png(path: Path, flag: str) -> bytes:
     except OSError as exc:
         raise TreegenError(f"{where}: cannot read: {exc.strerror or exc}") from None
     if not data.startswith(PNG_SIGNATURE):
-        raise TreegenError(f"{where}: not a PNG image (convert it to PNG first: glTF and USD "
-                           f"embed PNG)")
+        raise TreegenError(f"{where}: not a PNG image (convert it to PNG first: glTF and USD embed PNG)")
     try:
         with Image.open(io.BytesIO(data)) as img:
-            img.load()                              # decodes every row: truncation shows here
+            img.load()  # decodes every row: truncation shows here
             w, h = img.size
-    except Exception as exc:                        # PIL raises many types for broken files
+    except Exception as exc:  # PIL raises many types for broken files
         msg = " ".join(str(exc).split())[:120] or type(exc).__name__
         raise TreegenError(f"{where}: unreadable PNG ({msg})") from None
     if w < 1 or h < 1:
@@ -139,8 +141,9 @@ def _generated_pngs(params: Params, size: int) -> tuple[bytes, bytes, bytes]:
     many trees of few species. The seed is the species name's CRC (stable across processes),
     so species with the same colours and leaf shape still differ."""
     seed = zlib.crc32(params.name.encode("utf-8"))
-    pngs = species_textures(params, seed=seed, leaf_size=size, bark_size=size // 2,
-                            variants=LEAF_VARIANTS).pngs()
+    pngs = species_textures(
+        params, seed=seed, leaf_size=size, bark_size=size // 2, variants=LEAF_VARIANTS
+    ).pngs()
     return pngs["leaf"], pngs["bark"], pngs["bark_normal"]
 
 
@@ -155,37 +158,53 @@ def build_materials(params: Params, options: MaterialOptions = MATERIAL_DEFAULTS
     textures are made in the background (see Materials)."""
     check_options(options)
     leaf_rgb, bark_rgb = species_colors(params)
-    colour_leaf = Material("leaf", base_color=(*leaf_rgb, 1.0), roughness=LEAF_ROUGHNESS,
-                           double_sided=True)
+    colour_leaf = Material("leaf", base_color=(*leaf_rgb, 1.0), roughness=LEAF_ROUGHNESS, double_sided=True)
     if not options.textures:
         bark = Material("bark", base_color=(*bark_rgb, 1.0), roughness=BARK_ROUGHNESS)
         return Materials(FULL_CARD_CELL, lambda: [bark, colour_leaf])
     leaf_png = read_png(options.leaf_texture, "--leaf-texture") if options.leaf_texture else None
     bark_png = read_png(options.bark_texture, "--bark-texture") if options.bark_texture else None
     leafy = has_leaves(params)
-    cells: Cells = FULL_CARD_CELL       # an artist's image is one leaf; leafless: no atlas
+    cells: Cells = FULL_CARD_CELL  # an artist's image is one leaf; leafless: no atlas
     if leaf_png is None and leafy:
-        cells = tuple((float(u0), float(v0), float(u1), float(v1))
-                      for u0, v0, u1, v1 in atlas_rects(LEAF_VARIANTS, options.texture_size))
+        cells = tuple(
+            (float(u0), float(v0), float(u1), float(v1))
+            for u0, v0, u1, v1 in atlas_rects(LEAF_VARIANTS, options.texture_size)
+        )
 
     def make() -> list[Material]:
         png = leaf_png
         if bark_png is not None:
-            bark = Material("bark", base_color=WHITE, roughness=BARK_ROUGHNESS,
-                            base_texture=Texture("bark", bark_png, wrap="REPEAT"))
+            bark = Material(
+                "bark",
+                base_color=WHITE,
+                roughness=BARK_ROUGHNESS,
+                base_texture=Texture("bark", bark_png, wrap="REPEAT"),
+            )
         if bark_png is None or (leaf_png is None and leafy):
             atlas, albedo, normal = _generated_pngs(params, options.texture_size)
             if bark_png is None:
-                bark = Material("bark", base_color=WHITE, roughness=BARK_ROUGHNESS,
-                                base_texture=Texture("bark", albedo, wrap="REPEAT"),
-                                normal_texture=Texture("bark_normal", normal, wrap="REPEAT",
-                                                       srgb=False))
+                bark = Material(
+                    "bark",
+                    base_color=WHITE,
+                    roughness=BARK_ROUGHNESS,
+                    base_texture=Texture("bark", albedo, wrap="REPEAT"),
+                    normal_texture=Texture("bark_normal", normal, wrap="REPEAT", srgb=False),
+                )
             if leaf_png is None and leafy:
                 png = atlas
         if png is None:
             return [bark, colour_leaf]
-        return [bark, Material("leaf", base_color=WHITE, roughness=LEAF_ROUGHNESS,
-                               double_sided=True, alpha_cutoff=ALPHA_CUTOFF,
-                               base_texture=Texture("leaf", png, wrap="CLAMP"))]
+        return [
+            bark,
+            Material(
+                "leaf",
+                base_color=WHITE,
+                roughness=LEAF_ROUGHNESS,
+                double_sided=True,
+                alpha_cutoff=ALPHA_CUTOFF,
+                base_texture=Texture("leaf", png, wrap="CLAMP"),
+            ),
+        ]
 
     return Materials(cells, make)

@@ -31,6 +31,7 @@ UVs (origin bottom-left, as every Primitive's):
 Everything is ragged-array arithmetic over all stems at once (np.repeat / cumsum): no Python loop
 over stems, rings, leaves or vertices (only over the few trunk stems for their flare rings).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -45,35 +46,35 @@ from .leafshapes import OUTLINES, outline
 from .shapes import flare_factor, taper_radius
 from .textures import card_uvs
 
-FULL_CARD_CELL = ((0.0, 0.0, 1.0, 1.0),)   # one cell, the whole image: the card fills it
-BARK_MAX_TILES = 64.0                      # most texture tiles along one stem (see UVs above)
+FULL_CARD_CELL = ((0.0, 0.0, 1.0, 1.0),)  # one cell, the whole image: the card fills it
+BARK_MAX_TILES = 64.0  # most texture tiles along one stem (see UVs above)
 
 
 @dataclass(frozen=True)
 class MeshOptions:
     """Per-level tuples index by stem level; their last entry repeats for deeper levels."""
 
-    sides: tuple[int, ...] = (16, 8, 6, 4, 3)   # cross-section sides per level (>= 3)
+    sides: tuple[int, ...] = (16, 8, 6, 4, 3)  # cross-section sides per level (>= 3)
     rings_per_segment: tuple[int, ...] = (2, 1)  # rings per segment per level (>= 1): more rings
-                                                 # bend more smoothly under skinning
-    flare_rings: int = 4          # extra trunk rings in the flare zone (lowest 1/8 of the trunk)
-    thin_radius: float = 0.002    # metres: stems with a thinner base radius get thin_sides
+    # bend more smoothly under skinning
+    flare_rings: int = 4  # extra trunk rings in the flare zone (lowest 1/8 of the trunk)
+    thin_radius: float = 0.002  # metres: stems with a thinner base radius get thin_sides
     thin_sides: int = 3
-    cap_height: float = 0.5       # tip cap cone height / tip radius
-    point_radius: float = 1e-4    # metres: tips thinner than this end in a point, not a cap,
-    point_ratio: float = 0.02     # ... and so do tips thinner than this × the stem's base radius
-    leaves: bool = True           # emit the "leaves" primitive
-    leaf_geometry: str = "card"   # "card": a textured quad per leaf; "shape": the LeafShape
-                                  # outline as geometry (see leafshapes.py)
+    cap_height: float = 0.5  # tip cap cone height / tip radius
+    point_radius: float = 1e-4  # metres: tips thinner than this end in a point, not a cap,
+    point_ratio: float = 0.02  # ... and so do tips thinner than this × the stem's base radius
+    leaves: bool = True  # emit the "leaves" primitive
+    leaf_geometry: str = "card"  # "card": a textured quad per leaf; "shape": the LeafShape
+    # outline as geometry (see leafshapes.py)
     leaf_cells: tuple[tuple[float, float, float, float], ...] = FULL_CARD_CELL
-                                  # leaf atlas layout: per variant its card rectangle
-                                  # (u0, v0, u1, v1) in glTF UVs (top-left origin), as
-                                  # textures.LeafAtlas.rects; materials.Materials gives it
+    # leaf atlas layout: per variant its card rectangle
+    # (u0, v0, u1, v1) in glTF UVs (top-left origin), as
+    # textures.LeafAtlas.rects; materials.Materials gives it
 
 
 MESH_DEFAULTS = MeshOptions()
 LEAF_GEOMETRIES = ("card", "shape")
-CARD = OUTLINES[4]                # the full length × width rectangle, UVs 0..1
+CARD = OUTLINES[4]  # the full length × width rectangle, UVs 0..1
 
 
 def _per_level(values: tuple, level: np.ndarray) -> np.ndarray:
@@ -89,15 +90,13 @@ def stem_sides(tree, options: MeshOptions) -> np.ndarray:
     sides = _per_level(options.sides, level).astype(np.int64)
     if p.lobes > 0 and p.lobe_depth != 0:
         sides = np.where(level == 0, np.maximum(sides, 4 * p.lobes), sides)
-    return np.where(tree.stem_radius < options.thin_radius,
-                    np.minimum(sides, options.thin_sides), sides)
+    return np.where(tree.stem_radius < options.thin_radius, np.minimum(sides, options.thin_sides), sides)
 
 
 def pointed_tips(tree, options: MeshOptions) -> np.ndarray:
     """Bool (S,): stems whose tip is thin enough to close on an apex instead of a capped ring."""
     tip = tree.stem_node_start.astype(np.int64) + tree.stem_node_count - 1
-    return tree.node_radius[tip] < np.maximum(options.point_radius,
-                                              options.point_ratio * tree.stem_radius)
+    return tree.node_radius[tip] < np.maximum(options.point_radius, options.point_ratio * tree.stem_radius)
 
 
 def merge_influences(joints: np.ndarray, weights: np.ndarray):
@@ -128,8 +127,9 @@ def _check(options: MeshOptions) -> None:
     if min(options.rings_per_segment) < 1:
         raise TreegenError(f"rings per segment {options.rings_per_segment}: must be >= 1")
     if options.leaf_geometry not in LEAF_GEOMETRIES:
-        raise TreegenError(f"--leaf-geometry '{options.leaf_geometry}': expected one of "
-                           f"{', '.join(LEAF_GEOMETRIES)}")
+        raise TreegenError(
+            f"--leaf-geometry '{options.leaf_geometry}': expected one of {', '.join(LEAF_GEOMETRIES)}"
+        )
     cells = np.asarray(options.leaf_cells, dtype=np.float64)
     if cells.ndim != 2 or cells.shape[1] != 4 or not len(cells) or not np.all(np.isfinite(cells)):
         raise ValueError(f"leaf_cells must be (u0, v0, u1, v1) rectangles, got {options.leaf_cells!r}")
@@ -150,8 +150,8 @@ def _ring_params(tree, options: MeshOptions):
         # Flare grows as 100^(1 − 8Z): rings packed toward the base (quadratic spacing).
         Zs = (np.arange(1, options.flare_rings + 1) / (options.flare_rings + 1)) ** 2 / 8.0
         extra_s, extra_u = [], []
-        for s in trunks:                           # a handful of trunks at most
-            nz = tree.node_z[tree.stem_node_start[s]:tree.stem_node_start[s] + cnt[s]]
+        for s in trunks:  # a handful of trunks at most
+            nz = tree.node_z[tree.stem_node_start[s] : tree.stem_node_start[s] + cnt[s]]
             z = nz[0] + Zs * tree.stem_length[s]
             a = np.clip(np.searchsorted(nz, z, side="right") - 1, 0, seg[s] - 1)
             extra_u.append(a + (z - nz[a]) / np.maximum(nz[a + 1] - nz[a], 1e-12))
@@ -220,31 +220,33 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
     def fit(r_node, prof):
         return np.where(prof > 0, r_node / np.where(prof > 0, prof, 1.0), 1.0)
 
-    radius = (fit(tree.node_radius[a], profile(tree.node_z[a])) * (1 - t)
-              + fit(tree.node_radius[b], profile(tree.node_z[b])) * t) * profile(z)
+    radius = (
+        fit(tree.node_radius[a], profile(tree.node_z[a])) * (1 - t)
+        + fit(tree.node_radius[b], profile(tree.node_z[b])) * t
+    ) * profile(z)
 
     n_all = np.bincount(rs, minlength=S)
     first = np.cumsum(n_all) - n_all
     last = first + n_all - 1
     i = np.arange(rs.size)
     ip, inx = np.maximum(i - 1, first[rs]), np.minimum(i + 1, last[rs])
-    slope = (radius[inx] - radius[ip]) / np.maximum(z[inx] - z[ip], 1e-12)   # dr/ds
+    slope = (radius[inx] - radius[ip]) / np.maximum(z[inx] - z[ip], 1e-12)  # dr/ds
 
     # Pointed tips drop their zero-radius ring and close on the apex; others get a cone cap.
     tip = start + cnt - 1
     pointed = pointed_tips(tree, options)
     emit = ~(pointed[rs] & (i == last[rs]))
     rs, centre, frame, z, radius, slope, a, b, t = (
-        x[emit] for x in (rs, centre, frame, z, radius, slope, a, b, t))
+        x[emit] for x in (rs, centre, frame, z, radius, slope, a, b, t)
+    )
     trunk = level[rs] == 0
     R = rs.size
 
     # --- bark UVs per stem: tile height, seeded offsets, centring shift (module docstring) ---
     cap = np.where(pointed, 0.0, options.cap_height * tree.node_radius[tip])
     z_base = tree.node_z[start]
-    span = tree.node_z[tip] + cap - z_base                  # metres of bark, cap included
-    tile = np.maximum(2.0 * np.pi * np.maximum(tree.stem_radius, 1e-6),
-                      span / BARK_MAX_TILES)
+    span = tree.node_z[tip] + cap - z_base  # metres of bark, cap included
+    tile = np.maximum(2.0 * np.pi * np.maximum(tree.stem_radius, 1e-6), span / BARK_MAX_TILES)
     off_u, off_v = bark_offsets(tree).T
     v_shift = off_v - np.round(0.5 * (span / tile + off_v))
     v_ring = (z - z_base[rs]) / tile[rs] + v_shift[rs]
@@ -252,7 +254,7 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
     lobed = p.lobes > 0 and p.lobe_depth != 0
     sides = stem_sides(tree, options)
     sd = sides[rs]
-    nv = sd + 1                                         # seam column duplicated for UVs
+    nv = sd + 1  # seam column duplicated for UVs
     v0 = np.cumsum(nv) - nv
     Vr = int(nv.sum())
 
@@ -267,7 +269,7 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
         theta = 2.0 * np.pi * col / n
         c, s_ = np.cos(theta)[None, :, None], np.sin(theta)[None, :, None]
         fr = frame[g]
-        radial = c * fr[:, None, :, 0] + s_ * fr[:, None, :, 1]        # (Rg, n+1, 3)
+        radial = c * fr[:, None, :, 0] + s_ * fr[:, None, :, 1]  # (Rg, n+1, 3)
         if lobed:
             on = trunk[g][:, None]
             lf = np.where(on, 1.0 + p.lobe_depth * np.sin(p.lobes * theta), 1.0)
@@ -275,12 +277,14 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
         else:
             lf, dlf = np.ones((1, n + 1)), np.zeros((1, n + 1))
         dest = (v0[g][:, None] + col[None, :]).ravel()
-        pos_r[dest] = (centre[g][:, None, :]
-                       + (radius[g][:, None] * lf)[:, :, None] * radial).reshape(-1, 3)
+        pos_r[dest] = (centre[g][:, None, :] + (radius[g][:, None] * lf)[:, :, None] * radial).reshape(-1, 3)
         # Normal of c(s) + r(s)·f(θ)·radial(θ): f·radial − f'·tangent − f²·r'(s)·axis.
         tangent = -s_ * fr[:, None, :, 0] + c * fr[:, None, :, 1]
-        nr = lf[:, :, None] * radial - dlf[:, :, None] * tangent \
+        nr = (
+            lf[:, :, None] * radial
+            - dlf[:, :, None] * tangent
             - (lf * lf * slope[g][:, None])[:, :, None] * fr[:, None, :, 2]
+        )
         nr /= np.linalg.norm(nr, axis=2, keepdims=True)
         nrm_r[dest] = nr.reshape(-1, 3)
         # Tangent (for the bark normal map): +u runs with θ, made orthogonal to the normal.
@@ -292,8 +296,9 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
     rv = np.repeat(np.arange(R), nv)
 
     ring_J = np.concatenate([rig.node_joints[a], rig.node_joints[b]], axis=1)
-    ring_W = np.concatenate([rig.node_weights[a] * (1 - t)[:, None],
-                             rig.node_weights[b] * t[:, None]], axis=1)
+    ring_W = np.concatenate(
+        [rig.node_weights[a] * (1 - t)[:, None], rig.node_weights[b] * t[:, None]], axis=1
+    )
     ring_J, ring_W = merge_influences(ring_J, ring_W)
 
     # --- apex per stem (tip point, or a low cone over a blunt tip) ---
@@ -323,7 +328,8 @@ def _bark(tree, rig, options: MeshOptions) -> Primitive:
     tangents[:Vr, :3] = tan_r
     tangents[Vr:, :3] = F[tip][:, :, 0]
     return Primitive(
-        name="bark", material="bark",
+        name="bark",
+        material="bark",
         positions=np.concatenate([pos_r, pos_a]).astype(np.float32),
         normals=np.concatenate([nrm_r, axis]).astype(np.float32),
         tangents=tangents,
@@ -351,28 +357,30 @@ def _leaf_uvs(tree, o, cells) -> np.ndarray:
     """(L·P, 2) bottom-left UVs: each leaf's outline points in its seeded atlas cell. card_uvs
     maps the P points into each of the few cells once; leaves then index that small table."""
     K, P = len(cells), len(o.points)
-    table = card_uvs(np.tile(o.uvs, (K, 1)), np.repeat(np.arange(K), P),
-                     SimpleNamespace(rects=np.asarray(cells, dtype=np.float32)),  # reads .rects
-                     origin="bottom-left")
+    table = card_uvs(
+        np.tile(o.uvs, (K, 1)),
+        np.repeat(np.arange(K), P),
+        SimpleNamespace(rects=np.asarray(cells, dtype=np.float32)),  # reads .rects
+        origin="bottom-left",
+    )
     pick = leaf_variants(tree, K)[:, None] * P + np.arange(P)[None, :]
     return table[pick.ravel()]
 
 
-def _leaves(tree, rig, geometry: str = "card",
-            cells: tuple = FULL_CARD_CELL) -> Primitive:
+def _leaves(tree, rig, geometry: str = "card", cells: tuple = FULL_CARD_CELL) -> Primitive:
     """Stamp a card (or the LeafShape outline) on every leaf frame (float32 broadcasts)."""
-    o = outline(tree.params.leaf_shape)          # validates the code even for cards
+    o = outline(tree.params.leaf_shape)  # validates the code even for cards
     if geometry == "card":
         o = CARD
     L, P = tree.n_leaves, len(o.points)
     F = tree.leaf_frame.astype(np.float32)
     size = tree.leaf_size.astype(np.float32)
-    length, width = size[:, 0:1], size[:, 1:2]                    # (L, 1)
+    length, width = size[:, 0:1], size[:, 1:2]  # (L, 1)
     pts = o.points.astype(np.float32)
     base = tree.leaf_pos.astype(np.float32)
     # Blade axes scaled once, then one (L, 3) pass per outline point (P ≤ 16, not per leaf).
     across, along = F[:, :, 0] * width, F[:, :, 1] * length
-    up = F[:, :, 2] * width if np.any(pts[:, 2]) else None        # folded blades (palm)
+    up = F[:, :, 2] * width if np.any(pts[:, 2]) else None  # folded blades (palm)
     pos = np.empty((L, P, 3), dtype=np.float32)
     for k, (x, y, z) in enumerate(pts):
         out = pos[:, k]
@@ -383,26 +391,35 @@ def _leaves(tree, rig, geometry: str = "card",
         if z and up is not None:
             out += z * up
     nl = o.normals.astype(np.float32)
-    if np.all(nl == [0.0, 0.0, 1.0]):                             # flat blade: the frame normal
+    if np.all(nl == [0.0, 0.0, 1.0]):  # flat blade: the frame normal
         n = F[:, :, 2]
         n = n / np.sqrt(np.einsum("ij,ij->i", n, n))[:, None]
         nrm = np.repeat(n, P, axis=0)
     else:
-        nrm = (nl[None, :, 0, None] * F[:, None, :, 0] + nl[None, :, 1, None] * F[:, None, :, 1]
-               + nl[None, :, 2, None] * F[:, None, :, 2])
+        nrm = (
+            nl[None, :, 0, None] * F[:, None, :, 0]
+            + nl[None, :, 1, None] * F[:, None, :, 1]
+            + nl[None, :, 2, None] * F[:, None, :, 2]
+        )
         nrm = (nrm / np.linalg.norm(nrm, axis=2, keepdims=True)).reshape(-1, 3)
-    idx = o.triangles.astype(np.uint32)[None, :, :] \
+    idx = (
+        o.triangles.astype(np.uint32)[None, :, :]
         + (np.uint32(P) * np.arange(L, dtype=np.uint32))[:, None, None]
+    )
     joints = np.zeros((L * P, 4), dtype=np.uint16)
     joints[:, 0] = np.repeat(rig.leaf_joint, P)
     weights = np.zeros((L * P, 4), dtype=np.float32)
     weights[:, 0] = 1.0
     return Primitive(
-        name="leaves", material="leaf",
-        positions=pos.reshape(-1, 3), normals=nrm,
+        name="leaves",
+        material="leaf",
+        positions=pos.reshape(-1, 3),
+        normals=nrm,
         uvs=_leaf_uvs(tree, o, cells),
-        indices=idx.ravel(), joints=joints, weights=weights,
-        flat_normals=_faces_flat(o),     # frames are rotations: flat stays flat
+        indices=idx.ravel(),
+        joints=joints,
+        weights=weights,
+        flat_normals=_faces_flat(o),  # frames are rotations: flat stays flat
     )
 
 

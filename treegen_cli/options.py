@@ -3,6 +3,7 @@ DEFAULTS beside each stage), their types, and `resolve()`, which validates them 
 stage options. The CLI's `make`/`info`, `api.make` and `treegen batch` catalogues all come
 through here, so they share defaults, validation and error messages.
 """
+
 from __future__ import annotations
 
 import math
@@ -42,7 +43,7 @@ DEFAULTS: dict[str, object] = {
     "max_size": GENERATE_DEFAULTS.max_size,
     "max_joints": RIG_DEFAULTS.max_joints,
     "joint_levels": RIG_DEFAULTS.joint_levels,
-    "sides": None,                                  # None: MESH_DEFAULTS.sides (budgets may cut)
+    "sides": None,  # None: MESH_DEFAULTS.sides (budgets may cut)
     "leaf_geometry": MESH_DEFAULTS.leaf_geometry,
     "texture_size": MATERIAL_DEFAULTS.texture_size,
     "leaf_texture": MATERIAL_DEFAULTS.leaf_texture,
@@ -62,11 +63,11 @@ DEFAULTS: dict[str, object] = {
     "width": LOD_DEFAULTS.width,
     "error_px": LOD_DEFAULTS.error_px,
     "schedule": LOD_DEFAULTS.schedule,
-    "lod_triangles": _text(LOD_DEFAULTS.triangles[1:]),     # LOD0 is always 1.0
+    "lod_triangles": _text(LOD_DEFAULTS.triangles[1:]),  # LOD0 is always 1.0
     "no_lod": False,
     "lod_files": False,
     "impostor": True,
-    "up_axis": None,                                # None: the format's own (exchange/)
+    "up_axis": None,  # None: the format's own (exchange/)
     "compress": GLTF_DEFAULTS.compress,
     "max_vertices": LIMITS_DEFAULTS.max_vertices,
     "max_keys": LIMITS_DEFAULTS.max_keys,
@@ -80,23 +81,41 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "lod": ("lod_screen", "lod_distances", "fov", "width", "error_px", "schedule"),
     "wind": ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "stiffness"),
 }
-INTS = ("seed", "max_stems", "max_leaves", "max_joints", "width", "max_vertices", "max_keys",
-        "texture_size")
-OPTIONAL_INTS = ("triangles", "joints")      # None: no budget / --max-joints decides
+INTS = ("seed", "max_stems", "max_leaves", "max_joints", "width", "max_vertices", "max_keys", "texture_size")
+OPTIONAL_INTS = ("triangles", "joints")  # None: no budget / --max-joints decides
 # Options added after assets were first keyed: left out of identity hashes while unset, so a
 # catalogue built before they existed keeps its keys (batch/catalogue.py).
 UNSET_FREE = ("triangles", "joints", "profile")
 PATHS = ("leaf_texture", "bark_texture")
-FLOATS = ("max_size", "wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "fov", "error_px",
-          "stiffness")
+FLOATS = (
+    "max_size",
+    "wind_speed",
+    "wind_dir",
+    "gust",
+    "turbulence",
+    "duration",
+    "fps",
+    "fov",
+    "error_px",
+    "stiffness",
+)
 FLAGS = ("no_wind", "no_lod", "lod_files", "no_textures", "impostor")
-CHOICES = {"leaf_geometry": ("card", "shape"), "schedule": SCHEDULES,
-           "up_axis": (None, "y", "z"), "profile": (None, *PROFILE_NAMES),
-           "compress": COMPRESS}
+CHOICES = {
+    "leaf_geometry": ("card", "shape"),
+    "schedule": SCHEDULES,
+    "up_axis": (None, "y", "z"),
+    "profile": (None, *PROFILE_NAMES),
+    "compress": COMPRESS,
+}
 LISTS = ("joint_levels", "sides", "lod_screen", "lod_distances", "lod_triangles")
 # stage option fields (WindOptions, LodOptions) → the make option a user typed for them
-STAGE_FIELDS = {"speed": "wind_speed", "direction_deg": "wind_dir", "distances": "lod_distances",
-                "fov_deg": "fov", "screen": "lod_screen"}
+STAGE_FIELDS = {
+    "speed": "wind_speed",
+    "direction_deg": "wind_dir",
+    "distances": "lod_distances",
+    "fov_deg": "fov",
+    "screen": "lod_screen",
+}
 
 
 def cli_name(key: str) -> str:
@@ -128,16 +147,20 @@ def _number_list(key: str, value, kind: type, label: Callable[[str], str]) -> tu
                 example, what = "0.5,0.15,0.05", "fractions"
             if key == "lod_screen":
                 example, what = "0.5,0.25,0.1", "fractions"
-            raise TreegenError(f"{label(key)} '{value}': expected comma-separated {what}, "
-                               f"e.g. {example}") from None
+            raise TreegenError(
+                f"{label(key)} '{value}': expected comma-separated {what}, e.g. {example}"
+            ) from None
     elif isinstance(value, (list, tuple)) and all(
-            isinstance(v, (int, float)) and not isinstance(v, bool)
-            and (kind is float or float(v).is_integer()) for v in value):
+        isinstance(v, (int, float)) and not isinstance(v, bool) and (kind is float or float(v).is_integer())
+        for v in value
+    ):
         values = tuple(kind(v) for v in value)
     else:
-        raise TreegenError(f"{label(key)} {value!r}: expected a list of "
-                           f"{'numbers' if kind is float else 'whole numbers'} or text like "
-                           f"{'0,10,30' if kind is float else '0,1,2'}")
+        raise TreegenError(
+            f"{label(key)} {value!r}: expected a list of "
+            f"{'numbers' if kind is float else 'whole numbers'} or text like "
+            f"{'0,10,30' if kind is float else '0,1,2'}"
+        )
     if not values and kind is int:
         raise TreegenError(f"{label(key)} '{_text(value)}': give at least one value")
     return values
@@ -156,8 +179,7 @@ def _scalar(key: str, value, label: Callable[[str], str]):
             raise TreegenError(f"{label(key)} {value!r}: expected a whole number")
         return value
     if key in FLOATS:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                or not math.isfinite(value):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
             raise TreegenError(f"{label(key)} {value!r}: expected a finite number")
         return float(value)
     if key in PATHS:
@@ -166,13 +188,16 @@ def _scalar(key: str, value, label: Callable[[str], str]):
         return None if value is None else Path(value)
     if key in CHOICES:
         if value not in CHOICES[key]:
-            raise TreegenError(f"{label(key)} {value!r}: use one of {', '.join(str(c).lower() for c in CHOICES[key])}")
+            raise TreegenError(
+                f"{label(key)} {value!r}: use one of {', '.join(str(c).lower() for c in CHOICES[key])}"
+            )
         return value
     return value
 
 
-def resolve(options: dict, label: Callable[[str], str] = cli_name,
-            output: str | os.PathLike | None = None) -> Resolved:
+def resolve(
+    options: dict, label: Callable[[str], str] = cli_name, output: str | os.PathLike | None = None
+) -> Resolved:
     """Validate `make` options (missing ones take DEFAULTS) and build the stage options.
     For a static `output` format (.obj .ply) no wind or LODs are built: it cannot hold them.
 
@@ -193,18 +218,22 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
     if not v["no_lod"]:
         t = v["lod_triangles"]
         if not t or any(not (math.isfinite(x) and 0.0 < x <= 1.0) for x in t):
-            raise TreegenError(f"{label('lod_triangles')} '{_text(t)}': give LOD1, LOD2, … "
-                               "triangles as fractions of LOD0's, each in (0, 1], e.g. 0.5,0.15,0.05")
+            raise TreegenError(
+                f"{label('lod_triangles')} '{_text(t)}': give LOD1, LOD2, … "
+                "triangles as fractions of LOD0's, each in (0, 1], e.g. 0.5,0.15,0.05"
+            )
     if v["triangles"] is not None and not 1 <= v["triangles"] <= 100_000_000:
-        raise TreegenError(f"{label('triangles')} {v['triangles']}: the LOD0 triangle budget "
-                           "must be in [1, 100000000]")
+        raise TreegenError(
+            f"{label('triangles')} {v['triangles']}: the LOD0 triangle budget must be in [1, 100000000]"
+        )
     if v["max_joints"] < 1:
         raise TreegenError(f"{label('max_joints')} {v['max_joints']}: the joint budget must be at least 1")
     mesh = replace(MESH_DEFAULTS, leaf_geometry=v["leaf_geometry"])
     if v["sides"] is not None:
         if min(v["sides"]) < 3 or max(v["sides"]) > 64:
-            raise TreegenError(f"{label('sides')} '{_text(options.get('sides'))}': "
-                               "each value must be in [3, 64]")
+            raise TreegenError(
+                f"{label('sides')} '{_text(options.get('sides'))}': each value must be in [3, 64]"
+            )
         mesh = replace(mesh, sides=v["sides"])
     if not 0 <= v["seed"] < 2**63:
         raise TreegenError(f"{label('seed')} {v['seed']}: allowed range 0..{2**63 - 1}")
@@ -214,11 +243,14 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
     if not v["max_size"] > 0:
         raise TreegenError(f"{label('max_size')} {v['max_size']:g}: the bound must be > 0 metres")
     if v["joint_levels"] is not None and not all(0 <= n <= MAX_LEVELS for n in v["joint_levels"]):
-        raise TreegenError(f"{label('joint_levels')} '{_text(v['joint_levels'])}': each stem "
-                           f"level must be in 0..{MAX_LEVELS}")
+        raise TreegenError(
+            f"{label('joint_levels')} '{_text(v['joint_levels'])}': each stem "
+            f"level must be in 0..{MAX_LEVELS}"
+        )
     if v["max_joints"] > MAX_JOINTS:
-        raise TreegenError(f"{label('max_joints')} {v['max_joints']}: the joint budget must be "
-                           f"in 1..{MAX_JOINTS}")
+        raise TreegenError(
+            f"{label('max_joints')} {v['max_joints']}: the joint budget must be in 1..{MAX_JOINTS}"
+        )
     lo, hi = TEXTURE_SIZES
     n = v["texture_size"]
     if not (lo <= n <= hi and n & (n - 1) == 0):
@@ -226,36 +258,65 @@ def resolve(options: dict, label: Callable[[str], str] = cli_name,
     static = output is not None and Path(output).suffix.lower() in STATIC
     if output is not None:
         check_compress(output, v["compress"], label("compress"))
-    try:        # a stage's range check names its own field: say what the user typed instead
-        wind = None if v["no_wind"] or static else WindOptions(
-            speed=v["wind_speed"], direction_deg=v["wind_dir"], gust=v["gust"],
-            turbulence=v["turbulence"], duration=v["duration"], fps=v["fps"],
-            stiffness=v["stiffness"])
+    try:  # a stage's range check names its own field: say what the user typed instead
+        wind = (
+            None
+            if v["no_wind"] or static
+            else WindOptions(
+                speed=v["wind_speed"],
+                direction_deg=v["wind_dir"],
+                gust=v["gust"],
+                turbulence=v["turbulence"],
+                duration=v["duration"],
+                fps=v["fps"],
+                stiffness=v["stiffness"],
+            )
+        )
         # LodOptions checks --lod-screen/--lod-distances (also for a static format, which
         # then drops the LODs)
-        lod = None if v["no_lod"] else LodOptions(
-            distances=v["lod_distances"], screen=v["lod_screen"], fov_deg=v["fov"],
-            width=v["width"], error_px=v["error_px"], schedule=v["schedule"],
-            triangles=(1.0, *v["lod_triangles"]))
+        lod = (
+            None
+            if v["no_lod"]
+            else LodOptions(
+                distances=v["lod_distances"],
+                screen=v["lod_screen"],
+                fov_deg=v["fov"],
+                width=v["width"],
+                error_px=v["error_px"],
+                schedule=v["schedule"],
+                triangles=(1.0, *v["lod_triangles"]),
+            )
+        )
     except OptionError as e:
         raise TreegenError(e.worded(label(STAGE_FIELDS.get(e.field, e.field)))) from None
     lod = None if static else lod
 
     make_options = MakeOptions(
         impostor=IMPOSTOR_DEFAULTS if v["impostor"] and lod is not None else None,
-        generate=GenerateOptions(max_stems=v["max_stems"], max_leaves=v["max_leaves"],
-                                 max_size=v["max_size"]),
+        generate=GenerateOptions(
+            max_stems=v["max_stems"], max_leaves=v["max_leaves"], max_size=v["max_size"]
+        ),
         rig=RigOptions(max_joints=v["max_joints"], joint_levels=v["joint_levels"]),
-        mesh=mesh, wind=wind, lod=lod,
+        mesh=mesh,
+        wind=wind,
+        lod=lod,
         limits=Limits(max_vertices=v["max_vertices"], max_keys=v["max_keys"]),
-        materials=MaterialOptions(textures=not v["no_textures"], texture_size=v["texture_size"],
-                                  leaf_texture=v["leaf_texture"], bark_texture=v["bark_texture"]),
+        materials=MaterialOptions(
+            textures=not v["no_textures"],
+            texture_size=v["texture_size"],
+            leaf_texture=v["leaf_texture"],
+            bark_texture=v["bark_texture"],
+        ),
         budget=BudgetOptions(triangles=v["triangles"], fixed_sides=v["sides"] is not None),
-        gltf=GltfOptions(compress=v["compress"], pixel_size=pixel_size(1.0, lod)
-                         if lod is not None and v["compress"] == "meshopt" else 0.0))
+        gltf=GltfOptions(
+            compress=v["compress"],
+            pixel_size=pixel_size(1.0, lod) if lod is not None and v["compress"] == "meshopt" else 0.0,
+        ),
+    )
 
-    values = {k: list(x) if isinstance(x, tuple) else str(x) if isinstance(x, Path) else x
-              for k, x in v.items()}
+    values = {
+        k: list(x) if isinstance(x, tuple) else str(x) if isinstance(x, Path) else x for k, x in v.items()
+    }
     return Resolved(seed=v["seed"], options=make_options, values=values)
 
 
@@ -265,6 +326,8 @@ def _joints_alias(options: dict, label: Callable[[str], str]) -> dict:
     if joints is None:
         return options
     if options.get("max_joints", joints) != joints:
-        raise TreegenError(f"{label('joints')} {joints} and {label('max_joints')} "
-                           f"{options['max_joints']}: the same joint budget; give one of them")
+        raise TreegenError(
+            f"{label('joints')} {joints} and {label('max_joints')} "
+            f"{options['max_joints']}: the same joint budget; give one of them"
+        )
     return {**{k: x for k, x in options.items() if k != "joints"}, "max_joints": joints}

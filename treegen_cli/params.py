@@ -4,6 +4,7 @@ Field names follow the paper in snake_case (`down_angle`, `curve_res`, `shape_ra
 file keys are the Weber–Penn / Arbaro names (`1DownAngle`, `0CurveRes`, `Shape`).
 Defaults for absent keys follow Arbaro; the file's own values always win.
 """
+
 from __future__ import annotations
 
 import difflib
@@ -15,7 +16,7 @@ from xml.parsers import expat
 
 from .errors import TreegenError
 
-MAX_LEVELS = 9          # Levels may be 0..MAX_LEVELS
+MAX_LEVELS = 9  # Levels may be 0..MAX_LEVELS
 LEVEL_SLOTS = MAX_LEVELS + 1  # per-level values exist for levels 0..MAX_LEVELS
 
 
@@ -23,22 +24,22 @@ LEVEL_SLOTS = MAX_LEVELS + 1  # per-level values exist for levels 0..MAX_LEVELS
 class LevelParams:
     """Per-level values (the `n` prefix of the Weber–Penn names)."""
 
-    length: float = 0.5          # nLength
-    length_v: float = 0.0        # nLengthV
-    taper: float = 1.0           # nTaper, [0, 3)
-    seg_splits: float = 0.0      # nSegSplits (0BaseSplits is Params.base_splits)
-    split_angle: float = 0.0     # nSplitAngle, degrees
-    split_angle_v: float = 0.0   # nSplitAngleV
-    curve_res: int = 3           # nCurveRes, segments per stem
-    curve: float = 0.0           # nCurve, degrees
-    curve_back: float = 0.0      # nCurveBack
-    curve_v: float = 0.0         # nCurveV (negative: helix)
-    down_angle: float = 0.0      # nDownAngle, degrees
-    down_angle_v: float = 0.0    # nDownAngleV (negative: varies along the parent)
-    rotate: float = 0.0          # nRotate (negative: alternating / whorled)
-    rotate_v: float = 0.0        # nRotateV
-    branches: float = 0.0        # nBranches
-    branch_dist: float = 0.0     # nBranchDist (Arbaro; 0 = evenly spread)
+    length: float = 0.5  # nLength
+    length_v: float = 0.0  # nLengthV
+    taper: float = 1.0  # nTaper, [0, 3)
+    seg_splits: float = 0.0  # nSegSplits (0BaseSplits is Params.base_splits)
+    split_angle: float = 0.0  # nSplitAngle, degrees
+    split_angle_v: float = 0.0  # nSplitAngleV
+    curve_res: int = 3  # nCurveRes, segments per stem
+    curve: float = 0.0  # nCurve, degrees
+    curve_back: float = 0.0  # nCurveBack
+    curve_v: float = 0.0  # nCurveV (negative: helix)
+    down_angle: float = 0.0  # nDownAngle, degrees
+    down_angle_v: float = 0.0  # nDownAngleV (negative: varies along the parent)
+    rotate: float = 0.0  # nRotate (negative: alternating / whorled)
+    rotate_v: float = 0.0  # nRotateV
+    branches: float = 0.0  # nBranches
+    branch_dist: float = 0.0  # nBranchDist (Arbaro; 0 = evenly spread)
 
 
 @dataclass(frozen=True)
@@ -46,38 +47,38 @@ class Params:
     """One species, validated. `level[n]` holds the `n`-prefixed values for level n."""
 
     name: str = "tree"
-    shape: int = 0               # Shape, 0..8
-    base_size: float = 0.25      # BaseSize, fraction of the trunk without branches
-    scale: float = 10.0          # Scale, metres
-    scale_v: float = 0.0         # ScaleV
-    levels: int = 3              # Levels: stem levels (trunk = 0); leaves grow on the last
-    ratio: float = 0.05          # Ratio: trunk radius / length
-    ratio_power: float = 1.0     # RatioPower
-    lobes: int = 0               # Lobes
-    lobe_depth: float = 0.0      # LobeDepth
-    flare: float = 0.5           # Flare
-    scale0: float = 1.0          # 0Scale: trunk radius scale
-    scale0_v: float = 0.0        # 0ScaleV
-    base_splits: int = 0         # 0BaseSplits
-    leaves: float = 0.0          # Leaves per stem (negative: a fan at the stem tip)
-    leaf_shape: int = 0          # LeafShape (see leafshapes.py)
-    leaf_scale: float = 0.2      # LeafScale, metres
-    leaf_scale_x: float = 0.5    # LeafScaleX, width / length
-    leaf_quality: float = 1.0    # LeafQuality, (0, 1]
-    leaf_bend: float = 0.3       # LeafBend (Arbaro), 0..1
-    leaf_distrib: int = 4        # LeafDistrib (Arbaro): shape used for leaf counts along a stem
-    leaf_stem_len: float = 0.5   # LeafStemLen (Arbaro): petiole length / leaf length
-    attraction_up: float = 0.0   # AttractionUp
-    prune_ratio: float = 0.0     # PruneRatio, 0..1
-    prune_width: float = 0.5     # PruneWidth
+    shape: int = 0  # Shape, 0..8
+    base_size: float = 0.25  # BaseSize, fraction of the trunk without branches
+    scale: float = 10.0  # Scale, metres
+    scale_v: float = 0.0  # ScaleV
+    levels: int = 3  # Levels: stem levels (trunk = 0); leaves grow on the last
+    ratio: float = 0.05  # Ratio: trunk radius / length
+    ratio_power: float = 1.0  # RatioPower
+    lobes: int = 0  # Lobes
+    lobe_depth: float = 0.0  # LobeDepth
+    flare: float = 0.5  # Flare
+    scale0: float = 1.0  # 0Scale: trunk radius scale
+    scale0_v: float = 0.0  # 0ScaleV
+    base_splits: int = 0  # 0BaseSplits
+    leaves: float = 0.0  # Leaves per stem (negative: a fan at the stem tip)
+    leaf_shape: int = 0  # LeafShape (see leafshapes.py)
+    leaf_scale: float = 0.2  # LeafScale, metres
+    leaf_scale_x: float = 0.5  # LeafScaleX, width / length
+    leaf_quality: float = 1.0  # LeafQuality, (0, 1]
+    leaf_bend: float = 0.3  # LeafBend (Arbaro), 0..1
+    leaf_distrib: int = 4  # LeafDistrib (Arbaro): shape used for leaf counts along a stem
+    leaf_stem_len: float = 0.5  # LeafStemLen (Arbaro): petiole length / leaf length
+    attraction_up: float = 0.0  # AttractionUp
+    prune_ratio: float = 0.0  # PruneRatio, 0..1
+    prune_width: float = 0.5  # PruneWidth
     prune_width_peak: float = 0.5  # PruneWidthPeak
-    prune_power_low: float = 0.5   # PrunePowerLow
+    prune_power_low: float = 0.5  # PrunePowerLow
     prune_power_high: float = 0.5  # PrunePowerHigh
-    smooth: float = 0.5          # Smooth (Arbaro mesh smoothness), 0..1
+    smooth: float = 0.5  # Smooth (Arbaro mesh smoothness), 0..1
     leaf_color: tuple[float, float, float] | None = None  # LeafColor rrggbb (sRGB in the file),
     bark_color: tuple[float, float, float] | None = None  # BarkColor; stored as linear RGB like
-                                                          # Material.base_color; None: the
-                                                          # species default (textures.species_colors)
+    # Material.base_color; None: the
+    # species default (textures.species_colors)
     level: tuple[LevelParams, ...] = field(
         default_factory=lambda: tuple(LevelParams() for _ in range(LEVEL_SLOTS))
     )
@@ -108,16 +109,34 @@ INF = math.inf
 # | 6    | palm                      | two half-discs folded along the midrib (palm fronds)   |
 # | 7    | star                      | star-shaped (palmate) outline                          |
 LEAF_SHAPES: dict[str, int] = {
-    "disc": 0, "oval": 0, "ellipse": 0,
-    "disc1": 1, "disc2": 2, "disc3": 3,
-    "disc4": 0, "disc5": 0, "disc6": 0, "disc7": 0, "disc8": 0, "disc9": 0,
-    "square": 4, "rectangle": 4,
+    "disc": 0,
+    "oval": 0,
+    "ellipse": 0,
+    "disc1": 1,
+    "disc2": 2,
+    "disc3": 3,
+    "disc4": 0,
+    "disc5": 0,
+    "disc6": 0,
+    "disc7": 0,
+    "disc8": 0,
+    "disc9": 0,
+    "square": 4,
+    "rectangle": 4,
     "sphere": 5,
     "palm": 6,
     "star": 7,
 }
-LEAF_SHAPE_NAMES: dict[int, str] = {0: "disc", 1: "disc1", 2: "disc2", 3: "disc3",
-                                    4: "square", 5: "sphere", 6: "palm", 7: "star"}
+LEAF_SHAPE_NAMES: dict[int, str] = {
+    0: "disc",
+    1: "disc1",
+    2: "disc2",
+    3: "disc3",
+    4: "square",
+    5: "sphere",
+    6: "palm",
+    7: "star",
+}
 MAX_LEAF_SHAPE = 7
 
 
@@ -125,14 +144,14 @@ MAX_LEAF_SHAPE = 7
 class KeySpec:
     """One file key: where it goes in Params, its type and its legal range."""
 
-    key: str            # canonical spelling; per-level keys without the digit ("DownAngle")
-    field: str          # Params / LevelParams attribute
-    kind: type          # int or float
+    key: str  # canonical spelling; per-level keys without the digit ("DownAngle")
+    field: str  # Params / LevelParams attribute
+    kind: type  # int or float
     lo: float = -INF
     hi: float = INF
     lo_open: bool = False
     hi_open: bool = False
-    per_level: bool = False     # kind str: a colour (6 hex digits, see _color)
+    per_level: bool = False  # kind str: a colour (6 hex digits, see _color)
 
     def contains(self, v: float) -> bool:
         if v < self.lo or (self.lo_open and v == self.lo):
@@ -145,10 +164,12 @@ class KeySpec:
         """The legal range in interval notation, e.g. '[-180, 180]', '(0, 1]', '[0, inf)'."""
         if self.kind is str:
             return COLOR_FORMAT
+
         def num(x: float) -> str:
             if math.isinf(x):
                 return "inf" if x > 0 else "-inf"
             return str(int(x)) if float(x).is_integer() else repr(float(x))
+
         left = "(" if self.lo_open or math.isinf(self.lo) else "["
         right = ")" if self.hi_open or math.isinf(self.hi) else "]"
         return f"{left}{num(self.lo)}, {num(self.hi)}{right}"
@@ -184,15 +205,15 @@ TOP_KEYS: tuple[KeySpec, ...] = (
     _k("0Scale", "scale0", float, 0, INF, lo_open=True),
     _k("0ScaleV", "scale0_v", float, 0, INF),
     _k("0BaseSplits", "base_splits", int, 0, 1000),
-    _k("Leaves", "leaves", float),                    # negative: a fan at the stem tip
+    _k("Leaves", "leaves", float),  # negative: a fan at the stem tip
     _k("LeafShape", "leaf_shape", int, 0, MAX_LEAF_SHAPE),
     _k("LeafScale", "leaf_scale", float, 0, INF, lo_open=True),
     _k("LeafScaleX", "leaf_scale_x", float, 0, INF, lo_open=True),
     _k("LeafQuality", "leaf_quality", float, 0, 1, lo_open=True),
     _k("LeafBend", "leaf_bend", float, 0, 1),
     _k("LeafDistrib", "leaf_distrib", int, 0, 8),
-    _k("LeafStemLen", "leaf_stem_len", float),         # Arbaro allows negative
-    _k("AttractionUp", "attraction_up", float),        # negative: droop (willow)
+    _k("LeafStemLen", "leaf_stem_len", float),  # Arbaro allows negative
+    _k("AttractionUp", "attraction_up", float),  # negative: droop (willow)
     _k("PruneRatio", "prune_ratio", float, 0, 1),
     _k("PruneWidth", "prune_width", float, 0, INF),
     _k("PruneWidthPeak", "prune_width_peak", float, 0, 1),
@@ -213,10 +234,10 @@ LEVEL_KEYS: tuple[KeySpec, ...] = (
     _n("CurveRes", "curve_res", int, 1, 100),
     _n("Curve", "curve", float),
     _n("CurveBack", "curve_back", float),
-    _n("CurveV", "curve_v", float, -90, INF),          # negative: helix
+    _n("CurveV", "curve_v", float, -90, INF),  # negative: helix
     _n("DownAngle", "down_angle", float, -180, 180),
     _n("DownAngleV", "down_angle_v", float, -180, 180),  # negative: varies along the parent
-    _n("Rotate", "rotate", float, -360, 360),          # negative: alternating / whorled
+    _n("Rotate", "rotate", float, -360, 360),  # negative: alternating / whorled
     _n("RotateV", "rotate_v", float, -360, 360),
     _n("Branches", "branches", float, 0, INF),
     _n("BranchDist", "branch_dist", float, 0, 1),
@@ -250,7 +271,7 @@ def srgb_hex_to_linear(text: str) -> tuple[float, float, float]:
         raise ValueError(f"{text!r} is not {COLOR_FORMAT}")
     out = []
     for i in range(0, 6, 2):
-        x = int(m.group(1)[i:i + 2], 16) / 255.0
+        x = int(m.group(1)[i : i + 2], 16) / 255.0
         out.append(x / 12.92 if x <= 0.04045 else ((x + 0.055) / 1.055) ** 2.4)
     return tuple(out)
 
@@ -264,6 +285,7 @@ def linear_to_srgb_hex(rgb) -> str:
         out += f"{int(round(x * 255.0)):02x}"
     return out
 
+
 # Arbaro's per-level defaults for levels 0..3 (its LevelParams); level n > 3 repeats level 3,
 # as Arbaro uses level 3's values for every deeper level.
 _ARBARO_LEVEL_DEFAULTS: dict[str, tuple] = {
@@ -274,9 +296,18 @@ _ARBARO_LEVEL_DEFAULTS: dict[str, tuple] = {
     "branches": (1.0, 10.0, 5.0, 5.0),
     "branch_dist": (0.0, 1.0, 1.0, 1.0),
 }
-_ARBARO_LEVEL_CONST = {"length_v": 0.0, "taper": 1.0, "seg_splits": 0.0, "split_angle": 0.0,
-                       "split_angle_v": 0.0, "curve": 0.0, "curve_back": 0.0, "curve_v": 0.0,
-                       "down_angle_v": 0.0, "rotate_v": 0.0}
+_ARBARO_LEVEL_CONST = {
+    "length_v": 0.0,
+    "taper": 1.0,
+    "seg_splits": 0.0,
+    "split_angle": 0.0,
+    "split_angle_v": 0.0,
+    "curve": 0.0,
+    "curve_back": 0.0,
+    "curve_v": 0.0,
+    "down_angle_v": 0.0,
+    "rotate_v": 0.0,
+}
 
 
 def arbaro_level_defaults(n: int) -> LevelParams:
@@ -291,6 +322,7 @@ def default_params(name: str = "tree") -> Params:
 
 
 # ------------------------------------------------------------------------------ key lookup
+
 
 def _all_key_names() -> list[str]:
     names = [s.key for s in TOP_KEYS] + list(NAME_KEYS)
@@ -336,11 +368,12 @@ def _lookup(key: str) -> tuple[KeySpec, int | None, str] | None:
 
 # ------------------------------------------------------------------------------ assembling
 
+
 @dataclass
 class _Entry:
-    key: str            # as written in the file
-    value: str          # as written in the file
-    line: int | None    # 1-based, None if unknown
+    key: str  # as written in the file
+    value: str  # as written in the file
+    line: int | None  # 1-based, None if unknown
 
 
 def _printable(text: str) -> str:
@@ -373,8 +406,11 @@ class _Builder:
         if self.name is not None:
             raise self.fail(line, f"duplicate key {key} (first set on line {self.name_line})")
         if not value or not value.isprintable() or "#" in value:
-            raise self.fail(line, f"{key} = {_clip(value)!r} must be a non-empty one-line name "
-                                  f"without '#' (the text format's comment sign)")
+            raise self.fail(
+                line,
+                f"{key} = {_clip(value)!r} must be a non-empty one-line name "
+                f"without '#' (the text format's comment sign)",
+            )
         self.name, self.name_line = value, line
 
     def add(self, key: str, value: str, line: int | None) -> None:
@@ -390,8 +426,7 @@ class _Builder:
             try:
                 return srgb_hex_to_linear(raw)
             except ValueError:
-                raise self.fail(e.line, f"{canon} = {shown!r} is not a colour "
-                                        f"({COLOR_FORMAT})") from None
+                raise self.fail(e.line, f"{canon} = {shown!r} is not a colour ({COLOR_FORMAT})") from None
         if spec.field == "leaf_shape" and raw.lower() in LEAF_SHAPES:
             return LEAF_SHAPES[raw.lower()]
         rng = spec.range_text()
@@ -400,10 +435,10 @@ class _Builder:
         except ValueError:
             if spec.field == "leaf_shape":
                 allowed = ", ".join(sorted(set(LEAF_SHAPES) - {f"disc{i}" for i in range(4, 10)}))
-                raise self.fail(e.line, f"{canon} = {shown!r} is not a leaf shape "
-                                        f"(a code in {rng} or one of: {allowed})") from None
-            raise self.fail(e.line, f"{canon} = {shown!r} is not a number "
-                                    f"(allowed range {rng})") from None
+                raise self.fail(
+                    e.line, f"{canon} = {shown!r} is not a leaf shape (a code in {rng} or one of: {allowed})"
+                ) from None
+            raise self.fail(e.line, f"{canon} = {shown!r} is not a number (allowed range {rng})") from None
         if not math.isfinite(v):
             raise self.fail(e.line, f"{canon} = {shown} is not a finite number (allowed range {rng})")
         if not spec.contains(v):
@@ -434,8 +469,11 @@ class _Builder:
                 raise self.fail(e.line, f"duplicate key {e.key}: {canon} already set on {at}{was}")
             seen[ident] = e
             if n is not None and n > MAX_LEVELS:
-                raise self.fail(e.line, f"{canon}: level {n} is beyond the last level "
-                                        f"{MAX_LEVELS} (Levels is at most {MAX_LEVELS})")
+                raise self.fail(
+                    e.line,
+                    f"{canon}: level {n} is beyond the last level "
+                    f"{MAX_LEVELS} (Levels is at most {MAX_LEVELS})",
+                )
             value = self._number(spec, canon, e)
             if n is None:
                 top[spec.field] = value
@@ -445,9 +483,12 @@ class _Builder:
         levels = int(top.get("levels", Params.levels))
         for n, canon, e in level_refs:
             if n > levels:
-                raise self.fail(e.line, f"{canon}: level {n} is beyond Levels = {levels} "
-                                        f"(level keys may use 0..{levels}; level {levels} "
-                                        f"holds the leaves' DownAngle/Rotate)")
+                raise self.fail(
+                    e.line,
+                    f"{canon}: level {n} is beyond Levels = {levels} "
+                    f"(level keys may use 0..{levels}; level {levels} "
+                    f"holds the leaves' DownAngle/Rotate)",
+                )
         slots: list[LevelParams] = []
         for n in range(LEVEL_SLOTS):
             base = arbaro_level_defaults(n) if n <= 3 else slots[n - 1]
@@ -463,6 +504,7 @@ def _default_name(source: str) -> str:
 
 
 # ------------------------------------------------------------------------------ text format
+
 
 def parse_params_text(text: str, source: str = "<string>") -> Params:
     """Parse the plain text species format: `Key value` or `Key = value`, `#` comments."""
@@ -490,17 +532,19 @@ def parse_params_text(text: str, source: str = "<string>") -> Params:
             raise b.fail(lineno, f"unknown key {_clip(key)}{_suggest(key)}")
         if not value:
             if found[0].kind is str:
-                raise b.fail(lineno, f"{key} has no value ({COLOR_FORMAT}; write it without "
-                                     f"'#', which starts a comment)")
+                raise b.fail(
+                    lineno,
+                    f"{key} has no value ({COLOR_FORMAT}; write it without '#', which starts a comment)",
+                )
             raise b.fail(lineno, f"{key} has no value (allowed range {found[0].range_text()})")
         if len(value.split()) > 1:
-            raise b.fail(lineno, f"{key} = {_clip(value)!r}: expected one value, "
-                                 f"got {len(value.split())}")
+            raise b.fail(lineno, f"{key} = {_clip(value)!r}: expected one value, got {len(value.split())}")
         b.add(key, value, lineno)
     return b.build(_default_name(source))
 
 
 # ------------------------------------------------------------------------------ Arbaro XML
+
 
 class _Refused(Exception):
     """Raised inside expat callbacks; turned into a TreegenError by the caller."""
@@ -561,11 +605,12 @@ def parse_params_xml(data: str | bytes, source: str = "<string>") -> Params:
     except _Refused as exc:
         raise TreegenError(str(exc)) from None
     except expat.ExpatError as exc:
-        raise TreegenError(f"{source}:{exc.lineno}:{exc.offset + 1}: malformed XML: "
-                           f"{expat.ErrorString(exc.code)}") from None
+        raise TreegenError(
+            f"{source}:{exc.lineno}:{exc.offset + 1}: malformed XML: {expat.ErrorString(exc.code)}"
+        ) from None
     except TreegenError:
         raise
-    except (ValueError, UnicodeError, LookupError) as exc:   # e.g. unknown encoding declaration
+    except (ValueError, UnicodeError, LookupError) as exc:  # e.g. unknown encoding declaration
         raise TreegenError(f"{source}: unreadable XML: {_printable(_clip(str(exc), 200))}") from None
     if species_count == 0:
         raise b.fail(None, "no <species> element: not an Arbaro species file")
@@ -573,6 +618,7 @@ def parse_params_xml(data: str | bytes, source: str = "<string>") -> Params:
 
 
 # ------------------------------------------------------------------------------ dispatch
+
 
 def _looks_xml(text: str) -> bool:
     return text.lstrip("\ufeff \t\r\n").startswith("<")
@@ -587,10 +633,12 @@ def parse_params_bytes(data: bytes, source: str = "<string>") -> Params:
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         if data.lstrip().startswith(b"<?xml") and b"encoding" in data[:200]:
-            return parse_params_xml(data, source)   # declared non-UTF-8 encoding: expat decodes
+            return parse_params_xml(data, source)  # declared non-UTF-8 encoding: expat decodes
         line = data.count(b"\n", 0, exc.start) + 1
-        raise TreegenError(f"{source}:{line}: not UTF-8 text (byte 0x{data[exc.start]:02x} "
-                           f"at offset {exc.start}): binary file?") from None
+        raise TreegenError(
+            f"{source}:{line}: not UTF-8 text (byte 0x{data[exc.start]:02x} "
+            f"at offset {exc.start}): binary file?"
+        ) from None
     if not text.strip():
         raise TreegenError(f"{source}:1: empty species file: no parameters found")
     if _looks_xml(text):
@@ -615,6 +663,7 @@ def load_params(path: str | Path) -> Params:
 
 # ------------------------------------------------------------------------------ output
 
+
 def _fmt(v: int | float | str) -> str:
     if isinstance(v, str):
         return v
@@ -622,7 +671,7 @@ def _fmt(v: int | float | str) -> str:
         raise TypeError("bool is not a parameter value")
     if isinstance(v, int):
         return str(v)
-    return repr(float(v))   # shortest text that reads back to the same float
+    return repr(float(v))  # shortest text that reads back to the same float
 
 
 def params_dict(params: Params) -> dict[str, object]:
@@ -651,7 +700,7 @@ def format_params_text(params: Params, header: str | None = None) -> str:
     width = max(len(k) for k in d)
     current = None
     for key, value in d.items():
-        if value is None:                  # an unset colour: the species default
+        if value is None:  # an unset colour: the species default
             continue
         group = key[0] if key[0].isdigit() and key not in ("0Scale", "0ScaleV", "0BaseSplits") else ""
         if group != current:

@@ -3,6 +3,7 @@
 Each stage is a function with an options dataclass whose defaults live beside it; this module
 only composes them, so a newcomer can read `build_asset` top to bottom and see every step.
 """
+
 from __future__ import annotations
 
 import time
@@ -27,6 +28,7 @@ from .rig import RIG_DEFAULTS, RigOptions, build_rig
 from .tree import Tree, tree_height
 from .wind import DEFAULTS as WIND_DEFAULTS, WindOptions, bake_wind
 
+
 @dataclass(frozen=True)
 class MakeOptions:
     """Options of every stage; `wind=None` writes a static (but skinned) tree."""
@@ -35,13 +37,13 @@ class MakeOptions:
     rig: RigOptions = RIG_DEFAULTS
     mesh: MeshOptions = MESH_DEFAULTS
     wind: WindOptions | None = WIND_DEFAULTS
-    lod: LodOptions | None = LOD_DEFAULTS   # None: one LOD with the dense clip
-    limits: Limits = LIMITS_DEFAULTS        # refuse oversized meshes / clips before building
-    materials: MaterialOptions = MATERIAL_DEFAULTS   # textures (generated or an artist's) or colours
-    budget: BudgetOptions = BUDGET_DEFAULTS # LOD0 triangle budget, met before the tree grows
-    impostor: ImpostorOptions | None = None # an impostor after the LODs (needs `lod`; `treegen
-                                            # make` turns it on: api.resolve); None: none
-    gltf: GltfOptions = GLTF_DEFAULTS       # --compress: how the glTF writer encodes (not the build)
+    lod: LodOptions | None = LOD_DEFAULTS  # None: one LOD with the dense clip
+    limits: Limits = LIMITS_DEFAULTS  # refuse oversized meshes / clips before building
+    materials: MaterialOptions = MATERIAL_DEFAULTS  # textures (generated or an artist's) or colours
+    budget: BudgetOptions = BUDGET_DEFAULTS  # LOD0 triangle budget, met before the tree grows
+    impostor: ImpostorOptions | None = None  # an impostor after the LODs (needs `lod`; `treegen
+    # make` turns it on: api.resolve); None: none
+    gltf: GltfOptions = GLTF_DEFAULTS  # --compress: how the glTF writer encodes (not the build)
 
 
 @dataclass
@@ -78,8 +80,7 @@ def build_lod(tree: Tree, options: MakeOptions, seed: int, timings: Timings) -> 
     return Lod(primitives=primitives, skeleton=rig.skeleton, clips=clips)
 
 
-def build_lods(params: Params, tree: Tree, options: MakeOptions, seed: int,
-               timings: Timings) -> list[Lod]:
+def build_lods(params: Params, tree: Tree, options: MakeOptions, seed: int, timings: Timings) -> list[Lod]:
     """One coarser tree per LOD, each with its own rig, mesh, dense wind (same wind
     options and seed, so the motion matches) and a clip decimated for its distance
     (clip_name(k)); distances follow the tree's height on screen (lod.switch_distances).
@@ -88,16 +89,19 @@ def build_lods(params: Params, tree: Tree, options: MakeOptions, seed: int,
     lo = options.lod
     height = tree_height(tree)
     distances = switch_distances(height, lo)
-    at = replace(lo, distances=tuple(distances))     # lod_tree sizes stems by the switch distance
+    at = replace(lo, distances=tuple(distances))  # lod_tree sizes stems by the switch distance
     lods: list[Lod] = []
     for k, distance in enumerate(distances):
         t, rig, mesh = tree, options.rig, options.mesh
         if k > 0:
-            t, rig, mesh = timings.run("generate", lod_tree, tree, k, lods[0], lods[-1], options.rig,
-                                       options.mesh, at)
+            t, rig, mesh = timings.run(
+                "generate", lod_tree, tree, k, lods[0], lods[-1], options.rig, options.mesh, at
+            )
         lod = build_lod(t, replace(options, rig=rig, mesh=mesh), seed, timings)
-        clips = [timings.run("lod", decimate, lod.skeleton, lod.primitives, c, distance, lo,
-                             clip_name(k))[0] for c in lod.clips]
+        clips = [
+            timings.run("lod", decimate, lod.skeleton, lod.primitives, c, distance, lo, clip_name(k))[0]
+            for c in lod.clips
+        ]
         # MSFT_screencoverage: LOD k is shown while the tree covers more than the coverage at
         # which LOD k+1 takes over; the last LOD is never culled.
         coverage = screen_coverage(height, distances[k + 1], lo) if k + 1 < len(distances) else 0.0
@@ -105,20 +109,27 @@ def build_lods(params: Params, tree: Tree, options: MakeOptions, seed: int,
     return lods
 
 
-def add_impostor(lods: list[Lod], materials: list, tree: Tree,
-                 options: MakeOptions) -> tuple[list[Lod], list]:
+def add_impostor(
+    lods: list[Lod], materials: list, tree: Tree, options: MakeOptions
+) -> tuple[list[Lod], list]:
     """The impostor appended after the last geometric LOD (rendered from it), which now hands
     over at the impostor's distance."""
     lo, height = options.lod, tree_height(tree)
     distance = switch_distance(height, lods[-1].distance, lo, options.impostor)
-    imp, material = build_impostor(lods[0], lods[-1], materials, lo, distance,
-                                   clip_name(len(lods)), options.impostor)
+    imp, material = build_impostor(
+        lods[0], lods[-1], materials, lo, distance, clip_name(len(lods)), options.impostor
+    )
     last = replace(lods[-1], screen_coverage=screen_coverage(height, distance, lo))
     return [*lods[:-1], last, imp], [*materials, material]
 
 
-def build_asset(params: Params, seed: int = 0, options: MakeOptions = MakeOptions(),
-                timings: Timings | None = None, tree: Tree | None = None) -> tuple[Asset, Tree]:
+def build_asset(
+    params: Params,
+    seed: int = 0,
+    options: MakeOptions = MakeOptions(),
+    timings: Timings | None = None,
+    tree: Tree | None = None,
+) -> tuple[Asset, Tree]:
     """Grow, rig, mesh and animate `params` with `seed`; returns the asset and its tree.
     `tree`: the tree `generate(params, seed, options.generate)` already grew, to reuse."""
     timings = timings if timings is not None else Timings()
@@ -126,20 +137,27 @@ def build_asset(params: Params, seed: int = 0, options: MakeOptions = MakeOption
     # --leaf-texture fails before anything is grown; the textures are drawn meanwhile.
     mats = timings.run("materials", build_materials, params, options.materials)
     options = replace(options, mesh=replace(options.mesh, leaf_cells=mats.leaf_cells))
-    if options.budget.triangles is not None:    # the species and mesh that meet the budget
-        plan = timings.run("budget", plan_budget, params, seed, options.mesh, options.budget,
-                           options.generate)
+    if options.budget.triangles is not None:  # the species and mesh that meet the budget
+        plan = timings.run(
+            "budget", plan_budget, params, seed, options.mesh, options.budget, options.generate
+        )
         params, options, tree = plan.params, replace(options, mesh=plan.mesh), None
     if tree is None:
         tree = timings.run("generate", generate, params, seed, options.generate)
-    lods = [build_lod(tree, options, seed, timings)] if options.lod is None else \
-        build_lods(params, tree, options, seed, timings)
-    materials = timings.run("textures", lambda: mats.materials)   # waits only if not done
+    lods = (
+        [build_lod(tree, options, seed, timings)]
+        if options.lod is None
+        else build_lods(params, tree, options, seed, timings)
+    )
+    materials = timings.run("textures", lambda: mats.materials)  # waits only if not done
     if options.lod is not None and options.impostor is not None:
         lods, materials = timings.run("impostor", add_impostor, lods, materials, tree, options)
-    asset = Asset(name=params.name, materials=materials, lods=lods,
-                  extras={"species": params.name, "seed": seed,
-                          "generator": f"treegen {__version__}"})
+    asset = Asset(
+        name=params.name,
+        materials=materials,
+        lods=lods,
+        extras={"species": params.name, "seed": seed, "generator": f"treegen {__version__}"},
+    )
     return timings.run("prepare", prepare, asset), tree
 
 
@@ -155,15 +173,30 @@ def plan_asset(params: Params, seed: int = 0, options: MakeOptions = MakeOptions
         params, plain = plan.params, replace(plain, mesh=plan.mesh)
     tree = generate(params, seed, plain.generate)
     timings = Timings()
-    lods = [build_lod(tree, plain, seed, timings)] if plain.lod is None else \
-        build_lods(params, tree, plain, seed, timings)
-    rows = [{"triangles": sum(len(p.indices) // 3 for p in lod.primitives),
-             "vertices": sum(len(p.positions) for p in lod.primitives),
-             "joints": len(lod.skeleton.names), "distance_m": float(lod.distance)}
-            for lod in lods]
+    lods = (
+        [build_lod(tree, plain, seed, timings)]
+        if plain.lod is None
+        else build_lods(params, tree, plain, seed, timings)
+    )
+    rows = [
+        {
+            "triangles": sum(len(p.indices) // 3 for p in lod.primitives),
+            "vertices": sum(len(p.positions) for p in lod.primitives),
+            "joints": len(lod.skeleton.names),
+            "distance_m": float(lod.distance),
+        }
+        for lod in lods
+    ]
     if plain.lod is not None and plain.impostor is not None:
         card = cards(np.zeros(3), 1.0, plain.impostor.grid)
-        rows.append({"triangles": len(card.indices) // 3, "vertices": len(card.positions),
-                     "joints": 1, "distance_m": switch_distance(
-                         tree_height(tree), lods[-1].distance, plain.lod, plain.impostor)})
+        rows.append(
+            {
+                "triangles": len(card.indices) // 3,
+                "vertices": len(card.positions),
+                "joints": 1,
+                "distance_m": switch_distance(
+                    tree_height(tree), lods[-1].distance, plain.lod, plain.impostor
+                ),
+            }
+        )
     return rows

@@ -5,6 +5,7 @@ shared timeline (`Clip.timeline`) set; with_bounds(asset) adds every LOD's anima
 (`Lod.bounds`), which only formats that store extents need (the export table's USD entry);
 prepare_forest(forest) does both and fills the phase variants and repeated clips of the prototypes.
 """
+
 from __future__ import annotations
 
 from dataclasses import replace
@@ -15,7 +16,7 @@ from .asset import Asset, Clip, Forest, Lod, Skeleton, lod_bounds
 from .clip import moving_joints, phase_rotate, repeat_clip, union_timeline
 from .skeleton import pose_world
 
-BOUNDS_MARGIN = 0.02    # of the box size: slerp between keys can bulge slightly past the keys
+BOUNDS_MARGIN = 0.02  # of the box size: slerp between keys can bulge slightly past the keys
 
 
 def prepare_clip(clip: Clip, skeleton: Skeleton) -> Clip:
@@ -43,7 +44,7 @@ def animated_bounds(lod: Lod) -> tuple[np.ndarray, np.ndarray]:
         return lo, hi
     bind = np.asarray(skel.bind_world, np.float64)
     box_lo, box_hi = np.full((J, 3), np.inf), np.full((J, 3), -np.inf)
-    for prim in lod.primitives:   # per-joint local boxes: one pass per influence slot
+    for prim in lod.primitives:  # per-joint local boxes: one pass per influence slot
         pos = np.asarray(prim.positions, np.float64)
         joints = np.asarray(prim.joints, np.int64)
         weights = np.asarray(prim.weights)
@@ -55,7 +56,7 @@ def animated_bounds(lod: Lod) -> tuple[np.ndarray, np.ndarray]:
             order = np.argsort(jv, kind="stable")
             jv = jv[order]
             local = np.einsum("nji,nj->ni", bind[jv, :3, :3], pos[used][order] - bind[jv, :3, 3])
-            starts = np.flatnonzero(np.r_[True, jv[1:] != jv[:-1]])   # Rᵀ(p − t) per joint run
+            starts = np.flatnonzero(np.r_[True, jv[1:] != jv[:-1]])  # Rᵀ(p − t) per joint run
             js = jv[starts]
             box_lo[js] = np.minimum(box_lo[js], np.minimum.reduceat(local, starts, axis=0))
             box_hi[js] = np.maximum(box_hi[js], np.maximum.reduceat(local, starts, axis=0))
@@ -63,7 +64,7 @@ def animated_bounds(lod: Lod) -> tuple[np.ndarray, np.ndarray]:
     if not has.any():
         return lo, hi
     corner_sel = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)], bool)
-    corners = np.where(corner_sel[None], box_hi[has, None, :], box_lo[has, None, :])   # (Jh, 8, 3)
+    corners = np.where(corner_sel[None], box_hi[has, None, :], box_lo[has, None, :])  # (Jh, 8, 3)
     rest_q = np.asarray(skel.rest_rotation, np.float64)
     for clip in clips:
         K = len(clip.times)
@@ -93,19 +94,28 @@ def prepare(asset: Asset, bounds: bool = False) -> Asset:
 def with_bounds(asset: Asset) -> Asset:
     """Every LOD's animated bounds filled (kept where already set): forward kinematics over
     every key, so it runs only for formats that store extents (USD: exchange's table)."""
-    return replace(asset, lods=[lod if lod.bounds is not None else replace(lod, bounds=animated_bounds(lod))
-                                for lod in asset.lods])
+    return replace(
+        asset,
+        lods=[
+            lod if lod.bounds is not None else replace(lod, bounds=animated_bounds(lod)) for lod in asset.lods
+        ],
+    )
 
 
 def prepare_forest(forest: Forest) -> Forest:
     """Prototypes prepared; for each (prototype, LOD) an instance uses, its first clip at every
     phase variant (moving joints as the base clip's); and every prototype's clips repeated over two periods."""
     protos = [prepare(a, bounds=True) for a in forest.prototypes]
-    used = sorted({(i.prototype, k) for i in forest.instances
-                   for k in (range(len(protos[i.prototype].lods)) if forest.all_lods else [i.lod])})
+    used = sorted(
+        {
+            (i.prototype, k)
+            for i in forest.instances
+            for k in (range(len(protos[i.prototype].lods)) if forest.all_lods else [i.lod])
+        }
+    )
     V = max(1, forest.phase_variants)
     variants: dict[tuple[int, int], list[Clip]] = {}
-    for p, k in used:                        # a few (prototype, LOD) pairs
+    for p, k in used:  # a few (prototype, LOD) pairs
         lod = protos[p].lods[k]
         if lod.clips and len(lod.clips[0].times) > 1:
             base = lod.clips[0]
@@ -114,8 +124,14 @@ def prepare_forest(forest: Forest) -> Forest:
     looped = []
     if forest.loop > 0:
         for a in protos:
-            looped.append(prepare(replace(a, lods=[
-                replace(lod, clips=[repeat_clip(c, 2) for c in lod.clips]) for lod in a.lods]), bounds=True))
+            looped.append(
+                prepare(
+                    replace(
+                        a, lods=[replace(lod, clips=[repeat_clip(c, 2) for c in lod.clips]) for lod in a.lods]
+                    ),
+                    bounds=True,
+                )
+            )
     return replace(forest, prototypes=protos, variants=variants, looped=looped)
 
 
@@ -128,8 +144,17 @@ def split_lods(asset: Asset) -> list[Asset]:
     out = []
     for k, lod in enumerate(asset.lods):
         clips = [replace(c, name="wind_loop") for c in lod.clips[:1]] + list(lod.clips[1:])
-        out.append(replace(asset, lods=[replace(lod, clips=clips)],
-                           extras=asset.extras | {"lod_index": k, "lod_count": len(asset.lods),
-                                                  "lod_distance_m": float(lod.distance),
-                                                  "lod_screen_coverage": float(lod.screen_coverage)}))
+        out.append(
+            replace(
+                asset,
+                lods=[replace(lod, clips=clips)],
+                extras=asset.extras
+                | {
+                    "lod_index": k,
+                    "lod_count": len(asset.lods),
+                    "lod_distance_m": float(lod.distance),
+                    "lod_screen_coverage": float(lod.screen_coverage),
+                },
+            )
+        )
     return out

@@ -6,6 +6,7 @@ parts in Y-up world space plus `skinning(t)`, the per-joint matrices S_j(t) = W_
 an engine would upload — joint world matrices posed from the clip, times inverse bind. The
 renderer applies them per vertex, so what you see is what the file's skin and animation do.
 """
+
 from __future__ import annotations
 
 import json
@@ -29,20 +30,19 @@ from .pipeline import MakeOptions, build_asset
 from .render import frame_points, skin_points
 
 
-
 @dataclass(frozen=True)
 class PreviewOptions:
     """Camera and output; angles in degrees, size in pixels."""
 
-    azimuth: float = -90.0      # camera bearing, counter-clockwise from +X (Z up): −90 looks
-                                # along +Y, so the default wind (towards +X) blows left → right
-    elevation: float = 8.0      # camera height angle above the horizon
+    azimuth: float = -90.0  # camera bearing, counter-clockwise from +X (Z up): −90 looks
+    # along +Y, so the default wind (towards +X) blows left → right
+    elevation: float = 8.0  # camera height angle above the horizon
     width: int = 512
     height: int = 512
     lod: int = 0
-    seed: int = 0               # species input only
-    fps: float = 15.0           # GIF frames per second of the wind loop
-    sun_azimuth: float | None = None   # None: 50° left of the camera
+    seed: int = 0  # species input only
+    fps: float = 15.0  # GIF frames per second of the wind loop
+    sun_azimuth: float | None = None  # None: 50° left of the camera
     sun_elevation: float = 50.0
 
 
@@ -50,6 +50,7 @@ DEFAULTS = PreviewOptions()
 
 
 # ------------------------------------------------------------------------------ front door
+
 
 def load_scene(path: str | os.PathLike, options: PreviewOptions = DEFAULTS) -> Drawable:
     """A species file or bundled species name (grown here) or a written tree (read back by
@@ -72,8 +73,10 @@ def resolve_input(value: str | os.PathLike) -> Path:
     text = os.fspath(value)
     path = Path(text)
     if path.is_dir():
-        raise TreegenError(f"{text} is a directory; expected a tree file (.glb .gltf .usd*), "
-                           f"a species file (.txt .xml) or a bundled species name ({LIST_HINT})")
+        raise TreegenError(
+            f"{text} is a directory; expected a tree file (.glb .gltf .usd*), "
+            f"a species file (.txt .xml) or a bundled species name ({LIST_HINT})"
+        )
     if path.is_file():
         return path
     hit = bundled_species(text)
@@ -81,7 +84,7 @@ def resolve_input(value: str | os.PathLike) -> Path:
         return hit
     if path.suffix.lower() in exchange.SPECIES or not path.suffix:
         raise not_found(f"species '{text}'", text)
-    return path                          # exchange.check_input names what is missing
+    return path  # exchange.check_input names what is missing
 
 
 def framing_points(scene: Drawable, times: np.ndarray, max_points: int = 20000) -> np.ndarray:
@@ -94,7 +97,7 @@ def framing_points(scene: Drawable, times: np.ndarray, max_points: int = 20000) 
     for p in scene.parts:
         sel = slice(0, len(p.positions), step)
         pts, jnt, wgt = p.positions[sel], np.asarray(p.joints)[sel], p.weights[sel]
-        for pose in poses:                   # a dozen poses at most
+        for pose in poses:  # a dozen poses at most
             out.append(skin_points(pts, jnt, wgt, pose))
     return np.concatenate(out) if out else np.zeros((1, 3))
 
@@ -112,10 +115,9 @@ def sun_angles(options: PreviewOptions) -> tuple[float, float]:
 
 def _renderer(scene: Drawable, options: PreviewOptions, renderer=None):
     """`renderer` as a no-op context, or a new Renderer for `scene` (an EGL context)."""
-    from .render import Renderer   # lazy: moderngl/EGL only when something is drawn
+    from .render import Renderer  # lazy: moderngl/EGL only when something is drawn
 
-    return nullcontext(renderer) if renderer is not None else \
-        Renderer(scene, options.width, options.height)
+    return nullcontext(renderer) if renderer is not None else Renderer(scene, options.width, options.height)
 
 
 def render_still(scene: Drawable, options: PreviewOptions = DEFAULTS, renderer=None) -> np.ndarray:
@@ -129,8 +131,7 @@ def render_still(scene: Drawable, options: PreviewOptions = DEFAULTS, renderer=N
         return r.render(camera, rest.pose(times)[0], az, el)
 
 
-def render_loop(scene: Drawable, options: PreviewOptions = DEFAULTS,
-                renderer=None) -> list[np.ndarray]:
+def render_loop(scene: Drawable, options: PreviewOptions = DEFAULTS, renderer=None) -> list[np.ndarray]:
     """Frames over the whole wind loop, first and last at t = 0 and t = duration (equal poses
     for a looping clip); one fixed camera that fits every frame."""
     if scene.duration <= 0 or scene.skinning is None:
@@ -140,12 +141,13 @@ def render_loop(scene: Drawable, options: PreviewOptions = DEFAULTS,
     frames = []
     with _renderer(scene, options, renderer) as r:
         az, el = sun_angles(options)
-        for pose in scene.pose(times):             # frames: tens
+        for pose in scene.pose(times):  # frames: tens
             frames.append(r.render(camera, pose, az, el))
     return frames
 
 
 # ------------------------------------------------------------------------------ command
+
 
 def _size(text: str) -> tuple[int, int]:
     m = re.fullmatch(r"\s*(\d+)\s*(?:[xX×]\s*(\d+))?\s*", text or "")
@@ -160,30 +162,62 @@ def _size(text: str) -> tuple[int, int]:
 
 @click.command("preview")
 @click.argument("input_path", metavar="INPUT")
-@click.option("-o", "--output", type=click.Path(path_type=Path),
-              help="Still image of the rest pose: .png (optimised) or .jpg.")
-@click.option("--animate", type=click.Path(path_type=Path),
-              help="Animated GIF of the whole wind loop (first frame = last frame), skinned on "
-                   "the GPU from the file's joints and keys, like an engine.")
-@click.option("--azimuth", type=float, default=DEFAULTS.azimuth, show_default=True,
-              help="Camera bearing, degrees counter-clockwise from +X seen from above "
-                   "(Z-up tree space); -90 looks along +Y, so the default wind blows left → right.")
-@click.option("--elevation", type=float, default=DEFAULTS.elevation, show_default=True,
-              help="Camera height angle above the horizon, degrees (-89..89).")
-@click.option("--size", "size", default=str(DEFAULTS.width), show_default=True, metavar="N|WxH",
-              help="Image size in pixels (square N, or width x height).")
-@click.option("--lod", type=int, default=0, show_default=True,
-              help="Which LOD to render (0 = full detail).")
-@click.option("--seed", type=int, default=0, show_default=True,
-              help="Seed when INPUT is a species file.")
-@click.option("--fps", type=float, default=DEFAULTS.fps, show_default=True,
-              help="GIF frames per second of the wind loop (frames = duration × fps + 1).")
-@click.option("--png-colors", type=click.IntRange(0, 256), default=0, show_default=True,
-              help="Quantise the PNG to this many palette colours (smaller files, e.g. 256 "
-                   "for a README); 0 keeps full colour.")
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(path_type=Path),
+    help="Still image of the rest pose: .png (optimised) or .jpg.",
+)
+@click.option(
+    "--animate",
+    type=click.Path(path_type=Path),
+    help="Animated GIF of the whole wind loop (first frame = last frame), skinned on "
+    "the GPU from the file's joints and keys, like an engine.",
+)
+@click.option(
+    "--azimuth",
+    type=float,
+    default=DEFAULTS.azimuth,
+    show_default=True,
+    help="Camera bearing, degrees counter-clockwise from +X seen from above "
+    "(Z-up tree space); -90 looks along +Y, so the default wind blows left → right.",
+)
+@click.option(
+    "--elevation",
+    type=float,
+    default=DEFAULTS.elevation,
+    show_default=True,
+    help="Camera height angle above the horizon, degrees (-89..89).",
+)
+@click.option(
+    "--size",
+    "size",
+    default=str(DEFAULTS.width),
+    show_default=True,
+    metavar="N|WxH",
+    help="Image size in pixels (square N, or width x height).",
+)
+@click.option("--lod", type=int, default=0, show_default=True, help="Which LOD to render (0 = full detail).")
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed when INPUT is a species file.")
+@click.option(
+    "--fps",
+    type=float,
+    default=DEFAULTS.fps,
+    show_default=True,
+    help="GIF frames per second of the wind loop (frames = duration × fps + 1).",
+)
+@click.option(
+    "--png-colors",
+    type=click.IntRange(0, 256),
+    default=0,
+    show_default=True,
+    help="Quantise the PNG to this many palette colours (smaller files, e.g. 256 "
+    "for a README); 0 keeps full colour.",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print what was written as JSON.")
-def preview_command(input_path, output, animate, azimuth, elevation, size, lod, seed, fps,
-                    png_colors, as_json):
+def preview_command(
+    input_path, output, animate, azimuth, elevation, size, lod, seed, fps, png_colors, as_json
+):
     """Render INPUT headless (OpenGL on EGL; no display needed): a species file (.txt .xml,
     grown in-process) or bundled species name (`treegen species`), or a tree written by
     `treegen make` (.glb .gltf .usda .usdc .usdz).
@@ -194,7 +228,7 @@ def preview_command(input_path, output, animate, azimuth, elevation, size, lod, 
 
     if output is None and animate is None:
         raise TreegenError("preview: give an image with -o out.png and/or --animate out.gif")
-    if output is not None:                        # fail before anything is grown or rendered
+    if output is not None:  # fail before anything is grown or rendered
         exchange.check_suffix(output, exchange.STILLS, "image", "-o")
     if animate is not None:
         exchange.check_suffix(animate, exchange.LOOPS, "animation", "--animate")
@@ -205,12 +239,13 @@ def preview_command(input_path, output, animate, azimuth, elevation, size, lod, 
     if lod < 0:
         raise TreegenError(f"--lod {lod}: must be 0 or more")
     width, height = _size(size)
-    options = PreviewOptions(azimuth=azimuth, elevation=elevation, width=width, height=height,
-                             lod=lod, seed=seed, fps=fps)
+    options = PreviewOptions(
+        azimuth=azimuth, elevation=elevation, width=width, height=height, lod=lod, seed=seed, fps=fps
+    )
     t0 = time.perf_counter()
     scene = load_scene(input_path, options)
     lines, summary = [], {"input": str(input_path), "width": width, "height": height, "lod": lod}
-    with _renderer(scene, options) as renderer:   # one GL context for the still and the loop
+    with _renderer(scene, options) as renderer:  # one GL context for the still and the loop
         if output is not None:
             exchange.save_still(render_still(scene, options, renderer), output, png_colors)
             lines.append(f"wrote {output}  ({width}×{height}, LOD {lod})")
@@ -218,10 +253,15 @@ def preview_command(input_path, output, animate, azimuth, elevation, size, lod, 
         if animate is not None:
             frames = render_loop(scene, options, renderer)
             exchange.save_loop(frames, animate, fps)
-            lines.append(f"wrote {animate}  ({width}×{height}, {len(frames)} frames over "
-                         f"{scene.duration:.2f} s, LOD {lod})")
-            summary |= {"animation": str(animate), "frames": len(frames),
-                        "duration_s": round(float(scene.duration), 4)}
+            lines.append(
+                f"wrote {animate}  ({width}×{height}, {len(frames)} frames over "
+                f"{scene.duration:.2f} s, LOD {lod})"
+            )
+            summary |= {
+                "animation": str(animate),
+                "frames": len(frames),
+                "duration_s": round(float(scene.duration), 4),
+            }
     summary["seconds"] = round(time.perf_counter() - t0, 3)
     if as_json:
         click.echo(json.dumps(summary, indent=2))

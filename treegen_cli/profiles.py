@@ -9,6 +9,7 @@ command line (click's parameter source), in the API call or in a catalogue entry
 
 The README's profile table is `markdown_table()` (tests/test_budget.py keeps them equal).
 """
+
 from __future__ import annotations
 
 from typing import Callable
@@ -20,18 +21,46 @@ from .errors import TreegenError
 # (lod_budget.py); triangles: the LOD0 budget (budget.py); compress: the glTF encoding (web
 # pages decode meshopt; game engines' importers mostly read only plain files: README).
 PROFILES: dict[str, dict[str, object]] = {
-    "mobile": {"triangles": 20_000, "max_joints": 64, "texture_size": 256,
-               "duration": 6.0, "fps": 15.0, "lod_screen": "0.3,0.1", "lod_triangles": "0.4,0.1",
-               "compress": "none"},
-    "web": {"triangles": 50_000, "max_joints": 128, "texture_size": 512,
-            "duration": 8.0, "fps": 24.0, "lod_screen": "0.4,0.2,0.08",
-            "lod_triangles": "0.5,0.15,0.05", "compress": "meshopt"},
-    "desktop": {"triangles": 150_000, "max_joints": 256, "texture_size": 1024,
-                "duration": 10.0, "fps": 30.0, "lod_screen": "0.5,0.25,0.1",
-                "lod_triangles": "0.5,0.15,0.05", "compress": "none"},
-    "hero": {"triangles": 500_000, "max_joints": 512, "texture_size": 2048,
-             "duration": 20.0, "fps": 30.0, "lod_screen": "0.6,0.3,0.12",
-             "lod_triangles": "0.5,0.2,0.05", "compress": "none"},
+    "mobile": {
+        "triangles": 20_000,
+        "max_joints": 64,
+        "texture_size": 256,
+        "duration": 6.0,
+        "fps": 15.0,
+        "lod_screen": "0.3,0.1",
+        "lod_triangles": "0.4,0.1",
+        "compress": "none",
+    },
+    "web": {
+        "triangles": 50_000,
+        "max_joints": 128,
+        "texture_size": 512,
+        "duration": 8.0,
+        "fps": 24.0,
+        "lod_screen": "0.4,0.2,0.08",
+        "lod_triangles": "0.5,0.15,0.05",
+        "compress": "meshopt",
+    },
+    "desktop": {
+        "triangles": 150_000,
+        "max_joints": 256,
+        "texture_size": 1024,
+        "duration": 10.0,
+        "fps": 30.0,
+        "lod_screen": "0.5,0.25,0.1",
+        "lod_triangles": "0.5,0.15,0.05",
+        "compress": "none",
+    },
+    "hero": {
+        "triangles": 500_000,
+        "max_joints": 512,
+        "texture_size": 2048,
+        "duration": 20.0,
+        "fps": 30.0,
+        "lod_screen": "0.6,0.3,0.12",
+        "lod_triangles": "0.5,0.2,0.05",
+        "compress": "none",
+    },
 }
 PURPOSE = {
     "mobile": "phones and tablets; many trees on screen",
@@ -63,7 +92,12 @@ def markdown_table() -> str:
         cells = []
         for k in keys:
             v = row.get(k, "")
-            cells.append(f"{v:,}" if isinstance(v, int) and v >= 10_000 else
-                         f"{v:g}" if isinstance(v, float) else str(v))
+            cells.append(
+                f"{v:,}"
+                if isinstance(v, int) and v >= 10_000
+                else f"{v:g}"
+                if isinstance(v, float)
+                else str(v)
+            )
         rows.append(f"| `{name}` | " + " | ".join(cells) + f" | {PURPOSE[name]} |")
     return "\n".join([head, rule, *rows])

@@ -14,6 +14,7 @@ explicitly asked for with --json); --verbose adds one stderr line per stage with
 `StageTimings` duck-types pipeline.Timings (`stages` dict + `run(name, fn, ...)`), so stages
 report progress without the pipeline knowing about terminals.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -66,8 +67,14 @@ class Reporter:
         from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
         console = Console(file=sys.stderr)
-        with Progress(SpinnerColumn(), TextColumn("{task.description:<10}"), BarColumn(),
-                      TimeElapsedColumn(), console=console, transient=True) as prog:
+        with Progress(
+            SpinnerColumn(),
+            TextColumn("{task.description:<10}"),
+            BarColumn(),
+            TimeElapsedColumn(),
+            console=console,
+            transient=True,
+        ) as prog:
             self._live = prog
             self._task = prog.add_task("working", total=None)
             try:
@@ -120,6 +127,7 @@ def _wrap(callback):
     def run(*args, quiet=False, verbose=False, **kwargs):
         if quiet and verbose:
             from .errors import TreegenError
+
             raise TreegenError("--quiet and --verbose: give at most one")
         rep = Reporter(quiet=quiet, verbose=verbose)
         click.get_current_context().find_root().meta[_META_KEY] = rep
@@ -128,6 +136,7 @@ def _wrap(callback):
             with contextlib.redirect_stdout(io.StringIO()):
                 return callback(*args, **kwargs)
         return callback(*args, **kwargs)
+
     run.__treegen_output__ = True
     return run
 
@@ -145,11 +154,18 @@ def add_output_options(command: click.Command) -> None:
     if "quiet" in names or "verbose" in names:
         return
     taken = {o for p in command.params for o in p.opts + p.secondary_opts}
-    command.params.append(click.Option([o for o in ("-q", "--quiet") if o not in taken],
-                                       is_flag=True,
-                                       help="Print nothing but errors (and --json output)."))
-    command.params.append(click.Option([o for o in ("-v", "--verbose") if o not in taken],
-                                       is_flag=True,
-                                       help="Also print each stage's seconds and extra counts "
-                                            "(on stderr)."))
+    command.params.append(
+        click.Option(
+            [o for o in ("-q", "--quiet") if o not in taken],
+            is_flag=True,
+            help="Print nothing but errors (and --json output).",
+        )
+    )
+    command.params.append(
+        click.Option(
+            [o for o in ("-v", "--verbose") if o not in taken],
+            is_flag=True,
+            help="Also print each stage's seconds and extra counts (on stderr).",
+        )
+    )
     command.callback = _wrap(command.callback)

@@ -3,6 +3,7 @@
 One home for the few operations every stage needs (wind composes, LOD and the writers slerp),
 kept in plain numpy because scipy's Rotation is ~10× slower on hundreds of thousands of pairs.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -17,8 +18,9 @@ def mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product a ∘ b (apply b, then a)."""
     av, aw = a[..., :3], a[..., 3:]
     bv, bw = b[..., :3], b[..., 3:]
-    return np.concatenate([aw * bv + bw * av + np.cross(av, bv),
-                           aw * bw - np.sum(av * bv, axis=-1, keepdims=True)], axis=-1)
+    return np.concatenate(
+        [aw * bv + bw * av + np.cross(av, bv), aw * bw - np.sum(av * bv, axis=-1, keepdims=True)], axis=-1
+    )
 
 
 def continuous(q: np.ndarray) -> np.ndarray:

@@ -17,6 +17,7 @@ What it draws, so a picture says something about the asset before an engine open
 World space here is Y up (glTF's), metres. Everything the renderer needs comes in a
 `drawable.Drawable`; loading files and assets into one is drawable.py's and exchange's job.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -26,34 +27,36 @@ import numpy as np
 from .drawable import Drawable, Part
 from .errors import TreegenError
 
-FOV_DEG = 30.0                      # vertical field of view of the preview camera
-SUPERSAMPLE = 2                     # rendered at SUPERSAMPLE× the size, box-filtered down
-SHADOW_SIZE = 2048                  # shadow map texels per side
-SKY_ZENITH = (0.23, 0.42, 0.78)     # linear RGB
+FOV_DEG = 30.0  # vertical field of view of the preview camera
+SUPERSAMPLE = 2  # rendered at SUPERSAMPLE× the size, box-filtered down
+SHADOW_SIZE = 2048  # shadow map texels per side
+SKY_ZENITH = (0.23, 0.42, 0.78)  # linear RGB
 SKY_HORIZON = (0.72, 0.80, 0.90)
 GROUND = (0.085, 0.10, 0.045)
-SUN_COLOR = (2.6, 2.45, 2.2)        # linear, HDR (tone-mapped in the shader)
-MIP_BIAS = -0.5                     # sharper than the 1:1 mip: the 2× supersampling averages
-ANISOTROPY = 1.0                    # off: Mesa llvmpipe's anisotropic path costs ~100× (a 200 px
-                                    # fir took 48 s for its bark, 0.5 s without) and the 2×2
-                                    # supersampling already averages along grazing bark
-HASH_LOD = 1.0                      # mip level from which cut-outs fade into hashed alpha tests
+SUN_COLOR = (2.6, 2.45, 2.2)  # linear, HDR (tone-mapped in the shader)
+MIP_BIAS = -0.5  # sharper than the 1:1 mip: the 2× supersampling averages
+ANISOTROPY = 1.0  # off: Mesa llvmpipe's anisotropic path costs ~100× (a 200 px
+# fir took 48 s for its bark, 0.5 s without) and the 2×2
+# supersampling already averages along grazing bark
+HASH_LOD = 1.0  # mip level from which cut-outs fade into hashed alpha tests
 GL_SRGB8_ALPHA8 = 0x8C43
 
 
-def skin_points(points: np.ndarray, joints: np.ndarray, weights: np.ndarray,
-                skinning: np.ndarray) -> np.ndarray:
+def skin_points(
+    points: np.ndarray, joints: np.ndarray, weights: np.ndarray, skinning: np.ndarray
+) -> np.ndarray:
     """Linear blend skinning on the CPU: Σ_k w_k · S[j_k] · p for (V, 3) points and (J, 4, 4)
     matrices. Used for framing (animated bounds) and as the reference for the shader."""
     p = np.asarray(points, dtype=np.float64)
     out = np.zeros_like(p)
-    for k in range(joints.shape[1]):          # four influence slots, not vertices
+    for k in range(joints.shape[1]):  # four influence slots, not vertices
         m = skinning[np.asarray(joints[:, k], dtype=np.int64)]
         out += weights[:, k, None] * (np.einsum("vij,vj->vi", m[:, :3, :3], p) + m[:, :3, 3])
     return out
 
 
 # --------------------------------------------------------------------------------- cameras
+
 
 def look_at(eye: np.ndarray, target: np.ndarray, up=(0.0, 1.0, 0.0)) -> np.ndarray:
     f = np.asarray(target, float) - eye
@@ -90,7 +93,7 @@ def direction(azimuth_deg: float, elevation_deg: float) -> np.ndarray:
     generator's Z-up frame, counter-clockwise from +X (so 0 looks from +X, -90 from −Y)."""
     a, e = np.radians(azimuth_deg), np.radians(elevation_deg)
     zx, zy, zz = np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)
-    return np.array([zx, zz, -zy])             # Z up → Y up: (x, y, z) → (x, z, −y)
+    return np.array([zx, zz, -zy])  # Z up → Y up: (x, y, z) → (x, z, −y)
 
 
 @dataclass(frozen=True)
@@ -105,8 +108,13 @@ class Camera:
         return perspective(self.fov_deg, aspect, self.near, self.far) @ look_at(self.eye, self.target)
 
 
-def frame_points(points: np.ndarray, azimuth_deg: float, elevation_deg: float,
-                 margin: float = 0.08, fov_deg: float = FOV_DEG) -> Camera:
+def frame_points(
+    points: np.ndarray,
+    azimuth_deg: float,
+    elevation_deg: float,
+    margin: float = 0.08,
+    fov_deg: float = FOV_DEG,
+) -> Camera:
     """A camera looking from (azimuth, elevation) that fits every point inside the view with
     `margin` (fraction of the half-height) to spare, centred on the points' screen extent."""
     pts = np.asarray(points, dtype=np.float64)
@@ -116,17 +124,17 @@ def frame_points(points: np.ndarray, azimuth_deg: float, elevation_deg: float,
     back = direction(azimuth_deg, elevation_deg)
     tan_half = np.tan(np.radians(fov_deg) / 2) * (1.0 - margin)
     dist = 3.0 * radius
-    for _ in range(4):   # fit distance, re-centre on the projected extent, fit again
+    for _ in range(4):  # fit distance, re-centre on the projected extent, fit again
         view = look_at(target + back * dist, target)
-        v = pts @ view[:3, :3].T + view[:3, 3]      # camera space, looking down −z
+        v = pts @ view[:3, :3].T + view[:3, 3]  # camera space, looking down −z
         depth = -v[:, 2]
-        x, y = v[:, 0] / depth, v[:, 1] / depth     # tangents of the view angles
+        x, y = v[:, 0] / depth, v[:, 1] / depth  # tangents of the view angles
         cx, cy = 0.5 * (x.min() + x.max()), 0.5 * (y.min() + y.max())
         right, up = view[0, :3], view[1, :3]
         target = target + dist * (cx * right + cy * up)
         # distance at which every point's |x|,|y| tangent from the new centre fits tan_half
         rel = pts - target
-        along = rel @ back                          # towards the camera
+        along = rel @ back  # towards the camera
         lateral = np.maximum(np.abs(rel @ right), np.abs(rel @ up))
         dist = float(np.max(along + lateral / tan_half))
     near = max(dist - radius * 1.5, dist * 0.02)
@@ -237,9 +245,13 @@ bool cut_away(float alpha, vec2 uv) {
 }
 """
 
-_TREE_FS = """
+_TREE_FS = (
+    """
 #version 330
-""" + _COMMON + _TEX + """
+"""
+    + _COMMON
+    + _TEX
+    + """
 uniform vec3 base_color;
 uniform bool leaf;
 uniform vec3 crown_center;
@@ -304,15 +316,20 @@ void main() {
     f_color = vec4(tonemap(c), 1.0);
 }
 """
+)
 
-_DEPTH_FS = """
+_DEPTH_FS = (
+    """
 #version 330
-""" + _TEX + """
+"""
+    + _TEX
+    + """
 in vec2 v_uv;
 void main() {        // cut-outs cast cut-out shadows
     if (has_tex && cut_away(sample_tex(base_tex, v_uv, tex_wrap).a * opacity, v_uv)) discard;
 }
 """
+)
 
 _SKY_VS = """
 #version 330
@@ -321,9 +338,12 @@ out vec2 v_ndc;
 void main() { v_ndc = in_ndc; gl_Position = vec4(in_ndc, 0.9999, 1.0); }
 """
 
-_SKY_FS = """
+_SKY_FS = (
+    """
 #version 330
-""" + _COMMON + """
+"""
+    + _COMMON
+    + """
 uniform mat4 inv_view_proj;
 in vec2 v_ndc;
 out vec4 f_color;
@@ -334,6 +354,7 @@ void main() {
     f_color = vec4(tonemap(sky(d)), 1.0);
 }
 """
+)
 
 _GROUND_VS = """
 #version 330
@@ -350,9 +371,12 @@ void main() {
 }
 """
 
-_GROUND_FS = """
+_GROUND_FS = (
+    """
 #version 330
-""" + _COMMON + """
+"""
+    + _COMMON
+    + """
 uniform vec3 eye;
 uniform float fog_start;
 uniform float fog_end;
@@ -367,6 +391,7 @@ void main() {
     f_color = vec4(tonemap(mix(c, sky(vec3(d.x, 0.0, d.z)), fog)), 1.0);
 }
 """
+)
 
 
 def _context():
@@ -376,7 +401,7 @@ def _context():
         raise TreegenError(f"preview needs moderngl (pip install moderngl): {e}") from None
     try:
         return moderngl.create_standalone_context(backend="egl", require=330)
-    except Exception as e:   # no EGL / no GPU driver: say so in one line
+    except Exception as e:  # no EGL / no GPU driver: say so in one line
         msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         raise TreegenError(f"preview: cannot create a headless OpenGL (EGL) context: {msg}") from None
 
@@ -393,10 +418,12 @@ def egl_available() -> bool:
 
 # --------------------------------------------------------------------------------- textures
 
+
 def _srgb_to_linear(c: np.ndarray) -> np.ndarray:
     x = c.astype(np.float32) / np.float32(255.0)
-    return np.where(x <= 0.04045, x / np.float32(12.92),
-                    ((x + np.float32(0.055)) / np.float32(1.055)) ** np.float32(2.4))
+    return np.where(
+        x <= 0.04045, x / np.float32(12.92), ((x + np.float32(0.055)) / np.float32(1.055)) ** np.float32(2.4)
+    )
 
 
 def _linear_to_srgb8(x: np.ndarray) -> np.ndarray:
@@ -434,7 +461,7 @@ def mip_chain(image: np.ndarray, srgb: bool) -> list[np.ndarray]:
         lin[..., :3] = _srgb_to_linear(img[..., :3])
     has_alpha = img.shape[2] == 4
     if has_alpha:
-        lin[..., :3] *= lin[..., 3:]                   # premultiplied while filtering
+        lin[..., :3] *= lin[..., 3:]  # premultiplied while filtering
     levels, cur = [np.ascontiguousarray(img)], lin
     while cur.shape[0] > 1 or cur.shape[1] > 1:
         cur = _half(cur)
@@ -443,8 +470,11 @@ def mip_chain(image: np.ndarray, srgb: bool) -> list[np.ndarray]:
             a = out[..., 3:]
             out[..., :3] = np.where(a > 1e-6, out[..., :3] / np.maximum(a, 1e-6), 0.0)
         enc = np.empty(out.shape, np.uint8)
-        enc[..., :3] = _linear_to_srgb8(out[..., :3]) if srgb else \
-            np.round(np.clip(out[..., :3], 0, 1) * 255).astype(np.uint8)
+        enc[..., :3] = (
+            _linear_to_srgb8(out[..., :3])
+            if srgb
+            else np.round(np.clip(out[..., :3], 0, 1) * 255).astype(np.uint8)
+        )
         if has_alpha:
             enc[..., 3] = np.round(out[..., 3] * 255).astype(np.uint8)
         levels.append(enc)
@@ -493,16 +523,19 @@ class Renderer:
 
     def _upload(self, p: Part) -> _GpuPart:
         ctx = self.ctx
-        bufs = [(ctx.buffer(np.ascontiguousarray(p.positions, "f4").tobytes()), "3f", "in_pos"),
-                (ctx.buffer(np.ascontiguousarray(p.normals, "f4").tobytes()), "3f", "in_normal"),
-                (ctx.buffer(np.ascontiguousarray(p.joints, "f4").tobytes()), "4f", "in_joints"),
-                (ctx.buffer(np.ascontiguousarray(p.weights, "f4").tobytes()), "4f", "in_weights")]
+        bufs = [
+            (ctx.buffer(np.ascontiguousarray(p.positions, "f4").tobytes()), "3f", "in_pos"),
+            (ctx.buffer(np.ascontiguousarray(p.normals, "f4").tobytes()), "3f", "in_normal"),
+            (ctx.buffer(np.ascontiguousarray(p.joints, "f4").tobytes()), "4f", "in_joints"),
+            (ctx.buffer(np.ascontiguousarray(p.weights, "f4").tobytes()), "4f", "in_weights"),
+        ]
         if p.uvs is not None:
             bufs.append((ctx.buffer(np.ascontiguousarray(p.uvs, "f4").tobytes()), "2f", "in_uv"))
         ibo = ctx.buffer(np.ascontiguousarray(p.indices, "u4").tobytes())
         vao = ctx.vertex_array(self.tree_prog, bufs, index_buffer=ibo, index_element_size=4)
-        dvao = ctx.vertex_array(self.depth_prog, [b for b in bufs if b[2] != "in_normal"],
-                                index_buffer=ibo, index_element_size=4)
+        dvao = ctx.vertex_array(
+            self.depth_prog, [b for b in bufs if b[2] != "in_normal"], index_buffer=ibo, index_element_size=4
+        )
         tex = self._texture(p.texture, True, p.wrap) if p.textured else None
         nmap = self._texture(p.normal_map, False, p.normal_wrap) if p.bumpy else None
         return _GpuPart(vao, dvao, p, tex, nmap)
@@ -510,13 +543,14 @@ class Renderer:
     def _texture(self, image: np.ndarray, srgb: bool, wrap):
         """A mipmapped GL texture; rows flipped so texture t = the bottom-left-origin v."""
         img = np.asarray(image, np.uint8)
-        if img.shape[2] == 3:                              # RGBA texels: no row alignment fuss
+        if img.shape[2] == 3:  # RGBA texels: no row alignment fuss
             img = np.concatenate([img, np.full(img.shape[:2] + (1,), 255, np.uint8)], axis=2)
         levels = mip_chain(img[::-1], srgb)
         h, w = img.shape[:2]
-        tex = self.ctx.texture((w, h), 4, levels[0].tobytes(),
-                               internal_format=GL_SRGB8_ALPHA8 if srgb else None)
-        tex.build_mipmaps(0, len(levels) - 1)              # allocates; our levels replace them
+        tex = self.ctx.texture(
+            (w, h), 4, levels[0].tobytes(), internal_format=GL_SRGB8_ALPHA8 if srgb else None
+        )
+        tex.build_mipmaps(0, len(levels) - 1)  # allocates; our levels replace them
         for k, lv in enumerate(levels[1:], 1):
             tex.write(lv.tobytes(), level=k)
         tex.repeat_x, tex.repeat_y = (m == "REPEAT" for m in wrap)
@@ -525,8 +559,9 @@ class Renderer:
         return tex
 
     def _setup_lighting(self) -> None:
-        pts = np.concatenate([p.positions for p in self.scene.parts if len(p.positions)] or
-                             [np.zeros((1, 3), np.float32)]).astype(np.float64)
+        pts = np.concatenate(
+            [p.positions for p in self.scene.parts if len(p.positions)] or [np.zeros((1, 3), np.float32)]
+        ).astype(np.float64)
         lo, hi = pts.min(0), pts.max(0)
         self.bounds = (lo, hi)
         leaves = [p.positions for p in self.scene.parts if p.double_sided and len(p.positions)]
@@ -545,7 +580,7 @@ class Renderer:
             elif isinstance(value, int):
                 u.value = value
             elif isinstance(value, tuple) and all(isinstance(v, int) for v in value):
-                u.value = value                           # ivec
+                u.value = value  # ivec
             else:
                 u.value = tuple(float(v) for v in np.ravel(value)) if np.ndim(value) else float(value)
 
@@ -565,9 +600,14 @@ class Renderer:
         self._set(prog, "alpha_cutoff", float(cut))
         self._set(prog, "opacity", p.opacity)
 
-    def render(self, camera: Camera, skinning: np.ndarray | None = None,
-               sun_azimuth_deg: float = 0.0, sun_elevation_deg: float = 50.0,
-               draw_tree: bool = True) -> np.ndarray:
+    def render(
+        self,
+        camera: Camera,
+        skinning: np.ndarray | None = None,
+        sun_azimuth_deg: float = 0.0,
+        sun_elevation_deg: float = 50.0,
+        draw_tree: bool = True,
+    ) -> np.ndarray:
         """One frame as uint8 (height, width, 3), top row first. `draw_tree=False` renders the
         same view without the tree itself (its shadow stays): the background, for tests."""
         ctx = self.ctx
@@ -584,9 +624,16 @@ class Renderer:
         light_vp = orthographic(radius, 0.0, 4 * radius) @ look_at(center + sun * 2 * radius, center)
         view_proj = camera.view_proj(self.width / self.height)
         texel_world = 2 * radius / SHADOW_SIZE
-        common = {"sun_dir": sun, "sun_color": SUN_COLOR, "light_vp": light_vp,
-                  "shadow_map": 1, "shadow_bias": 1.5 * texel_world, "sky_zenith": SKY_ZENITH,
-                  "sky_horizon": SKY_HORIZON, "ground_color": GROUND}
+        common = {
+            "sun_dir": sun,
+            "sun_color": SUN_COLOR,
+            "light_vp": light_vp,
+            "shadow_map": 1,
+            "shadow_bias": 1.5 * texel_world,
+            "sky_zenith": SKY_ZENITH,
+            "sky_horizon": SKY_HORIZON,
+            "ground_color": GROUND,
+        }
 
         # shadow pass: depth of the posed tree from the sun
         self.shadow_fbo.use()
@@ -640,7 +687,7 @@ class Renderer:
             self._set(self.tree_prog, "base_color", g.part.color)
             self._set(self.tree_prog, "leaf", g.part.double_sided)
             self._material(self.tree_prog, g)
-            if g.part.one_sided:          # an engine culls single-sided faces' backs
+            if g.part.one_sided:  # an engine culls single-sided faces' backs
                 ctx.enable(ctx.CULL_FACE)
             g.vao.render()
             ctx.disable(ctx.CULL_FACE)

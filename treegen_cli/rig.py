@@ -12,6 +12,7 @@ gets them; the first level that does not fit has its chains coarsened (every k-t
 the smallest k that fits, the stem's base always kept) and deeper levels get no joints; if even
 one joint per stem does not fit, only that level's longest stems get one (at their base).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -26,13 +27,13 @@ from .errors import TreegenError
 @dataclass(frozen=True, eq=False)
 class Rig:
     skeleton: Skeleton
-    joint_node: np.ndarray     # int32 (J,): the tree node each joint sits on
-    joint_stem: np.ndarray     # int32 (J,): the stem that node belongs to
-    node_joints: np.ndarray    # uint16 (N, 2): skin binding of a point at each node: the jointed
-    node_weights: np.ndarray   # float32 (N, 2)  nodes enclosing it on its chain, weights sum 1
-                               # (rigidly carried nodes: (carrier, 0) with weights (1, 0))
-    leaf_joint: np.ndarray     # uint16 (L,): joint carrying each leaf rigidly
-    stem_joint: np.ndarray     # int32 (S,): joint carrying the stem's base (its attach joint)
+    joint_node: np.ndarray  # int32 (J,): the tree node each joint sits on
+    joint_stem: np.ndarray  # int32 (J,): the stem that node belongs to
+    node_joints: np.ndarray  # uint16 (N, 2): skin binding of a point at each node: the jointed
+    node_weights: np.ndarray  # float32 (N, 2)  nodes enclosing it on its chain, weights sum 1
+    # (rigidly carried nodes: (carrier, 0) with weights (1, 0))
+    leaf_joint: np.ndarray  # uint16 (L,): joint carrying each leaf rigidly
+    stem_joint: np.ndarray  # int32 (S,): joint carrying the stem's base (its attach joint)
 
 
 @dataclass(frozen=True)
@@ -46,8 +47,8 @@ class RigOptions:
 
 RIG_DEFAULTS = RigOptions()
 
-MAX_JOINTS = 65535                       # skin joint indices are uint16
-_BASE_ONLY = np.iinfo(np.int32).max      # chain stride that keeps only a stem's base node
+MAX_JOINTS = 65535  # skin joint indices are uint16
+_BASE_ONLY = np.iinfo(np.int32).max  # chain stride that keeps only a stem's base node
 
 
 def _chain_joints(chain: np.ndarray, clone: np.ndarray, stride: int) -> int:
@@ -60,16 +61,19 @@ def _select(tree, options: RigOptions) -> np.ndarray:
     """Bool (N,): which nodes become joints, following the budget rules in the module doc."""
     level = tree.stem_level.astype(np.int64)
     clone = tree.stem_clone.astype(bool)
-    chain = tree.stem_node_count.astype(np.int64) - 1       # segment-start nodes per stem
+    chain = tree.stem_node_count.astype(np.int64) - 1  # segment-start nodes per stem
     include = np.zeros(tree.n_stems, dtype=bool)
     stride = np.ones(tree.n_stems, dtype=np.int64)
     budget = options.max_joints
     roots = np.flatnonzero(tree.stem_parent < 0)
 
     present = np.unique(level)
-    allowed = present if options.joint_levels is None else \
-        np.intersect1d(present, np.asarray(options.joint_levels, dtype=np.int64))
-    if 0 not in allowed:                   # the root joint exists regardless
+    allowed = (
+        present
+        if options.joint_levels is None
+        else np.intersect1d(present, np.asarray(options.joint_levels, dtype=np.int64))
+    )
+    if 0 not in allowed:  # the root joint exists regardless
         include[roots[:budget]] = True
         stride[roots] = _BASE_ONLY
         budget -= int(min(len(roots), budget))
@@ -91,7 +95,7 @@ def _select(tree, options: RigOptions) -> np.ndarray:
             include[keep] = True
             stride[keep] = _BASE_ONLY
             k = _BASE_ONLY
-        if k > 1:                          # this level was coarsened: deeper levels get none
+        if k > 1:  # this level was coarsened: deeper levels get none
             break
 
     s = tree.node_stem
@@ -109,35 +113,36 @@ def joint_names(tree, joint_node: np.ndarray, joint_stem: np.ndarray) -> list[st
     level = tree.stem_level[joint_stem]
     trunks = np.flatnonzero(tree.stem_level == 0)
     single = len(trunks) <= 1
-    return [(f"trunk_{kk}" if single else f"trunk{ss}_{kk}") if lv == 0 else f"b{ss}_{kk}"
-            for ss, kk, lv in zip(joint_stem.tolist(), k.tolist(), level.tolist())]   # ≤ 256
+    return [
+        (f"trunk_{kk}" if single else f"trunk{ss}_{kk}") if lv == 0 else f"b{ss}_{kk}"
+        for ss, kk, lv in zip(joint_stem.tolist(), k.tolist(), level.tolist())
+    ]  # ≤ 256
 
 
 def build_rig(tree, options: RigOptions = RIG_DEFAULTS) -> Rig:
     """Joints on stem nodes under `options.max_joints`, with node and leaf skin bindings."""
     if not 1 <= options.max_joints <= MAX_JOINTS:
-        raise TreegenError(f"--max-joints {options.max_joints}: the joint budget must be in "
-                           f"1..{MAX_JOINTS}")
+        raise TreegenError(f"--max-joints {options.max_joints}: the joint budget must be in 1..{MAX_JOINTS}")
     N = tree.n_nodes
     nid = np.arange(N)
     s = tree.node_stem
     jointed = _select(tree, options)
     joint_node = np.flatnonzero(jointed).astype(np.int32)
     J = len(joint_node)
-    joint_of = np.cumsum(jointed) - 1                       # joint index at jointed nodes
+    joint_of = np.cumsum(jointed) - 1  # joint index at jointed nodes
 
     # Carrier: the last joint at or below the node on its own chain, else the attach joint.
     last_own = np.maximum.accumulate(np.where(jointed, nid, -1))
     has_prev = (last_own >= 0) & (s[np.maximum(last_own, 0)] == s)
     carrier = np.where(has_prev, joint_of[np.maximum(last_own, 0)], -1)
     attach = tree.stem_parent_node[s]
-    carrier[(carrier < 0) & (attach < 0)] = 0               # extra trunks hang from the root
-    while (todo := carrier < 0).any():                      # one pass per stem generation
+    carrier[(carrier < 0) & (attach < 0)] = 0  # extra trunks hang from the root
+    while (todo := carrier < 0).any():  # one pass per stem generation
         carrier[todo] = carrier[attach[todo]]
 
     # Blend toward the next joint of the own chain, linearly in node_z.
     nxt = np.minimum.accumulate(np.where(jointed, nid, N)[::-1])[::-1]
-    nxt = np.append(nxt[1:], N)                             # strictly after the node
+    nxt = np.append(nxt[1:], N)  # strictly after the node
     has_next = (nxt < N) & (s[np.minimum(nxt, N - 1)] == s)
     z = tree.node_z
     z_prev = np.where(has_prev, z[np.maximum(last_own, 0)], z[tree.stem_node_start[s]])
@@ -159,8 +164,11 @@ def build_rig(tree, options: RigOptions = RIG_DEFAULTS) -> Rig:
     b = np.where((a + 1 < N) & (s[np.minimum(a + 1, N - 1)] == s[a]), a + 1, a)
     ab = tree.node_pos[b] - tree.node_pos[a]
     base = tree.node_pos[tree.stem_node_start[stem_of]]
-    t = np.clip(np.einsum("ij,ij->i", base - tree.node_pos[a], ab)
-                / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-24), 0.0, 1.0)
+    t = np.clip(
+        np.einsum("ij,ij->i", base - tree.node_pos[a], ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-24),
+        0.0,
+        1.0,
+    )
     todo = rigid
     while todo.size:
         k = np.searchsorted(rigid, todo)
@@ -188,8 +196,11 @@ def build_rig(tree, options: RigOptions = RIG_DEFAULTS) -> Rig:
         x = ca + tk * (cb - ca)
         rhs = (1.0 - tk) * alpha_a[:, None] * ca + tk * alpha_b[:, None] * cb
         den = np.einsum("ij,ij->i", x, x)
-        beta = np.where(den > 1e-18, np.einsum("ij,ij->i", rhs, x) / np.maximum(den, 1e-18),
-                        (1.0 - t[k]) * alpha_a + t[k] * alpha_b)
+        beta = np.where(
+            den > 1e-18,
+            np.einsum("ij,ij->i", rhs, x) / np.maximum(den, 1e-18),
+            (1.0 - t[k]) * alpha_a + t[k] * alpha_b,
+        )
         beta = np.clip(beta, 0.0, 1.0)
         w0 = np.where(first == desc, beta, 1.0 - beta)
         node_joints[todo, 0] = first
@@ -197,11 +208,15 @@ def build_rig(tree, options: RigOptions = RIG_DEFAULTS) -> Rig:
         node_weights[todo, 0] = np.where(has2, w0, 1.0)
         node_weights[todo, 1] = np.where(has2, 1.0 - w0, 0.0)
         node_joints[todo, 1] = np.where(node_weights[todo, 1] > 0, node_joints[todo, 1], 0)
-        todo = todo[np.isin(a[k], todo) | np.isin(b[k], todo)]      # parent not settled yet
-    stem_joint = np.where(tree.stem_parent_node >= 0,
-                          carrier[np.maximum(tree.stem_parent_node, 0)], 0).astype(np.int32)
-    lj = node_joints[tree.leaf_node, np.argmax(node_weights[tree.leaf_node], axis=1)] \
-        if tree.n_leaves else np.zeros(0, dtype=np.uint16)
+        todo = todo[np.isin(a[k], todo) | np.isin(b[k], todo)]  # parent not settled yet
+    stem_joint = np.where(
+        tree.stem_parent_node >= 0, carrier[np.maximum(tree.stem_parent_node, 0)], 0
+    ).astype(np.int32)
+    lj = (
+        node_joints[tree.leaf_node, np.argmax(node_weights[tree.leaf_node], axis=1)]
+        if tree.n_leaves
+        else np.zeros(0, dtype=np.uint16)
+    )
 
     # Hierarchy: previous joint on the chain, else the stem's attach joint; root = trunk base.
     js = s[joint_node]
@@ -213,21 +228,30 @@ def build_rig(tree, options: RigOptions = RIG_DEFAULTS) -> Rig:
     if J > 1 and not np.all(parent[1:] < np.arange(1, J)):
         raise ValueError("tree stems are not ordered parent before child")
 
-    rot = Rotation.from_matrix(tree.node_frame[joint_node])      # orthonormalised frames
+    rot = Rotation.from_matrix(tree.node_frame[joint_node])  # orthonormalised frames
     R = rot.as_matrix()
     t = tree.node_pos[joint_node]
     pr = np.maximum(parent, 0)
-    local_R = np.einsum("jki,jkl->jil", R[pr], R)                # R_parent^T R
+    local_R = np.einsum("jki,jkl->jil", R[pr], R)  # R_parent^T R
     local_t = np.einsum("jki,jk->ji", R[pr], t - t[pr])
     local_R[0], local_t[0] = R[0], t[0]
     world = np.zeros((J, 4, 4))
     world[:, :3, :3] = R
     world[:, :3, 3] = t
     world[:, 3, 3] = 1.0
-    skeleton = Skeleton(names=joint_names(tree, joint_node, js), parent=parent,
-                        rest_translation=local_t,
-                        rest_rotation=Rotation.from_matrix(local_R).as_quat(),
-                        bind_world=world)
-    return Rig(skeleton=skeleton, joint_node=joint_node, joint_stem=js.astype(np.int32),
-               node_joints=node_joints, node_weights=node_weights,
-               leaf_joint=lj.astype(np.uint16), stem_joint=stem_joint)
+    skeleton = Skeleton(
+        names=joint_names(tree, joint_node, js),
+        parent=parent,
+        rest_translation=local_t,
+        rest_rotation=Rotation.from_matrix(local_R).as_quat(),
+        bind_world=world,
+    )
+    return Rig(
+        skeleton=skeleton,
+        joint_node=joint_node,
+        joint_stem=js.astype(np.int32),
+        node_joints=node_joints,
+        node_weights=node_weights,
+        leaf_joint=lj.astype(np.uint16),
+        stem_joint=stem_joint,
+    )

@@ -3,6 +3,7 @@
 Kept apart from the generator because the mesh builder evaluates the same radius profile
 between nodes.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -11,8 +12,9 @@ CONICAL, SPHERICAL, HEMISPHERICAL, CYLINDRICAL = 0, 1, 2, 3
 TAPERED_CYLINDRICAL, FLAME, INVERSE_CONICAL, TEND_FLAME, ENVELOPE = 4, 5, 6, 7, 8
 
 
-def shape_ratio(shape: int, r, prune_width_peak: float = 0.5,
-                prune_power_low: float = 0.5, prune_power_high: float = 0.5) -> np.ndarray:
+def shape_ratio(
+    shape: int, r, prune_width_peak: float = 0.5, prune_power_low: float = 0.5, prune_power_high: float = 0.5
+) -> np.ndarray:
     """The paper's ShapeRatio(shape, r) for r in [0, 1], elementwise.
 
     Shape 8 is the pruning envelope. It uses the continuous form (dividing by PruneWidthPeak
@@ -51,8 +53,8 @@ def taper_radius(r0, length, taper, z) -> np.ndarray:
     taper in [0, 1): cone to cylinder; [1, 2): spherical end; [2, 3): periodic (beads).
     """
     r0, length, taper, z = np.broadcast_arrays(
-        np.asarray(r0, float), np.asarray(length, float), np.asarray(taper, float),
-        np.asarray(z, float))
+        np.asarray(r0, float), np.asarray(length, float), np.asarray(taper, float), np.asarray(z, float)
+    )
     Z = np.clip(z / np.maximum(length, 1e-12), 0.0, 1.0)
     unit = np.where(taper < 1.0, taper, np.where(taper < 2.0, 2.0 - taper, 0.0))
     taper_z = r0 * (1.0 - unit * Z)
@@ -60,9 +62,8 @@ def taper_radius(r0, length, taper, z) -> np.ndarray:
     depth = np.where((taper < 2.0) | (Z2 < taper_z), 1.0, taper - 2.0)
     period = np.maximum(2.0 * taper_z, 1e-12)
     Z3 = np.where(taper < 2.0, Z2, np.abs(Z2 - period * np.floor(Z2 / period + 0.5)))
-    sphere = np.sqrt(np.clip(taper_z ** 2 - (Z3 - taper_z) ** 2, 0.0, None))
-    rounded = np.where((taper < 2.0) & (Z3 >= taper_z), taper_z,
-                       (1.0 - depth) * taper_z + depth * sphere)
+    sphere = np.sqrt(np.clip(taper_z**2 - (Z3 - taper_z) ** 2, 0.0, None))
+    rounded = np.where((taper < 2.0) & (Z3 >= taper_z), taper_z, (1.0 - depth) * taper_z + depth * sphere)
     out = np.where(taper < 1.0, taper_z, rounded)
     # A stem never ends in a zero-width point: keep a sliver so radii stay positive.
     return np.maximum(out, 1e-3 * r0)

@@ -18,6 +18,7 @@ What is compared, per view (the rest pose, side views around the tree):
     crown whose leaves clump into fronds, grow or thin out does not. Without it, two random
     scatters of the same density would score p/(2 − p) (0.43 at 60 % cover) however alike.
 """
+
 from __future__ import annotations
 
 import math
@@ -25,22 +26,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
-BLUR_PX = 3              # silhouette scale: a box of this many pixels (odd)
-SUPERSAMPLE = 2          # sub-samples per pixel side, as the preview renders
-MAX_PX = 768             # longest image side; bigger switch sizes are drawn at this size
-VIEWS = (-90.0, 0.0)     # camera azimuths (degrees, the preview's convention)
-ELEVATION = 5.0          # camera height angle, degrees
+BLUR_PX = 3  # silhouette scale: a box of this many pixels (odd)
+SUPERSAMPLE = 2  # sub-samples per pixel side, as the preview renders
+MAX_PX = 768  # longest image side; bigger switch sizes are drawn at this size
+VIEWS = (-90.0, 0.0)  # camera azimuths (degrees, the preview's convention)
+ELEVATION = 5.0  # camera height angle, degrees
 
 
 @dataclass(frozen=True)
 class Pop:
     """What changes on screen at one LOD switch (LOD `switch` − 1 → `switch`), worst view."""
 
-    switch: int                 # index of the LOD that takes over
-    distance: float             # metres at which it does
-    pixels: int                 # tree's longest side on screen at the switch, as rendered
-    iou: float                  # silhouette IoU, the lowest over the views
-    coverage: float             # covered area ratio new / old, the farthest from 1 over the views
+    switch: int  # index of the LOD that takes over
+    distance: float  # metres at which it does
+    pixels: int  # tree's longest side on screen at the switch, as rendered
+    iou: float  # silhouette IoU, the lowest over the views
+    coverage: float  # covered area ratio new / old, the farthest from 1 over the views
 
 
 def metres_per_pixel(distance: float, options) -> float:
@@ -71,8 +72,9 @@ def _extent(points: np.ndarray, azimuth: float) -> tuple[float, float]:
     return float(np.ptp(v[:, 0])), float(np.ptp(v[:, 1]))
 
 
-def coverage_masks(drawables, m_per_px: float, views=VIEWS, max_px: int = MAX_PX,
-                   margin_px: int = 4) -> tuple[list[list[np.ndarray]], int]:
+def coverage_masks(
+    drawables, m_per_px: float, views=VIEWS, max_px: int = MAX_PX, margin_px: int = 4
+) -> tuple[list[list[np.ndarray]], int]:
     """Per drawable, per view: a float32 (H, W) mask, each pixel's covered fraction, all with
     the same camera (fitted to the first drawable) at `m_per_px` metres per pixel (coarser when
     the tree would exceed `max_px`). Returns (masks, longest side of the tree in pixels)."""
@@ -156,7 +158,13 @@ def lod_pops(asset, options, views=VIEWS, max_px: int = MAX_PX) -> list[Pop]:
         pair = [from_asset(asset, k - 1), from_asset(asset, k)]
         masks, px = coverage_masks(pair, metres_per_pixel(d, options), views, max_px)
         scores = [compare(a, b) for a, b in zip(*masks)]
-        pops.append(Pop(switch=k, distance=float(d), pixels=px,
-                        iou=min(s[0] for s in scores),
-                        coverage=max((s[1] for s in scores), key=lambda c: abs(c - 1.0))))
+        pops.append(
+            Pop(
+                switch=k,
+                distance=float(d),
+                pixels=px,
+                iou=min(s[0] for s in scores),
+                coverage=max((s[1] for s in scores), key=lambda c: abs(c - 1.0)),
+            )
+        )
     return pops

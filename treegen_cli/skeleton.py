@@ -4,6 +4,7 @@ One home for the rules wind, LOD, the forest, the preview and the writers' prepa
 need. Everything is batched one depth level at a time, so the cost is a few numpy operations
 per level of the hierarchy, never per joint or per key.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -33,7 +34,7 @@ def depth_levels(parent: np.ndarray) -> list[np.ndarray]:
     depth = joint_depth(parent)
     order = np.argsort(depth, kind="stable")
     bounds = np.searchsorted(depth[order], np.arange(depth.max() + 2))
-    return [order[bounds[d]:bounds[d + 1]] for d in range(depth.max() + 1)]
+    return [order[bounds[d] : bounds[d + 1]] for d in range(depth.max() + 1)]
 
 
 def trs(t: np.ndarray, q: np.ndarray, s: np.ndarray | None = None) -> np.ndarray:
@@ -54,8 +55,9 @@ def forward(parent: np.ndarray, local: np.ndarray, root_world: np.ndarray | None
     world = np.empty_like(local)
     for idx in depth_levels(parent):
         roots, kids = idx[parent[idx] < 0], idx[parent[idx] >= 0]
-        world[..., roots, :, :] = local[..., roots, :, :] if root_world is None else \
-            root_world[roots] @ local[..., roots, :, :]
+        world[..., roots, :, :] = (
+            local[..., roots, :, :] if root_world is None else root_world[roots] @ local[..., roots, :, :]
+        )
         if kids.size:
             world[..., kids, :, :] = world[..., parent[kids], :, :] @ local[..., kids, :, :]
     return world

@@ -5,6 +5,7 @@ from this list in place of a species file. Each file's header comment names the 
 first line and its origin on a "Source:" line; counts come from growing it at the default seed
 (tens of ms each, the willow about a second).
 """
+
 from __future__ import annotations
 
 import re
@@ -17,10 +18,10 @@ from .bundled import species_dir, species_files  # noqa: F401  (species_dir: re-
 
 @dataclass(frozen=True)
 class SpeciesInfo:
-    name: str            # file stem, what `treegen make <name>` takes
+    name: str  # file stem, what `treegen make <name>` takes
     path: str
-    description: str     # one line: the tree's name and where its values come from
-    stems: int           # at the default seed
+    description: str  # one line: the tree's name and where its values come from
+    stems: int  # at the default seed
     leaves: int
     height_m: float
 
@@ -39,7 +40,7 @@ def describe(path: Path) -> str:
     if title.replace(" ", "_").lower() == path.stem.lower():
         title = path.stem.replace("_", " ").capitalize()
     source = next((h.split(":", 1)[1].strip() for h in header if h.lower().startswith("source:")), "")
-    if source.lower().startswith("no "):         # "no paper values exist ...; taken from X"
+    if source.lower().startswith("no "):  # "no paper values exist ...; taken from X"
         m = re.search(r"taken from ([\w./-]+)", " ".join(header))
         source = m.group(1) if m else ""
     source = re.split(r"[,(]", source)[0].strip().rstrip(".")
@@ -56,9 +57,14 @@ def species_info(path: Path, seed: int = 0) -> SpeciesInfo:
 
     tree = generate(load_params(path), seed)
     stats = tree_stats(tree)
-    return SpeciesInfo(name=path.stem, path=str(path), description=describe(path),
-                       stems=int(tree.n_stems), leaves=int(tree.n_leaves),
-                       height_m=round(float(stats["height_m"]), 2))
+    return SpeciesInfo(
+        name=path.stem,
+        path=str(path),
+        description=describe(path),
+        stems=int(tree.n_stems),
+        leaves=int(tree.n_leaves),
+        height_m=round(float(stats["height_m"]), 2),
+    )
 
 
 def list_species(seed: int = 0, folder: Path | None = None) -> list[SpeciesInfo]:

@@ -23,6 +23,7 @@ Default sizes keep a tree's textures to a few hundred KB of PNG: a 512² leaf at
 240-texel leaves) and 256² bark (bark is noise-like and compresses poorly: 512² bark albedo +
 normal is ~600 KB, 256² ~190 KB; it tiles around and along every stem anyway).
 """
+
 from __future__ import annotations
 
 import colorsys
@@ -36,7 +37,7 @@ from scipy import ndimage
 
 from .leafshapes import outline
 
-PNG_COMPRESS_LEVEL = 6   # fixed: PNG bytes are a function of the pixels only
+PNG_COMPRESS_LEVEL = 6  # fixed: PNG bytes are a function of the pixels only
 # zlib's run-length strategy: 4× faster than the default on these images (0.03 s instead of
 # 0.10 s for a 512² atlas + 256² bark maps) for 12 % more bytes (358 KB instead of 320 KB), which
 # keeps `treegen make` within its time budget.
@@ -45,9 +46,14 @@ PNG_STRATEGY = zlib.Z_RLE
 
 # ---------------------------------------------------------------------------------- colour
 
-_SRGB_LUT = np.round(255.0 * np.where(
-    np.linspace(0.0, 1.0, 4096) <= 0.0031308, 12.92 * np.linspace(0.0, 1.0, 4096),
-    1.055 * np.power(np.linspace(0.0, 1.0, 4096), 1 / 2.4) - 0.055)).astype(np.uint8)
+_SRGB_LUT = np.round(
+    255.0
+    * np.where(
+        np.linspace(0.0, 1.0, 4096) <= 0.0031308,
+        12.92 * np.linspace(0.0, 1.0, 4096),
+        1.055 * np.power(np.linspace(0.0, 1.0, 4096), 1 / 2.4) - 0.055,
+    )
+).astype(np.uint8)
 
 
 def _to_srgb8(lin: np.ndarray) -> np.ndarray:
@@ -67,8 +73,9 @@ def srgb8_to_linear(c: np.ndarray) -> np.ndarray:
 def _jitter(color, dh: float, ds: float, dv: float) -> np.ndarray:
     """Shift a linear colour's hue/saturation/value (HSV done on the linear values: small moves)."""
     h, s, v = colorsys.rgb_to_hsv(*(float(c) for c in color))
-    rgb = colorsys.hsv_to_rgb((h + dh) % 1.0, min(max(s * (1 + ds), 0.0), 1.0),
-                              min(max(v * (1 + dv), 0.0), 1.0))
+    rgb = colorsys.hsv_to_rgb(
+        (h + dh) % 1.0, min(max(s * (1 + ds), 0.0), 1.0), min(max(v * (1 + dv), 0.0), 1.0)
+    )
     return np.array(rgb, dtype=np.float32)
 
 
@@ -87,11 +94,11 @@ def _value_noise(rng: np.random.Generator, h: int, w: int, cells: int) -> np.nda
         p = np.linspace(0.0, cells, m, dtype=np.float32)
         i = np.minimum(p.astype(np.int32), cells - 1)
         f = p - i
-        return i, f * f * (3 - 2 * f)                         # smoothstep: no grid creases
+        return i, f * f * (3 - 2 * f)  # smoothstep: no grid creases
 
     iy, fy = weights(h)
     ix, fx = weights(w)
-    rows = g[:, ix] * (1 - fx) + g[:, ix + 1] * fx            # (cells + 1, w), cheap
+    rows = g[:, ix] * (1 - fx) + g[:, ix + 1] * fx  # (cells + 1, w), cheap
     return rows[iy] * (1 - fy)[:, None] + rows[iy + 1] * fy[:, None]
 
 
@@ -105,6 +112,7 @@ def _smoothstep(e0: float, e1: float, x: np.ndarray) -> np.ndarray:
 
 # ---------------------------------------------------------------------------------- leaves
 
+
 @dataclass(frozen=True, eq=False)
 class LeafAtlas:
     """Leaf variants side by side in one RGBA image.
@@ -115,17 +123,18 @@ class LeafAtlas:
     so the image shows the blade as seen from its front (+normal) side. Use `card_uvs`.
     """
 
-    rgba: np.ndarray      # uint8 (H, W, 4): sRGB colour, straight alpha = blade coverage
-    rects: np.ndarray     # float32 (variants, 4): u0, v0, u1, v1
-    shape: int            # the LeafShape code drawn
+    rgba: np.ndarray  # uint8 (H, W, 4): sRGB colour, straight alpha = blade coverage
+    rects: np.ndarray  # float32 (variants, 4): u0, v0, u1, v1
+    shape: int  # the LeafShape code drawn
 
     @property
     def variants(self) -> int:
         return len(self.rects)
 
 
-def card_uvs(card_uv01: np.ndarray, variant: np.ndarray, atlas: LeafAtlas,
-             origin: str = "top-left") -> np.ndarray:
+def card_uvs(
+    card_uv01: np.ndarray, variant: np.ndarray, atlas: LeafAtlas, origin: str = "top-left"
+) -> np.ndarray:
     """Map card UVs (u = x + 0.5, v = y, base at v = 0) into each vertex's variant cell.
 
     `origin="top-left"` gives glTF UVs (as `atlas.rects`). Asset Primitive.uvs use the
@@ -148,7 +157,7 @@ def _grid(variants: int, size: int):
     cols = math.ceil(math.sqrt(variants))
     rows = math.ceil(variants / cols)
     cw, ch = size // cols, size // rows
-    pad = max(2, min(cw, ch) // 32)        # texels kept clear round each card (mip bleeding)
+    pad = max(2, min(cw, ch) // 32)  # texels kept clear round each card (mip bleeding)
     if min(cw, ch) - 2 * pad < 8:
         raise ValueError(f"leaf atlas {size}² is too small for {variants} variants")
     return cols, rows, cw, ch, pad
@@ -160,8 +169,7 @@ def atlas_rects(variants: int, size: int) -> np.ndarray:
     cols, _rows, cw, ch, pad = _grid(variants, size)
     r, c = np.divmod(np.arange(variants), cols)
     x0, y0 = c * cw + pad, r * ch + pad
-    return (np.stack([x0, y0, x0 + cw - 2 * pad, y0 + ch - 2 * pad], axis=1)
-            / size).astype(np.float32)
+    return (np.stack([x0, y0, x0 + cw - 2 * pad, y0 + ch - 2 * pad], axis=1) / size).astype(np.float32)
 
 
 def _coverage(shape: int, bw: int, bh: int):
@@ -173,12 +181,12 @@ def _coverage(shape: int, bw: int, bh: int):
     (matched by coordinates, so the palm's two halves share their midrib).
     """
     o = outline(shape)
-    p2 = o.uvs                                                 # (u, v) = (x + 0.5, y)
+    p2 = o.uvs  # (u, v) = (x + 0.5, y)
     px = np.column_stack([p2[:, 0] * bw, (1.0 - p2[:, 1]) * bh])  # texel units, y down
-    tri = px[o.triangles]                                      # (T, 3, 2)
+    tri = px[o.triangles]  # (T, 3, 2)
     ys, xs = np.mgrid[0:bh, 0:bw].astype(np.float64) + 0.5
     inside = np.zeros((bh, bw), dtype=bool)
-    for a, b, c in tri:                                        # ≤ 12 triangles, whole-image ops
+    for a, b, c in tri:  # ≤ 12 triangles, whole-image ops
         area = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
         if abs(area) < 1e-12:
             continue
@@ -198,22 +206,22 @@ def _coverage(shape: int, bw: int, bh: int):
                 continue
             count[key] = count.get(key, 0) + 1
             seg[key] = (px[t[i]], px[t[j]])
-    edges = np.array([seg[k] for k, n in count.items() if n == 1])   # (E, 2, 2)
+    edges = np.array([seg[k] for k, n in count.items() if n == 1])  # (E, 2, 2)
     # Only texels next to an inside/outside change can be partly covered.
     m = np.pad(inside, 1, mode="constant")
     grow = m[1:-1, 1:-1].copy()
     shrink = grow.copy()
     for dy in (-1, 0, 1):
         for dx in (-1, 0, 1):
-            nb = m[1 + dy:1 + dy + bh, 1 + dx:1 + dx + bw]
+            nb = m[1 + dy : 1 + dy + bh, 1 + dx : 1 + dx + bw]
             grow |= nb
             shrink &= nb
     band = np.flatnonzero((grow & ~shrink).ravel())
     alpha = inside.astype(np.float32)
     if band.size and edges.size:
-        q = np.column_stack([xs.ravel()[band], ys.ravel()[band]])     # (B, 2)
-        a, d = edges[:, 0], edges[:, 1] - edges[:, 0]                # (E, 2)
-        rel = q[:, None, :] - a[None, :, :]                          # (B, E, 2)
+        q = np.column_stack([xs.ravel()[band], ys.ravel()[band]])  # (B, 2)
+        a, d = edges[:, 0], edges[:, 1] - edges[:, 0]  # (E, 2)
+        rel = q[:, None, :] - a[None, :, :]  # (B, E, 2)
         t = np.clip((rel * d).sum(-1) / np.maximum((d * d).sum(-1), 1e-12), 0.0, 1.0)
         dist = np.sqrt(((rel - t[..., None] * d) ** 2).sum(-1)).min(axis=1)
         sign = np.where(inside.ravel()[band], 1.0, -1.0)
@@ -231,7 +239,7 @@ def _lobes(shape: int, aspect: float):
     if shape == 7:
         o = outline(7)
         c = np.array([0.0, 0.5])
-        tips = o.uvs[1::2] - [0.5, 0.0]                       # outer ring points (even k)
+        tips = o.uvs[1::2] - [0.5, 0.0]  # outer ring points (even k)
         out = []
         for tx, ty in tips:
             d = np.array([tx * aspect, ty]) - c
@@ -250,9 +258,9 @@ def _veins(X: np.ndarray, Y: np.ndarray, lobes, rng, side_veins: bool, half_widt
     converging at base and tip instead. Jitter per variant comes from `rng`.
     """
     spacing = rng.uniform(0.10, 0.135)
-    slope = rng.uniform(0.7, 1.0)            # how far a side vein climbs per unit outward
-    bend = rng.uniform(0.6, 0.75)            # < 1: veins curve toward the tip near the margin
-    phase = rng.uniform(0.0, 1.0, 2)         # left / right rows offset (alternate veins)
+    slope = rng.uniform(0.7, 1.0)  # how far a side vein climbs per unit outward
+    bend = rng.uniform(0.6, 0.75)  # < 1: veins curve toward the tip near the margin
+    phase = rng.uniform(0.0, 1.0, 2)  # left / right rows offset (alternate veins)
     best = None
     for origin, d, ln in lobes:
         rx, ry = X - origin[0], Y - origin[1]
@@ -277,9 +285,9 @@ def _veins(X: np.ndarray, Y: np.ndarray, lobes, rng, side_veins: bool, half_widt
     zero = np.zeros_like(mid)
     if not side_veins:
         return mid, zero, zero
-    if half_width < 0.125:                   # narrow blade: parallel veins
+    if half_width < 0.125:  # narrow blade: parallel veins
         taper = np.power(np.sin(np.pi * sc), 0.5) * half_width + 1e-6
-        k = a / taper * 3.5                 # three veins a side, at k = 1, 2, 3
+        k = a / taper * 3.5  # three veins a side, at k = 1, 2, 3
         dist = np.abs(k - np.clip(np.round(k), 1, 3)) * taper / 3.5
         w = 0.35 * half_width / 3.5
         side = (1.0 - _smoothstep(0.0, 1.0, dist / w)) * inside_len
@@ -287,18 +295,19 @@ def _veins(X: np.ndarray, Y: np.ndarray, lobes, rng, side_veins: bool, half_widt
         return mid, side * 0.7, relief * 0.5
     t = (s * ln - slope * np.power(a + 1e-6, bend)) / spacing
     t = t + np.where(across < 0, phase[0], phase[1])
-    frac = np.abs(t - np.round(t))                           # 0 on a vein, 0.5 between two
+    frac = np.abs(t - np.round(t))  # 0 on a vein, 0.5 between two
     dist = frac * spacing / math.sqrt(1.0 + slope * slope)
     w_side = 0.004 * (1.0 - 0.6 * np.clip(a / (2 * half_width), 0, 1)) + 0.0015
     side = 1.0 - _smoothstep(0.0, 1.0, dist / w_side)
     along_ok = _smoothstep(0.03, 0.10, s) * (1.0 - _smoothstep(0.85, 0.98, s))
-    side *= along_ok * _smoothstep(0.0, 1.5, a / w_mid)       # starts at the midrib's edge
+    side *= along_ok * _smoothstep(0.0, 1.5, a / w_mid)  # starts at the midrib's edge
     relief = _smoothstep(0.0, 0.5, frac) * along_ok
     return mid, side, relief
 
 
-def leaf_atlas(shape: int, color, size: int = 512, variants: int = 4, seed: int = 0,
-               aspect: float = 0.5) -> LeafAtlas:
+def leaf_atlas(
+    shape: int, color, size: int = 512, variants: int = 4, seed: int = 0, aspect: float = 0.5
+) -> LeafAtlas:
     """RGBA atlas of `variants` leaves drawn from LeafShape `shape`'s outline.
 
     `color` is the blade's mean linear RGB; `aspect` is the card's width / length
@@ -311,7 +320,7 @@ def leaf_atlas(shape: int, color, size: int = 512, variants: int = 4, seed: int 
         raise ValueError("variants must be at least 1")
     if not aspect > 0:
         raise ValueError("aspect must be positive")
-    outline(shape)                                             # validates the code
+    outline(shape)  # validates the code
     rng = np.random.default_rng([int(seed), 0x1EAF, int(shape)])
     cols, rows, cw, ch, pad = _grid(variants, size)
     bw, bh = cw - 2 * pad, ch - 2 * pad
@@ -320,7 +329,7 @@ def leaf_atlas(shape: int, color, size: int = 512, variants: int = 4, seed: int 
     # Nearest solid blade texel for every cell texel (colour dilation): one EDT for all cells,
     # kept as a flat index into the blade rectangle.
     cell_inside = np.zeros((ch, cw), dtype=bool)
-    cell_inside[pad:pad + bh, pad:pad + bw] = inside
+    cell_inside[pad : pad + bh, pad : pad + bw] = inside
     if not cell_inside.any():
         cell_inside[pad + bh // 2, pad + bw // 2] = True
     _, (ny, nx) = ndimage.distance_transform_edt(~cell_inside, return_indices=True)
@@ -331,8 +340,9 @@ def leaf_atlas(shape: int, color, size: int = 512, variants: int = 4, seed: int 
     core = np.pad(inside, 1)
     for _ in range(math.ceil(rim_w)):
         margin += core[1:-1, 1:-1]
-        core[1:-1, 1:-1] = (core[1:-1, 1:-1] & core[:-2, 1:-1] & core[2:, 1:-1]
-                            & core[1:-1, :-2] & core[1:-1, 2:])
+        core[1:-1, 1:-1] = (
+            core[1:-1, 1:-1] & core[:-2, 1:-1] & core[2:, 1:-1] & core[1:-1, :-2] & core[1:-1, 2:]
+        )
 
     # Physical blade coordinates of card texel centres (tip at row 0).
     x = (np.arange(bw, dtype=np.float32) + 0.5) / bw - 0.5
@@ -346,12 +356,12 @@ def leaf_atlas(shape: int, color, size: int = 512, variants: int = 4, seed: int 
         rr = np.hypot(x[None, :] * 2, (y[:, None] - 0.5) * 2)
         nz = np.sqrt(np.clip(1.0 - rr * rr, 0.0, 1.0))
         lit = np.clip(nz * 0.75 - x[None, :] * 0.45 + (y[:, None] - 0.5) * 0.45, 0.0, 1.0)
-        shade0 = (0.5 + 0.6 * lit + 0.3 * lit ** 6).astype(np.float32)
+        shade0 = (0.5 + 0.6 * lit + 0.3 * lit**6).astype(np.float32)
     else:
         across = 1.0 - np.clip(np.abs(X) / np.float32(0.5 * aspect), 0.0, 1.0)
         shade0 = (1.0 + 0.10 * (0.5 - Y) + 0.08 * across).astype(np.float32)
     side_ok = shape not in (1, 5)
-    vein_col = np.array([1.35, 1.30, 0.85], dtype=np.float32)        # pale yellow-green
+    vein_col = np.array([1.35, 1.30, 0.85], dtype=np.float32)  # pale yellow-green
 
     rgba = np.zeros((size, size, 4), dtype=np.uint8)
     rects = atlas_rects(variants, size)
@@ -385,24 +395,24 @@ def leaf_atlas(shape: int, color, size: int = 512, variants: int = 4, seed: int 
         blade = _to_srgb8(lin * gain).reshape(-1, 3)
         y0, x0 = r * ch, c * cw
         # Solid texels are their own nearest; the rest take the nearest solid texel's colour.
-        rgba[y0:y0 + ch, x0:x0 + cw, :3] = blade.take(nearest, axis=0).reshape(ch, cw, 3)
-        rgba[y0 + pad:y0 + pad + bh, x0 + pad:x0 + pad + bw, 3] = alpha8
+        rgba[y0 : y0 + ch, x0 : x0 + cw, :3] = blade.take(nearest, axis=0).reshape(ch, cw, 3)
+        rgba[y0 + pad : y0 + pad + bh, x0 + pad : x0 + pad + bw, 3] = alpha8
     # Unused cells and texels outside every cell (size not a multiple of the grid) get leaf
     # colour too, alpha 0, so nothing dark bleeds in at small mip levels.
     for k in range(variants, rows * cols):
         r, c = divmod(k, cols)
-        rgba[r * ch:(r + 1) * ch, c * cw:(c + 1) * cw, :3] = rgba[:ch, :cw, :3]
+        rgba[r * ch : (r + 1) * ch, c * cw : (c + 1) * cw, :3] = rgba[:ch, :cw, :3]
     if rows * ch < size:
-        rgba[rows * ch:, :, :3] = rgba[rows * ch - 1:rows * ch, :, :3]
+        rgba[rows * ch :, :, :3] = rgba[rows * ch - 1 : rows * ch, :, :3]
     if cols * cw < size:
-        rgba[:, cols * cw:, :3] = rgba[:, cols * cw - 1:cols * cw, :3]
+        rgba[:, cols * cw :, :3] = rgba[:, cols * cw - 1 : cols * cw, :3]
     return LeafAtlas(rgba=rgba, rects=rects, shape=int(shape))
 
 
 # ---------------------------------------------------------------------------------- bark
 
-def _torus_noise(rng: np.random.Generator, n: int, sx: float, sy: float,
-                 count: int = 1) -> np.ndarray:
+
+def _torus_noise(rng: np.random.Generator, n: int, sx: float, sy: float, count: int = 1) -> np.ndarray:
     """`count` periodic Gaussian fields on an n × n torus, unit variance each (float32).
 
     Random Fourier coefficients × a Gaussian envelope of widths sx (cycles per tile across, u)
@@ -416,14 +426,14 @@ def _torus_noise(rng: np.random.Generator, n: int, sx: float, sy: float,
     fy = np.concatenate([np.arange(0, ky + 1), np.arange(-ky, 0)])[:, None]
     fx = np.arange(0, kx + 1)[None, :]
     env = np.exp(-0.5 * ((fx / sx) ** 2 + (fy / sy) ** 2))
-    env[0, 0] = 0.0                                             # zero mean
+    env[0, 0] = 0.0  # zero mean
     shape = (count, 2 * ky + 1, kx + 1)
     coef = (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)) * env
     cols = np.zeros((count, n, kx + 1), dtype=np.complex64)
-    cols[:, :ky + 1] = coef[:, :ky + 1]
-    cols[:, n - ky:] = coef[:, ky + 1:]
+    cols[:, : ky + 1] = coef[:, : ky + 1]
+    cols[:, n - ky :] = coef[:, ky + 1 :]
     f = np.fft.irfft(np.fft.ifft(cols, axis=1), n=n, axis=2).astype(np.float32, copy=False)
-    step = max(1, n // 128)                          # the std of a 128² subgrid is plenty
+    step = max(1, n // 128)  # the std of a 128² subgrid is plenty
     f /= f[:, ::step, ::step].std(axis=(1, 2), keepdims=True) + np.float32(1e-12)
     return f
 
@@ -442,31 +452,30 @@ def _upsample_periodic(a: np.ndarray, f: int) -> np.ndarray:
     return rows[:, i0] * (1 - t)[None, :] + rows[:, i1] * t[None, :]
 
 
-def _worley_border(rng: np.random.Generator, n: int, gx: int, gy: int,
-                   wx: np.ndarray, wy: np.ndarray):
+def _worley_border(rng: np.random.Generator, n: int, gx: int, gy: int, wx: np.ndarray, wy: np.ndarray):
     """Distance in texels to the nearest cell border of a periodic Voronoi diagram, and each
     texel's cell id, for `gx` × `gy` jittered seeds per tile (gy < gx: cells long along v),
     looked up at warped texel coordinates (wx, wy in tile units).
     """
     sx = rng.uniform(0.05, 0.95, gy * gx).astype(np.float32)
     sy = rng.uniform(0.0, 1.0, gy * gx).astype(np.float32)
-    ox, oy = rng.uniform(0.0, 1.0, 2).astype(np.float32)   # the seam need not be a grid line
+    ox, oy = rng.uniform(0.0, 1.0, 2).astype(np.float32)  # the seam need not be a grid line
     grid = (np.arange(n, dtype=np.float32) + 0.5) / n
-    px = (grid[None, :] + wx) * gx + ox               # cell widths across
-    py = (grid[:, None] + wy) * gy + oy               # cell heights along
+    px = (grid[None, :] + wx) * gx + ox  # cell widths across
+    py = (grid[:, None] + wy) * gy + oy  # cell heights along
     cx, cy = np.floor(px).astype(np.int32), np.floor(py).astype(np.int32)
     fx, fy = px - cx, py - cy
     f1 = np.full((n, n), np.inf, dtype=np.float32)
     f2 = np.full((n, n), np.inf, dtype=np.float32)
     ident = np.zeros((n, n), dtype=np.int32)
     cols = [(cx + dx) % gx for dx in (-1, 0, 1)]
-    for dy in (-1, 0, 1):                            # isotropic in cell units: 3 × 3 suffice
+    for dy in (-1, 0, 1):  # isotropic in cell units: 3 × 3 suffice
         row = ((cy + dy) % gy) * gx
         for dx, col in zip((-1, 0, 1), cols):
             k = row + col
             ddx = sx.take(k) - fx + dx
             ddy = sy.take(k) - fy + dy
-            d = ddx * ddx + ddy * ddy                # squared: order is all that matters here
+            d = ddx * ddx + ddy * ddy  # squared: order is all that matters here
             np.copyto(ident, k, where=d < f1)
             np.minimum(f2, np.maximum(f1, d), out=f2)
             np.minimum(f1, d, out=f1)
@@ -495,13 +504,14 @@ def bark_height(size: int = 256, seed: int = 0, furrow: float = 1.0) -> np.ndarr
         raise ValueError(f"furrow must be in 0..1, got {furrow!r}")
     # One independent stream per ingredient: a field clamped at a small `n` (fewer
     # coefficients drawn) must not shift the others, so every size shows the same bark.
-    rw, rr, rc, re, rv = (np.random.default_rng(s)
-                          for s in np.random.SeedSequence([int(seed), 0xBA4C]).spawn(5))
+    rw, rr, rc, re, rv = (
+        np.random.default_rng(s) for s in np.random.SeedSequence([int(seed), 0xBA4C]).spawn(5)
+    )
     n = size
-    w = _torus_noise(rw, n, 3.0, 2.0, 2)             # big bends of the plates
-    rough = _torus_noise(rr, n, 24.0, 8.0, 1)[0]     # ragged furrow edges, plate undulation
-    c = _torus_noise(rc, n, 2.0, 14.0, 2)            # cross checks, and where they show
-    e = _torus_noise(re, n, 70.0, 12.0, 1)[0]        # fibres along the stem
+    w = _torus_noise(rw, n, 3.0, 2.0, 2)  # big bends of the plates
+    rough = _torus_noise(rr, n, 24.0, 8.0, 1)[0]  # ragged furrow edges, plate undulation
+    c = _torus_noise(rc, n, 2.0, 14.0, 2)  # cross checks, and where they show
+    e = _torus_noise(re, n, 70.0, 12.0, 1)[0]  # fibres along the stem
     cross = (1.0 - _smoothstep(0.0, 0.10, np.abs(c[0]))) * _smoothstep(0.8, 1.6, c[1])
     lenticel = (1.0 - _smoothstep(0.0, 0.22, np.abs(c[0]))) * _smoothstep(0.4, 1.4, c[1])
     smooth = 0.85 + 0.05 * rough + 0.025 * e - 0.7 * lenticel
@@ -511,12 +521,13 @@ def bark_height(size: int = 256, seed: int = 0, furrow: float = 1.0) -> np.ndarr
     # (the border distance is continuous; plate ids only change inside furrows, unseen).
     f = 2 if n >= 512 and n % 2 == 0 else 1
     m = n // f
-    border, ident = _worley_border(rv, m, 9, 3, 0.02 * w[0, ::f, ::f] + 0.004 * rough[::f, ::f],
-                                   0.03 * w[1, ::f, ::f])
+    border, ident = _worley_border(
+        rv, m, 9, 3, 0.02 * w[0, ::f, ::f] + 0.004 * rough[::f, ::f], 0.03 * w[1, ::f, ::f]
+    )
     plate_h = rv.uniform(0.0, 1.0, 27).astype(np.float32)[ident]
     border = _upsample_periodic(border, f)
-    plate_h = plate_h.repeat(f, axis=0).repeat(f, axis=1)   # steps fall inside furrows
-    border = border * np.float32(f / n)             # texels → tile units
+    plate_h = plate_h.repeat(f, axis=0).repeat(f, axis=1)  # steps fall inside furrows
+    border = border * np.float32(f / n)  # texels → tile units
     # Furrows open and close along their length; never under 2.5 texels of the Voronoi pass,
     # or they break up into beads where a thin furrow falls between its samples.
     width = np.maximum(0.012 + 0.008 * np.clip(w[1], -1.0, 1.5), np.float32(2.5 * f / n))
@@ -530,8 +541,7 @@ def bark_height(size: int = 256, seed: int = 0, furrow: float = 1.0) -> np.ndarr
     return h.astype(np.float32)
 
 
-def bark_textures(tint, size: int = 256, seed: int = 0, depth: float = 0.03,
-                  furrow: float = 1.0):
+def bark_textures(tint, size: int = 256, seed: int = 0, depth: float = 0.03, furrow: float = 1.0):
     """(albedo uint8 H×W×3 sRGB, normal uint8 H×W×3) for bark that tiles in u and v.
 
     `tint` is the bark's mean linear RGB. V runs along the stem (mesh.py's bark UVs), so the
@@ -542,8 +552,7 @@ def bark_textures(tint, size: int = 256, seed: int = 0, depth: float = 0.03,
     """
     t = _check_color("tint", tint).astype(np.float32)
     h = bark_height(size, seed, furrow)
-    rb, rf = (np.random.default_rng(s)
-              for s in np.random.SeedSequence([int(seed), 0xC0105]).spawn(2))
+    rb, rf = (np.random.default_rng(s) for s in np.random.SeedSequence([int(seed), 0xC0105]).spawn(2))
     blot = _torus_noise(rb, size, 6.0, 3.0, 1)[0]
     fib = _torus_noise(rf, size, 48.0, 6.0, 1)[0]
     # Furrows dark and warm, ridge tops lighter and greyer (weathered); fibres and slow
@@ -554,11 +563,11 @@ def bark_textures(tint, size: int = 256, seed: int = 0, depth: float = 0.03,
     k = _smoothstep(0.08, 0.6, h)[..., None]
     lin = low + (top * 1.3 - low) * k
     lin *= (1.0 + 0.08 * blot + 0.07 * fib)[..., None] * (0.85 + 0.3 * h)[..., None]
-    lin *= t / np.maximum(lin.reshape(-1, 3).mean(axis=0), 1e-6)   # mean albedo = tint
+    lin *= t / np.maximum(lin.reshape(-1, 3).mean(axis=0), 1e-6)  # mean albedo = tint
     albedo = _to_srgb8(lin)
     s = depth * size
-    dx = (np.roll(h, -1, axis=1) - np.roll(h, 1, axis=1)) * (0.5 * s)   # dh / d(column)
-    dy = (np.roll(h, -1, axis=0) - np.roll(h, 1, axis=0)) * (0.5 * s)   # dh / d(row), row = −Y
+    dx = (np.roll(h, -1, axis=1) - np.roll(h, 1, axis=1)) * (0.5 * s)  # dh / d(column)
+    dy = (np.roll(h, -1, axis=0) - np.roll(h, 1, axis=0)) * (0.5 * s)  # dh / d(row), row = −Y
     inv = 127.5 / np.sqrt(dx * dx + dy * dy + 1.0)
     normal = np.empty(h.shape + (3,), dtype=np.uint8)
     normal[..., 0] = np.round(127.5 - dx * inv)
@@ -568,6 +577,7 @@ def bark_textures(tint, size: int = 256, seed: int = 0, depth: float = 0.03,
 
 
 # ---------------------------------------------------------------------------------- PNG
+
 
 def png_bytes(array: np.ndarray) -> bytes:
     """PNG of a uint8 H×W×3 (RGB) or H×W×4 (RGBA) array; no metadata, so bytes are repeatable."""
@@ -591,16 +601,19 @@ def png_bytes_unfiltered(array: np.ndarray) -> bytes:
     if a.dtype != np.uint8 or a.ndim != 3 or a.shape[2] != 4:
         raise ValueError(f"png_bytes_unfiltered wants uint8 H×W×4, got {a.dtype} {a.shape}")
     h, w = a.shape[:2]
-    raw = np.zeros((h, 1 + 4 * w), np.uint8)                    # filter byte 0: None
+    raw = np.zeros((h, 1 + 4 * w), np.uint8)  # filter byte 0: None
     raw[:, 1:] = a.reshape(h, 4 * w)
 
     def chunk(kind: bytes, data: bytes) -> bytes:
-        return (len(data).to_bytes(4, "big") + kind + data
-                + zlib.crc32(kind + data).to_bytes(4, "big"))
+        return len(data).to_bytes(4, "big") + kind + data + zlib.crc32(kind + data).to_bytes(4, "big")
 
-    header = w.to_bytes(4, "big") + h.to_bytes(4, "big") + bytes((8, 6, 0, 0, 0))   # RGBA8
-    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header)
-            + chunk(b"IDAT", zlib.compress(raw.tobytes(), 1)) + chunk(b"IEND", b""))
+    header = w.to_bytes(4, "big") + h.to_bytes(4, "big") + bytes((8, 6, 0, 0, 0))  # RGBA8
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", header)
+        + chunk(b"IDAT", zlib.compress(raw.tobytes(), 1))
+        + chunk(b"IEND", b"")
+    )
 
 
 # ---------------------------------------------------------------------------------- colours
@@ -609,14 +622,14 @@ def png_bytes_unfiltered(array: np.ndarray) -> bytes:
 # bark; the by-shape and generic entries are the fallbacks.
 DEFAULT_LEAF_COLOR: dict[str | int, tuple[float, float, float]] = {
     "default": (0.16, 0.30, 0.06),
-    0: (0.16, 0.30, 0.06),             # broadleaf
-    1: (0.07, 0.16, 0.05),             # needles
-    2: (0.07, 0.17, 0.06),             # narrow needles / willow-like
+    0: (0.16, 0.30, 0.06),  # broadleaf
+    1: (0.07, 0.16, 0.05),  # needles
+    2: (0.07, 0.17, 0.06),  # narrow needles / willow-like
     3: (0.14, 0.27, 0.06),
     4: (0.15, 0.28, 0.06),
-    5: (0.12, 0.17, 0.06),             # seeds, knots, tiny blobs: olive
-    6: (0.10, 0.22, 0.05),             # palm fronds
-    7: (0.15, 0.29, 0.05),             # palmate
+    5: (0.12, 0.17, 0.06),  # seeds, knots, tiny blobs: olive
+    6: (0.10, 0.22, 0.05),  # palm fronds
+    7: (0.15, 0.29, 0.05),  # palmate
     "balsam_fir": (0.04, 0.11, 0.04),
     "black_tupelo": (0.10, 0.22, 0.04),
     "ca_black_oak": (0.12, 0.20, 0.05),
@@ -635,19 +648,19 @@ DEFAULT_LEAF_COLOR: dict[str | int, tuple[float, float, float]] = {
 }
 DEFAULT_BARK_COLOR: dict[str, tuple[float, float, float]] = {
     "default": (0.13, 0.09, 0.06),
-    "balsam_fir": (0.17, 0.15, 0.13),          # smooth grey-brown
-    "black_tupelo": (0.11, 0.09, 0.08),        # dark, blocky
-    "ca_black_oak": (0.08, 0.07, 0.06),        # nearly black furrows
+    "balsam_fir": (0.17, 0.15, 0.13),  # smooth grey-brown
+    "black_tupelo": (0.11, 0.09, 0.08),  # dark, blocky
+    "ca_black_oak": (0.08, 0.07, 0.06),  # nearly black furrows
     "desert_bush": (0.20, 0.15, 0.10),
     "eastern_cottonwood": (0.20, 0.19, 0.17),  # ash-grey, deeply furrowed
-    "european_larch": (0.17, 0.08, 0.05),      # reddish brown
+    "european_larch": (0.17, 0.08, 0.05),  # reddish brown
     "fan_palm": (0.22, 0.17, 0.11),
     "lombardy_poplar": (0.16, 0.15, 0.13),
     "palm": (0.22, 0.17, 0.11),
-    "quaking_aspen": (0.45, 0.44, 0.37),       # pale, chalky
-    "rush": (0.15, 0.22, 0.07),                # green stems
-    "sassafras": (0.17, 0.10, 0.07),           # orange-brown
-    "shave_grass": (0.12, 0.22, 0.08),         # green stems
+    "quaking_aspen": (0.45, 0.44, 0.37),  # pale, chalky
+    "rush": (0.15, 0.22, 0.07),  # green stems
+    "sassafras": (0.17, 0.10, 0.07),  # orange-brown
+    "shave_grass": (0.12, 0.22, 0.08),  # green stems
     "tamarack": (0.16, 0.09, 0.07),
     "weeping_willow": (0.14, 0.11, 0.08),
 }
@@ -655,14 +668,14 @@ DEFAULT_BARK_COLOR: dict[str, tuple[float, float, float]] = {
 # How furrowed each species' bark is (bark_textures' `furrow`): 1 deep plates, 0 smooth.
 DEFAULT_BARK_FURROW: dict[str, float] = {
     "default": 1.0,
-    "balsam_fir": 0.35,            # smooth with resin blisters until old
+    "balsam_fir": 0.35,  # smooth with resin blisters until old
     "desert_bush": 0.6,
     "european_larch": 0.8,
     "fan_palm": 0.2,
     "lombardy_poplar": 0.8,
     "palm": 0.2,
-    "quaking_aspen": 0.1,          # smooth, chalky, dark lenticels
-    "rush": 0.0,                   # green culms
+    "quaking_aspen": 0.1,  # smooth, chalky, dark lenticels
+    "rush": 0.0,  # green culms
     "sassafras": 0.9,
     "shave_grass": 0.0,
     "tamarack": 0.7,
@@ -683,7 +696,8 @@ def species_colors(params) -> tuple[tuple[float, float, float], tuple[float, flo
     bark = getattr(params, "bark_color", None)
     if leaf is None:
         leaf = DEFAULT_LEAF_COLOR.get(name) or DEFAULT_LEAF_COLOR.get(
-            int(getattr(params, "leaf_shape", 0)), DEFAULT_LEAF_COLOR["default"])
+            int(getattr(params, "leaf_shape", 0)), DEFAULT_LEAF_COLOR["default"]
+        )
     if bark is None:
         bark = DEFAULT_BARK_COLOR.get(name, DEFAULT_BARK_COLOR["default"])
     return tuple(float(c) for c in leaf), tuple(float(c) for c in bark)
@@ -694,24 +708,29 @@ class TreeTextures:
     """A species' leaf atlas and bark maps, ready to embed (see `pngs`)."""
 
     leaf: LeafAtlas
-    bark_albedo: np.ndarray     # uint8 (N, N, 3) sRGB
-    bark_normal: np.ndarray     # uint8 (N, N, 3) tangent space, OpenGL/glTF convention
+    bark_albedo: np.ndarray  # uint8 (N, N, 3) sRGB
+    bark_normal: np.ndarray  # uint8 (N, N, 3) tangent space, OpenGL/glTF convention
 
     def pngs(self) -> dict[str, bytes]:
         """PNG bytes by role: "leaf" (RGBA), "bark" (RGB), "bark_normal" (RGB)."""
-        return {"leaf": png_bytes(self.leaf.rgba), "bark": png_bytes(self.bark_albedo),
-                "bark_normal": png_bytes(self.bark_normal)}
+        return {
+            "leaf": png_bytes(self.leaf.rgba),
+            "bark": png_bytes(self.bark_albedo),
+            "bark_normal": png_bytes(self.bark_normal),
+        }
 
 
-def species_textures(params, seed: int = 0, leaf_size: int = 512, bark_size: int = 256,
-                     variants: int = 4) -> TreeTextures:
+def species_textures(
+    params, seed: int = 0, leaf_size: int = 512, bark_size: int = 256, variants: int = 4
+) -> TreeTextures:
     """Everything a writer needs for one species: its colours, its LeafShape outline, its
     leaf width / length (LeafScaleX) so veins keep their angles on the stretched card, and
     how furrowed its bark is."""
     leaf_rgb, bark_rgb = species_colors(params)
     aspect = float(getattr(params, "leaf_scale_x", 0.5))
-    atlas = leaf_atlas(int(getattr(params, "leaf_shape", 0)), leaf_rgb, leaf_size, variants,
-                       seed, aspect=aspect)
+    atlas = leaf_atlas(
+        int(getattr(params, "leaf_shape", 0)), leaf_rgb, leaf_size, variants, seed, aspect=aspect
+    )
     furrow = DEFAULT_BARK_FURROW.get(_species_key(params), DEFAULT_BARK_FURROW["default"])
     albedo, normal = bark_textures(bark_rgb, bark_size, seed, furrow=furrow)
     return TreeTextures(atlas, albedo, normal)

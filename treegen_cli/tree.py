@@ -11,6 +11,7 @@ A split ("clone") is a stem of the same level whose parent is the stem it split 
 first node sits on the parent's split node and its `node_z` continues the parent's, so radius
 and taper carry on seamlessly.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -24,35 +25,35 @@ from .params import Params
 class Tree:
     params: Params
     seed: int
-    scale: float                 # scale_tree = Scale ± ScaleV, metres
+    scale: float  # scale_tree = Scale ± ScaleV, metres
 
     # stems, shape (S,)
-    stem_level: np.ndarray       # int8, 0 = trunk
-    stem_parent: np.ndarray      # int32, -1 for a trunk
-    stem_parent_node: np.ndarray # int32, global index of the parent's node at the start of the
-                                 # parent segment the stem grows from (-1 for a trunk)
-    stem_offset: np.ndarray      # float64, metres along the parent from its base (node_z units)
-    stem_length: np.ndarray      # float64, metres (a clone carries its original's length)
-    stem_radius: np.ndarray      # float64, base radius in metres (before flare)
-    stem_clone: np.ndarray       # bool, True for a split clone
+    stem_level: np.ndarray  # int8, 0 = trunk
+    stem_parent: np.ndarray  # int32, -1 for a trunk
+    stem_parent_node: np.ndarray  # int32, global index of the parent's node at the start of the
+    # parent segment the stem grows from (-1 for a trunk)
+    stem_offset: np.ndarray  # float64, metres along the parent from its base (node_z units)
+    stem_length: np.ndarray  # float64, metres (a clone carries its original's length)
+    stem_radius: np.ndarray  # float64, base radius in metres (before flare)
+    stem_clone: np.ndarray  # bool, True for a split clone
     stem_node_start: np.ndarray  # int32, first node of the stem
     stem_node_count: np.ndarray  # int32, number of nodes (>= 2)
 
     # nodes, shape (N,)
-    node_stem: np.ndarray        # int32
-    node_pos: np.ndarray         # float64 (N, 3)
-    node_frame: np.ndarray       # float64 (N, 3, 3) rotation; column 2 = direction of the segment
-                                 # leaving the node (the last node repeats the last segment's)
-    node_radius: np.ndarray      # float64, radius at the node (taper and trunk flare applied)
-    node_z: np.ndarray           # float64, metres from the stem's (original's) base
+    node_stem: np.ndarray  # int32
+    node_pos: np.ndarray  # float64 (N, 3)
+    node_frame: np.ndarray  # float64 (N, 3, 3) rotation; column 2 = direction of the segment
+    # leaving the node (the last node repeats the last segment's)
+    node_radius: np.ndarray  # float64, radius at the node (taper and trunk flare applied)
+    node_z: np.ndarray  # float64, metres from the stem's (original's) base
 
     # leaves, shape (L,)
-    leaf_stem: np.ndarray        # int32, stem the leaf grows on
-    leaf_node: np.ndarray        # int32, node the leaf is fixed to (segment start below it)
-    leaf_pos: np.ndarray         # float64 (L, 3), base of the leaf blade
-    leaf_frame: np.ndarray       # float64 (L, 3, 3); column 0 = blade width axis, column 1 =
-                                 # blade length axis (base to tip), column 2 = blade normal
-    leaf_size: np.ndarray        # float64 (L, 2): (length, width) in metres
+    leaf_stem: np.ndarray  # int32, stem the leaf grows on
+    leaf_node: np.ndarray  # int32, node the leaf is fixed to (segment start below it)
+    leaf_pos: np.ndarray  # float64 (L, 3), base of the leaf blade
+    leaf_frame: np.ndarray  # float64 (L, 3, 3); column 0 = blade width axis, column 1 =
+    # blade length axis (base to tip), column 2 = blade normal
+    leaf_size: np.ndarray  # float64 (L, 2): (length, width) in metres
 
     @property
     def n_stems(self) -> int:

@@ -34,6 +34,7 @@ Modules: wind_options (the options), wind_loads (loads and springs per joint), w
 (the linear system and its modes), wind_field (the field and its torques); this one solves,
 bounds and bakes, and reports what an artist tunes with.
 """
+
 from __future__ import annotations
 
 import functools
@@ -54,14 +55,31 @@ from .wind_field import drag_pressure, generalized_forces, wind_velocity
 from .wind_loads import JointLoads, joint_loads
 from .wind_options import AIR_DENSITY, DEFAULTS, GRAVITY, WindOptions
 
-__all__ = ["AIR_DENSITY", "DEFAULTS", "GRAVITY", "Dynamics", "JointLoads", "WindOptions", "bake_wind",
-           "bound_bends", "drag_pressure", "dynamics", "generalized_forces", "joint_loads",
-           "one_blas_thread", "steady_state", "trunk_mode", "wind_angles", "wind_report",
-           "wind_velocity"]
+__all__ = [
+    "AIR_DENSITY",
+    "DEFAULTS",
+    "GRAVITY",
+    "Dynamics",
+    "JointLoads",
+    "WindOptions",
+    "bake_wind",
+    "bound_bends",
+    "drag_pressure",
+    "dynamics",
+    "generalized_forces",
+    "joint_loads",
+    "one_blas_thread",
+    "steady_state",
+    "trunk_mode",
+    "wind_angles",
+    "wind_report",
+    "wind_velocity",
+]
 
 
 # ---------------------------------------------------------------------------------------------
 # the bake
+
 
 def _frames(options: WindOptions) -> tuple[int, np.ndarray]:
     times = loop_times(options.duration, options.fps)
@@ -73,7 +91,7 @@ def steady_state(dyn: Dynamics, torque: np.ndarray, duration: float) -> np.ndarr
     harmonic ω and mode m, q̂ = φ_mᵀQ̂ / (ω_m² − ω² + 2iζω_mω); θ = Σ φ_m q_m. No spin-up, no
     transient: the result loops with continuous derivatives."""
     n_j, n = torque.shape[:2]
-    Q = np.einsum("jca,jkc->jak", dyn.basis, torque).reshape(2 * n_j, n)     # (2J, n)
+    Q = np.einsum("jca,jkc->jak", dyn.basis, torque).reshape(2 * n_j, n)  # (2J, n)
     spectrum = np.fft.rfft(Q, axis=1)
     omega = 2.0 * np.pi * np.arange(spectrum.shape[1]) / duration
     wm = dyn.omega[:, None]
@@ -87,6 +105,7 @@ def bound_bends(theta: np.ndarray, parent: np.ndarray, options: WindOptions) -> 
     """Soft bounds, first on each joint frame's world-space turn Θ_j = Σ_{ancestors} θ (so a
     chain streams downwind instead of folding over however many joints it has), then on each
     joint's own turn: x → b·tanh(|x|/b)·x/|x|, smooth and identity for small angles."""
+
     def soft(x: np.ndarray, bound: float) -> np.ndarray:
         mag = np.linalg.norm(x, axis=-1, keepdims=True)
         safe = np.where(mag > 0.0, mag, 1.0)
@@ -113,16 +132,19 @@ def one_blas_thread(fn):
     """Run `fn` with single-threaded BLAS/LAPACK: a threaded reduction sums in another order,
     so the same tree would bake to different bytes under `treegen make` (all cores) and a Dask
     worker; at these sizes (J <= 256) one thread is also faster."""
+
     @functools.wraps(fn)
     def run(*args, **kwargs):
         with _BLAS.limit(limits=1, user_api="blas"):
             return fn(*args, **kwargs)
+
     return run
 
 
 @one_blas_thread
-def wind_angles(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int = 0,
-                dyn: Dynamics | None = None) -> np.ndarray:
+def wind_angles(
+    tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int = 0, dyn: Dynamics | None = None
+) -> np.ndarray:
     """World-frame rotation vectors (J, n, 3) of each joint's deviation from rest over one
     period (n = fps·duration samples, the closing key not repeated)."""
     n, _ = _frames(options)
@@ -142,7 +164,7 @@ def bake_wind(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int =
     carries through the hierarchy. Times 0..duration inclusive; last key == first key."""
     skel = rig.skeleton
     n, times = _frames(options)
-    theta = wind_angles(tree, rig, options, seed)                             # (J, n, 3)
+    theta = wind_angles(tree, rig, options, seed)  # (J, n, 3)
     n_j = theta.shape[0]
     rest = np.asarray(skel.rest_rotation, dtype=np.float64)
     rot = np.broadcast_to(rest[None], (n + 1, n_j, 4)).copy()
@@ -150,10 +172,10 @@ def bake_wind(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int =
     if np.any(moving):
         idx = np.flatnonzero(moving)
         world_rest = Rotation.from_matrix(np.asarray(skel.bind_world)[idx, :3, :3]).as_matrix()
-        local = np.einsum("jba,jkb->jka", world_rest, theta[idx])            # R_wᵀ θ
+        local = np.einsum("jba,jkb->jka", world_rest, theta[idx])  # R_wᵀ θ
         half = 0.5 * np.linalg.norm(local, axis=2, keepdims=True)
-        sinc = np.sinc(half / np.pi) * 0.5                                    # sin(h)/(2h)
-        delta = np.concatenate([local * sinc, np.cos(half)], axis=2)          # (m, n, 4) xyzw
+        sinc = np.sinc(half / np.pi) * 0.5  # sin(h)/(2h)
+        delta = np.concatenate([local * sinc, np.cos(half)], axis=2)  # (m, n, 4) xyzw
         q_rest = quat_unit(rest[idx])
         q = quat_mul(q_rest[:, None, :], delta)
         # keep the rest quaternion's hemisphere so LINEAR (slerp) keys never flip
@@ -167,8 +189,14 @@ def bake_wind(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int =
 # ---------------------------------------------------------------------------------------------
 # what an artist tunes with
 
-def trunk_mode(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS,
-               loads: JointLoads | None = None, dyn: Dynamics | None = None) -> int:
+
+def trunk_mode(
+    tree: Tree,
+    rig: Rig,
+    options: WindOptions = DEFAULTS,
+    loads: JointLoads | None = None,
+    dyn: Dynamics | None = None,
+) -> int:
     """Index of the mode that carries most of the trunk top's static downwind deflection under
     the mean wind: the tree's sway mode (lower modes may be single hanging branches)."""
     ld = loads if loads is not None else joint_loads(tree, rig, options)
@@ -186,8 +214,7 @@ def trunk_mode(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS,
 
 
 @one_blas_thread
-def wind_report(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int = 0,
-                modes: int = 4) -> dict:
+def wind_report(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int = 0, modes: int = 4) -> dict:
     """`treegen info --wind`: natural frequencies (Hz) and damping of the lowest modes and of
     the trunk's sway mode, and what the clip does at `options.speed`: the tree top's mean
     downwind lean and RMS sway (m), the largest joint turn (degrees)."""
@@ -196,20 +223,24 @@ def wind_report(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int
     dyn = dynamics(tree, rig, options, loads)
     sway = trunk_mode(tree, rig, options, loads, dyn)
     out = {
-        "modes": [{"hz": round(float(w / (2 * np.pi)), 4), "damping": round(float(z), 4)}
-                  for w, z in zip(dyn.omega[:modes], dyn.damping[:modes])],
+        "modes": [
+            {"hz": round(float(w / (2 * np.pi)), 4), "damping": round(float(z), 4)}
+            for w, z in zip(dyn.omega[:modes], dyn.damping[:modes])
+        ],
         "sway_hz": round(float(dyn.omega[sway] / (2 * np.pi)), 4),
         "sway_damping": round(float(dyn.damping[sway]), 4),
         "speed_m_s": options.speed,
     }
-    theta = wind_angles(tree, rig, options, seed, dyn)                 # (J, n, 3)
+    theta = wind_angles(tree, rig, options, seed, dyn)  # (J, n, 3)
     j, x = trunk_top(tree, rig)
     phi = np.deg2rad(options.direction_deg)
     e_dir = np.array([np.cos(phi), np.sin(phi), 0.0])
     D = displacement_map(dyn, loads, parent, j, x)
     top = np.einsum("ia,ak->ki", D, np.einsum("jca,jkc->jak", dyn.basis, theta).reshape(D.shape[1], -1))
     along = top @ e_dir
-    out |= {"top_lean_m": round(float(along.mean()), 4),
-            "top_sway_rms_m": round(float(np.sqrt(np.mean(np.sum((top - top.mean(axis=0)) ** 2, axis=1)))), 4),
-            "max_joint_deg": round(float(np.degrees(np.linalg.norm(theta, axis=2).max())), 2)}
+    out |= {
+        "top_lean_m": round(float(along.mean()), 4),
+        "top_sway_rms_m": round(float(np.sqrt(np.mean(np.sum((top - top.mean(axis=0)) ** 2, axis=1)))), 4),
+        "max_joint_deg": round(float(np.degrees(np.linalg.norm(theta, axis=2).max())), 2),
+    }
     return out

@@ -4,6 +4,7 @@ M θ̈ + C θ̇ + K θ = Q over the whole hierarchy (wind.py's model): mass and 
 as quadratic forms of every weight moving with its ancestors' joints, springs plus gravity's
 geometric stiffness, solved once for the modes the bake and `info --wind` use.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -32,12 +33,12 @@ class Dynamics:
     velocity (aerodynamic damping grows with the wind, so storms sway less about their lean),
     kept on the modes' diagonal."""
 
-    basis: np.ndarray        # (J, 3, 2) bending axes per joint
-    mass: np.ndarray         # (n, n), n = 2J
-    stiffness: np.ndarray    # (n, n)
-    omega: np.ndarray        # (n,) natural angular frequencies, rad/s, ascending
-    modes: np.ndarray        # (n, n) mass-normalised mode shapes (columns)
-    damping: np.ndarray      # (n,) ζ per mode: structural + aerodynamic
+    basis: np.ndarray  # (J, 3, 2) bending axes per joint
+    mass: np.ndarray  # (n, n), n = 2J
+    stiffness: np.ndarray  # (n, n)
+    omega: np.ndarray  # (n,) natural angular frequencies, rad/s, ascending
+    modes: np.ndarray  # (n, n) mass-normalised mode shapes (columns)
+    damping: np.ndarray  # (n,) ζ per mode: structural + aerodynamic
 
 
 def _ancestor_pairs(parent: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -72,16 +73,20 @@ def _skew_free_gravity(s: np.ndarray) -> np.ndarray:
     return GRAVITY * out
 
 
-def _hierarchy_matrix(a: np.ndarray, b: np.ndarray, E: np.ndarray, s: np.ndarray,
-                      S: np.ndarray, pivot: np.ndarray) -> np.ndarray:
+def _hierarchy_matrix(
+    a: np.ndarray, b: np.ndarray, E: np.ndarray, s: np.ndarray, S: np.ndarray, pivot: np.ndarray
+) -> np.ndarray:
     """(2J, 2J) quadratic form ½ θ̇ᵀ X θ̇ of a weight field moving with the joints (mass: kinetic
     energy; drag area: dissipation): X_ab = Σ_{i ∈ sub(b)} w [r_a×]ᵀ[r_b×]
     = (tr S_b + d·s_b) I − S_b − s_b dᵀ with r_a = r_b + d, d = p_b − p_a, a ancestor of b."""
     n_j = pivot.shape[0]
     d = pivot[b] - pivot[a]
     sb, Sb = s[b], S[b]
-    x = ((np.trace(Sb, axis1=1, axis2=2) + np.einsum("ij,ij->i", d, sb))[:, None, None] * np.eye(3)
-         - Sb - np.einsum("ji,jk->jik", sb, d))
+    x = (
+        (np.trace(Sb, axis1=1, axis2=2) + np.einsum("ij,ij->i", d, sb))[:, None, None] * np.eye(3)
+        - Sb
+        - np.einsum("ji,jk->jik", sb, d)
+    )
     return _assemble(a, b, np.swapaxes(E[a], 1, 2) @ x @ E[b], n_j)
 
 
@@ -104,8 +109,9 @@ def drag_damping_coefficient(options: WindOptions) -> float:
     return AIR_DENSITY * soften * u * (1.0 + 0.5 * beta)
 
 
-def dynamics(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS,
-             loads: JointLoads | None = None) -> Dynamics:
+def dynamics(
+    tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, loads: JointLoads | None = None
+) -> Dynamics:
     """Assemble M, K and the aerodynamic damping over the hierarchy and solve K φ = ω² M φ
     (dense, n = 2J ≤ 512); modal damping ζ_m = ζ + φ_mᵀ C_aero φ_m / (2 ω_m)."""
     ld = loads if loads is not None else joint_loads(tree, rig, options)
@@ -114,8 +120,9 @@ def dynamics(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS,
     E = _bending_basis(ld)
     a, b = _ancestor_pairs(parent)
     M = _hierarchy_matrix(a, b, E, ld.first_moment, ld.second_moment, ld.pivot)
-    C = drag_damping_coefficient(options) * _hierarchy_matrix(a, b, E, ld.area_first,
-                                                              ld.area_second, ld.pivot)
+    C = drag_damping_coefficient(options) * _hierarchy_matrix(
+        a, b, E, ld.area_first, ld.area_second, ld.pivot
+    )
     # gravity: K_ab (a strict ancestor of b) = g(s_b ẑᵀ − s_bz I); K_aa = its symmetric part
     g_ab = _skew_free_gravity(ld.first_moment[b])
     diag = a == b
@@ -162,14 +169,15 @@ def trunk_top(tree: Tree, rig: Rig) -> tuple[int, np.ndarray]:
     return int(carrier[tip]), tree.node_pos[tip]
 
 
-def displacement_map(dyn: Dynamics, loads: JointLoads, parent: np.ndarray, joint: int,
-                     point: np.ndarray) -> np.ndarray:
+def displacement_map(
+    dyn: Dynamics, loads: JointLoads, parent: np.ndarray, joint: int, point: np.ndarray
+) -> np.ndarray:
     """D (3, 2J): small-angle displacement of `point`, carried by `joint`, per bending angle."""
     n_j = parent.shape[0]
     D = np.zeros((3, n_j, 2))
     a = joint
     while a >= 0:
         r = point - loads.pivot[a]
-        D[:, a, :] = -np.cross(r[None, :], dyn.basis[a].T).T      # θ × r = −r × θ
+        D[:, a, :] = -np.cross(r[None, :], dyn.basis[a].T).T  # θ × r = −r × θ
         a = int(parent[a])
     return D.reshape(3, 2 * n_j)

@@ -4,6 +4,7 @@ A seeded, periodic field (only harmonics of 1/duration): mean wind, coherent von
 (log-normal along the wind, never reversing it), canopy turbulence advected with the mean wind,
 and per-branch incoherent noise; its drag, summed over each joint's subtree (wind.py's model).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -23,8 +24,9 @@ def _von_karman(f: np.ndarray, length: float, speed: float, lateral: bool) -> np
     return 4.0 * (length / speed) * (1.0 + 755.2 * n * n) / (1.0 + 283.2 * n * n) ** (11.0 / 6.0)
 
 
-def _amplitudes(n_bins: int, n_max: int, duration: float, sigma: float, length: float,
-                speed: float, lateral: bool) -> np.ndarray:
+def _amplitudes(
+    n_bins: int, n_max: int, duration: float, sigma: float, length: float, speed: float, lateral: bool
+) -> np.ndarray:
     """Cosine amplitudes of harmonics 0..n_bins−1 (only 1..n_max nonzero) sampling the spectrum
     at its own level, a_b² / 2 = σ²·S(f_b)·Δf with Δf = 1/duration.
 
@@ -36,12 +38,11 @@ def _amplitudes(n_bins: int, n_max: int, duration: float, sigma: float, length: 
         return amp
     f = np.arange(1, n_max + 1) / duration
     s = _von_karman(f, length, speed, lateral)
-    amp[1:n_max + 1] = np.sqrt(2.0 * s / duration) * sigma
+    amp[1 : n_max + 1] = np.sqrt(2.0 * s / duration) * sigma
     return amp
 
 
-def _series(amp: np.ndarray, phase: np.ndarray, delay: np.ndarray, duration: float,
-            n: int) -> np.ndarray:
+def _series(amp: np.ndarray, phase: np.ndarray, delay: np.ndarray, duration: float, n: int) -> np.ndarray:
     """Real periodic signals (P, n) with cosine amplitudes `amp` (B,), phases (P|1, B) delayed by
     `delay` (P,) seconds: Σ a_b cos(2π f_b (t − delay) + φ_b), evaluated by inverse rFFT."""
     f = np.arange(amp.shape[0]) / duration
@@ -49,8 +50,9 @@ def _series(amp: np.ndarray, phase: np.ndarray, delay: np.ndarray, duration: flo
     return np.fft.irfft(coef, n=n, axis=1)
 
 
-def wind_velocity(points: np.ndarray, groups: np.ndarray, options: WindOptions, seed: int,
-                  n_samples: int) -> np.ndarray:
+def wind_velocity(
+    points: np.ndarray, groups: np.ndarray, options: WindOptions, seed: int, n_samples: int
+) -> np.ndarray:
     """Wind vectors (P, n_samples, 3) at `points` (P, 3) over one period (the clip's grid, end
     key excluded). `groups` (P,) labels points sharing one per-branch incoherent component.
 
@@ -75,7 +77,7 @@ def wind_velocity(points: np.ndarray, groups: np.ndarray, options: WindOptions, 
     out = np.broadcast_to(u * e_dir, (p.shape[0], n_samples, 3)).copy()
     if u == 0.0:
         return out
-    along = np.zeros((p.shape[0], n_samples))       # Gaussian along-wind fluctuation, reshaped below
+    along = np.zeros((p.shape[0], n_samples))  # Gaussian along-wind fluctuation, reshaped below
 
     def draw(r: np.random.Generator, rows: int) -> np.ndarray:
         return r.uniform(0.0, 2.0 * np.pi, size=(rows, n_bins))
@@ -137,14 +139,15 @@ def drag_pressure(v: np.ndarray, options: WindOptions) -> np.ndarray:
     return (0.5 * AIR_DENSITY) * soften * speed * v
 
 
-def generalized_forces(tree: Tree, rig: Rig, options: WindOptions, seed: int, n: int,
-                       loads: JointLoads) -> np.ndarray:
+def generalized_forces(
+    tree: Tree, rig: Rig, options: WindOptions, seed: int, n: int, loads: JointLoads
+) -> np.ndarray:
     """Torques (J, n, 3) about each joint of the wind on its whole subtree (the paper's load
     summed over the branch and its children), one period on the clip's grid."""
-    v = wind_velocity(loads.pivot, rig.joint_stem, options, seed, n)          # (J, n, 3)
+    v = wind_velocity(loads.pivot, rig.joint_stem, options, seed, n)  # (J, n, 3)
     pressure = drag_pressure(v, options)
-    force = loads.area[:, None, None] * pressure                             # (J, n, 3)
-    torque = np.cross(loads.area_moment[:, None, :], pressure)               # about own pivot
+    force = loads.area[:, None, None] * pressure  # (J, n, 3)
+    torque = np.cross(loads.area_moment[:, None, :], pressure)  # about own pivot
     parent = np.asarray(rig.skeleton.parent, dtype=np.int64)
     for idx in reversed(depth_levels(parent)[1:]):
         p = parent[idx]

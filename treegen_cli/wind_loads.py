@@ -4,6 +4,7 @@ Drag areas and their moments, masses and their first and second moments (each jo
 subtree, about its pivot), and each joint's spring k = E·π r⁴/4 over the wood it bends, with the
 load-bearing radius where a Weber–Penn radius is too thin to hold its load (wind.py's model).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -21,18 +22,18 @@ from .wind_options import DEFAULTS, GRAVITY, WindOptions
 class JointLoads:
     """Static per-joint quantities of the model (subtree sums about each joint)."""
 
-    pivot: np.ndarray        # (J, 3) joint positions at rest
-    direction: np.ndarray    # (J, 3) unit branch direction at the joint
-    area: np.ndarray         # (J,) drag area Σ C_d·A of the joint's own load, m²
+    pivot: np.ndarray  # (J, 3) joint positions at rest
+    direction: np.ndarray  # (J, 3) unit branch direction at the joint
+    area: np.ndarray  # (J,) drag area Σ C_d·A of the joint's own load, m²
     area_moment: np.ndarray  # (J, 3) Σ C_d·A_i (x_i − pivot) of its own load
-    mass: np.ndarray         # (J,) subtree mass, kg
-    inertia: np.ndarray      # (J,) subtree second moment of mass about the joint, kg·m² (trace)
-    first_moment: np.ndarray   # (J, 3) s = Σ m (x − pivot) over the subtree, kg·m
+    mass: np.ndarray  # (J,) subtree mass, kg
+    inertia: np.ndarray  # (J,) subtree second moment of mass about the joint, kg·m² (trace)
+    first_moment: np.ndarray  # (J, 3) s = Σ m (x − pivot) over the subtree, kg·m
     second_moment: np.ndarray  # (J, 3, 3) S = Σ m (x − pivot)(x − pivot)ᵀ (+ rods' own), kg·m²
-    radius: np.ndarray       # (J,) r used for the stiffness: max(node radius, load-bearing radius)
-    stiffness: np.ndarray    # (J,) k = E / ∫ (M/M₀)² dz / (π r⁴/4), N·m/rad
-    span: np.ndarray         # (J,) ℓ, m
-    area_first: np.ndarray   # (J, 3) Σ C_d·A (x − pivot) over the subtree (aerodynamic damping)
+    radius: np.ndarray  # (J,) r used for the stiffness: max(node radius, load-bearing radius)
+    stiffness: np.ndarray  # (J,) k = E / ∫ (M/M₀)² dz / (π r⁴/4), N·m/rad
+    span: np.ndarray  # (J,) ℓ, m
+    area_first: np.ndarray  # (J, 3) Σ C_d·A (x − pivot) over the subtree (aerodynamic damping)
     area_second: np.ndarray  # (J, 3, 3) Σ C_d·A (x − pivot)(x − pivot)ᵀ over the subtree
 
 
@@ -89,8 +90,9 @@ def wood_radius(tree: Tree) -> np.ndarray:
     return np.where(trunk, r / flare_factor(tree.params.flare, rel), r)
 
 
-def _span_compliance(tree: Tree, rig: Rig, carrier: np.ndarray, bearing: np.ndarray,
-                     lever: np.ndarray, spread: np.ndarray) -> np.ndarray:
+def _span_compliance(
+    tree: Tree, rig: Rig, carrier: np.ndarray, bearing: np.ndarray, lever: np.ndarray, spread: np.ndarray
+) -> np.ndarray:
     """Per joint, the lumped hinge compliance of the wood it bends (its own stem from its node
     to the next joint): c = ∫ (M(z)/M(0))² dz / (π r⁴/4) (the span's bending energy, Castigliano),
     r linear between nodes and at least the joint's load-bearing radius; the load beyond the
@@ -104,7 +106,7 @@ def _span_compliance(tree: Tree, rig: Rig, carrier: np.ndarray, bearing: np.ndar
     n_j = rig.skeleton.parent.shape[0]
     seg = np.flatnonzero(tree.node_stem[:-1] == tree.node_stem[1:])
     joint = carrier[seg]
-    own = np.asarray(rig.joint_stem)[joint] == tree.node_stem[seg]     # rigid stems bend nothing
+    own = np.asarray(rig.joint_stem)[joint] == tree.node_stem[seg]  # rigid stems bend nothing
     seg, joint = seg[own], joint[own]
     r = wood_radius(tree)
     z0 = tree.node_z[seg] - tree.node_z[np.asarray(rig.joint_node)[joint]]
@@ -117,15 +119,21 @@ def _span_compliance(tree: Tree, rig: Rig, carrier: np.ndarray, bearing: np.ndar
     L = np.maximum(lever[joint], 1e-6)[:, None]
     a = np.minimum(spread[joint], lever[joint])[:, None]
     ramp = np.clip(L + a - z, 0.0, None) ** 2 / np.maximum(4.0 * a, 1e-12)
-    beyond = np.where(z <= L - a, L - z, np.where(a > 0.0, ramp, 0.0))   # E[(x − z)⁺] / 1
+    beyond = np.where(z <= L - a, L - z, np.where(a > 0.0, ramp, 0.0))  # E[(x − z)⁺] / 1
     w = (beyond / L) ** 2
     per = ell * np.sum(wq * w / (0.25 * np.pi * np.maximum(rr, 1e-9) ** 4), axis=1)
     return np.bincount(joint, weights=per, minlength=n_j)
 
 
-def subtree_moments(owner: np.ndarray, rel: np.ndarray, weight: np.ndarray, rod: np.ndarray,
-                    u: np.ndarray, pivot: np.ndarray, parent: np.ndarray
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def subtree_moments(
+    owner: np.ndarray,
+    rel: np.ndarray,
+    weight: np.ndarray,
+    rod: np.ndarray,
+    u: np.ndarray,
+    pivot: np.ndarray,
+    parent: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Zeroth, first and second moments (J,), (J, 3), (J, 3, 3) of `weight` at offsets `rel`
     from their owner joint's pivot (plus rod terms rod·u uᵀ), summed over each joint's whole
     subtree about its own pivot: deepest level first, parallel-axis shift to the parent."""
@@ -144,7 +152,9 @@ def subtree_moments(owner: np.ndarray, rel: np.ndarray, weight: np.ndarray, rod:
         p = parent[idx]
         d = pivot[idx] - pivot[p]
         sd = np.einsum("ji,jk->jik", s[idx], d)
-        np.add.at(S, p, S[idx] + sd + sd.transpose(0, 2, 1) + m[idx, None, None] * np.einsum("ji,jk->jik", d, d))
+        np.add.at(
+            S, p, S[idx] + sd + sd.transpose(0, 2, 1) + m[idx, None, None] * np.einsum("ji,jk->jik", d, d)
+        )
         np.add.at(s, p, s[idx] + m[idx, None] * d)
         np.add.at(m, p, m[idx])
     return m, s, S
@@ -167,12 +177,12 @@ def joint_loads(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS) -> JointL
     axis = (b - a) / np.maximum(length, 1e-12)[:, None]
     wood_mid = 0.5 * (a + b)
     wood_mass = options.wood_density * np.pi * length * (r0 * r0 + r0 * r1 + r1 * r1) / 3.0
-    wood_area = options.stem_drag_coefficient * (r0 + r1) * length      # C_d · 2·r̄·l
+    wood_area = options.stem_drag_coefficient * (r0 + r1) * length  # C_d · 2·r̄·l
     wood_joint = carrier[seg]
 
     # leaves: blade centroid, area, fresh mass; rigidly on rig.leaf_joint
     leaf_area = np.asarray(tree.leaf_area, dtype=np.float64)
-    leaf_drag = options.drag_coefficient * leaf_area                       # C_d · A
+    leaf_drag = options.drag_coefficient * leaf_area  # C_d · A
     leaf_mid = tree.leaf_pos + 0.5 * tree.leaf_size[:, :1] * tree.leaf_frame[:, :, 1]
     leaf_mass = options.leaf_areal_density * leaf_area
     leaf_joint = np.asarray(rig.leaf_joint, dtype=np.int64)
@@ -184,8 +194,9 @@ def joint_loads(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS) -> JointL
     rel = x - pivot[owner]
 
     own_area = np.bincount(owner, weights=area, minlength=n_j)
-    own_moment = np.stack([np.bincount(owner, weights=area * rel[:, i], minlength=n_j)
-                           for i in range(3)], axis=1)
+    own_moment = np.stack(
+        [np.bincount(owner, weights=area * rel[:, i], minlength=n_j) for i in range(3)], axis=1
+    )
     # rods: each wood segment's own second moment m·l²/12·u uᵀ (leaves are points)
     rod = np.concatenate([wood_mass * length**2 / 12.0, np.zeros_like(leaf_mass)])
     u = np.concatenate([axis, np.zeros_like(leaf_mid)])
@@ -200,7 +211,7 @@ def joint_loads(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS) -> JointL
     bearing = load_bearing_radius(weight_moment, options)
     radius = np.maximum(tree.node_radius[rig.joint_node], bearing)
     inertia = np.trace(S_sub, axis1=1, axis2=2)
-    lever = np.linalg.norm(s_sub, axis=1) / np.maximum(m_sub, 1e-12)     # load centre's lever
+    lever = np.linalg.norm(s_sub, axis=1) / np.maximum(m_sub, 1e-12)  # load centre's lever
     spread = np.sqrt(3.0 * np.maximum(inertia / np.maximum(m_sub, 1e-12) - lever**2, 0.0))
     compliance = _span_compliance(tree, rig, carrier, bearing, lever, spread)
     # a joint whose span has no length (a LOD's joint on a kept stem's base, where its parent's
@@ -210,6 +221,19 @@ def joint_loads(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS) -> JointL
     positive = compliance[compliance > 0]
     floor = float(positive.min()) * 1e-3 if positive.size else 1e-300
     stiffness = options.stiffness * options.elastic_modulus / np.maximum(compliance, floor)
-    stiffness = np.maximum(stiffness, 1e-9)   # a massless zero-radius joint must not divide by zero
-    return JointLoads(pivot, direction, own_area, own_moment, m_sub, inertia, s_sub, S_sub,
-                      radius, stiffness, span, as_sub, aS_sub)
+    stiffness = np.maximum(stiffness, 1e-9)  # a massless zero-radius joint must not divide by zero
+    return JointLoads(
+        pivot,
+        direction,
+        own_area,
+        own_moment,
+        m_sub,
+        inertia,
+        s_sub,
+        S_sub,
+        radius,
+        stiffness,
+        span,
+        as_sub,
+        aS_sub,
+    )

@@ -22,16 +22,50 @@ One module per job: catalogue.py (the file → validated jobs and their identity
 plan.py (what to build or skip, each tree's plan for --dry-run, estimates), run.py (the
 builds on Dask), manifest.py (the manifest and its journal, read and written).
 """
+
 from __future__ import annotations
 
-from .catalogue import (DEFAULT_NAME, FORMATS, MAX_JOBS, SCHEMA_NAME, Catalogue, Job,
-                        load_catalogue, name_value, parse_catalogue, parse_seeds, render_name,
-                        schema_text)
+from .catalogue import (
+    DEFAULT_NAME,
+    FORMATS,
+    MAX_JOBS,
+    SCHEMA_NAME,
+    Catalogue,
+    Job,
+    load_catalogue,
+    name_value,
+    parse_catalogue,
+    parse_seeds,
+    render_name,
+    schema_text,
+)
 from .manifest import CSV_COLUMNS, JOURNAL, MANIFEST, MANIFEST_CSV, write_manifest
 from .plan import Plan, estimate, plan_jobs, plan_trees
 from .run import build_task, clean_staging, run_jobs
 
-__all__ = ["CSV_COLUMNS", "Catalogue", "DEFAULT_NAME", "FORMATS", "JOURNAL", "Job", "MANIFEST",
-           "MANIFEST_CSV", "MAX_JOBS", "Plan", "SCHEMA_NAME", "build_task", "clean_staging",
-           "estimate", "load_catalogue", "name_value", "parse_catalogue", "parse_seeds",
-           "plan_jobs", "plan_trees", "render_name", "run_jobs", "schema_text", "write_manifest"]
+__all__ = [
+    "CSV_COLUMNS",
+    "Catalogue",
+    "DEFAULT_NAME",
+    "FORMATS",
+    "JOURNAL",
+    "Job",
+    "MANIFEST",
+    "MANIFEST_CSV",
+    "MAX_JOBS",
+    "Plan",
+    "SCHEMA_NAME",
+    "build_task",
+    "clean_staging",
+    "estimate",
+    "load_catalogue",
+    "name_value",
+    "parse_catalogue",
+    "parse_seeds",
+    "plan_jobs",
+    "plan_trees",
+    "render_name",
+    "run_jobs",
+    "schema_text",
+    "write_manifest",
+]

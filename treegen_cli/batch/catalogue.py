@@ -1,6 +1,7 @@
 """A catalogue file → validated, expanded jobs: one per output file, each with the task
 (the tree build) it shares with its other formats and the resume key its bytes depend on.
 Every error names the catalogue's JSON path (`entries[1].grid.wind_speed[0]`)."""
+
 from __future__ import annotations
 
 import hashlib
@@ -20,7 +21,7 @@ from ..generate import check_trunk
 SCHEMA_NAME = "catalogue.schema.json"
 DEFAULT_NAME = "{species}_{seed}.{ext}"
 FORMATS = ("glb", "gltf", "usda", "usdc", "usdz", "obj", "ply")
-MAX_JOBS = 100_000        # jobs one catalogue may expand to (seed ranges × grid × formats)
+MAX_JOBS = 100_000  # jobs one catalogue may expand to (seed ranges × grid × formats)
 _SEEDS = re.compile(r"^\s*(\d+)\s*(?:-\s*(\d+)\s*)?$")
 
 
@@ -36,12 +37,12 @@ class Job:
 
     index: int
     source: str
-    species: Path              # resolved species file
-    species_text: str          # as written in the catalogue
+    species: Path  # resolved species file
+    species_text: str  # as written in the catalogue
     seed: int
     fmt: str
-    grid: tuple                # ((option, value), ...) of this grid point
-    output: str                # path under DIR, POSIX
+    grid: tuple  # ((option, value), ...) of this grid point
+    output: str  # path under DIR, POSIX
     task: str
     key: str
 
@@ -50,9 +51,9 @@ class Job:
 class Catalogue:
     path: Path
     jobs: list[Job]
-    params: dict = field(default_factory=dict)     # species file → Params, parsed once
-    digests: dict = field(default_factory=dict)    # species file → sha256 of its bytes
-    resolved: dict = field(default_factory=dict)   # task → api.Resolved
+    params: dict = field(default_factory=dict)  # species file → Params, parsed once
+    digests: dict = field(default_factory=dict)  # species file → sha256 of its bytes
+    resolved: dict = field(default_factory=dict)  # task → api.Resolved
 
 
 def load_catalogue(path: str | os.PathLike, max_jobs: int = MAX_JOBS) -> Catalogue:
@@ -68,28 +69,37 @@ def load_catalogue(path: str | os.PathLike, max_jobs: int = MAX_JOBS) -> Catalog
 def parse_seeds(value, where: str, max_jobs: int = MAX_JOBS) -> list[int]:
     """7, [1, 5, 9] or "1-40" / "1-5,9" → sorted-as-given list of distinct seeds."""
     if isinstance(value, bool):
-        raise TreegenError(f"{where}: expected a seed, a list of seeds or text like \"1-40\", got {json.dumps(value)}")
+        raise TreegenError(
+            f'{where}: expected a seed, a list of seeds or text like "1-40", got {json.dumps(value)}'
+        )
     if isinstance(value, int):
         values = [value]
-    elif isinstance(value, list) and value and all(isinstance(v, int) and not isinstance(v, bool)
-                                                   for v in value):
+    elif (
+        isinstance(value, list)
+        and value
+        and all(isinstance(v, int) and not isinstance(v, bool) for v in value)
+    ):
         values = list(value)
     elif isinstance(value, str):
         values = []
         for part in value.split(","):
             m = _SEEDS.match(part)
             if not m:
-                raise TreegenError(f"{where}: '{value}' is not a seed range; use e.g. \"1-40\" or \"1-5,9\"")
+                raise TreegenError(f'{where}: \'{value}\' is not a seed range; use e.g. "1-40" or "1-5,9"')
             lo, hi = int(m[1]), int(m[2] if m[2] is not None else m[1])
             if hi < lo:
                 raise TreegenError(f"{where}: range '{part.strip()}' runs backwards; use {hi}-{lo}")
             if hi - lo + 1 > max_jobs:
-                raise TreegenError(f"{where}: range '{part.strip()}' gives {hi - lo + 1:,} seeds, "
-                                   f"over the limit of {max_jobs:,} jobs")
+                raise TreegenError(
+                    f"{where}: range '{part.strip()}' gives {hi - lo + 1:,} seeds, "
+                    f"over the limit of {max_jobs:,} jobs"
+                )
             values.extend(range(lo, hi + 1))
     else:
-        raise TreegenError(f"{where}: expected a seed, a non-empty list of seeds or text like "
-                           f"\"1-40\", got {type(value).__name__}")
+        raise TreegenError(
+            f"{where}: expected a seed, a non-empty list of seeds or text like "
+            f'"1-40", got {type(value).__name__}'
+        )
     for v in values:
         if not 0 <= v <= 2**32 - 1:
             raise TreegenError(f"{where}: seed {v} is out of range; allowed [0, 4294967295]")
@@ -120,21 +130,27 @@ def render_name(template: str, fields: dict, grid: tuple, fmt: str, where: str) 
         used = {f for _, f, _, _ in Formatter().parse(template) if f is not None}
         name = template.format_map(fields)
     except KeyError as e:
-        raise TreegenError(f"{where}: unknown field {{{e.args[0]}}} in '{template}'; allowed: "
-                           "{species}, {seed}, {ext}, {entry} and any make option, e.g. "
-                           "{wind_speed}") from None
+        raise TreegenError(
+            f"{where}: unknown field {{{e.args[0]}}} in '{template}'; allowed: "
+            "{species}, {seed}, {ext}, {entry} and any make option, e.g. "
+            "{wind_speed}"
+        ) from None
     except (ValueError, IndexError, AttributeError) as e:
         raise TreegenError(f"{where}: bad name template '{template}' ({e})") from None
     if not name.lower().endswith("." + fmt):
-        raise TreegenError(f"{where}: '{template}' gives '{name}' for format {fmt}; the name must "
-                           f"end in .{fmt} (use {{ext}})")
+        raise TreegenError(
+            f"{where}: '{template}' gives '{name}' for format {fmt}; the name must "
+            f"end in .{fmt} (use {{ext}})"
+        )
     extra = "".join(f"_{k}-{name_value(v)}" for k, v in grid if k not in used)
     if extra:
-        name = name[:-len(fmt) - 1] + extra + name[-len(fmt) - 1:]
+        name = name[: -len(fmt) - 1] + extra + name[-len(fmt) - 1 :]
     p = PurePosixPath(name.replace("\\", "/"))
     if p.is_absolute() or ".." in p.parts or not p.name or p.name.startswith("."):
-        raise TreegenError(f"{where}: '{template}' gives '{name}'; output names must stay inside "
-                           "the output folder (no absolute paths, '..' or hidden names)")
+        raise TreegenError(
+            f"{where}: '{template}' gives '{name}'; output names must stay inside "
+            "the output folder (no absolute paths, '..' or hidden names)"
+        )
     return str(p)
 
 
@@ -169,6 +185,7 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
     """Validate decoded JSON `data` of the catalogue at `path` and expand it into jobs, in
     catalogue order; refuses two jobs with one output before anything runs."""
     from .. import api
+
     schema = json.loads(schema_text())
     check_schema(data, schema, schema)
     base = path.parent
@@ -192,7 +209,9 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
         formats, fwhere = pick("formats", ["glb"])
         for k, f in enumerate(formats):
             if f not in FORMATS:
-                raise TreegenError(f"{fwhere}[{k}]: unknown format {json.dumps(f)}; allowed: {', '.join(FORMATS)}")
+                raise TreegenError(
+                    f"{fwhere}[{k}]: unknown format {json.dumps(f)}; allowed: {', '.join(FORMATS)}"
+                )
         template, _ = pick("name", data.get("name"))
         twhere = f"{where}.name" if "name" in entry else "name"
         template = template or DEFAULT_NAME
@@ -220,47 +239,77 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
                 base_job = api.resolve(opts, label)
             except TreegenError as e:
                 msg = str(e)
-                raise TreegenError(msg if msg.startswith(("entries[", "defaults."))
-                                   else f"{where}: {msg}") from None
+                raise TreegenError(
+                    msg if msg.startswith(("entries[", "defaults.")) else f"{where}: {msg}"
+                ) from None
             if base_job.values["compress"] == "meshopt":
                 from ..exchange.compress import check_encoder
+
                 check_encoder()
             if base_job.values["compress"] != "none":
                 for k, f in enumerate(formats):
                     if f not in ("glb", "gltf"):
                         raise TreegenError(
                             f"{label('compress')}: {base_job.values['compress']} is for glb/gltf "
-                            f"only, but {fwhere}[{k}] is {json.dumps(f)} (USD has no such encoding)")
-            try:        # an implausible Scale is a typo: refused now, not by a worker mid-run
+                            f"only, but {fwhere}[{k}] is {json.dumps(f)} (USD has no such encoding)"
+                        )
+            try:  # an implausible Scale is a typo: refused now, not by a worker mid-run
                 check_trunk(loaded[sp][0], base_job.options.generate)
             except TreegenError as e:
                 raise TreegenError(f"{where}.species: {e}") from None
-            values = {k: v for k, v in base_job.values.items() if k != "seed"
-                      and not (k in api.UNSET_FREE and v is None)}
+            values = {
+                k: v
+                for k, v in base_job.values.items()
+                if k != "seed" and not (k in api.UNSET_FREE and v is None)
+            }
             for seed in seeds:
-                task = short_hash({"species": digest, "seed": seed, "options": values,
-                                "treegen": __version__})
-                resolved[task] = api.Resolved(seed=seed, options=base_job.options,
-                                              values={**base_job.values, "seed": seed})
-                fields = {**{k: name_value(v) for k, v in values.items()},
-                          "species": sp.stem, "seed": str(seed), "entry": str(i)}
+                task = short_hash(
+                    {"species": digest, "seed": seed, "options": values, "treegen": __version__}
+                )
+                resolved[task] = api.Resolved(
+                    seed=seed, options=base_job.options, values={**base_job.values, "seed": seed}
+                )
+                fields = {
+                    **{k: name_value(v) for k, v in values.items()},
+                    "species": sp.stem,
+                    "seed": str(seed),
+                    "entry": str(i),
+                }
                 for fmt in formats:
                     name = render_name(template, {**fields, "ext": fmt}, point, fmt, twhere)
                     other = outputs.get(name.casefold())
                     if other is not None:
                         raise TreegenError(
                             f"{where}: output '{name}' (seed {seed}) is also written by {other}; "
-                            "put {seed} or the grid keys into the name template, or drop the duplicate")
+                            "put {seed} or the grid keys into the name template, or drop the duplicate"
+                        )
                     outputs[name.casefold()] = f"{where} (seed {seed})"
-                    jobs.append(Job(index=len(jobs), source=where, species=sp,
-                                    species_text=entry["species"], seed=seed, fmt=fmt, grid=point,
-                                    output=name, task=task,
-                                    key=short_hash({"task": task, "format": fmt})))
+                    jobs.append(
+                        Job(
+                            index=len(jobs),
+                            source=where,
+                            species=sp,
+                            species_text=entry["species"],
+                            seed=seed,
+                            fmt=fmt,
+                            grid=point,
+                            output=name,
+                            task=task,
+                            key=short_hash({"task": task, "format": fmt}),
+                        )
+                    )
                     if len(jobs) > max_jobs:
-                        raise TreegenError(f"{where}: the catalogue expands to more than "
-                                           f"{max_jobs:,} jobs; split it into several files")
-    return Catalogue(path=path, jobs=jobs, params={p: v[0] for p, v in loaded.items()},
-                     digests={p: v[1][:16] for p, v in loaded.items()}, resolved=resolved)
+                        raise TreegenError(
+                            f"{where}: the catalogue expands to more than "
+                            f"{max_jobs:,} jobs; split it into several files"
+                        )
+    return Catalogue(
+        path=path,
+        jobs=jobs,
+        params={p: v[0] for p, v in loaded.items()},
+        digests={p: v[1][:16] for p, v in loaded.items()},
+        resolved=resolved,
+    )
 
 
 def species_sha(cat: Catalogue, job: Job) -> str:
@@ -269,5 +318,7 @@ def species_sha(cat: Catalogue, job: Job) -> str:
 
 def options_sha(values: dict) -> str:
     from .. import api
-    return short_hash({k: v for k, v in values.items() if k != "seed"
-                    and not (k in api.UNSET_FREE and v is None)})
+
+    return short_hash(
+        {k: v for k, v in values.items() if k != "seed" and not (k in api.UNSET_FREE and v is None)}
+    )

@@ -1,5 +1,6 @@
 """What a run will do: the jobs to build and those up to date (resume), each tree's plan
 (--dry-run: LODs, triangles, joints as the build makes them) and size/time estimates."""
+
 from __future__ import annotations
 
 import os
@@ -9,6 +10,7 @@ from pathlib import Path
 from ..errors import TreegenError
 from .catalogue import Catalogue, Job, options_sha, species_sha
 from .manifest import journal_rows
+
 
 def _up_to_date(out_dir: Path, job: Job, row: dict | None) -> bool:
     if row is None or row.get("options_hash") != job.key:
@@ -24,7 +26,7 @@ def _up_to_date(out_dir: Path, job: Job, row: dict | None) -> bool:
 class Plan:
     build: list[Job]
     skip: list[Job]
-    previous: dict[str, dict]          # output path → earlier row
+    previous: dict[str, dict]  # output path → earlier row
 
 
 def plan_jobs(cat: Catalogue, out_dir: str | os.PathLike, force: bool = False) -> Plan:
@@ -61,8 +63,9 @@ _VERTEX_BYTES, _TRIANGLE_BYTES = 48, 8
 _COMPRESSED = {"none": 1.0, "quantize": 0.6, "meshopt": 0.2}
 
 
-def estimate(cat: Catalogue, plan: Plan,
-             shapes: dict[str, list[dict] | str] | None = None) -> dict[str, tuple[float, float, str]]:
+def estimate(
+    cat: Catalogue, plan: Plan, shapes: dict[str, list[dict] | str] | None = None
+) -> dict[str, tuple[float, float, str]]:
     """Per output path: (bytes, seconds, how). Measured when an earlier run built the same
     species, format and options (any seed); otherwise a model of the clip length and either
     the planned LODs (`shapes`, plan_trees: "plan") or the leaf and stem counts the species
@@ -71,8 +74,9 @@ def estimate(cat: Catalogue, plan: Plan,
 
     measured: dict[tuple, list] = {}
     for row in plan.previous.values():
-        measured.setdefault((row.get("species_sha"), row.get("format"), row.get("options_sha")),
-                            []).append((row.get("bytes", 0), row.get("seconds", 0.0)))
+        measured.setdefault((row.get("species_sha"), row.get("format"), row.get("options_sha")), []).append(
+            (row.get("bytes", 0), row.get("seconds", 0.0))
+        )
     out = {}
     for job in cat.jobs:
         r = cat.resolved[job.task]
@@ -88,8 +92,8 @@ def estimate(cat: Catalogue, plan: Plan,
             lods = len(shape)
             verts = sum(row["vertices"] for row in shape)
             size = _COMPRESSED[r.values["compress"]] * sum(
-                row["vertices"] * _VERTEX_BYTES + row["triangles"] * _TRIANGLE_BYTES
-                for row in shape) + shape[0]["joints"] * frames * 16 * min(lods, 2)
+                row["vertices"] * _VERTEX_BYTES + row["triangles"] * _TRIANGLE_BYTES for row in shape
+            ) + shape[0]["joints"] * frames * 16 * min(lods, 2)
             how = "plan"
         else:
             stems, leaves = estimate_counts(cat.params[job.species])

@@ -1,5 +1,6 @@
 """The builds: one Dask task per tree (its formats written by the worker that grew it),
 results streamed into the journal and the manifest; Ctrl-C keeps what finished."""
+
 from __future__ import annotations
 
 import json
@@ -11,6 +12,7 @@ from ..errors import TreegenError
 from .catalogue import Catalogue, Job
 from .manifest import JOURNAL, manifest_row, write_manifest
 from .plan import Plan, estimate
+
 
 def build_task(params, species: str, resolved, outputs: list[str]) -> list[dict]:
     """On a worker: grow one tree and write it once per output (each atomically). Returns
@@ -45,8 +47,9 @@ def clean_staging(out_dir: Path, jobs: list[Job]) -> None:
         sweep(folder)
 
 
-def run_jobs(cat: Catalogue, plan: Plan, out_dir: str | os.PathLike, *, scheduler=None,
-             workers=None, on_event=None) -> dict:
+def run_jobs(
+    cat: Catalogue, plan: Plan, out_dir: str | os.PathLike, *, scheduler=None, workers=None, on_event=None
+) -> dict:
     """Build `plan.build` on Dask, stream each result to `on_event(kind, job, row)` (kind:
     built, failed, skipped, start), write the manifest, and return the totals. Failures do not
     stop the others; Ctrl-C cancels what is queued, closes the cluster and keeps what finished."""
@@ -74,13 +77,16 @@ def run_jobs(cat: Catalogue, plan: Plan, out_dir: str | os.PathLike, *, schedule
                 for folder in sorted({(out_dir / job.output).parent for job in cat.jobs}):
                     folder.mkdir(parents=True, exist_ok=True)
             except OSError as e:
-                raise TreegenError(f"-o {out_dir}: cannot create folder '{e.filename}' "
-                                   f"({e.strerror})") from None
+                raise TreegenError(
+                    f"-o {out_dir}: cannot create folder '{e.filename}' ({e.strerror})"
+                ) from None
             started = True
             clean_staging(out_dir, plan.build)
             for job in plan.skip:
-                rows[job.output] = {**plan.previous[job.output],
-                                    **manifest_row(job, out_dir, cat, None, "skipped")}
+                rows[job.output] = {
+                    **plan.previous[job.output],
+                    **manifest_row(job, out_dir, cat, None, "skipped"),
+                }
                 on_event("skipped", job, rows[job.output])
             if tasks:
                 journal = open(out_dir / JOURNAL, "a", encoding="utf-8")
@@ -92,13 +98,19 @@ def run_jobs(cat: Catalogue, plan: Plan, out_dir: str | os.PathLike, *, schedule
             journal.close()
         if started:
             clean_staging(out_dir, plan.build)
-            ordered = [rows.get(job.output) or manifest_row(job, out_dir, cat, None, "pending")
-                       for job in cat.jobs]
-            totals = {"jobs": len(cat.jobs),
-                      **{k: sum(r["status"] == k for r in ordered)
-                         for k in ("built", "skipped", "failed", "pending")},
-                      "tasks": len(tasks), "seconds": round(time.perf_counter() - t0, 3),
-                      "cluster": where}
+            ordered = [
+                rows.get(job.output) or manifest_row(job, out_dir, cat, None, "pending") for job in cat.jobs
+            ]
+            totals = {
+                "jobs": len(cat.jobs),
+                **{
+                    k: sum(r["status"] == k for r in ordered)
+                    for k in ("built", "skipped", "failed", "pending")
+                },
+                "tasks": len(tasks),
+                "seconds": round(time.perf_counter() - t0, 3),
+                "cluster": where,
+            }
             write_manifest(out_dir, cat, ordered, totals)
     return totals
 
@@ -110,10 +122,15 @@ def _build_all(cat, plan, out_dir, tasks, client, journal, rows, on_event, as_co
     futures = {}
     for task, jobs in tasks.items():
         j0 = jobs[0]
-        fut = client.submit(build_task, cat.params[j0.species], j0.species_text,
-                            cat.resolved[task], [str(out_dir / j.output) for j in jobs],
-                            key=f"treegen-{j0.species.stem}-{task}-{run}",
-                            priority=int(sum(est[j.output][1] for j in jobs) * 1000))
+        fut = client.submit(
+            build_task,
+            cat.params[j0.species],
+            j0.species_text,
+            cat.resolved[task],
+            [str(out_dir / j.output) for j in jobs],
+            key=f"treegen-{j0.species.stem}-{task}-{run}",
+            priority=int(sum(est[j.output][1] for j in jobs) * 1000),
+        )
         futures[fut] = jobs
     for fut in as_completed(list(futures), loop=client.loop):
         jobs = futures.pop(fut)
@@ -121,7 +138,7 @@ def _build_all(cat, plan, out_dir, tasks, client, journal, rows, on_event, as_co
             results = fut.result()
         except TreegenError as e:
             results, reason = None, str(e)
-        except Exception as e:             # worker crash, KilledWorker, a bug
+        except Exception as e:  # worker crash, KilledWorker, a bug
             results, reason = None, f"{type(e).__name__}: {e}"
         for k, job in enumerate(jobs):
             if results is None:

@@ -1,4 +1,5 @@
 """`treegen info SPECIES`: grow a tree and report on it (`api.info` computes, this prints)."""
+
 from __future__ import annotations
 
 import json
@@ -13,18 +14,33 @@ from . import flags
 @click.argument("species")
 @flags.use(*api.GROUPS["generate"])
 @flags.json_flag("Print the summary as JSON.")
-@click.option("--lod", "with_lod", is_flag=True,
-              help="Also build the LODs and print, per LOD distance, keys kept, max error, leaf-"
-                   "vertex updates per frame vs all leaf vertices, joints, triangles.")
+@click.option(
+    "--lod",
+    "with_lod",
+    is_flag=True,
+    help="Also build the LODs and print, per LOD distance, keys kept, max error, leaf-"
+    "vertex updates per frame vs all leaf vertices, joints, triangles.",
+)
 @flags.use(*api.GROUPS["lod"])
-@click.option("--wind", "with_wind", is_flag=True,
-              help="Also print the wind physics: natural frequencies and damping, the trunk's "
-                   "sway frequency, and the tree top's lean and sway at --wind-speed.")
-@flags.use("wind_speed", "stiffness", help={
-    "stiffness": "Multiplier on every joint's stiffness (frequencies scale with its square root)."})
-@flags.use("triangles", help={
-    "triangles": "Also plan a LOD0 triangle budget as `make --triangles N` would, and print "
-                 "the levers it picks and the triangles it will build."})
+@click.option(
+    "--wind",
+    "with_wind",
+    is_flag=True,
+    help="Also print the wind physics: natural frequencies and damping, the trunk's "
+    "sway frequency, and the tree top's lean and sway at --wind-speed.",
+)
+@flags.use(
+    "wind_speed",
+    "stiffness",
+    help={"stiffness": "Multiplier on every joint's stiffness (frequencies scale with its square root)."},
+)
+@flags.use(
+    "triangles",
+    help={
+        "triangles": "Also plan a LOD0 triangle budget as `make --triangles N` would, and print "
+        "the levers it picks and the triangles it will build."
+    },
+)
 def info(species, as_json, with_lod, with_wind, triangles, **options):
     """Grow SPECIES (a Weber–Penn text or Arbaro XML file, or a bundled name such as
     quaking_aspen: see `treegen species`) and report on the tree:
@@ -39,8 +55,10 @@ def info(species, as_json, with_lod, with_wind, triangles, **options):
     o = options
     click.echo(f"{stats['species']}  ({stats['file']}, seed {o['seed']})")
     rows = [
-        ("stems", f"{stats['stems']:,}  per level {stats['stems_per_level']}"
-                  f"  ({stats['clones']:,} split clones)"),
+        (
+            "stems",
+            f"{stats['stems']:,}  per level {stats['stems_per_level']}  ({stats['clones']:,} split clones)",
+        ),
         ("nodes", f"{stats['nodes']:,}"),
         ("leaves", f"{stats['leaves']:,}"),
         ("leaf area", f"{stats['leaf_area_m2']:.2f} m²"),
@@ -48,13 +66,17 @@ def info(species, as_json, with_lod, with_wind, triangles, **options):
         ("crown width", f"{stats['crown_width_m']:.2f} m"),
         ("trunk radius", f"{stats['trunk_radius_m'] * 100:.1f} cm"),
         ("generation", f"{stats['generate_s']:.3f} s"),
-        ("triangles", f"{stats['triangles']['lod0']:,} at LOD0 ({stats['triangles']['bark']:,} "
-                      f"bark, {stats['triangles']['leaves']:,} leaves)"),
+        (
+            "triangles",
+            f"{stats['triangles']['lod0']:,} at LOD0 ({stats['triangles']['bark']:,} "
+            f"bark, {stats['triangles']['leaves']:,} leaves)",
+        ),
     ]
     if "budget" in stats["triangles"]:
         b = stats["triangles"]["budget"]
-        rows.append(("budget", f"--triangles {triangles:,}: {b['plan']}; the fewest it "
-                               f"reaches: {b['minimum']:,}"))
+        rows.append(
+            ("budget", f"--triangles {triangles:,}: {b['plan']}; the fewest it reaches: {b['minimum']:,}")
+        )
     for name, value in rows:
         click.echo(f"  {name:<13}{value}")
     if with_lod:
@@ -64,35 +86,52 @@ def info(species, as_json, with_lod, with_wind, triangles, **options):
 
 
 def _lod_table(stats: dict, o: dict) -> None:
-    click.echo(f"  LODs (fov {o['fov']:g}°, {o['width']} px, error {o['error_px']:g} px, "
-               f"{o['schedule']}): leaf-vertex updates per frame, LOD method vs all-GPU")
-    click.echo(f"    {'LOD':<4}{'dist m':>8}{'keys kept':>16}{'max err px':>11}"
-               f"{'updates/frame':>15}{'leaf verts':>12}{'joints':>8}{'triangles':>11}")
+    click.echo(
+        f"  LODs (fov {o['fov']:g}°, {o['width']} px, error {o['error_px']:g} px, "
+        f"{o['schedule']}): leaf-vertex updates per frame, LOD method vs all-GPU"
+    )
+    click.echo(
+        f"    {'LOD':<4}{'dist m':>8}{'keys kept':>16}{'max err px':>11}"
+        f"{'updates/frame':>15}{'leaf verts':>12}{'joints':>8}{'triangles':>11}"
+    )
     for k, r in enumerate(stats["lods"]):
-        click.echo(f"    {k:<4}{r['distance_m']:>8g}{r['keys_kept']:>9,} {r['keys_kept_pct']:>5.1f}%"
-                   f"{r['max_error_px']:>11.3f}{r['leaf_vertex_updates_per_frame']:>15,.0f}"
-                   f"{r['leaf_vertices']:>12,}{r['joints']:>8}{r['triangles']:>11,}")
+        click.echo(
+            f"    {k:<4}{r['distance_m']:>8g}{r['keys_kept']:>9,} {r['keys_kept_pct']:>5.1f}%"
+            f"{r['max_error_px']:>11.3f}{r['leaf_vertex_updates_per_frame']:>15,.0f}"
+            f"{r['leaf_vertices']:>12,}{r['joints']:>8}{r['triangles']:>11,}"
+        )
         if "impostor" in r:
             i = r["impostor"]
-            click.echo(f"    LOD {k} is the impostor: from {r['distance_m']:g} m, two crossed "
-                       f"cards {i['card_m']:g} m square cut from {i['grid']}×{i['grid']} views "
-                       f"of {i['cell_px']} px ({i['atlas_px']}² atlas, "
-                       f"{i['atlas_bytes'] / 1e3:,.0f} KB of PNG)")
-    click.echo("  schedules on the full tree (the paper's Table 3; error: perspective-true, "
-               "measured on every vertex's bound)")
-    click.echo(f"    {'dist m':>6}  {'schedule':<9}{'keys kept':>16}{'anim bytes':>12}"
-               f"{'max err px':>11}{'updates/frame':>15}")
+            click.echo(
+                f"    LOD {k} is the impostor: from {r['distance_m']:g} m, two crossed "
+                f"cards {i['card_m']:g} m square cut from {i['grid']}×{i['grid']} views "
+                f"of {i['cell_px']} px ({i['atlas_px']}² atlas, "
+                f"{i['atlas_bytes'] / 1e3:,.0f} KB of PNG)"
+            )
+    click.echo(
+        "  schedules on the full tree (the paper's Table 3; error: perspective-true, "
+        "measured on every vertex's bound)"
+    )
+    click.echo(
+        f"    {'dist m':>6}  {'schedule':<9}{'keys kept':>16}{'anim bytes':>12}"
+        f"{'max err px':>11}{'updates/frame':>15}"
+    )
     for r in stats["schedules"]:
-        click.echo(f"    {r['distance_m']:>6g}  {r['schedule']:<9}{r['keys_kept']:>9,} "
-                   f"{r['keys_kept_pct']:>5.1f}%{r['animation_bytes']:>12,}"
-                   f"{r['max_error_px']:>11.3f}{r['leaf_vertex_updates_per_frame']:>15,.0f}")
+        click.echo(
+            f"    {r['distance_m']:>6g}  {r['schedule']:<9}{r['keys_kept']:>9,} "
+            f"{r['keys_kept_pct']:>5.1f}%{r['animation_bytes']:>12,}"
+            f"{r['max_error_px']:>11.3f}{r['leaf_vertex_updates_per_frame']:>15,.0f}"
+        )
 
 
 def _wind_lines(w: dict, o: dict) -> None:
     click.echo(f"  wind ({o['wind_speed']:g} m/s, stiffness ×{o['stiffness']:g}):")
-    click.echo("    modes        " + ", ".join(f"{m['hz']:.2f} Hz (ζ {m['damping']:.2f})"
-                                              for m in w["modes"]))
+    click.echo(
+        "    modes        " + ", ".join(f"{m['hz']:.2f} Hz (ζ {m['damping']:.2f})" for m in w["modes"])
+    )
     if w["sway_hz"] is not None:
         click.echo(f"    trunk sway   {w['sway_hz']:.3f} Hz, damping ζ {w['sway_damping']:.2f}")
-        click.echo(f"    tree top     leans {w['top_lean_m']:.2f} m downwind, sways "
-                   f"{w['top_sway_rms_m']:.2f} m RMS; largest joint turn {w['max_joint_deg']:.1f}°")
+        click.echo(
+            f"    tree top     leans {w['top_lean_m']:.2f} m downwind, sways "
+            f"{w['top_sway_rms_m']:.2f} m RMS; largest joint turn {w['max_joint_deg']:.1f}°"
+        )

@@ -3,6 +3,7 @@
 The whole path: the flags the user gave → `api.plan_make` (checks, `options.resolve`, species
 file) → `api.run_make` (`pipeline.build_asset` → `exchange.export`) → the summary printed here.
 """
+
 from __future__ import annotations
 
 import json
@@ -18,9 +19,14 @@ from . import flags
 
 @click.command()
 @click.argument("species")
-@click.option("-o", "--output", type=click.Path(path_type=Path), required=True,
-              help="Output file; the extension picks the format: .glb .gltf .usda .usdc .usdz "
-                   "(skinned, animated) or .obj .ply (static rest pose).")
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(path_type=Path),
+    required=True,
+    help="Output file; the extension picks the format: .glb .gltf .usda .usdc .usdz "
+    "(skinned, animated) or .obj .ply (static rest pose).",
+)
 @flags.use(*api.GROUPS["generate"], *flags.MAKE)
 @flags.json_flag("Print a machine-readable summary (files, bytes, counts, seconds per stage).")
 def make(species, output, as_json, **options):
@@ -38,12 +44,19 @@ def make(species, output, as_json, **options):
     click.echo(f"wrote {', '.join(s['files'])}  ({s['bytes'] / 1e6:.2f} MB)")
     if job.static:
         click.echo("  static format: no wind or LODs")
-    click.echo(f"  {s['stems']:,} stems, {s['leaves']:,} leaves; {s['vertices']:,} vertices, "
-               f"{s['triangles']:,} triangles; {s['joints']} joints; "
-               f"{s['joint_keys']:,} keys ({s['keys']} frames)")
+    click.echo(
+        f"  {s['stems']:,} stems, {s['leaves']:,} leaves; {s['vertices']:,} vertices, "
+        f"{s['triangles']:,} triangles; {s['joints']} joints; "
+        f"{s['joint_keys']:,} keys ({s['keys']} frames)"
+    )
     if len(s["lods"]) > 1:
-        click.echo("  LODs: " + "; ".join(
-            f"{r['distance_m']:.1f} m: {r['triangles']:,} tris, {r['joints']} joints"
-            + (f", {r['joint_keys']:,} keys" if r["decimated"] else "") for r in s["lods"]))
+        click.echo(
+            "  LODs: "
+            + "; ".join(
+                f"{r['distance_m']:.1f} m: {r['triangles']:,} tris, {r['joints']} joints"
+                + (f", {r['joint_keys']:,} keys" if r["decimated"] else "")
+                for r in s["lods"]
+            )
+        )
     stages = ", ".join(f"{k} {v:.2f}" for k, v in timings.stages.items())
     click.echo(f"  {time.perf_counter() - t0:.2f} s  ({stages})")

@@ -12,6 +12,7 @@ Writing is atomic (staging.staged): a writer writes `path` (and any siblings, su
 .gltf's .bin) into a hidden staging folder, which is moved into place only when it succeeded.
 A writer is `writer(thing, path)` and only encodes; to add a format, add one table entry.
 """
+
 from __future__ import annotations
 
 import os
@@ -30,51 +31,67 @@ from .staging import staged, sweep, written  # noqa: F401  (re-exported)
 
 
 def _usd(asset: Asset, path: Path) -> None:
-    from .usd import write_usd   # lazy: pxr takes ~0.5 s to import; most runs write glTF
-    write_usd(with_bounds(asset), path)   # UsdSkel stores animated extents; only USD pays for them
+    from .usd import write_usd  # lazy: pxr takes ~0.5 s to import; most runs write glTF
+
+    write_usd(with_bounds(asset), path)  # UsdSkel stores animated extents; only USD pays for them
 
 
 def _forest_usd(forest: Forest, path: Path) -> None:
-    from .forest_usd import write_forest_usd   # lazy: pxr (see _usd)
+    from .forest_usd import write_forest_usd  # lazy: pxr (see _usd)
+
     write_forest_usd(forest, path)
 
 
 def _static(asset: Asset, path: Path) -> None:
-    from .static import write_static   # lazy: trimesh is slow to import
+    from .static import write_static  # lazy: trimesh is slow to import
+
     write_static(asset, path)
 
 
 def _read_usd(path: Path, lod: int):
-    from .read_usd import read_drawable   # lazy: pxr (see _usd)
+    from .read_usd import read_drawable  # lazy: pxr (see _usd)
+
     return read_drawable(path, lod)
 
 
 WRITERS: dict[str, Callable[[Asset, Path], None]] = {
-    ".glb": gltf.write_gltf, ".gltf": gltf.write_gltf,
-    ".usda": _usd, ".usdc": _usd, ".usdz": _usd,
-    ".obj": _static, ".ply": _static,
+    ".glb": gltf.write_gltf,
+    ".gltf": gltf.write_gltf,
+    ".usda": _usd,
+    ".usdc": _usd,
+    ".usdz": _usd,
+    ".obj": _static,
+    ".ply": _static,
 }
 FOREST_WRITERS: dict[str, Callable[[Forest, Path], None]] = {
-    ".glb": write_forest_gltf, ".gltf": write_forest_gltf,
-    ".usda": _forest_usd, ".usdc": _forest_usd, ".usdz": _forest_usd,
+    ".glb": write_forest_gltf,
+    ".gltf": write_forest_gltf,
+    ".usda": _forest_usd,
+    ".usdc": _forest_usd,
+    ".usdz": _forest_usd,
 }
 READERS: dict[str, Callable[[Path, int], object]] = {
-    ".glb": read_gltf.read_drawable, ".gltf": read_gltf.read_drawable,
-    ".usd": _read_usd, ".usda": _read_usd, ".usdc": _read_usd, ".usdz": _read_usd,
+    ".glb": read_gltf.read_drawable,
+    ".gltf": read_gltf.read_drawable,
+    ".usd": _read_usd,
+    ".usda": _read_usd,
+    ".usdc": _read_usd,
+    ".usdz": _read_usd,
 }
-SPECIES = (".txt", ".xml")      # species files: read by params.py (text or Arbaro XML)
+SPECIES = (".txt", ".xml")  # species files: read by params.py (text or Arbaro XML)
 STILLS = (".png", ".jpg", ".jpeg")
 LOOPS = (".gif",)
-STATIC = (".obj", ".ply")        # formats with no skin or animation
-FIXED_UP_AXIS = {".glb": "y", ".gltf": "y"}   # glTF is Y up by spec; the rest take Asset.up_axis
+STATIC = (".obj", ".ply")  # formats with no skin or animation
+FIXED_UP_AXIS = {".glb": "y", ".gltf": "y"}  # glTF is Y up by spec; the rest take Asset.up_axis
 
 
 def supported_suffixes(table: dict | tuple = WRITERS) -> list[str]:
     return sorted(table)
 
 
-def check_suffix(path: str | os.PathLike, table: dict | tuple = WRITERS, kind: str = "output",
-                 flag: str | None = None) -> Path:
+def check_suffix(
+    path: str | os.PathLike, table: dict | tuple = WRITERS, kind: str = "output", flag: str | None = None
+) -> Path:
     """`path` as a Path, or the one-line error naming the extensions `table` supports.
     `flag` is how the user gave the path (`-o`, `--animate`), named first in the message."""
     path = Path(path)
@@ -82,11 +99,14 @@ def check_suffix(path: str | os.PathLike, table: dict | tuple = WRITERS, kind: s
     allowed = " ".join(supported_suffixes(table))
     who = f"{flag} {path}" if flag else str(path)
     if kind != "input" and path.is_dir():
-        raise TreegenError(f"{who}: is a directory; give a file name ending in one of {allowed} "
-                           f"(e.g. {path / ('tree' + next(iter(table)))})")
+        raise TreegenError(
+            f"{who}: is a directory; give a file name ending in one of {allowed} "
+            f"(e.g. {path / ('tree' + next(iter(table)))})"
+        )
     if not suffix:
-        raise TreegenError(f"{who}: no file extension; the extension picks the {kind} format, "
-                           f"one of {allowed}")
+        raise TreegenError(
+            f"{who}: no file extension; the extension picks the {kind} format, one of {allowed}"
+        )
     if suffix not in table:
         raise TreegenError(f"{who}: unknown {kind} extension '{suffix}'; allowed: {allowed}")
     return path
@@ -110,10 +130,12 @@ def check_compress(path: str | os.PathLike, compress: str, flag: str = "--compre
         raise TreegenError(f"{flag} {compress!r}: use one of {', '.join(COMPRESS)}")
     suffix = Path(path).suffix.lower()
     if compress != "none" and suffix not in FIXED_UP_AXIS:
-        why = "USD has no such encoding; .usdc is already compact" if suffix.startswith(".usd") \
+        why = (
+            "USD has no such encoding; .usdc is already compact"
+            if suffix.startswith(".usd")
             else f"{suffix} has no such encoding"
-        raise TreegenError(f"{path}: {flag} {compress} is for .glb/.gltf only ({why}); "
-                           f"use {flag} none")
+        )
+        raise TreegenError(f"{path}: {flag} {compress} is for .glb/.gltf only ({why}); use {flag} none")
     if compress == "meshopt":
         check_encoder()
 
@@ -133,8 +155,7 @@ def _write(writer: Callable[[Path], None], path: Path) -> list[Path]:
         return written(tmp, path)
 
 
-def export(asset: Asset, path: str | os.PathLike,
-           options: GltfOptions = GLTF_DEFAULTS) -> list[Path]:
+def export(asset: Asset, path: str | os.PathLike, options: GltfOptions = GLTF_DEFAULTS) -> list[Path]:
     """Write a prepared `asset` in the format `path`'s suffix names, atomically. Returns the
     files written, main file first (a .gltf also writes its .bin)."""
     path = check_suffix(path, WRITERS)
@@ -150,8 +171,9 @@ def lod_file_paths(path: str | os.PathLike, count: int) -> list[Path]:
     return [path.with_name(f"{path.stem}_LOD{k}{path.suffix}") for k in range(count)]
 
 
-def export_parts(parts: list[Asset], path: str | os.PathLike,
-                 options: GltfOptions = GLTF_DEFAULTS) -> list[Path]:
+def export_parts(
+    parts: list[Asset], path: str | os.PathLike, options: GltfOptions = GLTF_DEFAULTS
+) -> list[Path]:
     """Each asset of `parts` to its own file (lod_file_paths), all or nothing: every part is
     staged in one folder and moved into place only when all were written."""
     path = check_suffix(path, WRITERS)
@@ -159,14 +181,15 @@ def export_parts(parts: list[Asset], path: str | os.PathLike,
     targets = lod_file_paths(path, len(parts))
 
     def write_all(tmp: Path) -> None:
-        for part, target in zip(parts, targets):   # a handful of LODs
+        for part, target in zip(parts, targets):  # a handful of LODs
             writer(part, tmp.parent / target.name)
 
     return _write(write_all, targets[0])
 
 
-def export_forest(forest: Forest, path: str | os.PathLike,
-                  options: GltfOptions = GLTF_DEFAULTS) -> list[Path]:
+def export_forest(
+    forest: Forest, path: str | os.PathLike, options: GltfOptions = GLTF_DEFAULTS
+) -> list[Path]:
     """Write a prepared forest, atomically; the suffix picks glTF or USD (`options`: glTF only)."""
     path = check_suffix(path, FOREST_WRITERS)
     check_compress(path, options.compress)
@@ -181,9 +204,11 @@ def check_input(path: str | os.PathLike) -> Path:
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in SPECIES and suffix not in READERS:
-        raise TreegenError(f"{path}: unknown input extension '{suffix or '(none)'}'; expected a "
-                           f"species file ({' '.join(SPECIES)}) or a written tree "
-                           f"({' '.join(supported_suffixes(READERS))})")
+        raise TreegenError(
+            f"{path}: unknown input extension '{suffix or '(none)'}'; expected a "
+            f"species file ({' '.join(SPECIES)}) or a written tree "
+            f"({' '.join(supported_suffixes(READERS))})"
+        )
     if not path.is_file():
         raise TreegenError(f"{path}: no such file")
     return path

@@ -17,6 +17,7 @@
 Grid error: half a step, extent / 131070 (0.23 mm for a 30 m tree). UV error: half a step of
 the material's UV range over 65535 (≤ 0.001 for bark's ±64).
 """
+
 from __future__ import annotations
 
 import json
@@ -35,14 +36,14 @@ QUANTIZATION = "KHR_mesh_quantization"
 MESHOPT = "EXT_meshopt_compression"
 TEXTURE_TRANSFORM = "KHR_texture_transform"
 ENCODER = "meshopt_encode.mjs"
-DECODER = "meshopt_decode.mjs"       # reading EXT_meshopt_compression back (preview)
+DECODER = "meshopt_decode.mjs"  # reading EXT_meshopt_compression back (preview)
 
 
 @dataclass(frozen=True)
 class GltfOptions:
     """How the glTF writer encodes vertex and key data; `none` is plain float32."""
 
-    compress: str = "none"          # one of COMPRESS
+    compress: str = "none"  # one of COMPRESS
     # meshopt: metres one pixel spans per metre of distance (lod.pixel_size(1)); a LOD shown
     # from distance d gets a position grid of step ≤ d · pixel_size / 2 (error ≤ ¼ pixel, on
     # top of the LOD's own error_px), never finer than MESHOPT_POSITION_STEP. 0: that step.
@@ -72,7 +73,7 @@ def meshopt_step(options: GltfOptions, distance: float) -> float:
 class Grid:
     """One skin's position grid: position = offset + step · q, q in [0, 65535]."""
 
-    offset: np.ndarray          # (3,) float64, Y up
+    offset: np.ndarray  # (3,) float64, Y up
     step: float
 
     def dequantize(self) -> np.ndarray:
@@ -153,6 +154,7 @@ def quantize_uvs(uv: np.ndarray, box: UvRange) -> np.ndarray:
 
 # ---- EXT_meshopt_compression ----
 
+
 @dataclass(frozen=True)
 class MeshoptView:
     """How one bufferView is encoded: mode ATTRIBUTES/TRIANGLES/INDICES, element stride, and
@@ -169,8 +171,11 @@ def _node(who: str = "--compress meshopt", what: str = "encoder") -> str:
     given = os.environ.get("TREEGEN_NODE")
     node = shutil.which(given) if given else shutil.which("node")
     if not node:
-        where = f"TREEGEN_NODE={given} is not an executable" if given else \
-            "`node` is not on PATH; set TREEGEN_NODE to its path"
+        where = (
+            f"TREEGEN_NODE={given} is not an executable"
+            if given
+            else "`node` is not on PATH; set TREEGEN_NODE to its path"
+        )
         raise TreegenError(f"{who} needs Node.js ({where}) to run meshoptimizer's {what}")
     return node
 
@@ -183,15 +188,21 @@ def check_encoder() -> None:
 
 def _tools(who: str = "--compress meshopt", script: str = ENCODER) -> str:
     from .validate import ValidatorUnavailable, tools_dir
+
     try:
         tools = tools_dir()
     except ValidatorUnavailable:
         tools = None
-    if tools is None or not (tools / "node_modules" / "meshoptimizer").is_dir() \
-            or not (tools / script).is_file():
-        raise TreegenError(f"{who} needs the npm package meshoptimizer: run "
-                           "`make install` (npm ci in tools/) in a treegen checkout, or set "
-                           f"TREEGEN_TOOLS to a folder holding {script} and node_modules/")
+    if (
+        tools is None
+        or not (tools / "node_modules" / "meshoptimizer").is_dir()
+        or not (tools / script).is_file()
+    ):
+        raise TreegenError(
+            f"{who} needs the npm package meshoptimizer: run "
+            "`make install` (npm ci in tools/) in a treegen checkout, or set "
+            f"TREEGEN_TOOLS to a folder holding {script} and node_modules/"
+        )
     return str(tools)
 
 
@@ -201,27 +212,40 @@ def decode(views: list[tuple[dict, bytes]], who: str) -> list[bytes]:
     byteStride × count bytes, filters undone into the stored integers (int8 normals, int16
     quaternions), as a client without the extension would have read the fallback. `who`
     names the reading file in messages."""
-    jobs = [{"mode": ext["mode"], "filter": ext.get("filter", "NONE"), "stride": ext["byteStride"],
-             "count": ext["count"], "bytes": len(data)} for ext, data in views]
+    jobs = [
+        {
+            "mode": ext["mode"],
+            "filter": ext.get("filter", "NONE"),
+            "stride": ext["byteStride"],
+            "count": ext["count"],
+            "bytes": len(data),
+        }
+        for ext, data in views
+    ]
     head = json.dumps({"jobs": jobs}).encode()
     tools = _tools(who, DECODER)
-    proc = subprocess.run([_node(who, "decoder"), os.path.join(tools, DECODER)], cwd=tools,
-                          capture_output=True,
-                          input=b"".join([struct.pack("<I", len(head)), head,
-                                          *(data for _, data in views)]))
+    proc = subprocess.run(
+        [_node(who, "decoder"), os.path.join(tools, DECODER)],
+        cwd=tools,
+        capture_output=True,
+        input=b"".join([struct.pack("<I", len(head)), head, *(data for _, data in views)]),
+    )
     if proc.returncode != 0:
-        raise TreegenError(f"{who}: meshoptimizer could not decode it: "
-                           f"{proc.stderr.decode(errors='replace').strip().splitlines()[-1:]}")
+        raise TreegenError(
+            f"{who}: meshoptimizer could not decode it: "
+            f"{proc.stderr.decode(errors='replace').strip().splitlines()[-1:]}"
+        )
     out, pos = [], 0
     for job in jobs:
         size = job["count"] * job["stride"]
-        out.append(proc.stdout[pos:pos + size])
+        out.append(proc.stdout[pos : pos + size])
         pos += size
     return out
 
 
-def encode(views: list[tuple[MeshoptView, memoryview]],
-           groups: list[tuple[int, list[int]]] = ()) -> list[bytes]:    # type: ignore[assignment]
+def encode(
+    views: list[tuple[MeshoptView, memoryview]], groups: list[tuple[int, list[int]]] = ()
+) -> list[bytes]:  # type: ignore[assignment]
     """Encode every view with meshoptimizer in one node process: stdin is a little-endian
     uint32 JSON length, the JSON {jobs, groups}, then each job's bytes (the view, or the
     float32 filter source); stdout the same with the encoded views. `groups` (index job,
@@ -230,24 +254,33 @@ def encode(views: list[tuple[MeshoptView, memoryview]],
     in the order its codecs compress best."""
     jobs, payloads = [], []
     for spec, data in views:
-        raw = memoryview(spec.source.astype("<f4", copy=False)).cast("B") \
-            if spec.source is not None else data
-        jobs.append({"mode": spec.mode, "filter": spec.filter, "stride": spec.stride,
-                     "count": spec.count, "bytes": raw.nbytes,
-                     "bits": OCT_BITS if spec.filter == "OCTAHEDRAL" else QUAT_BITS})
+        raw = memoryview(spec.source.astype("<f4", copy=False)).cast("B") if spec.source is not None else data
+        jobs.append(
+            {
+                "mode": spec.mode,
+                "filter": spec.filter,
+                "stride": spec.stride,
+                "count": spec.count,
+                "bytes": raw.nbytes,
+                "bits": OCT_BITS if spec.filter == "OCTAHEDRAL" else QUAT_BITS,
+            }
+        )
         payloads.append(raw)
-    head = json.dumps({"jobs": jobs, "groups": [{"indices": i, "vertices": v}
-                                                 for i, v in groups]}).encode()
+    head = json.dumps({"jobs": jobs, "groups": [{"indices": i, "vertices": v} for i, v in groups]}).encode()
     tools = _tools()
-    proc = subprocess.run([_node(), os.path.join(tools, ENCODER)], cwd=tools, capture_output=True,
-                          input=b"".join([struct.pack("<I", len(head)), head, *payloads]))
+    proc = subprocess.run(
+        [_node(), os.path.join(tools, ENCODER)],
+        cwd=tools,
+        capture_output=True,
+        input=b"".join([struct.pack("<I", len(head)), head, *payloads]),
+    )
     if proc.returncode != 0:
         raise RuntimeError(f"meshopt encoder failed: {proc.stderr.decode(errors='replace').strip()}")
     blob = proc.stdout
     (n,) = struct.unpack_from("<I", blob, 0)
-    lengths = json.loads(blob[4:4 + n])
+    lengths = json.loads(blob[4 : 4 + n])
     pos, result = 4 + n, []
     for length in lengths:
-        result.append(blob[pos:pos + length])
+        result.append(blob[pos : pos + length])
         pos += length
     return result

@@ -25,6 +25,7 @@ one position grid per (prototype, LOD) skin, folded into its inverse bind matric
 per material over every prototype using it, int16 rotation keys; meshopt then encodes every
 view. Per-instance JSON is unchanged, so the saving grows with prototypes, not trees.
 """
+
 from __future__ import annotations
 
 import math
@@ -36,9 +37,25 @@ import numpy as np
 from .. import __version__
 from ..asset import Forest, Material
 from .compress import GLTF_DEFAULTS, GltfOptions, UvRange, meshopt_step, position_grid, uv_range
-from .gltf import (Quantization, Textures, _Buffer, _gltf_uvs, _is_default, _primitive, _y_up32,
-                   finish, inverse_bind_accessor, joint_fields, lod_extras, material_dict,
-                   moving_joints, rotation_samplers, set_msft_lod, to_y_up, write_document)
+from .gltf import (
+    Quantization,
+    Textures,
+    _Buffer,
+    _gltf_uvs,
+    _is_default,
+    _primitive,
+    _y_up32,
+    finish,
+    inverse_bind_accessor,
+    joint_fields,
+    lod_extras,
+    material_dict,
+    moving_joints,
+    rotation_samplers,
+    set_msft_lod,
+    to_y_up,
+    write_document,
+)
 
 
 class _Shared:
@@ -73,11 +90,11 @@ class _Shared:
         if (p, k) not in self._quant:
             asset = self.scene.prototypes[p]
             lod = asset.lods[k]
-            step = meshopt_step(self.options, lod.distance) \
-                if self.options.compress == "meshopt" else 0.0
+            step = meshopt_step(self.options, lod.distance) if self.options.compress == "meshopt" else 0.0
             grid = position_grid([_y_up32(q.positions) for q in lod.primitives], step)
             self._quant[(p, k)] = Quantization(
-                grid, {m.name: self.uv_boxes[m] for m in asset.materials if m in self.uv_boxes})
+                grid, {m.name: self.uv_boxes[m] for m in asset.materials if m in self.uv_boxes}
+            )
         return self._quant[(p, k)]
 
     def mesh(self, p: int, k: int) -> int:
@@ -87,18 +104,21 @@ class _Shared:
             mats = {m.name: m for m in asset.materials}
             J = len(lod.skeleton.names)
             quant = self.quant(p, k)
-            prims = [_primitive(self.buf, q, J, self.material(mats[q.material]), quant)
-                     for q in lod.primitives]
+            prims = [
+                _primitive(self.buf, q, J, self.material(mats[q.material]), quant) for q in lod.primitives
+            ]
             self._mesh[(p, k)] = len(self.meshes)
-            self.meshes.append({"name": f"{asset.name}_s{asset.extras.get('seed', p)}_LOD{k}",
-                                "primitives": prims})
+            self.meshes.append(
+                {"name": f"{asset.name}_s{asset.extras.get('seed', p)}_LOD{k}", "primitives": prims}
+            )
         return self._mesh[(p, k)]
 
     def ibm(self, p: int, k: int) -> int:
         if (p, k) not in self._ibm:
             quant = self.quant(p, k)
-            self._ibm[(p, k)] = inverse_bind_accessor(self.buf, self.scene.prototypes[p].lods[k].skeleton,
-                                                      quant.grid if quant is not None else None)
+            self._ibm[(p, k)] = inverse_bind_accessor(
+                self.buf, self.scene.prototypes[p].lods[k].skeleton, quant.grid if quant is not None else None
+            )
         return self._ibm[(p, k)]
 
     def joints(self, p: int, k: int) -> tuple[list[dict], list[list[int]]]:
@@ -122,8 +142,7 @@ class _Shared:
         if (p, k) in self.scene.variants:
             clip = self.scene.variants[(p, k)][v]
             joints = moving_joints(clip)
-            for j, sampler in rotation_samplers(self.buf, clip, joints, self._inputs,
-                                                self.options.quantized):
+            for j, sampler in rotation_samplers(self.buf, clip, joints, self._inputs, self.options.quantized):
                 self.samplers.append(sampler)
                 out.append((j, len(self.samplers) - 1))
         self._tracks[key] = out
@@ -157,12 +176,12 @@ def _build_forest(scene: Forest, options: GltfOptions = GLTF_DEFAULTS) -> tuple[
     roots: list[int] = []
     places: list[int] = []
     width = len(str(max(len(scene.instances) - 1, 0)))
-    for i, inst in enumerate(scene.instances):     # per tree: JSON records only, no vertex data
+    for i, inst in enumerate(scene.instances):  # per tree: JSON records only, no vertex data
         asset = scene.prototypes[inst.prototype]
         name = f"tree{i:0{width}d}"
         t = to_y_up(np.asarray(inst.position, np.float64))
         half = math.radians(inst.rotation_deg) / 2
-        q = np.array([0.0, math.sin(half), 0.0, math.cos(half)])   # about glTF's up (+Y)
+        q = np.array([0.0, math.sin(half), 0.0, math.cos(half)])  # about glTF's up (+Y)
         lods = range(len(asset.lods)) if scene.all_lods else [inst.lod]
         lod_nodes = []
         for k in lods:
@@ -180,24 +199,34 @@ def _build_forest(scene: Forest, options: GltfOptions = GLTF_DEFAULTS) -> tuple[
                 place_node["rotation"] = [float(x) for x in q]
             if inst.scale != 1.0:
                 place_node["scale"] = [float(inst.scale)] * 3
-            nodes.append({"name": f"{name}_LOD{k}", "mesh": sh.mesh(inst.prototype, k),
-                          "skin": len(skins), "extras": lod_extras(asset, k)})
+            nodes.append(
+                {
+                    "name": f"{name}_LOD{k}",
+                    "mesh": sh.mesh(inst.prototype, k),
+                    "skin": len(skins),
+                    "extras": lod_extras(asset, k),
+                }
+            )
             nodes.append(place_node)
             fields, kids = sh.joints(inst.prototype, k)
             first = int(joint_nodes[0]) if J else 0
-            for j in range(J):      # one JSON node per joint, fields shared with the prototype
-                n = {"name": sk.names[j], **fields[j]}     # same names in every instance:
-                if kids[j]:                                # importers merge identical skins
+            for j in range(J):  # one JSON node per joint, fields shared with the prototype
+                n = {"name": sk.names[j], **fields[j]}  # same names in every instance:
+                if kids[j]:  # importers merge identical skins
                     n["children"] = [first + c for c in kids[j]]
                 nodes.append(n)
-            skin = {"name": f"{name}_LOD{k}_skin", "joints": [int(x) for x in joint_nodes],
-                    "inverseBindMatrices": sh.ibm(inst.prototype, k)}
+            skin = {
+                "name": f"{name}_LOD{k}_skin",
+                "joints": [int(x) for x in joint_nodes],
+                "inverseBindMatrices": sh.ibm(inst.prototype, k),
+            }
             if len(jroots) == 1:
                 skin["skeleton"] = int(joint_nodes[jroots[0]])
             skins.append(skin)
             for j, sampler in sh.tracks(inst.prototype, k, inst.variant):
-                channels.append({"sampler": sampler,
-                                 "target": {"node": int(joint_nodes[j]), "path": "rotation"}})
+                channels.append(
+                    {"sampler": sampler, "target": {"node": int(joint_nodes[j]), "path": "rotation"}}
+                )
             lod_nodes.append(mesh_node)
             places.append(place)
         if len(lod_nodes) > 1:
@@ -205,12 +234,21 @@ def _build_forest(scene: Forest, options: GltfOptions = GLTF_DEFAULTS) -> tuple[
         roots.append(lod_nodes[0])
 
     gltf: dict = {
-        "asset": {"version": "2.0", "generator": f"treegen {__version__}",
-                  "extras": {"forest": scene.name, "instances": len(scene.instances),
-                             "prototypes": [dict(a.extras) for a in scene.prototypes]}},
+        "asset": {
+            "version": "2.0",
+            "generator": f"treegen {__version__}",
+            "extras": {
+                "forest": scene.name,
+                "instances": len(scene.instances),
+                "prototypes": [dict(a.extras) for a in scene.prototypes],
+            },
+        },
         "scene": 0,
         "scenes": [{"name": scene.name, "nodes": roots + places}],
-        "nodes": nodes, "meshes": sh.meshes, "skins": skins, "materials": sh.materials,
+        "nodes": nodes,
+        "meshes": sh.meshes,
+        "skins": skins,
+        "materials": sh.materials,
     }
     sh.textures.fields(gltf)
     if channels:
@@ -220,8 +258,7 @@ def _build_forest(scene: Forest, options: GltfOptions = GLTF_DEFAULTS) -> tuple[
     return gltf, finish(gltf, buf, options.quantized, sh.uv_boxes.values())
 
 
-def write_forest_gltf(scene: Forest, path: str | os.PathLike,
-                      options: GltfOptions = GLTF_DEFAULTS) -> None:
+def write_forest_gltf(scene: Forest, path: str | os.PathLike, options: GltfOptions = GLTF_DEFAULTS) -> None:
     """Write straight to `path` (.glb, or .gltf + `<stem>.bin`); exchange.export_forest stages it."""
     path = Path(path)
     gltf, buf = _build_forest(scene, options)

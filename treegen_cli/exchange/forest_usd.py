@@ -21,6 +21,7 @@ Textures and axes as exchange.usd: a .usdz packages the textures and is Y up (in
 translate by the converted position and turn about +Y), a .usda/.usdc keeps Z up with the
 textures beside it; texture names carry their prototype's name (`<stem>_<prototype>_leaf.png`).
 """
+
 from __future__ import annotations
 
 from dataclasses import replace
@@ -32,8 +33,7 @@ from ..errors import TreegenError
 from ..asset import Forest
 from ..axes import to_y_up
 from .texture_files import TextureFiles
-from .usd import (_identifier, _sample_rate, _snap, build_stage, check_suffix, new_stage, up_axis,
-                  write_stage)
+from .usd import _identifier, _sample_rate, _snap, build_stage, check_suffix, new_stage, up_axis, write_stage
 
 
 def _prototype_asset(forest: Forest, p: int, lods: list[int], loop: bool):
@@ -63,15 +63,19 @@ def _lift_lod_variants(layer, proto, n: int) -> None:
     spec.variantSelections["LOD"] = "LOD0"
 
 
-def build_forest_stage(scene: Forest, up: str = "Z", textures: TextureFiles | None = None,
-                       lod_schemas: bool = True):
+def build_forest_stage(
+    scene: Forest, up: str = "Z", textures: TextureFiles | None = None, lod_schemas: bool = True
+):
     """The whole forest as an in-memory stage (one layer); `up`, `textures` and `lod_schemas`
     as exchange.usd.build_stage."""
     from pxr import Gf, Kind, Sdf, Usd, UsdGeom
 
     stage, root_path = new_stage(
-        scene.name, "treegen: forest of instanced, skinned Weber-Penn trees (UsdSkel)",
-        Kind.Tokens.assembly, up)
+        scene.name,
+        "treegen: forest of instanced, skinned Weber-Penn trees (UsdSkel)",
+        Kind.Tokens.assembly,
+        up,
+    )
     layer = stage.GetRootLayer()
     protos_path = root_path.AppendChild("Prototypes")
     stage.CreateClassPrim(protos_path)
@@ -91,12 +95,17 @@ def build_forest_stage(scene: Forest, up: str = "Z", textures: TextureFiles | No
         wanted[(inst.prototype, -1 if scene.all_lods else inst.lod)] = None
     proto_paths: dict[tuple[int, int], Sdf.Path] = {}
     used: set[str] = set()
-    for p, k in sorted(wanted):       # per prototype: a few
+    for p, k in sorted(wanted):  # per prototype: a few
         asset = scene.prototypes[p]
         lods = list(range(len(asset.lods))) if k < 0 else [k]
         proto = _identifier(f"{asset.name}_s{asset.extras.get('seed', p)}")
-        sub = build_stage(_prototype_asset(scene, p, lods, tcps is not None), up, textures,
-                          lod_schemas, texture_prefix=proto + "_")
+        sub = build_stage(
+            _prototype_asset(scene, p, lods, tcps is not None),
+            up,
+            textures,
+            lod_schemas,
+            texture_prefix=proto + "_",
+        )
         src = sub.GetDefaultPrim().GetPath()
         name = _identifier(proto + ("" if k < 0 else f"_lod{k}"))
         while name in used:
@@ -115,38 +124,47 @@ def build_forest_stage(scene: Forest, up: str = "Z", textures: TextureFiles | No
     width = len(str(max(len(scene.instances) - 1, 0)))
     frames = (scene.loop * tcps) if tcps else 0.0
     with Sdf.ChangeBlock():
-        for i, inst in enumerate(scene.instances):   # per tree: a handful of specs
+        for i, inst in enumerate(scene.instances):  # per tree: a handful of specs
             path = trees_path.AppendChild(f"tree{i:0{width}d}")
             spec = Sdf.CreatePrimInLayer(layer, path)
             spec.specifier = Sdf.SpecifierDef
             spec.typeName = "Xform"
             spec.instanceable = True
             offset = float(np.round(inst.time_offset * tcps)) % frames if tcps else 0.0
-            ref = Sdf.Reference("", proto_paths[(inst.prototype, -1 if scene.all_lods else inst.lod)],
-                                Sdf.LayerOffset(-offset, 1.0))
+            ref = Sdf.Reference(
+                "",
+                proto_paths[(inst.prototype, -1 if scene.all_lods else inst.lod)],
+                Sdf.LayerOffset(-offset, 1.0),
+            )
             spec.referenceList.Prepend(ref)
             ops = []
             position = to_y_up(np.asarray(inst.position, np.float64)) if up == "Y" else inst.position
             for op_name, type_name, value in (
-                    ("xformOp:translate", Sdf.ValueTypeNames.Double3,
-                     Gf.Vec3d(*(float(c) for c in position))),
-                    (f"xformOp:rotate{up}", Sdf.ValueTypeNames.Float, float(inst.rotation_deg)),
-                    ("xformOp:scale", Sdf.ValueTypeNames.Float3, Gf.Vec3f(*([inst.scale] * 3)))):
+                ("xformOp:translate", Sdf.ValueTypeNames.Double3, Gf.Vec3d(*(float(c) for c in position))),
+                (f"xformOp:rotate{up}", Sdf.ValueTypeNames.Float, float(inst.rotation_deg)),
+                ("xformOp:scale", Sdf.ValueTypeNames.Float3, Gf.Vec3f(*([inst.scale] * 3))),
+            ):
                 attr = Sdf.AttributeSpec(spec, op_name, type_name)
                 attr.default = value
                 ops.append(op_name)
-            order = Sdf.AttributeSpec(spec, "xformOpOrder", Sdf.ValueTypeNames.TokenArray,
-                                      Sdf.VariabilityUniform)
+            order = Sdf.AttributeSpec(
+                spec, "xformOpOrder", Sdf.ValueTypeNames.TokenArray, Sdf.VariabilityUniform
+            )
             order.default = ops
-            spec.customData = {"treegen": {"source": inst.source, "lod": inst.lod,
-                                           "time_offset_s": float(offset / tcps) if tcps else 0.0}}
+            spec.customData = {
+                "treegen": {
+                    "source": inst.source,
+                    "lod": inst.lod,
+                    "time_offset_s": float(offset / tcps) if tcps else 0.0,
+                }
+            }
     return stage
 
 
 def write_forest_usd(scene: Forest, path) -> None:
     """Write the forest to exactly `path` (.usda text, .usdc crate, .usdz package)."""
     path = Path(path)
-    suffix = check_suffix(path)           # before the stage is built
+    suffix = check_suffix(path)  # before the stage is built
     textures = TextureFiles(path)
     # keep the stage alive: it owns the layer
     stage = build_forest_stage(scene, up_axis(None, suffix), textures, suffix != ".usdz")

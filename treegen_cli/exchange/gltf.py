@@ -29,6 +29,7 @@ Lower LODs' mesh nodes are reached only through LOD0's MSFT_lod ids, so clients 
 MSFT_lod draw just the full-detail tree; their skeletons stay in the scene so every clip finds
 its joints. Each LOD node's extras carry its index, distance and screen coverage.
 """
+
 from __future__ import annotations
 
 import json
@@ -44,18 +45,39 @@ from ..asset import Asset, Clip, Material, Primitive, Skeleton, Texture
 from ..axes import Z_UP_TO_Y_UP, matrix_to_y_up, quat_to_y_up, to_y_up  # noqa: F401  (re-exported)
 from ..quat import continuous as _continuous
 from .impostor_meta import describe, impostor_lod, write_sidecar
-from .compress import (GLTF_DEFAULTS, MESHOPT, QUANTIZATION, TEXTURE_TRANSFORM, GltfOptions, Grid,
-                       MeshoptView, UvRange, encode, meshopt_step, position_grid,
-                       quantize_positions, quantize_uvs, snorm8, snorm16, uv_range)
+from .compress import (
+    GLTF_DEFAULTS,
+    MESHOPT,
+    QUANTIZATION,
+    TEXTURE_TRANSFORM,
+    GltfOptions,
+    Grid,
+    MeshoptView,
+    UvRange,
+    encode,
+    meshopt_step,
+    position_grid,
+    quantize_positions,
+    quantize_uvs,
+    snorm8,
+    snorm16,
+    uv_range,
+)
 
 # glTF enums
 FLOAT, UNSIGNED_BYTE, UNSIGNED_SHORT, UNSIGNED_INT = 5126, 5121, 5123, 5125
 BYTE, SHORT = 5120, 5122
 ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
-_COMPONENT = {np.dtype(np.float32): FLOAT, np.dtype(np.uint8): UNSIGNED_BYTE,
-              np.dtype(np.uint16): UNSIGNED_SHORT, np.dtype(np.uint32): UNSIGNED_INT,
-              np.dtype(np.int8): BYTE, np.dtype(np.int16): SHORT}
+_COMPONENT = {
+    np.dtype(np.float32): FLOAT,
+    np.dtype(np.uint8): UNSIGNED_BYTE,
+    np.dtype(np.uint16): UNSIGNED_SHORT,
+    np.dtype(np.uint32): UNSIGNED_INT,
+    np.dtype(np.int8): BYTE,
+    np.dtype(np.int16): SHORT,
+}
 _TYPE = {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4", 16: "MAT4"}
+
 
 def _unit(v: np.ndarray) -> np.ndarray:
     n = np.linalg.norm(v, axis=-1, keepdims=True)
@@ -76,7 +98,7 @@ class _Buffer:
         self.view_parts: list[memoryview] = []
         # --compress meshopt: how each accessor's view is encoded (compress.meshopt_views)
         self.meshopt: dict[int, MeshoptView] | None = {} if meshopt else None
-        self.groups: list[tuple[int, list[int]]] = []    # (index view, vertex views) per primitive
+        self.groups: list[tuple[int, list[int]]] = []  # (index view, vertex views) per primitive
         # --compress: skin and key data pooled into one view per (element type, filter), so
         # meshopt's codec sees long streams instead of hundreds of 301-key tracks (as gltfpack
         # does) and the JSON lists a few views instead of one per track
@@ -98,14 +120,21 @@ class _Buffer:
         self.views.append(v)
         return len(self.views) - 1
 
-    def accessor(self, a: np.ndarray, target: int | None = None, bounds: bool = False,
-                 normalized: bool = False, padded: bool = False, filter: str = "NONE",
-                 source: np.ndarray | None = None) -> int:
+    def accessor(
+        self,
+        a: np.ndarray,
+        target: int | None = None,
+        bounds: bool = False,
+        normalized: bool = False,
+        padded: bool = False,
+        filter: str = "NONE",
+        source: np.ndarray | None = None,
+    ) -> int:
         """`padded`: a's last component is alignment padding, not data (the view's byteStride
         keeps it, the accessor type drops it). `filter`/`source`: the meshopt filter for this
         view and the float32 (count, 4) data it encodes."""
         a = np.ascontiguousarray(a)
-        a = a.astype(a.dtype.newbyteorder("<"), copy=False)    # no copy on little-endian hosts
+        a = a.astype(a.dtype.newbyteorder("<"), copy=False)  # no copy on little-endian hosts
         stored = 1 if a.ndim == 1 else math.prod(a.shape[1:])
         comps = stored - 1 if padded else stored
         if self.pooled and target is None:
@@ -119,19 +148,25 @@ class _Buffer:
         if self.meshopt is not None:
             self.meshopt[view] = MeshoptView(
                 mode="TRIANGLES" if target == ELEMENT_ARRAY_BUFFER else "ATTRIBUTES",
-                stride=stored * a.itemsize, count=int(a.size // stored), filter=filter,
-                source=source)
+                stride=stored * a.itemsize,
+                count=int(a.size // stored),
+                filter=filter,
+                source=source,
+            )
         acc = {"bufferView": view, **self._fields(a, comps, stored, normalized, bounds)}
         self.accessors.append(acc)
         return len(self.accessors) - 1
 
     @staticmethod
     def _fields(a: np.ndarray, comps: int, stored: int, normalized: bool, bounds: bool) -> dict:
-        acc = {"componentType": _COMPONENT[a.dtype.newbyteorder("=")],
-               "count": int(a.shape[0]), "type": _TYPE[comps]}
+        acc = {
+            "componentType": _COMPONENT[a.dtype.newbyteorder("=")],
+            "count": int(a.shape[0]),
+            "type": _TYPE[comps],
+        }
         if normalized:
             acc["normalized"] = True
-        if bounds:    # column by column: numpy's axis-0 reduce over (V, 3) is 20× slower
+        if bounds:  # column by column: numpy's axis-0 reduce over (V, 3) is 20× slower
             flat = a.reshape(len(a), stored)
             acc["min"] = [_num(flat[:, c].min()) for c in range(comps)]
             acc["max"] = [_num(flat[:, c].max()) for c in range(comps)]
@@ -153,8 +188,12 @@ class _Buffer:
             size = members[0][1].itemsize * stored
             sources = [src for _, _, src in members]
             self.meshopt[view] = MeshoptView(
-                mode="ATTRIBUTES", stride=size, count=len(data) // size, filter=filter,
-                source=np.concatenate(sources) if filter != "NONE" else None)
+                mode="ATTRIBUTES",
+                stride=size,
+                count=len(data) // size,
+                filter=filter,
+                source=np.concatenate(sources) if filter != "NONE" else None,
+            )
         self.pools = {}
 
     def padding(self) -> bytes:
@@ -173,8 +212,9 @@ def _num(x) -> int | float:
     return int(x) if np.issubdtype(type(x), np.integer) else float(x)
 
 
-def _weights(joints: np.ndarray, weights: np.ndarray,
-             blended: type = np.uint16) -> tuple[np.ndarray, np.ndarray]:
+def _weights(
+    joints: np.ndarray, weights: np.ndarray, blended: type = np.uint16
+) -> tuple[np.ndarray, np.ndarray]:
     """Normalised integer weights whose rows sum exactly to the type's maximum; zero-weight
     slots index joint 0.
 
@@ -231,8 +271,9 @@ class Quantization:
         self.grid, self.uvs = grid, uvs
 
 
-def _primitive(buf: _Buffer, p: Primitive, n_joints: int, material: int,
-               quant: Quantization | None = None) -> dict:
+def _primitive(
+    buf: _Buffer, p: Primitive, n_joints: int, material: int, quant: Quantization | None = None
+) -> dict:
     if quant is not None:
         return _quantized_primitive(buf, p, n_joints, material, quant)
     pos = _y_up32(p.positions)
@@ -248,18 +289,25 @@ def _primitive(buf: _Buffer, p: Primitive, n_joints: int, material: int,
     nrm = _y_up32(p.normals)
     length = np.sqrt(np.einsum("ij,ij->i", nrm, nrm))
     nrm /= np.where(length > 0, length, np.float32(1.0))[:, None]
-    attrs = {"POSITION": buf.accessor(pos, ARRAY_BUFFER, bounds=True),
-             "NORMAL": buf.accessor(nrm, ARRAY_BUFFER),
-             "TEXCOORD_0": buf.accessor(uv, ARRAY_BUFFER),
-             **_tangent(buf, p),
-             "JOINTS_0": buf.accessor(joints, ARRAY_BUFFER),
-             "WEIGHTS_0": buf.accessor(weights, ARRAY_BUFFER, normalized=True)}
-    return {"attributes": attrs, "indices": buf.accessor(indices, ELEMENT_ARRAY_BUFFER),
-            "material": material, "mode": 4}
+    attrs = {
+        "POSITION": buf.accessor(pos, ARRAY_BUFFER, bounds=True),
+        "NORMAL": buf.accessor(nrm, ARRAY_BUFFER),
+        "TEXCOORD_0": buf.accessor(uv, ARRAY_BUFFER),
+        **_tangent(buf, p),
+        "JOINTS_0": buf.accessor(joints, ARRAY_BUFFER),
+        "WEIGHTS_0": buf.accessor(weights, ARRAY_BUFFER, normalized=True),
+    }
+    return {
+        "attributes": attrs,
+        "indices": buf.accessor(indices, ELEMENT_ARRAY_BUFFER),
+        "material": material,
+        "mode": 4,
+    }
 
 
-def _quantized_primitive(buf: _Buffer, p: Primitive, n_joints: int, material: int,
-                         quant: Quantization) -> dict:
+def _quantized_primitive(
+    buf: _Buffer, p: Primitive, n_joints: int, material: int, quant: Quantization
+) -> dict:
     """KHR_mesh_quantization (compress.py): grid positions, int8 normals and tangents,
     uint16 UVs in the material's box; joints, weights and indices as in `_primitive`."""
     pos = quantize_positions(_y_up32(p.positions), quant.grid)
@@ -269,22 +317,45 @@ def _quantized_primitive(buf: _Buffer, p: Primitive, n_joints: int, material: in
     joints = joints.astype(np.uint8 if n_joints <= 256 else np.uint16, copy=False)
     V = len(p.positions)
     indices = np.asarray(p.indices).astype(np.uint16 if V < 65535 else np.uint32, copy=False)
-    attrs = {"POSITION": buf.accessor(pos, ARRAY_BUFFER, bounds=True, padded=True),
-             "NORMAL": buf.accessor(snorm8(nrm, pad=True), ARRAY_BUFFER, normalized=True,
-                                    padded=True, filter="OCTAHEDRAL", source=_pad4(nrm, 0.0)),
-             "TEXCOORD_0": buf.accessor(uv, ARRAY_BUFFER, normalized=True)}
+    attrs = {
+        "POSITION": buf.accessor(pos, ARRAY_BUFFER, bounds=True, padded=True),
+        "NORMAL": buf.accessor(
+            snorm8(nrm, pad=True),
+            ARRAY_BUFFER,
+            normalized=True,
+            padded=True,
+            filter="OCTAHEDRAL",
+            source=_pad4(nrm, 0.0),
+        ),
+        "TEXCOORD_0": buf.accessor(uv, ARRAY_BUFFER, normalized=True),
+    }
     if p.tangents is not None:
         t = np.asarray(p.tangents, dtype=np.float64)
         tan = np.column_stack([_unit(to_y_up(t[:, :3])), np.sign(t[:, 3]) + (t[:, 3] == 0)])
-        attrs["TANGENT"] = buf.accessor(snorm8(tan, pad=False), ARRAY_BUFFER, normalized=True,
-                                        filter="OCTAHEDRAL", source=tan.astype(np.float32))
-    attrs |= {"JOINTS_0": buf.accessor(joints, ARRAY_BUFFER),
-              "WEIGHTS_0": buf.accessor(weights, ARRAY_BUFFER, normalized=True)}
-    prim = {"attributes": attrs, "indices": buf.accessor(indices, ELEMENT_ARRAY_BUFFER),
-            "material": material, "mode": 4}
-    if buf.meshopt is not None:     # one vertex order for all of the primitive's views
-        buf.groups.append((buf.accessors[prim["indices"]]["bufferView"],
-                           [buf.accessors[a]["bufferView"] for a in attrs.values()]))
+        attrs["TANGENT"] = buf.accessor(
+            snorm8(tan, pad=False),
+            ARRAY_BUFFER,
+            normalized=True,
+            filter="OCTAHEDRAL",
+            source=tan.astype(np.float32),
+        )
+    attrs |= {
+        "JOINTS_0": buf.accessor(joints, ARRAY_BUFFER),
+        "WEIGHTS_0": buf.accessor(weights, ARRAY_BUFFER, normalized=True),
+    }
+    prim = {
+        "attributes": attrs,
+        "indices": buf.accessor(indices, ELEMENT_ARRAY_BUFFER),
+        "material": material,
+        "mode": 4,
+    }
+    if buf.meshopt is not None:  # one vertex order for all of the primitive's views
+        buf.groups.append(
+            (
+                buf.accessors[prim["indices"]]["bufferView"],
+                [buf.accessors[a]["bufferView"] for a in attrs.values()],
+            )
+        )
     return prim
 
 
@@ -298,8 +369,7 @@ def quantization(asset: Asset, lod_index: int, min_step: float = 0.0) -> Quantiz
     for lod in asset.lods:
         for p in lod.primitives:
             by_material.setdefault(p.material, []).append(_gltf_uvs(p))
-    grid = position_grid([_y_up32(p.positions) for p in asset.lods[lod_index].primitives],
-                            min_step)
+    grid = position_grid([_y_up32(p.positions) for p in asset.lods[lod_index].primitives], min_step)
     return Quantization(grid, {m: uv_range(u) for m, u in by_material.items()})
 
 
@@ -309,7 +379,7 @@ def _tangent(buf: _Buffer, p: Primitive) -> dict:
     if p.tangents is None:
         return {}
     t = np.asarray(p.tangents, dtype=np.float32)
-    xyz = _y_up32(t[:, :3])        # a rotation: handedness w is unchanged
+    xyz = _y_up32(t[:, :3])  # a rotation: handedness w is unchanged
     return {"TANGENT": buf.accessor(np.column_stack([xyz, t[:, 3]]).astype(np.float32), ARRAY_BUFFER)}
 
 
@@ -320,8 +390,9 @@ def moving_joints(clip: Clip) -> np.ndarray:
     return np.flatnonzero(clip.animated)
 
 
-def rotation_samplers(buf: _Buffer, clip: Clip, joints: np.ndarray,
-                      inputs: dict, quantized: bool = False) -> list[tuple[int, dict]]:
+def rotation_samplers(
+    buf: _Buffer, clip: Clip, joints: np.ndarray, inputs: dict, quantized: bool = False
+) -> list[tuple[int, dict]]:
     """[(joint, sampler)] for the rotation tracks of `joints`, each with only its kept keys
     (Y up, sign-continuous). `inputs` caches input accessors by (times, key set), so tracks
     with the same schedule share one. `quantized`: outputs as normalized int16 (core glTF),
@@ -330,32 +401,36 @@ def rotation_samplers(buf: _Buffer, clip: Clip, joints: np.ndarray,
     rot = _unit(quat_to_y_up(clip.rotations))
     times = np.asarray(clip.times, dtype=np.float32)
     out = []
-    for j in joints:                    # loop over joints (a few hundred), not keys or vertices
+    for j in joints:  # loop over joints (a few hundred), not keys or vertices
         keys = np.arange(K) if clip.keys is None else np.asarray(clip.keys[j], dtype=np.int64)
         ident = (times.tobytes(), keys.tobytes())
         if ident not in inputs:
             inputs[ident] = buf.accessor(times[keys], bounds=True)
         q = _continuous(rot[keys, j])
-        output = buf.accessor(snorm16(q), normalized=True, filter="QUATERNION",
-                              source=q.astype(np.float32)) if quantized \
+        output = (
+            buf.accessor(snorm16(q), normalized=True, filter="QUATERNION", source=q.astype(np.float32))
+            if quantized
             else buf.accessor(q.astype(np.float32))
+        )
         sampler = {"input": inputs[ident], "output": output}
-        if not (quantized and clip.interpolation == "LINEAR"):   # (LINEAR is glTF's default)
+        if not (quantized and clip.interpolation == "LINEAR"):  # (LINEAR is glTF's default)
             sampler["interpolation"] = clip.interpolation
         out.append((int(j), sampler))
     return out
 
 
-def _animation(buf: _Buffer, clip: Clip, skeleton: Skeleton, joint_nodes: np.ndarray,
-               quantized: bool = False) -> dict | None:
+def _animation(
+    buf: _Buffer, clip: Clip, skeleton: Skeleton, joint_nodes: np.ndarray, quantized: bool = False
+) -> dict | None:
     joints = moving_joints(clip)
     if len(joints) == 0:
         return None
     samplers, channels = [], []
     for j, sampler in rotation_samplers(buf, clip, joints, {}, quantized):
         samplers.append(sampler)
-        channels.append({"sampler": len(samplers) - 1,
-                         "target": {"node": int(joint_nodes[j]), "path": "rotation"}})
+        channels.append(
+            {"sampler": len(samplers) - 1, "target": {"node": int(joint_nodes[j]), "path": "rotation"}}
+        )
     return {"name": clip.name, "samplers": samplers, "channels": channels}
 
 
@@ -367,7 +442,7 @@ def joint_fields(skeleton: Skeleton, short: bool = False) -> list[dict]:
     q = _unit(quat_to_y_up(skeleton.rest_rotation))
     num = _short if short else float
     out = []
-    for j in range(len(skeleton.names)):   # one JSON node per joint
+    for j in range(len(skeleton.names)):  # one JSON node per joint
         n = {}
         if not _is_default(t[j], [0, 0, 0]):
             n["translation"] = [num(x) for x in t[j]]
@@ -397,7 +472,8 @@ def set_msft_lod(node: dict, lower: list[int], lods: list) -> None:
     """Make `node` the LOD0 of an MSFT_lod chain: lower LOD node ids and screen coverages."""
     node["extensions"] = {"MSFT_lod": {"ids": lower}}
     node["extras"] = node.get("extras", {}) | {
-        "MSFT_screencoverage": [float(lod.screen_coverage) for lod in lods]}
+        "MSFT_screencoverage": [float(lod.screen_coverage) for lod in lods]
+    }
 
 
 def _is_default(v: np.ndarray, default) -> bool:
@@ -431,8 +507,14 @@ class Textures:
         if t not in self._tex:
             if t.wrap not in self._sampler:
                 self._sampler[t.wrap] = len(self.samplers)
-                self.samplers.append({"magFilter": LINEAR, "minFilter": LINEAR_MIPMAP_LINEAR,
-                                      "wrapS": _WRAP[t.wrap], "wrapT": _WRAP[t.wrap]})
+                self.samplers.append(
+                    {
+                        "magFilter": LINEAR,
+                        "minFilter": LINEAR_MIPMAP_LINEAR,
+                        "wrapS": _WRAP[t.wrap],
+                        "wrapT": _WRAP[t.wrap],
+                    }
+                )
             if t not in self._image:
                 view = self.buf.view(np.frombuffer(t.png, dtype=np.uint8), None)
                 self.images.append({"name": t.name, "bufferView": view, "mimeType": "image/png"})
@@ -461,8 +543,11 @@ def material_dict(m: Material, textures: Textures, uvs: UvRange | None = None) -
     """A Material as a glTF metallic-roughness material: base colour (and texture), normal map,
     MASK with its cutoff for alpha-tested leaves, double-sided leaves. `uvs`: the box of
     quantized UVs, undone by KHR_texture_transform on each texture reference."""
-    pbr: dict = {"baseColorFactor": [float(c) for c in m.base_color],
-                 "metallicFactor": float(m.metallic), "roughnessFactor": float(m.roughness)}
+    pbr: dict = {
+        "baseColorFactor": [float(c) for c in m.base_color],
+        "metallicFactor": float(m.metallic),
+        "roughnessFactor": float(m.roughness),
+    }
     d: dict = {"name": m.name, "pbrMetallicRoughness": pbr}
     ext = {} if uvs is None or uvs.identity else {"extensions": uvs.transform()}
     if m.base_texture is not None:
@@ -482,10 +567,14 @@ def _build(asset: Asset, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, _B
     buf = _Buffer(meshopt=options.compress == "meshopt", pooled=options.quantized)
     textures = Textures(buf)
     mat_index = {m.name: i for i, m in enumerate(asset.materials)}
-    steps = [meshopt_step(options, lod.distance) if options.compress == "meshopt" else 0.0
-             for lod in asset.lods]
-    quants = [quantization(asset, k, steps[k]) for k in range(len(asset.lods))] if options.quantized \
+    steps = [
+        meshopt_step(options, lod.distance) if options.compress == "meshopt" else 0.0 for lod in asset.lods
+    ]
+    quants = (
+        [quantization(asset, k, steps[k]) for k in range(len(asset.lods))]
+        if options.quantized
         else [None] * len(asset.lods)
+    )
     uv_boxes = quants[0].uvs if quants and quants[0] is not None else {}
     materials = [material_dict(m, textures, uv_boxes.get(m.name)) for m in asset.materials]
 
@@ -498,21 +587,29 @@ def _build(asset: Asset, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, _B
         rig_node = mesh_node + 1
         joint_nodes = rig_node + 1 + np.arange(J)
         lod_nodes.append(mesh_node)
-        nodes.append({})    # filled below
+        nodes.append({})  # filled below
         parent = np.asarray(sk.parent)
         roots = np.flatnonzero(parent < 0)
         rig_nodes.append(rig_node)
-        nodes.append({"name": f"{asset.name}_LOD{asset.extras.get('lod_index', k)}_rig", "children": [int(x) for x in joint_nodes[roots]]})
+        nodes.append(
+            {
+                "name": f"{asset.name}_LOD{asset.extras.get('lod_index', k)}_rig",
+                "children": [int(x) for x in joint_nodes[roots]],
+            }
+        )
         for j, fields in enumerate(joint_fields(sk, options.quantized)):
             n = {"name": sk.names[j], **fields}
             kids = np.flatnonzero(parent == j)
             if len(kids):
                 n["children"] = [int(x) for x in joint_nodes[kids]]
             nodes.append(n)
-        skin = {"name": f"{asset.name}_LOD{asset.extras.get('lod_index', k)}_skin",
-                "joints": [int(x) for x in joint_nodes],
-                "inverseBindMatrices": inverse_bind_accessor(
-                    buf, sk, quants[k].grid if quants[k] is not None else None)}
+        skin = {
+            "name": f"{asset.name}_LOD{asset.extras.get('lod_index', k)}_skin",
+            "joints": [int(x) for x in joint_nodes],
+            "inverseBindMatrices": inverse_bind_accessor(
+                buf, sk, quants[k].grid if quants[k] is not None else None
+            ),
+        }
         if len(roots) == 1:
             skin["skeleton"] = int(joint_nodes[roots[0]])
         skins.append(skin)
@@ -522,8 +619,12 @@ def _build(asset: Asset, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, _B
         prims = [_primitive(buf, p, J, mat_index[p.material], quants[k]) for p in lod.primitives]
         name = f"{asset.name}_LOD{asset.extras.get('lod_index', k)}"
         meshes.append({"name": name, "primitives": prims})
-        nodes[mesh_node] = {"name": name, "mesh": len(meshes) - 1, "skin": len(skins) - 1,
-                            "extras": lod_extras(asset, k)}
+        nodes[mesh_node] = {
+            "name": name,
+            "mesh": len(meshes) - 1,
+            "skin": len(skins) - 1,
+            "extras": lod_extras(asset, k),
+        }
         for clip in lod.clips:
             anim = _animation(buf, clip, sk, joint_nodes, options.quantized)
             if anim is not None:
@@ -536,14 +637,21 @@ def _build(asset: Asset, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, _B
         # module docstring); a lower LOD's mesh is reached only through MSFT_lod, its skeleton
         # is in the scene so its clip always finds its joints
         "scenes": [{"name": asset.name, "nodes": [lod_nodes[0], *rig_nodes]}],
-        "nodes": nodes, "meshes": meshes, "skins": skins, "materials": materials,
+        "nodes": nodes,
+        "meshes": meshes,
+        "skins": skins,
+        "materials": materials,
     }
     k = impostor_lod(asset)
     extras = dict(asset.extras)
     if k is not None:
         imp = asset.lods[k].impostor
-        extras["treegen_impostor"] = describe(asset, k, Z_UP_TO_Y_UP, {
-            "albedo": textures.image(imp.albedo), "normal_depth": textures.image(imp.normal_depth)})
+        extras["treegen_impostor"] = describe(
+            asset,
+            k,
+            Z_UP_TO_Y_UP,
+            {"albedo": textures.image(imp.albedo), "normal_depth": textures.image(imp.normal_depth)},
+        )
     textures.fields(gltf)
     if extras:
         gltf["asset"]["extras"] = extras
@@ -584,8 +692,7 @@ def _meshopt(gltf: dict, buf: _Buffer) -> _Buffer:
     order = sorted(buf.meshopt)
     slot = {v: k for k, v in enumerate(order)}
     groups = [(slot[i], [slot[v] for v in vs]) for i, vs in buf.groups]
-    encoded = dict(zip(order, encode([(buf.meshopt[i], buf.view_parts[i]) for i in order],
-                                        groups)))
+    encoded = dict(zip(order, encode([(buf.meshopt[i], buf.view_parts[i]) for i in order], groups)))
     out = _Buffer()
     for i, view in enumerate(buf.views):
         if i not in encoded:
@@ -597,10 +704,17 @@ def _meshopt(gltf: dict, buf: _Buffer) -> _Buffer:
         offset = out.size + (-out.size % 4)
         out.view(np.frombuffer(data, dtype=np.uint8), None)
         view["buffer"] = 1
-        view["extensions"] = {MESHOPT: {
-            "buffer": 0, "byteOffset": offset, "byteLength": len(data), "byteStride": spec.stride,
-            "count": spec.count, "mode": spec.mode,
-            **({"filter": spec.filter} if spec.filter != "NONE" else {})}}
+        view["extensions"] = {
+            MESHOPT: {
+                "buffer": 0,
+                "byteOffset": offset,
+                "byteLength": len(data),
+                "byteStride": spec.stride,
+                "count": spec.count,
+                "mode": spec.mode,
+                **({"filter": spec.filter} if spec.filter != "NONE" else {}),
+            }
+        }
     out.views, out.accessors = buf.views, buf.accessors
     fallback = {"byteLength": buf.size + len(buf.padding()), "extensions": {MESHOPT: {"fallback": True}}}
     gltf["buffers"] = [{"byteLength": out.size + len(out.padding())}, fallback]
@@ -612,10 +726,14 @@ def lod_extras(asset: Asset, k: int) -> dict:
     this LOD's index, the distance from which it is used and the screen coverage below which
     the next one takes over."""
     lod = asset.lods[k]
-    return {"treegen_lod": {"index": int(asset.extras.get("lod_index", k)),
-                            "count": int(asset.extras.get("lod_count", len(asset.lods))),
-                            "distance_m": float(lod.distance),
-                            "screen_coverage": float(lod.screen_coverage)}}
+    return {
+        "treegen_lod": {
+            "index": int(asset.extras.get("lod_index", k)),
+            "count": int(asset.extras.get("lod_count", len(asset.lods))),
+            "distance_m": float(lod.distance),
+            "screen_coverage": float(lod.screen_coverage),
+        }
+    }
 
 
 def _json_default(o):
@@ -629,8 +747,9 @@ def _json_default(o):
 
 
 def dumps(gltf: dict) -> bytes:
-    return json.dumps(gltf, sort_keys=True, separators=(",", ":"), allow_nan=False,
-                      default=_json_default).encode("utf-8")
+    return json.dumps(
+        gltf, sort_keys=True, separators=(",", ":"), allow_nan=False, default=_json_default
+    ).encode("utf-8")
 
 
 def _glb_head(gltf: dict, blob_len: int) -> bytes:
@@ -640,8 +759,9 @@ def _glb_head(gltf: dict, blob_len: int) -> bytes:
     js += b" " * (-len(js) % 4)
     bin_head = struct.pack("<I4s", blob_len, b"BIN\0") if blob_len else b""
     total = 12 + 8 + len(js) + len(bin_head) + blob_len
-    return b"".join([struct.pack("<4sII", b"glTF", 2, total),
-                     struct.pack("<I4s", len(js), b"JSON"), js, bin_head])
+    return b"".join(
+        [struct.pack("<4sII", b"glTF", 2, total), struct.pack("<I4s", len(js), b"JSON"), js, bin_head]
+    )
 
 
 def glb_bytes(gltf: dict, blob: bytes) -> bytes:
@@ -649,8 +769,9 @@ def glb_bytes(gltf: dict, blob: bytes) -> bytes:
     return _glb_head(gltf, len(blob)) + blob
 
 
-def write_gltf(asset: Asset, path: str | os.PathLike, binary: bool | None = None,
-               options: GltfOptions = GLTF_DEFAULTS) -> None:
+def write_gltf(
+    asset: Asset, path: str | os.PathLike, binary: bool | None = None, options: GltfOptions = GLTF_DEFAULTS
+) -> None:
     """Write straight to `path` (and `<stem>.bin` beside a .gltf); not atomic on its own —
     `exchange.export` stages it."""
     path = Path(path)
@@ -659,7 +780,7 @@ def write_gltf(asset: Asset, path: str | os.PathLike, binary: bool | None = None
     gltf, buf = _build(asset, options)
     write_document(gltf, buf, path, binary)
     meta = gltf["asset"].get("extras", {}).get("treegen_impostor")
-    if meta is not None:                # for engines' impostor shaders: images are in the file
+    if meta is not None:  # for engines' impostor shaders: images are in the file
         write_sidecar(meta | {"file": path.name}, path)
 
 
@@ -667,7 +788,7 @@ def write_document(gltf: dict, buf: _Buffer, path: Path, binary: bool) -> None:
     """A built glTF: .glb streamed (the buffer is never joined), or JSON + `<stem>.bin`."""
     blob_len = gltf["buffers"][0]["byteLength"]
     if binary:
-        with open(path, "wb") as f:                # streamed: the buffer is never joined
+        with open(path, "wb") as f:  # streamed: the buffer is never joined
             f.write(_glb_head(gltf, blob_len))
             if blob_len:
                 buf.write_to(f)
@@ -681,8 +802,14 @@ def write_document(gltf: dict, buf: _Buffer, path: Path, binary: bool) -> None:
 
 # ---- reading back (tests, `treegen preview`, cross-format checks) ----
 
-_DTYPE = {FLOAT: np.float32, UNSIGNED_BYTE: np.uint8, UNSIGNED_SHORT: np.uint16,
-          UNSIGNED_INT: np.uint32, BYTE: np.int8, SHORT: np.int16}
+_DTYPE = {
+    FLOAT: np.float32,
+    UNSIGNED_BYTE: np.uint8,
+    UNSIGNED_SHORT: np.uint16,
+    UNSIGNED_INT: np.uint32,
+    BYTE: np.int8,
+    SHORT: np.int16,
+}
 _NCOMP = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
 
 
@@ -693,11 +820,11 @@ def read_gltf(path: str | os.PathLike) -> tuple[dict, bytes]:
     if data[:4] == b"glTF":
         _, _, total = struct.unpack_from("<4sII", data, 0)
         jlen, _ = struct.unpack_from("<I4s", data, 12)
-        gltf = json.loads(data[20:20 + jlen])
+        gltf = json.loads(data[20 : 20 + jlen])
         blob = b""
         if 20 + jlen < total:
             blen, _ = struct.unpack_from("<I4s", data, 20 + jlen)
-            blob = data[28 + jlen:28 + jlen + blen]
+            blob = data[28 + jlen : 28 + jlen + blen]
         return gltf, blob
     gltf = json.loads(data)
     uri = gltf["buffers"][0].get("uri") if gltf.get("buffers") else None
@@ -712,8 +839,12 @@ def read_accessor(gltf: dict, blob: bytes, index: int) -> np.ndarray:
     view = gltf["bufferViews"][acc["bufferView"]]
     n = _NCOMP[acc["type"]]
     start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
-    a = np.frombuffer(blob, dtype=np.dtype(_DTYPE[acc["componentType"]]).newbyteorder("<"),
-                      count=acc["count"] * n, offset=start)
+    a = np.frombuffer(
+        blob,
+        dtype=np.dtype(_DTYPE[acc["componentType"]]).newbyteorder("<"),
+        count=acc["count"] * n,
+        offset=start,
+    )
     if acc.get("normalized"):
         a = a / float(np.iinfo(a.dtype).max)
     if acc["type"] == "MAT4":

@@ -5,6 +5,7 @@ No glTF or USD convention for impostors exists, so the description says everythi
 shader needs: the layout and its formula, the sphere each view frames, the frame the directions
 and normals are expressed in, and what each image channel holds (see README, "Impostor").
 """
+
 from __future__ import annotations
 
 import json
@@ -14,14 +15,20 @@ import numpy as np
 
 from ..asset import Asset
 
-ENCODING = ("d: unit vector from centre towards the viewer; n = (d·a, d·b, d·up) with up >= 0; "
-            "s = |n.x| + |n.y| + n.z; p = (n.x / s, n.y / s); "
-            "u = (p.x + p.y) / 2 + 0.5; v = (p.y - p.x) / 2 + 0.5 (v from the image's top); "
-            "cell = (floor(u * grid), floor(v * grid)) as (column, row)")
-DECODING = ("cell centre (u, v) = ((column + 0.5) / grid, (row + 0.5) / grid); p = (u - v, u + v - 1); "
-            "d = normalize(p.x * a + p.y * b + (1 - |p.x| - |p.y|) * up)")
-VIEW = ("orthographic; right = normalize(cross(up, d)) (b if d = up), up' = cross(d, right); "
-        "cell pixel (x, y) in [-1, 1]^2, y towards the cell's top, shows centre + radius * (x * right + y * up')")
+ENCODING = (
+    "d: unit vector from centre towards the viewer; n = (d·a, d·b, d·up) with up >= 0; "
+    "s = |n.x| + |n.y| + n.z; p = (n.x / s, n.y / s); "
+    "u = (p.x + p.y) / 2 + 0.5; v = (p.y - p.x) / 2 + 0.5 (v from the image's top); "
+    "cell = (floor(u * grid), floor(v * grid)) as (column, row)"
+)
+DECODING = (
+    "cell centre (u, v) = ((column + 0.5) / grid, (row + 0.5) / grid); p = (u - v, u + v - 1); "
+    "d = normalize(p.x * a + p.y * b + (1 - |p.x| - |p.y|) * up)"
+)
+VIEW = (
+    "orthographic; right = normalize(cross(up, d)) (b if d = up), up' = cross(d, right); "
+    "cell pixel (x, y) in [-1, 1]^2, y towards the cell's top, shows centre + radius * (x * right + y * up')"
+)
 
 
 def impostor_lod(asset: Asset) -> int | None:
@@ -60,9 +67,9 @@ def describe(asset: Asset, k: int, to_file: np.ndarray, images: dict) -> dict:
         "view": VIEW,
         "images": images,
         "albedo": "sRGB colour with the crown's self-shading baked in (leaves x 0.4, inner "
-                  f"crown darker); alpha = coverage, cut out below {imp.alpha_cutoff:g}",
+        f"crown darker); alpha = coverage, cut out below {imp.alpha_cutoff:g}",
         "normal_depth": "rgb = unit normal in (a, b, up) * 0.5 + 0.5 (linear); "
-                        "alpha = 0.5 + 0.5 * dot(p - centre, d) / radius (1 towards the viewer)",
+        "alpha = 0.5 + 0.5 * dot(p - centre, d) / radius (1 towards the viewer)",
         "cards": [[int(c), int(r)] for c, r in imp.cards],
         "lod_index": int(asset.extras.get("lod_index", k)),
         "distance_m": float(lod.distance),

@@ -14,6 +14,7 @@ decoder (npm, through Node: compress.decode), the library that encoded them. Rea
 the base texture's UV set: KHR_texture_transform offset and scale. Not read:
 occlusion/emissive/metallic-roughness maps (the preview's lighting has no use for them).
 """
+
 from __future__ import annotations
 
 import base64
@@ -29,7 +30,7 @@ from ..skeleton import forward, trs
 from .compress import MESHOPT, decode
 from .gltf import read_accessor, read_gltf
 
-WRAP = {10497: "REPEAT", 33071: "CLAMP", 33648: "MIRROR"}      # sampler wrapS / wrapT
+WRAP = {10497: "REPEAT", 33071: "CLAMP", 33648: "MIRROR"}  # sampler wrapS / wrapT
 
 
 def _node_world(gltf: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -37,7 +38,7 @@ def _node_world(gltf: dict) -> tuple[np.ndarray, np.ndarray]:
     nodes = gltf.get("nodes", [])
     n = len(nodes)
     parent = np.full(n, -1, dtype=np.int64)
-    for i, node in enumerate(nodes):              # JSON nodes: one Python step each
+    for i, node in enumerate(nodes):  # JSON nodes: one Python step each
         for c in node.get("children", []):
             parent[c] = i
     local = np.empty((n, 4, 4))
@@ -45,9 +46,11 @@ def _node_world(gltf: dict) -> tuple[np.ndarray, np.ndarray]:
         if "matrix" in node:
             local[i] = np.asarray(node["matrix"], dtype=np.float64).reshape(4, 4).T
         else:
-            local[i] = trs(np.asarray(node.get("translation", [0, 0, 0]), float),
-                           np.asarray(node.get("rotation", [0, 0, 0, 1]), float),
-                           np.asarray(node.get("scale", [1, 1, 1]), float))
+            local[i] = trs(
+                np.asarray(node.get("translation", [0, 0, 0]), float),
+                np.asarray(node.get("rotation", [0, 0, 0, 1]), float),
+                np.asarray(node.get("scale", [1, 1, 1]), float),
+            )
     return parent, forward(parent, local)
 
 
@@ -72,18 +75,24 @@ def _unpack_meshopt(gltf: dict, blob: bytes, path: Path) -> tuple[dict, bytes]:
     views = gltf.get("bufferViews", [])
     packed = [i for i, v in enumerate(views) if MESHOPT in v.get("extensions", {})]
     exts = [views[i]["extensions"][MESHOPT] for i in packed]
-    if any(e.get("buffer", 0) != 0 for e in exts) or \
-            any(v.get("buffer", 0) != 0 for i, v in enumerate(views) if i not in set(packed)):
-        raise TreegenError(f"{path}: EXT_meshopt_compression data outside the GLB's own buffer "
-                           "is not read here")
-    encoded = [blob[e.get("byteOffset", 0):e.get("byteOffset", 0) + e["byteLength"]] for e in exts]
+    if any(e.get("buffer", 0) != 0 for e in exts) or any(
+        v.get("buffer", 0) != 0 for i, v in enumerate(views) if i not in set(packed)
+    ):
+        raise TreegenError(
+            f"{path}: EXT_meshopt_compression data outside the GLB's own buffer is not read here"
+        )
+    encoded = [blob[e.get("byteOffset", 0) : e.get("byteOffset", 0) + e["byteLength"]] for e in exts]
     parts, size = [blob], len(blob)
     views = [dict(v) for v in views]
     for i, data in zip(packed, decode(list(zip(exts, encoded)), str(path))):
         pad = -size % 4
         parts.append(b"\0" * pad)
-        views[i] = {"buffer": 0, "byteOffset": size + pad, "byteLength": len(data),
-                    **({"byteStride": views[i]["byteStride"]} if "byteStride" in views[i] else {})}
+        views[i] = {
+            "buffer": 0,
+            "byteOffset": size + pad,
+            "byteLength": len(data),
+            **({"byteStride": views[i]["byteStride"]} if "byteStride" in views[i] else {}),
+        }
         parts.append(data)
         size += pad + len(data)
     return {**gltf, "bufferViews": views}, b"".join(parts)
@@ -92,8 +101,9 @@ def _unpack_meshopt(gltf: dict, blob: bytes, path: Path) -> tuple[dict, bytes]:
 def _gltf_scene(gltf, blob, read_accessor, lod, path) -> Drawable:
     nodes = gltf.get("nodes", [])
     scene = gltf.get("scenes", [{}])[gltf.get("scene", 0)]
-    roots = [i for i in scene.get("nodes", []) if "mesh" in nodes[i]] or \
-            [i for i, nd in enumerate(nodes) if "mesh" in nd][:1]
+    roots = [i for i in scene.get("nodes", []) if "mesh" in nodes[i]] or [
+        i for i, nd in enumerate(nodes) if "mesh" in nd
+    ][:1]
     if not roots:
         raise TreegenError(f"{path}: no mesh in the glTF scene")
     lod_nodes = [roots[0]] + list(nodes[roots[0]].get("extensions", {}).get("MSFT_lod", {}).get("ids", []))
@@ -107,10 +117,13 @@ def _gltf_scene(gltf, blob, read_accessor, lod, path) -> Drawable:
     if skin is not None:
         joints = np.asarray(skin["joints"], dtype=np.int64)
         J = len(joints)
-        ibm = (read_accessor(gltf, blob, skin["inverseBindMatrices"]).astype(np.float64)
-               if "inverseBindMatrices" in skin else np.broadcast_to(np.eye(4), (J, 4, 4)))
+        ibm = (
+            read_accessor(gltf, blob, skin["inverseBindMatrices"]).astype(np.float64)
+            if "inverseBindMatrices" in skin
+            else np.broadcast_to(np.eye(4), (J, 4, 4))
+        )
     else:
-        joints, J = np.array([node_index]), 1      # static: S = world of the mesh node
+        joints, J = np.array([node_index]), 1  # static: S = world of the mesh node
         ibm = np.eye(4)[None]
 
     parts = []
@@ -120,10 +133,16 @@ def _gltf_scene(gltf, blob, read_accessor, lod, path) -> Drawable:
             continue
         a = prim["attributes"]
         pos = read_accessor(gltf, blob, a["POSITION"]).astype(np.float32)
-        idx = (read_accessor(gltf, blob, prim["indices"]).astype(np.uint32) if "indices" in prim
-               else np.arange(len(pos), dtype=np.uint32))
-        nrm = (read_accessor(gltf, blob, a["NORMAL"]).astype(np.float32) if "NORMAL" in a
-               else vertex_normals(pos, idx))
+        idx = (
+            read_accessor(gltf, blob, prim["indices"]).astype(np.uint32)
+            if "indices" in prim
+            else np.arange(len(pos), dtype=np.uint32)
+        )
+        nrm = (
+            read_accessor(gltf, blob, a["NORMAL"]).astype(np.float32)
+            if "NORMAL" in a
+            else vertex_normals(pos, idx)
+        )
         if skin is not None and "JOINTS_0" in a:
             jnt = read_accessor(gltf, blob, a["JOINTS_0"]).astype(np.int64)
             wgt = read_accessor(gltf, blob, a["WEIGHTS_0"]).astype(np.float32)
@@ -133,20 +152,29 @@ def _gltf_scene(gltf, blob, read_accessor, lod, path) -> Drawable:
         mat = materials[prim["material"]] if "material" in prim else {}
         pbr = mat.get("pbrMetallicRoughness", {})
         looks = _surface(gltf, blob, a, mat, images)
-        color = pbr.get("baseColorFactor",
-                        [1.0, 1.0, 1.0, 1.0] if "texture" in looks else [0.6, 0.6, 0.6, 1])
-        parts.append(Part(name=mat.get("name", f"primitive{k}"), positions=pos, normals=nrm,
-                          indices=idx, joints=jnt, weights=wgt, color=tuple(color[:3]),
-                          double_sided=bool(mat.get("doubleSided", False)),
-                          opacity=float(color[3]) if len(color) > 3 else 1.0, **looks))
+        color = pbr.get("baseColorFactor", [1.0, 1.0, 1.0, 1.0] if "texture" in looks else [0.6, 0.6, 0.6, 1])
+        parts.append(
+            Part(
+                name=mat.get("name", f"primitive{k}"),
+                positions=pos,
+                normals=nrm,
+                indices=idx,
+                joints=jnt,
+                weights=wgt,
+                color=tuple(color[:3]),
+                double_sided=bool(mat.get("doubleSided", False)),
+                opacity=float(color[3]) if len(color) > 3 else 1.0,
+                **looks,
+            )
+        )
 
     jparent = np.full(J, -1, dtype=np.int64)
     slot = {int(n): j for j, n in enumerate(joints)}
-    for j, n in enumerate(joints):                # joints: hundreds at most
+    for j, n in enumerate(joints):  # joints: hundreds at most
         jparent[j] = slot.get(int(parent[n]), -1)
     above = parent[joints]
     root_world = np.broadcast_to(np.eye(4), (J, 4, 4)).copy()
-    outside = (jparent < 0) & (above >= 0)           # a root joint under a non-joint node
+    outside = (jparent < 0) & (above >= 0)  # a root joint under a non-joint node
     root_world[outside] = world[above[outside]]
     rest = [nodes[n] for n in joints]
     rig = PoseRig(
@@ -154,12 +182,13 @@ def _gltf_scene(gltf, blob, read_accessor, lod, path) -> Drawable:
         translation=np.array([n.get("translation", [0, 0, 0]) for n in rest], float).reshape(J, 3),
         rotation=np.array([n.get("rotation", [0, 0, 0, 1]) for n in rest], float).reshape(J, 4),
         scale=np.array([n.get("scale", [1, 1, 1]) for n in rest], float).reshape(J, 3),
-        root_world=root_world, inverse_bind=ibm,
-        channels=_gltf_channels(gltf, blob, read_accessor, slot) if skin is not None else [])
+        root_world=root_world,
+        inverse_bind=ibm,
+        channels=_gltf_channels(gltf, blob, read_accessor, slot) if skin is not None else [],
+    )
     if any("matrix" in n for n in rest):
         raise TreegenError(f"{path}: joint nodes with 'matrix' transforms are not supported")
-    return Drawable(parts=parts, n_joints=J, duration=rig.duration,
-                 skinning=rig.skinning, label=str(path))
+    return Drawable(parts=parts, n_joints=J, duration=rig.duration, skinning=rig.skinning, label=str(path))
 
 
 class _Images:
@@ -179,10 +208,13 @@ class _Images:
     def _bytes(self, img: dict) -> bytes:
         if "bufferView" in img:
             view = self.gltf["bufferViews"][img["bufferView"]]
-            data = self.blob if view.get("buffer", 0) == 0 else \
-                self._uri(self.gltf["buffers"][view["buffer"]]["uri"])
+            data = (
+                self.blob
+                if view.get("buffer", 0) == 0
+                else self._uri(self.gltf["buffers"][view["buffer"]]["uri"])
+            )
             start = view.get("byteOffset", 0)
-            return bytes(data[start:start + view["byteLength"]])
+            return bytes(data[start : start + view["byteLength"]])
         return self._uri(img["uri"])
 
     def _uri(self, uri: str) -> bytes:
@@ -200,25 +232,31 @@ def _texture(gltf: dict, ref: dict, images: _Images, channels: int):
     """(image, (wrap u, wrap v)) of a textureInfo."""
     tex = gltf["textures"][ref["index"]]
     source = tex.get("source")
-    if source is None:                           # EXT_texture_webp and the like: own source
-        source = next((e["source"] for e in tex.get("extensions", {}).values()
-                       if isinstance(e, dict) and "source" in e), None)
+    if source is None:  # EXT_texture_webp and the like: own source
+        source = next(
+            (
+                e["source"]
+                for e in tex.get("extensions", {}).values()
+                if isinstance(e, dict) and "source" in e
+            ),
+            None,
+        )
     if source is None:
         return None, ("REPEAT", "REPEAT")
     sampler = gltf["samplers"][tex["sampler"]] if "sampler" in tex else {}
-    wrap = (WRAP.get(sampler.get("wrapS", 10497), "REPEAT"),
-            WRAP.get(sampler.get("wrapT", 10497), "REPEAT"))
+    wrap = (WRAP.get(sampler.get("wrapS", 10497), "REPEAT"), WRAP.get(sampler.get("wrapT", 10497), "REPEAT"))
     return images.get(source, channels), wrap
 
 
-def _texcoords(gltf: dict, blob: bytes, attributes: dict, n: int,
-               transform: dict | None = None) -> np.ndarray | None:
+def _texcoords(
+    gltf: dict, blob: bytes, attributes: dict, n: int, transform: dict | None = None
+) -> np.ndarray | None:
     """TEXCOORD_n as float32 with the bottom-left origin (glTF's v runs down: v → 1 − v)."""
     key = f"TEXCOORD_{n}"
     if key not in attributes:
         return None
     uv = _accessor(gltf, blob, attributes[key]).astype(np.float32)
-    if transform:           # KHR_texture_transform offset and scale (what --compress writes)
+    if transform:  # KHR_texture_transform offset and scale (what --compress writes)
         uv = uv * np.float32(transform.get("scale", [1, 1])) + np.float32(transform.get("offset", [0, 0]))
     uv[:, 1] = 1.0 - uv[:, 1]
     return uv
@@ -229,16 +267,18 @@ def _accessor(gltf: dict, blob: bytes, index: int) -> np.ndarray:
     acc = gltf["accessors"][index]
     view = gltf["bufferViews"][acc["bufferView"]]
     stride = view.get("byteStride")
-    dtype = np.dtype({5120: "i1", 5121: "u1", 5122: "<i2", 5123: "<u2", 5125: "<u4",
-                      5126: "<f4"}[acc["componentType"]])
+    dtype = np.dtype(
+        {5120: "i1", 5121: "u1", 5122: "<i2", 5123: "<u2", 5125: "<u4", 5126: "<f4"}[acc["componentType"]]
+    )
     ncomp = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}.get(acc["type"])
     if not stride or ncomp is None or stride == ncomp * dtype.itemsize:
         a = read_accessor(gltf, blob, index)
         return np.maximum(a, -1.0) if acc.get("normalized") and dtype.kind == "i" else a
     start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
-    a = np.ndarray((acc["count"], ncomp), dtype, buffer=blob, offset=start,
-                   strides=(stride, dtype.itemsize)).copy()
-    if acc.get("normalized"):     # signed: c / max, at least -1 (glTF's rule)
+    a = np.ndarray(
+        (acc["count"], ncomp), dtype, buffer=blob, offset=start, strides=(stride, dtype.itemsize)
+    ).copy()
+    if acc.get("normalized"):  # signed: c / max, at least -1 (glTF's rule)
         a = np.maximum(a / float(np.iinfo(dtype).max), -1.0)
     return a
 
@@ -267,15 +307,18 @@ def _gltf_channels(gltf, blob, read_accessor, slot: dict[int, int]) -> list[Chan
     """Channels of the first animation that moves any of this skin's joints."""
     for anim in gltf.get("animations", []):
         out = []
-        for ch in anim["channels"]:            # one per animated joint (hundreds)
+        for ch in anim["channels"]:  # one per animated joint (hundreds)
             node, path = ch["target"].get("node"), ch["target"]["path"]
             if node not in slot or path not in ("rotation", "translation", "scale"):
                 continue
             s = anim["samplers"][ch["sampler"]]
             times = read_accessor(gltf, blob, s["input"]).astype(np.float64)
             values = read_accessor(gltf, blob, s["output"]).astype(np.float64)
-            out.append(Channel(np.array([slot[node]]), path, times, values[:, None, :],
-                               s.get("interpolation", "LINEAR")))
+            out.append(
+                Channel(
+                    np.array([slot[node]]), path, times, values[:, None, :], s.get("interpolation", "LINEAR")
+                )
+            )
         if out:
             return out
     return []

@@ -10,6 +10,7 @@ Image files resolve through Ar relative to the layer that authored them, inside 
 (read out of the package with Sdf.ZipFile). wrapS/T: repeat, clamp, mirror; black previews
 as clamp, useMetadata as repeat. Not read: UsdTransform2d, sourceColorSpace "raw" on colour.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -63,13 +64,16 @@ def read_drawable(path: Path, lod: int = 0) -> Drawable:
         if mesh.GetOrientationAttr().Get() == UsdGeom.Tokens.leftHanded:
             idx = idx.reshape(-1, 3)[:, ::-1].reshape(-1)
         nrm = mesh.GetNormalsAttr().Get()
-        nrm = (np.asarray(nrm, np.float64) @ geom_bind[:3, :3].T if nrm is not None and len(nrm) == len(pos)
-               else vertex_normals(pos, idx))
+        nrm = (
+            np.asarray(nrm, np.float64) @ geom_bind[:3, :3].T
+            if nrm is not None and len(nrm) == len(pos)
+            else vertex_normals(pos, idx)
+        )
         ji, jw = sq.ComputeJointInfluences()
         n_inf = sq.GetNumInfluencesPerComponent()
         ji = np.asarray(ji, np.int64).reshape(-1, n_inf)
         jw = np.asarray(jw, np.float32).reshape(-1, n_inf)
-        if len(ji) == 1 and len(pos) > 1:                          # constant interpolation
+        if len(ji) == 1 and len(pos) > 1:  # constant interpolation
             ji, jw = np.repeat(ji, len(pos), 0), np.repeat(jw, len(pos), 0)
         ji, jw = _four_influences(ji, jw)
         color, double = (0.6, 0.6, 0.6), bool(mesh.GetDoubleSidedAttr().Get())
@@ -94,12 +98,23 @@ def read_drawable(path: Path, lod: int = 0) -> Drawable:
         elif uvs is not None and len(uvs) != len(pos):
             uvs = None
         if uvs is None:
-            looks = {k: v for k, v in looks.items()
-                     if k not in ("texture", "normal_map", "wrap", "normal_wrap")}
-        parts.append(Part(name=prim.GetName(), positions=_apply(to_world, pos).astype(np.float32),
-                          normals=_apply(to_world, nrm, vector=True).astype(np.float32),
-                          indices=idx.astype(np.uint32), joints=ji, weights=jw, color=color,
-                          double_sided=double, uvs=uvs, **looks))
+            looks = {
+                k: v for k, v in looks.items() if k not in ("texture", "normal_map", "wrap", "normal_wrap")
+            }
+        parts.append(
+            Part(
+                name=prim.GetName(),
+                positions=_apply(to_world, pos).astype(np.float32),
+                normals=_apply(to_world, nrm, vector=True).astype(np.float32),
+                indices=idx.astype(np.uint32),
+                joints=ji,
+                weights=jw,
+                color=color,
+                double_sided=double,
+                uvs=uvs,
+                **looks,
+            )
+        )
     anim = skel_query.GetAnimQuery()
     duration = 0.0
     if anim:
@@ -108,9 +123,9 @@ def read_drawable(path: Path, lod: int = 0) -> Drawable:
             duration = (max(codes) - min(codes)) / tcps
     start = stage.GetStartTimeCode() if stage.HasAuthoredTimeCodeRange() else 0.0
 
-    def skinning(t: np.ndarray, _keep=(stage, cache)) -> np.ndarray:   # the query needs both alive
+    def skinning(t: np.ndarray, _keep=(stage, cache)) -> np.ndarray:  # the query needs both alive
         out = np.empty((len(t), J, 4, 4))
-        for i, ti in enumerate(np.atleast_1d(t)):     # frames (tens), not vertices
+        for i, ti in enumerate(np.atleast_1d(t)):  # frames (tens), not vertices
             xf = skel_query.ComputeSkinningTransforms(Usd.TimeCode(start + float(ti) * tcps))
             out[i] = np.asarray(xf, dtype=np.float64).transpose(0, 2, 1)
         return to_world @ out @ to_world.T
@@ -118,8 +133,13 @@ def read_drawable(path: Path, lod: int = 0) -> Drawable:
     return Drawable(parts=parts, n_joints=J, duration=duration, skinning=skinning, label=str(path))
 
 
-USD_WRAP = {"repeat": "REPEAT", "clamp": "CLAMP", "mirror": "MIRROR", "black": "CLAMP",
-            "useMetadata": "REPEAT"}
+USD_WRAP = {
+    "repeat": "REPEAT",
+    "clamp": "CLAMP",
+    "mirror": "MIRROR",
+    "black": "CLAMP",
+    "useMetadata": "REPEAT",
+}
 
 
 def _source(inp):
@@ -150,8 +170,10 @@ def _asset_bytes(asset_path, shader, path) -> bytes:
 
     resolved = asset_path.resolvedPath if asset_path is not None else ""
     if not resolved:
-        raise TreegenError(f"{path}: texture {getattr(asset_path, 'path', '')!r} of "
-                           f"{shader.GetPath()} not found (resolved against its layer)")
+        raise TreegenError(
+            f"{path}: texture {getattr(asset_path, 'path', '')!r} of "
+            f"{shader.GetPath()} not found (resolved against its layer)"
+        )
     if Ar.IsPackageRelativePath(resolved):
         outer, inner = Ar.SplitPackageRelativePathOuter(resolved)
         if Ar.IsPackageRelativePath(inner):
@@ -166,10 +188,10 @@ def _asset_bytes(asset_path, shader, path) -> bytes:
 
 def _texture(shader, channels: int, path):
     """(image, (wrap s, wrap t), scale, st primvar name) of a UsdUVTexture shader."""
-    image = decode_image(_asset_bytes(_value(shader, "file"), shader, path), channels,
-                         f"{path}: {shader.GetPath()}")
-    wrap = tuple(USD_WRAP.get(str(_value(shader, k, "useMetadata")), "REPEAT")
-                 for k in ("wrapS", "wrapT"))
+    image = decode_image(
+        _asset_bytes(_value(shader, "file"), shader, path), channels, f"{path}: {shader.GetPath()}"
+    )
+    wrap = tuple(USD_WRAP.get(str(_value(shader, k, "useMetadata")), "REPEAT") for k in ("wrapS", "wrapT"))
     scale = tuple(float(c) for c in _value(shader, "scale", (1.0, 1.0, 1.0, 1.0)))
     reader, _ = _source(shader.GetInput("st"))
     varname = str(_value(reader, "varname", "st")) if reader else "st"
@@ -189,8 +211,8 @@ def _surface(surf, mesh, path) -> dict:
         names.append(name)
         op, channel = _source(surf.GetInput("opacity"))
         if op is None:
-            rgba[..., 3] = 255                                   # colour texture, opaque
-        elif op.GetPath() != tex.GetPath() or channel != "a":   # alpha from its own texture
+            rgba[..., 3] = 255  # colour texture, opaque
+        elif op.GetPath() != tex.GetPath() or channel != "a":  # alpha from its own texture
             other = _texture(op, 4, path)[0] if op.GetIdAttr().Get() == "UsdUVTexture" else None
             ch = {"r": 0, "g": 1, "b": 2}.get(channel, 3)
             if other is not None and other.shape[:2] == rgba.shape[:2]:
@@ -227,11 +249,15 @@ def _triangulate(counts: np.ndarray, fvi: np.ndarray) -> np.ndarray:
         return fvi
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
     tris = []
-    for n in np.unique(counts[counts >= 3]):          # one pass per polygon size
+    for n in np.unique(counts[counts >= 3]):  # one pass per polygon size
         s = starts[counts == n]
         k = np.arange(1, n - 1)
-        tris.append(np.stack([np.repeat(fvi[s], n - 2), fvi[(s[:, None] + k).ravel()],
-                              fvi[(s[:, None] + k + 1).ravel()]], axis=1).ravel())
+        tris.append(
+            np.stack(
+                [np.repeat(fvi[s], n - 2), fvi[(s[:, None] + k).ravel()], fvi[(s[:, None] + k + 1).ravel()]],
+                axis=1,
+            ).ravel()
+        )
     return np.concatenate(tris) if tris else np.zeros(0, np.int64)
 
 
@@ -245,5 +271,3 @@ def _four_influences(ji: np.ndarray, jw: np.ndarray) -> tuple[np.ndarray, np.nda
         ji, jw = np.take_along_axis(ji, top, 1), np.take_along_axis(jw, top, 1)
         jw = jw / np.maximum(jw.sum(1, keepdims=True), 1e-12)
     return ji, jw
-
-

@@ -4,6 +4,7 @@ interrupted run never leaves a half-written asset. The folder is named after the
 writing process and its host (`.NAME.PID@HOST.XXXX.tmp`); a run into the same folder sweeps away
 the staging folders of runs on this host that were killed (their process is gone).
 """
+
 from __future__ import annotations
 
 import os
@@ -29,7 +30,7 @@ def _alive(pid: int) -> bool:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
-    except PermissionError:        # someone else's live process
+    except PermissionError:  # someone else's live process
         return True
     # A killed process whose parent died too stays a zombie until init reaps it (late, or
     # never in some containers); os.kill succeeds on it, but it will never write again.
@@ -47,10 +48,14 @@ def sweep(folder: Path) -> list[Path]:
         entries = list(os.scandir(folder))
     except OSError:
         return removed
-    for e in entries:              # a folder's entries, not vertices
+    for e in entries:  # a folder's entries, not vertices
         m = _STAGING.match(e.name)
-        if m and m.group(2) in (None, _HOST) and e.is_dir(follow_symlinks=False) \
-                and not _alive(int(m.group(1))):
+        if (
+            m
+            and m.group(2) in (None, _HOST)
+            and e.is_dir(follow_symlinks=False)
+            and not _alive(int(m.group(1)))
+        ):
             shutil.rmtree(e.path, ignore_errors=True)
             removed.append(Path(e.path))
     return removed
@@ -66,8 +71,9 @@ def staged(path: str | os.PathLike) -> Iterator[Path]:
         raise TreegenError(f"{path}: is a folder; give an output file name such as tree.glb")
     try:
         sweep(folder)
-        tmpdir = Path(tempfile.mkdtemp(prefix=f".{path.name}.{os.getpid()}@{_HOST}.", suffix=".tmp",
-                                       dir=folder))
+        tmpdir = Path(
+            tempfile.mkdtemp(prefix=f".{path.name}.{os.getpid()}@{_HOST}.", suffix=".tmp", dir=folder)
+        )
     except FileNotFoundError:
         raise TreegenError(f"{path}: output folder '{folder}' does not exist") from None
     except OSError as e:

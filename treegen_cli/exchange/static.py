@@ -13,6 +13,7 @@ PLY goes through trimesh: positions and normals only.
 Up axis: Y by default (OBJ/PLY consumers mostly assume Y up), "z" keeps generator space;
 metres either way.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -37,14 +38,15 @@ def write_static(asset: Asset, path: Path, lod: int = 0) -> None:
     if path.suffix.lower() == ".obj":
         _write_obj(asset, prims, path, axes)
         return
-    import trimesh   # lazy: trimesh is slow to import and only PLY needs it
+    import trimesh  # lazy: trimesh is slow to import and only PLY needs it
 
     counts = np.array([len(p.positions) for p in prims])
     offsets = np.concatenate([[0], np.cumsum(counts)[:-1]])
     vertices = axes(np.concatenate([np.asarray(p.positions, np.float64) for p in prims]))
     normals = axes(np.concatenate([np.asarray(p.normals, np.float64) for p in prims]))
-    faces = np.concatenate([np.asarray(p.indices, np.int64).reshape(-1, 3) + o
-                            for p, o in zip(prims, offsets)])
+    faces = np.concatenate(
+        [np.asarray(p.indices, np.int64).reshape(-1, 3) + o for p, o in zip(prims, offsets)]
+    )
     mesh = trimesh.Trimesh(vertices=vertices, faces=faces, vertex_normals=normals, process=False)
     mesh.export(path)
 
@@ -62,8 +64,11 @@ def _write_obj(asset: Asset, prims, path: Path, axes) -> None:
     mtl_name = path.stem + ".mtl"
     used = [p.material for p in prims if len(p.indices)]
     materials = [m for m in asset.materials if m.name in used]
-    lines = [f"# treegen: {asset.name}, rest pose, metres\n", f"mtllib {mtl_name}\n",
-             f"o {_token(asset.name)}\n"]
+    lines = [
+        f"# treegen: {asset.name}, rest pose, metres\n",
+        f"mtllib {mtl_name}\n",
+        f"o {_token(asset.name)}\n",
+    ]
     pos = [axes(np.asarray(p.positions, np.float64)) for p in prims]
     nrm = [axes(np.asarray(p.normals, np.float64)) for p in prims]
     lines += [_rows("v %.6f %.6f %.6f\n", p) for p in pos]
@@ -86,9 +91,15 @@ def _write_obj(asset: Asset, prims, path: Path, axes) -> None:
 
 def _mtl(m: Material, textures: TextureFiles) -> str:
     r, g, b, a = (float(c) for c in m.base_color)
-    shininess = (1.0 - float(m.roughness)) ** 2 * 1000.0    # Blender's roughness ↔ Ns mapping
-    out = [f"\nnewmtl {_token(m.name)}\n", f"Kd {r:.6f} {g:.6f} {b:.6f}\n", "Ks 0.000000 0.000000 0.000000\n",
-           f"Ns {shininess:.6f}\n", f"d {a:.6f}\n", "illum 2\n"]
+    shininess = (1.0 - float(m.roughness)) ** 2 * 1000.0  # Blender's roughness ↔ Ns mapping
+    out = [
+        f"\nnewmtl {_token(m.name)}\n",
+        f"Kd {r:.6f} {g:.6f} {b:.6f}\n",
+        "Ks 0.000000 0.000000 0.000000\n",
+        f"Ns {shininess:.6f}\n",
+        f"d {a:.6f}\n",
+        "illum 2\n",
+    ]
     if m.base_texture is not None:
         name = textures.name(m.base_texture)
         out.append(f"map_Kd {name}\n")

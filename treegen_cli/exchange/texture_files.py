@@ -9,6 +9,7 @@ Names come from Texture.name (made file- and identifier-safe); a texture used tw
 once; two different textures with one name get `_1`, `_2`, ... in the order they are met, so
 names depend only on the asset and the output name.
 """
+
 from __future__ import annotations
 
 import re

@@ -21,6 +21,7 @@ axes.Z_UP_TO_Y_UP in every point, normal, matrix, quaternion and box, so the sta
 Y up with no hidden root transform. USD matrices are row-vector (p' = p·M): every matrix here
 is the transpose of the Asset's.
 """
+
 from __future__ import annotations
 
 import json
@@ -44,6 +45,7 @@ USDZ_MTIME = 946684800  # 2000-01-01: fixed zip entry time for reproducible .usd
 
 # --------------------------------------------------------------------------- public API
 
+
 def write_usd(asset: Asset, path) -> None:
     """Write `asset` to exactly `path` (plus its texture files); the suffix picks text, crate
     or a usdz package.
@@ -52,26 +54,31 @@ def write_usd(asset: Asset, path) -> None:
     three formats.
     """
     path = Path(path)
-    suffix = check_suffix(path)                   # before the stage is built
+    suffix = check_suffix(path)  # before the stage is built
     up = up_axis(asset.up_axis, suffix)
     textures = TextureFiles(path)
     stage = build_stage(asset, up, textures, lod_schemas=suffix != ".usdz")
     k = impostor_lod(asset)
     meta = None
-    if k is not None:               # the atlas beside (or in) the file, described in its axes
+    if k is not None:  # the atlas beside (or in) the file, described in its axes
         imp = asset.lods[k].impostor
-        meta = describe(asset, k, Axes(up).points(np.eye(3)).T, {
-            "albedo": textures.name(imp.albedo), "normal_depth": textures.name(imp.normal_depth)})
+        meta = describe(
+            asset,
+            k,
+            Axes(up).points(np.eye(3)).T,
+            {"albedo": textures.name(imp.albedo), "normal_depth": textures.name(imp.normal_depth)},
+        )
         layer = stage.GetRootLayer()
         layer.customLayerData = dict(layer.customLayerData) | {
-            "treegen_impostor": json.dumps(meta, sort_keys=True)}
+            "treegen_impostor": json.dumps(meta, sort_keys=True)
+        }
     write_stage(stage, path, _identifier(asset.name) + ".usdc", textures.files)
     if meta is not None:
         write_sidecar(meta | {"file": path.name}, path)
 
 
 def up_axis(requested: str | None, suffix: str) -> str:
-    """"Y" or "Z": the requested axis, else Y for a .usdz (AR Quick Look accepts only Y up)
+    """ "Y" or "Z": the requested axis, else Y for a .usdz (AR Quick Look accepts only Y up)
     and Z (generator space, no conversion) for .usda/.usdc."""
     if requested is None:
         return "Y" if suffix == ".usdz" else "Z"
@@ -155,8 +162,11 @@ def validate_usd(path, all_variants: bool = True) -> list[str]:
 
     run("")
     if all_variants:
-        sets = [(prim.GetPath(), name, prim.GetVariantSets().GetVariantSet(name).GetVariantNames())
-                for prim in stage.Traverse() for name in prim.GetVariantSets().GetNames()]
+        sets = [
+            (prim.GetPath(), name, prim.GetVariantSets().GetVariantSet(name).GetVariantNames())
+            for prim in stage.Traverse()
+            for name in prim.GetVariantSets().GetNames()
+        ]
         with Usd.EditContext(stage, stage.GetSessionLayer()):
             for prim_path, name, variants in sets:
                 vset = stage.GetPrimAtPath(prim_path).GetVariantSets().GetVariantSet(name)
@@ -168,6 +178,7 @@ def validate_usd(path, all_variants: bool = True) -> list[str]:
 
 
 # --------------------------------------------------------------------------- stage building
+
 
 def new_stage(name: str, documentation: str, kind, up: str = "Z"):
     """An in-memory stage (metres, up axis `up`) whose default prim is an Xform named after
@@ -210,8 +221,13 @@ class Axes:
         return np.minimum(a, b), np.maximum(a, b)
 
 
-def build_stage(asset: Asset, up: str = "Z", textures: TextureFiles | None = None,
-                lod_schemas: bool = True, texture_prefix: str = ""):
+def build_stage(
+    asset: Asset,
+    up: str = "Z",
+    textures: TextureFiles | None = None,
+    lod_schemas: bool = True,
+    texture_prefix: str = "",
+):
     """The whole asset as an in-memory stage (one anonymous layer).
 
     textures: names the material textures' files (None: the materials are written without
@@ -222,18 +238,22 @@ def build_stage(asset: Asset, up: str = "Z", textures: TextureFiles | None = Non
     if not asset.lods:
         raise TreegenError(f"asset {asset.name!r}: no LODs to write")
     axes = Axes(up)
-    stage, root_path = new_stage(asset.name, "treegen: skinned Weber-Penn tree (UsdSkel)",
-                                 Kind.Tokens.component, up)
+    stage, root_path = new_stage(
+        asset.name, "treegen: skinned Weber-Penn tree (UsdSkel)", Kind.Tokens.component, up
+    )
     if asset.extras:
         stage.GetRootLayer().customLayerData = {
-            "treegen": {str(k): str(v) for k, v in sorted(asset.extras.items())}}
+            "treegen": {str(k): str(v) for k, v in sorted(asset.extras.items())}
+        }
 
     def texture_path(tex: Texture | None) -> str | None:
         """Layer-relative ("./textures/leaf.png"), never a search path."""
         return None if tex is None or textures is None else "./" + textures.name(tex, texture_prefix)
 
-    materials = {m.name: _define_material(stage, root_path.AppendChild("Looks"), m, texture_path)
-                 for m in asset.materials}
+    materials = {
+        m.name: _define_material(stage, root_path.AppendChild("Looks"), m, texture_path)
+        for m in asset.materials
+    }
 
     tcps = _stage_timing(stage, asset)
 
@@ -258,8 +278,9 @@ def _stage_timing(stage, asset: Asset) -> float | None:
     return tcps
 
 
-def _define_lod_root(stage, root_path, asset: Asset, materials, tcps, axes: Axes,
-                     lod_schemas: bool = True) -> None:
+def _define_lod_root(
+    stage, root_path, asset: Asset, materials, tcps, axes: Axes, lod_schemas: bool = True
+) -> None:
     """LODs as children of an LODRootAPI prim, plus a "LOD" variant set on that same prim.
     Without `lod_schemas` (a .usdz) only the variant set: the portable switch.
 
@@ -289,7 +310,7 @@ def _define_lod_root(stage, root_path, asset: Asset, materials, tcps, axes: Axes
         heur = UsdLod.DistanceHeuristic.Define(stage, heur_path)
         heur.CreateLodDomainAttr(UsdLod.Tokens.imaging)
         lo, hi = axes.box(*bounds[0])
-        heur.CreateCenterAttr(_gf_vec3f(0.5 * (lo + hi)))   # LOD root space = tree space
+        heur.CreateCenterAttr(_gf_vec3f(0.5 * (lo + hi)))  # LOD root space = tree space
         # thresholds: LOD k (k ≥ 1) is used from Lod.distance on
         heur.CreateThresholdsAttr(Vt.FloatArray([float(lod.distance) for lod in asset.lods[1:]]))
 
@@ -333,8 +354,16 @@ def _define_lod(stage, path, lod: Lod, asset: Asset, materials, tcps, axes: Axes
     for prim in lod.primitives:
         name = _unique(_identifier(prim.name), used)
         mat = next((m for m in asset.materials if m.name == prim.material), None)
-        _define_mesh(stage, path.AppendChild(name), prim, skel_path,
-                     materials.get(prim.material), mat, len(lod.skeleton.names), axes)
+        _define_mesh(
+            stage,
+            path.AppendChild(name),
+            prim,
+            skel_path,
+            materials.get(prim.material),
+            mat,
+            len(lod.skeleton.names),
+            axes,
+        )
 
 
 def _define_skeleton(stage, path, skel: Skeleton, axes: Axes) -> list[str]:
@@ -349,12 +378,13 @@ def _define_skeleton(stage, path, skel: Skeleton, axes: Axes) -> list[str]:
     bind = np.ascontiguousarray(np.transpose(bind, (0, 2, 1)))
     s.CreateBindTransformsAttr(Vt.Matrix4dArray.FromNumpy(bind))
     rest = axes.matrices(_rest_matrices(skel))
-    s.CreateRestTransformsAttr(Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(np.transpose(rest, (0, 2, 1)))))
+    s.CreateRestTransformsAttr(
+        Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(np.transpose(rest, (0, 2, 1))))
+    )
     return joint_paths
 
 
-def _define_animation(stage, path, clip: Clip, skel: Skeleton, joint_paths, tcps,
-                      axes: Axes) -> None:
+def _define_animation(stage, path, clip: Clip, skel: Skeleton, joint_paths, tcps, axes: Axes) -> None:
     """SkelAnimation for the joints that move: rotations time-sampled, translations and scales
     at rest (default value only).
 
@@ -375,13 +405,14 @@ def _define_animation(stage, path, clip: Clip, skel: Skeleton, joint_paths, tcps
     if clip.timeline is None or clip.animated is None:
         raise ValueError(f"clip {clip.name!r} is not prepared (prepare.prepare before export)")
     moving = np.flatnonzero(clip.animated)
-    moving = moving if moving.size else np.zeros(1, np.int64)     # the timeline's tracks
+    moving = moving if moving.size else np.zeros(1, np.int64)  # the timeline's tracks
     frames, rot = clip.timeline
-    rot = continuous(axes.quats(rot))   # consecutive samples on one hemisphere: lerping importers are safe
+    rot = continuous(axes.quats(rot))  # consecutive samples on one hemisphere: lerping importers are safe
     anim = UsdSkel.Animation.Define(stage, path)
     anim.CreateJointsAttr(Vt.TokenArray([joint_paths[j] for j in moving]))
-    anim.CreateTranslationsAttr(Vt.Vec3fArray.FromNumpy(
-        np.ascontiguousarray(axes.points(skel.rest_translation[moving]), np.float32)))
+    anim.CreateTranslationsAttr(
+        Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(axes.points(skel.rest_translation[moving]), np.float32))
+    )
     anim.CreateScalesAttr(Vt.Vec3hArray.FromNumpy(np.ones((len(moving), 3), np.float16)))
     rot_attr = anim.CreateRotationsAttr()
     codes = _snap(np.asarray(clip.times, np.float64)[frames] * (tcps or 1.0))
@@ -391,8 +422,9 @@ def _define_animation(stage, path, clip: Clip, skel: Skeleton, joint_paths, tcps
     anim.GetPrim().SetCustomDataByKey("treegen:interpolation", clip.interpolation)
 
 
-def _define_mesh(stage, path, prim: Primitive, skel_path, material, mat: Material | None,
-                 n_joints: int, axes: Axes) -> None:
+def _define_mesh(
+    stage, path, prim: Primitive, skel_path, material, mat: Material | None, n_joints: int, axes: Axes
+) -> None:
     """Triangle mesh with vertex normals, st, skinning primvars and a material binding."""
     from pxr import Gf, Sdf, UsdGeom, UsdShade, UsdSkel, Vt
 
@@ -406,17 +438,19 @@ def _define_mesh(stage, path, prim: Primitive, skel_path, material, mat: Materia
 
     mesh = UsdGeom.Mesh.Define(stage, path)
     mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
-    mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)   # Asset winding: CCW = front
+    mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)  # Asset winding: CCW = front
     mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(pos))
     mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(idx.size // 3, 3, np.int32)))
     mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(idx.astype(np.int32)))
-    mesh.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(
-        np.ascontiguousarray(axes.points(prim.normals), np.float32)))
+    mesh.CreateNormalsAttr(
+        Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(axes.points(prim.normals), np.float32))
+    )
     mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
     if len(pos):
         mesh.CreateExtentAttr([Gf.Vec3f(*map(float, pos.min(0))), Gf.Vec3f(*map(float, pos.max(0)))])
-    st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray,
-                                                 UsdGeom.Tokens.vertex)
+    st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar(
+        "st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex
+    )
     st.Set(Vt.Vec2fArray.FromNumpy(np.ascontiguousarray(prim.uvs, np.float32)))
     mesh.CreateDoubleSidedAttr(bool(mat.double_sided) if mat else False)
 
@@ -469,17 +503,24 @@ def _define_material(stage, looks_path, m: Material, texture_path=lambda tex: No
 
     base = texture_path(m.base_texture)
     if base is not None:
-        tex = _define_texture(stage, mpath.AppendChild("baseTexture"), base, m.base_texture, st,
-                              scale=(r, g, b, a))
+        tex = _define_texture(
+            stage, mpath.AppendChild("baseTexture"), base, m.base_texture, st, scale=(r, g, b, a)
+        )
         surf.GetInput("diffuseColor").ConnectToSource(tex.ConnectableAPI(), "rgb")
         if m.alpha_cutoff is not None:
             surf.GetInput("opacity").ConnectToSource(tex.ConnectableAPI(), "a")
     normal = texture_path(m.normal_texture)
     if normal is not None:
-        tex = _define_texture(stage, mpath.AppendChild("normalTexture"), normal, m.normal_texture,
-                              st, scale=(2.0, 2.0, 2.0, 1.0), bias=(-1.0, -1.0, -1.0, 0.0))
-        surf.CreateInput("normal", Sdf.ValueTypeNames.Normal3f).ConnectToSource(
-            tex.ConnectableAPI(), "rgb")
+        tex = _define_texture(
+            stage,
+            mpath.AppendChild("normalTexture"),
+            normal,
+            m.normal_texture,
+            st,
+            scale=(2.0, 2.0, 2.0, 1.0),
+            bias=(-1.0, -1.0, -1.0, 0.0),
+        )
+        surf.CreateInput("normal", Sdf.ValueTypeNames.Normal3f).ConnectToSource(tex.ConnectableAPI(), "rgb")
     return material
 
 
@@ -494,8 +535,7 @@ def _define_texture(stage, path, file: str, texture: Texture, st, scale, bias=No
     tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(st)
     tex.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set(wrap)
     tex.CreateInput("wrapT", Sdf.ValueTypeNames.Token).Set(wrap)
-    tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set(
-        "sRGB" if texture.srgb else "raw")
+    tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("sRGB" if texture.srgb else "raw")
     tex.CreateInput("scale", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*map(float, scale)))
     if bias is not None:
         tex.CreateInput("bias", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*map(float, bias)))
@@ -505,6 +545,7 @@ def _define_texture(stage, path, file: str, texture: Texture, st, scale, bias=No
 
 
 # --------------------------------------------------------------------------- numeric helpers
+
 
 def _joint_paths(skel: Skeleton) -> list[str]:
     """Path tokens from Skeleton.parent (parents come before children)."""
@@ -548,11 +589,13 @@ def _snap(codes: np.ndarray) -> np.ndarray:
 
 def _gf_vec3f(v):
     from pxr import Gf
+
     return Gf.Vec3f(*(float(x) for x in v))
 
 
 def _identifier(name: str) -> str:
     from pxr import Tf
+
     return Tf.MakeValidIdentifier(name or "tree")
 
 

@@ -3,6 +3,7 @@
 The validator is JavaScript, so we shell out to `node tools/validate.mjs FILE`, which prints
 the validator's JSON report. `make install` runs `cd tools && npm ci` to install it.
 """
+
 from __future__ import annotations
 
 import json
@@ -27,7 +28,8 @@ def tools_dir() -> Path:
             return base / "tools"
     raise ValidatorUnavailable(
         "gltf-validator is not installed: run `make install` (npm ci in tools/) in a treegen "
-        "checkout, or set TREEGEN_TOOLS to a folder holding validate.mjs and node_modules/")
+        "checkout, or set TREEGEN_TOOLS to a folder holding validate.mjs and node_modules/"
+    )
 
 
 class ValidatorUnavailable(RuntimeError):
@@ -38,7 +40,8 @@ def _node() -> str:
     node = os.environ.get("TREEGEN_NODE") or shutil.which("node")
     if not node:
         raise ValidatorUnavailable(
-            "glTF validation needs Node.js: `node` is not on PATH (set TREEGEN_NODE to its path)")
+            "glTF validation needs Node.js: `node` is not on PATH (set TREEGEN_NODE to its path)"
+        )
     return node
 
 
@@ -47,11 +50,15 @@ def validate_gltf(path: str | os.PathLike, max_issues: int = 0) -> dict:
     numErrors, numWarnings, numInfos, numHints, messages). max_issues=0: unlimited."""
     tools = tools_dir()
     if not (tools / NEEDED).is_dir():
-        raise ValidatorUnavailable(f"gltf-validator is not installed in {tools}: run "
-                                   "`cd tools && npm ci` (or `make install`)")
-    proc = subprocess.run([_node(), str(tools / "validate.mjs"), os.path.abspath(path),
-                           "--max-issues", str(max_issues)],
-                          capture_output=True, text=True, cwd=tools)
+        raise ValidatorUnavailable(
+            f"gltf-validator is not installed in {tools}: run `cd tools && npm ci` (or `make install`)"
+        )
+    proc = subprocess.run(
+        [_node(), str(tools / "validate.mjs"), os.path.abspath(path), "--max-issues", str(max_issues)],
+        capture_output=True,
+        text=True,
+        cwd=tools,
+    )
     if proc.returncode != 0:
         raise RuntimeError(f"glTF validator failed on {path}: {proc.stderr.strip()}")
     return json.loads(proc.stdout)
@@ -60,6 +67,7 @@ def validate_gltf(path: str | os.PathLike, max_issues: int = 0) -> dict:
 def summary(report: dict) -> str:
     """One line per message: 'severity CODE pointer: text' (severity 0 error … 3 hint)."""
     names = {0: "error", 1: "warning", 2: "info", 3: "hint"}
-    return "\n".join(f"{names.get(m['severity'], m['severity'])} {m['code']} "
-                     f"{m.get('pointer', '')}: {m['message']}"
-                     for m in report["issues"]["messages"])
+    return "\n".join(
+        f"{names.get(m['severity'], m['severity'])} {m['code']} {m.get('pointer', '')}: {m['message']}"
+        for m in report["issues"]["messages"]
+    )

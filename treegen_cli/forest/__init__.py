@@ -13,6 +13,7 @@ One module per job: schema.py (the published JSON Schema and its checker), layou
 placements), scatter.py (placing trees in a region), build.py (prototypes on Dask, order or
 camera LOD and phase per instance, the summary, the whole command).
 """
+
 from __future__ import annotations
 
 from .build import build_prototypes, build_scene, gltf_options, run_forest, select_lod, summary, time_offsets
@@ -20,7 +21,25 @@ from .layout import Camera, Defaults, Layout, Placement, WindSpec, load_layout, 
 from .scatter import inside_polygon, polygon_area, scatter_points
 from .schema import check_schema, layout_schema, schema_text
 
-__all__ = ["Camera", "Defaults", "Layout", "Placement", "WindSpec", "build_prototypes",
-           "build_scene", "check_schema", "gltf_options", "inside_polygon", "layout_schema", "load_layout",
-           "parse_layout", "polygon_area", "run_forest", "scatter_points", "schema_text",
-           "select_lod", "summary", "time_offsets"]
+__all__ = [
+    "Camera",
+    "Defaults",
+    "Layout",
+    "Placement",
+    "WindSpec",
+    "build_prototypes",
+    "build_scene",
+    "check_schema",
+    "gltf_options",
+    "inside_polygon",
+    "layout_schema",
+    "load_layout",
+    "parse_layout",
+    "polygon_area",
+    "run_forest",
+    "scatter_points",
+    "schema_text",
+    "select_lod",
+    "summary",
+    "time_offsets",
+]

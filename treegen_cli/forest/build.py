@@ -7,6 +7,7 @@ Phase variety: an instance's time offset is the travel time of the shared wind f
 from the upwind edge (x·dir / speed: trees downwind sway later, as in a frozen, advected field)
 plus a seeded jitter of `phase_jitter` × the loop, wrapped to the loop.
 """
+
 from __future__ import annotations
 
 import math
@@ -49,8 +50,11 @@ def time_offsets(positions: np.ndarray, wind: WindSpec, seed: int = 0) -> np.nda
     along = positions[:, :2] @ np.array([math.cos(phi), math.sin(phi)])
     rng = np.random.default_rng([wind.seed, seed, 0x0FF5E7])
     jitter = rng.random(len(positions)) * wind.phase_jitter * wind.duration
-    travel = (along - along.min(initial=0.0)) / wind.speed if wind.speed > 0 else \
-        rng.random(len(positions)) * wind.duration
+    travel = (
+        (along - along.min(initial=0.0)) / wind.speed
+        if wind.speed > 0
+        else rng.random(len(positions)) * wind.duration
+    )
     return np.mod(travel + jitter, wind.duration)
 
 
@@ -60,25 +64,43 @@ def make_options(layout: Layout, error_px: float | None = None, impostor: bool =
     with `impostor`, each prototype's impostor as its last LOD, as `treegen make` builds it."""
 
     w = layout.wind
-    wind = WindOptions(speed=w.speed, direction_deg=w.direction_deg, gust=w.gust,
-                       turbulence=w.turbulence, duration=w.duration, fps=w.fps,
-                       field_seed=w.seed) if w.enabled else None
+    wind = (
+        WindOptions(
+            speed=w.speed,
+            direction_deg=w.direction_deg,
+            gust=w.gust,
+            turbulence=w.turbulence,
+            duration=w.duration,
+            fps=w.fps,
+            field_seed=w.seed,
+        )
+        if w.enabled
+        else None
+    )
     cam = layout.camera
-    lod = replace(LOD_DEFAULTS, fov_deg=cam.fov_deg if cam else LOD_DEFAULTS.fov_deg,
-                  width=cam.width_px if cam else LOD_DEFAULTS.width,
-                  error_px=layout.defaults.error_px if error_px is None else error_px,
-                  distances=layout.defaults.lod_distances or LOD_DEFAULTS.distances)
-    return MakeOptions(rig=RigOptions(max_joints=layout.defaults.max_joints), wind=wind, lod=lod,
-                       impostor=IMPOSTOR_DEFAULTS if impostor else None)
+    lod = replace(
+        LOD_DEFAULTS,
+        fov_deg=cam.fov_deg if cam else LOD_DEFAULTS.fov_deg,
+        width=cam.width_px if cam else LOD_DEFAULTS.width,
+        error_px=layout.defaults.error_px if error_px is None else error_px,
+        distances=layout.defaults.lod_distances or LOD_DEFAULTS.distances,
+    )
+    return MakeOptions(
+        rig=RigOptions(max_joints=layout.defaults.max_joints),
+        wind=wind,
+        lod=lod,
+        impostor=IMPOSTOR_DEFAULTS if impostor else None,
+    )
 
 
-def gltf_options(layout: Layout, compress: str = "none",
-                 error_px: float | None = None) -> GltfOptions:
+def gltf_options(layout: Layout, compress: str = "none", error_px: float | None = None) -> GltfOptions:
     """--compress for the forest's glTF: meshopt's position grids coarsen with each LOD's
     distance on the prototypes' screen (the layout's camera, else make's defaults)."""
     lod = make_options(layout, error_px).lod
-    return GltfOptions(compress=compress, pixel_size=pixel_size(1.0, lod)
-                       if compress == "meshopt" and lod is not None else 0.0)
+    return GltfOptions(
+        compress=compress,
+        pixel_size=pixel_size(1.0, lod) if compress == "meshopt" and lod is not None else 0.0,
+    )
 
 
 def build_prototype(params, seed: int, options) -> Asset:
@@ -91,9 +113,15 @@ def build_prototype(params, seed: int, options) -> Asset:
     return asset
 
 
-def build_prototypes(keys: list[tuple[Path, int]], options, workers: int | None = None,
-                     progress: bool | None = None, parsed: dict | None = None,
-                     scheduler: str | None = None, report: dict | None = None) -> list[Asset]:
+def build_prototypes(
+    keys: list[tuple[Path, int]],
+    options,
+    workers: int | None = None,
+    progress: bool | None = None,
+    parsed: dict | None = None,
+    scheduler: str | None = None,
+    report: dict | None = None,
+) -> list[Asset]:
     """Each (species file, seed) built once, on the Dask cluster `treegen batch` uses
     (executor.dask_client): an embedded one with `workers` processes (default one per core),
     or the one at `scheduler` / $DASK_SCHEDULER_ADDRESS. Without a scheduler, one worker or
@@ -148,9 +176,10 @@ def _on_dask(keys, params, options, workers: int, scheduler: str | None, report:
     with dask_client(scheduler, workers) as (client, where):
         if report is not None:
             report["cluster"] = where
-        futures = {client.submit(build_prototype, params[p], s, options,
-                                 key=f"treegen-forest-{p.stem}-{s}-{run}"): i
-                   for i, (p, s) in enumerate(keys)}
+        futures = {
+            client.submit(build_prototype, params[p], s, options, key=f"treegen-forest-{p.stem}-{s}-{run}"): i
+            for i, (p, s) in enumerate(keys)
+        }
         for fut in as_completed(list(futures), loop=client.loop):
             i = futures.pop(fut)
             yield i, _in_file(keys[i][0], fut.result)
@@ -170,9 +199,15 @@ def _rotz(deg: np.ndarray) -> np.ndarray:
     return m
 
 
-def build_scene(layout: Layout, all_lods: bool = True, error_px: float | None = None,
-                workers: int | None = None, progress: bool | None = None,
-                scheduler: str | None = None, impostor: bool = True) -> Forest:
+def build_scene(
+    layout: Layout,
+    all_lods: bool = True,
+    error_px: float | None = None,
+    workers: int | None = None,
+    progress: bool | None = None,
+    scheduler: str | None = None,
+    impostor: bool = True,
+) -> Forest:
     """Prototypes (built once each, each ending in its impostor unless `impostor` is False)
     and instances with their time offset.
 
@@ -181,15 +216,16 @@ def build_scene(layout: Layout, all_lods: bool = True, error_px: float | None = 
     nearest first (what a progressive loader fetches first) and records the LOD it would see.
     all_lods=False bakes the layout's camera: each instance gets only that LOD, in layout order."""
     if not all_lods and layout.camera is None:
-        raise TreegenError(f"--camera-lod: {layout.path} has no camera; add \"camera\": "
-                           "{\"position\": [x, y, z], \"target\": [x, y, z]} or drop --camera-lod")
+        raise TreegenError(
+            f'--camera-lod: {layout.path} has no camera; add "camera": '
+            '{"position": [x, y, z], "target": [x, y, z]} or drop --camera-lod'
+        )
     t0 = time.perf_counter()
     keys = sorted({(p.species, p.seed) for p in layout.placements}, key=lambda k: (str(k[0]), k[1]))
     index = {k: i for i, k in enumerate(keys)}
     options = make_options(layout, error_px, impostor)
     report: dict = {}
-    prototypes = build_prototypes(keys, options, workers, progress, layout.params, scheduler,
-                                  report)
+    prototypes = build_prototypes(keys, options, workers, progress, layout.params, scheduler, report)
     t1 = time.perf_counter()
     placements = layout.placements
     proto = np.array([index[(p.species, p.seed)] for p in placements], int)
@@ -203,22 +239,41 @@ def build_scene(layout: Layout, all_lods: bool = True, error_px: float | None = 
     order = np.arange(len(placements))
     if layout.camera is not None:
         dist = np.linalg.norm(world_center - np.asarray(layout.camera.position), axis=1)
-        for k, asset in enumerate(prototypes):     # per prototype (few), vectorised over instances
+        for k, asset in enumerate(prototypes):  # per prototype (few), vectorised over instances
             sel = proto == k
             lods[sel] = select_lod(dist[sel], [lod.distance for lod in asset.lods], scale[sel])
         if all_lods:
-            order = np.argsort(dist / scale, kind="stable")   # nearest (on screen) first
+            order = np.argsort(dist / scale, kind="stable")  # nearest (on screen) first
     animated = layout.wind.enabled
     offsets = time_offsets(pos, layout.wind) if animated else np.zeros(len(placements))
     loop = layout.wind.duration if animated else 0.0
     V = max(1, layout.defaults.phase_variants)
     variant = np.round(offsets / loop * V).astype(int) % V if loop > 0 else np.zeros(len(placements), int)
-    instances = [Instance(int(proto[i]), tuple(pos[i]), float(rot[i]), float(scale[i]), int(lods[i]),
-                          float(offsets[i]), float(dist[i]), placements[i].source, int(variant[i]))
-                 for i in order]
-    forest = prepare_forest(Forest(name=layout.name, prototypes=prototypes, instances=instances,
-                                   all_lods=all_lods, phase_variants=layout.defaults.phase_variants,
-                                   loop=loop, cluster=report.get("cluster", "")))
+    instances = [
+        Instance(
+            int(proto[i]),
+            tuple(pos[i]),
+            float(rot[i]),
+            float(scale[i]),
+            int(lods[i]),
+            float(offsets[i]),
+            float(dist[i]),
+            placements[i].source,
+            int(variant[i]),
+        )
+        for i in order
+    ]
+    forest = prepare_forest(
+        Forest(
+            name=layout.name,
+            prototypes=prototypes,
+            instances=instances,
+            all_lods=all_lods,
+            phase_variants=layout.defaults.phase_variants,
+            loop=loop,
+            cluster=report.get("cluster", ""),
+        )
+    )
     forest.timings.update(prototypes_s=t1 - t0, place_s=time.perf_counter() - t1)
     return forest
 
@@ -259,10 +314,18 @@ def summary(scene: Forest, written: list[Path], seconds: float, camera: bool = T
     }
 
 
-def run_forest(layout_path, output, all_lods: bool = True, error_px: float | None = None,
-               workers: int | None = None, progress: bool | None = None,
-               max_trees: int = MAX_TREES, scheduler: str | None = None,
-               compress: str = "none", impostor: bool = True) -> dict:
+def run_forest(
+    layout_path,
+    output,
+    all_lods: bool = True,
+    error_px: float | None = None,
+    workers: int | None = None,
+    progress: bool | None = None,
+    max_trees: int = MAX_TREES,
+    scheduler: str | None = None,
+    compress: str = "none",
+    impostor: bool = True,
+) -> dict:
     """The whole command: validate (nothing written on error), build, write, summarise.
     `compress`: glTF's --compress (quantize, meshopt; a USD output refuses it); `impostor`:
     end each prototype's LODs with its impostor."""

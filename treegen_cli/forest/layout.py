@@ -2,6 +2,7 @@
 every error names the JSON path, and species files are parsed once, here, so a bad one is
 reported at the path that names it before anything is grown or written.
 """
+
 from __future__ import annotations
 
 import os
@@ -15,15 +16,22 @@ from ..errors import TreegenError
 from ..limits import MAX_TREES
 from ..params import load_params
 from .scatter import polygon_area, scatter_points
-from .schema import (Camera, Defaults, WindSpec, check_schema, layout_schema,  # noqa: F401
-                     read_json_file, show_value)
+from .schema import (
+    Camera,
+    Defaults,
+    WindSpec,
+    check_schema,
+    layout_schema,  # noqa: F401
+    read_json_file,
+    show_value,
+)
 
 
 @dataclass(frozen=True)
 class Placement:
     """One tree of the layout, before prototypes exist. `source` is its JSON path."""
 
-    species: Path                 # resolved species file
+    species: Path  # resolved species file
     seed: int
     position: tuple[float, float, float]
     rotation_deg: float
@@ -35,11 +43,11 @@ class Placement:
 class Layout:
     name: str
     path: Path
-    camera: Camera | None         # optional: orders the trees; --camera-lod picks LODs by it
+    camera: Camera | None  # optional: orders the trees; --camera-lod picks LODs by it
     wind: WindSpec
     defaults: Defaults
     placements: list[Placement]
-    params: dict = field(default_factory=dict)   # species file → its Params, parsed once
+    params: dict = field(default_factory=dict)  # species file → its Params, parsed once
 
 
 def _xyz(v) -> tuple[float, float, float]:
@@ -77,9 +85,12 @@ def parse_layout(data, path: Path, max_trees: int = MAX_TREES) -> Layout:
     camera = None
     if "camera" in data:
         cam = data["camera"]
-        camera = Camera(_xyz(cam["position"]), _xyz(cam["target"]),
-                        float(cam.get("fov_deg", Camera.fov_deg)),
-                        int(cam.get("width_px", Camera.width_px)))
+        camera = Camera(
+            _xyz(cam["position"]),
+            _xyz(cam["target"]),
+            float(cam.get("fov_deg", Camera.fov_deg)),
+            int(cam.get("width_px", Camera.width_px)),
+        )
         if np.allclose(camera.position, camera.target):
             raise TreegenError("camera.target: must differ from camera.position")
     wind = WindSpec(**data.get("wind", {}))
@@ -98,26 +109,44 @@ def parse_layout(data, path: Path, max_trees: int = MAX_TREES) -> Layout:
     for i, inst in enumerate(data.get("instances", [])):
         where = f"instances[{i}]"
         pos = [float(x) for x in inst["position"]] + [0.0] * (3 - len(inst["position"]))
-        placements.append(Placement(
-            species=_species_file(base, inst["species"], f"{where}.species", checked),
-            seed=int(inst.get("seed", defaults.seed)), position=_xyz(pos),
-            rotation_deg=float(inst.get("rotation_deg", defaults.rotation_deg)),
-            scale=float(inst.get("scale", defaults.scale)), source=where))
+        placements.append(
+            Placement(
+                species=_species_file(base, inst["species"], f"{where}.species", checked),
+                seed=int(inst.get("seed", defaults.seed)),
+                position=_xyz(pos),
+                rotation_deg=float(inst.get("rotation_deg", defaults.rotation_deg)),
+                scale=float(inst.get("scale", defaults.scale)),
+                source=where,
+            )
+        )
     for s, sc in enumerate(data.get("scatter", [])):
-        placements.extend(_scatter_placements(sc, f"scatter[{s}]", base, defaults, checked,
-                                              max_trees - len(placements)))
+        placements.extend(
+            _scatter_placements(sc, f"scatter[{s}]", base, defaults, checked, max_trees - len(placements))
+        )
         if len(placements) > max_trees:
-            raise TreegenError(f"scatter[{s}]: the layout places {len(placements):,} trees, over "
-                               f"the limit of {max_trees:,}; raise it with --max-trees N")
+            raise TreegenError(
+                f"scatter[{s}]: the layout places {len(placements):,} trees, over "
+                f"the limit of {max_trees:,}; raise it with --max-trees N"
+            )
     if len(placements) > max_trees:
-        raise TreegenError(f"instances: the layout places {len(placements):,} trees, over the "
-                           f"limit of {max_trees:,}; raise it with --max-trees N")
-    return Layout(name=str(data.get("name") or path.stem), path=path, camera=camera, wind=wind,
-                  defaults=defaults, placements=placements, params=checked)
+        raise TreegenError(
+            f"instances: the layout places {len(placements):,} trees, over the "
+            f"limit of {max_trees:,}; raise it with --max-trees N"
+        )
+    return Layout(
+        name=str(data.get("name") or path.stem),
+        path=path,
+        camera=camera,
+        wind=wind,
+        defaults=defaults,
+        placements=placements,
+        params=checked,
+    )
 
 
-def _scatter_placements(sc: dict, where: str, base: Path, defaults: Defaults,
-                        checked: dict, max_trees: int = MAX_TREES) -> list[Placement]:
+def _scatter_placements(
+    sc: dict, where: str, base: Path, defaults: Defaults, checked: dict, max_trees: int = MAX_TREES
+) -> list[Placement]:
     if ("rectangle" in sc) == ("polygon" in sc):
         raise TreegenError(f"{where}: give exactly one of 'rectangle' or 'polygon'")
     if ("count" in sc) == ("density" in sc):
@@ -138,13 +167,17 @@ def _scatter_placements(sc: dict, where: str, base: Path, defaults: Defaults,
             raise TreegenError(f"{where}.{key}: [low, high] with low <= high, got {sc[key]}")
     if "scale" in sc and sc["scale"][0] <= 0:
         raise TreegenError(f"{where}.scale: scales must be > 0, got {sc['scale']}")
-    files = [_species_file(base, s["file"], f"{where}.species[{i}].file", checked)
-             for i, s in enumerate(sc["species"])]
+    files = [
+        _species_file(base, s["file"], f"{where}.species[{i}].file", checked)
+        for i, s in enumerate(sc["species"])
+    ]
     weights = np.array([float(s.get("weight", 1.0)) for s in sc["species"]])
     count = int(sc["count"]) if "count" in sc else sc["density"] * area
     if count > max_trees:
-        raise TreegenError(f"{where}: {count:,.0f} trees (density × area), over the limit of "
-                           f"{max(max_trees, 0):,}; raise it with --max-trees N")
+        raise TreegenError(
+            f"{where}: {count:,.0f} trees (density × area), over the limit of "
+            f"{max(max_trees, 0):,}; raise it with --max-trees N"
+        )
     count = int(round(count))
     seed = int(sc.get("seed", defaults.seed))
     rng = np.random.default_rng([seed, 0x5CA77E4])
@@ -152,11 +185,18 @@ def _scatter_placements(sc: dict, where: str, base: Path, defaults: Defaults,
     kind = rng.choice(len(files), size=count, p=weights / weights.sum())
     variant = rng.integers(0, int(sc.get("variants", 3)), size=count)
     s_lo, s_hi = (float(x) + 0.0 for x in sc.get("scale", [defaults.scale, defaults.scale]))
-    r_lo, r_hi = (float(x) + 0.0 for x in sc.get("rotation_deg", [0.0, 360.0]))   # -0.0 → 0.0
+    r_lo, r_hi = (float(x) + 0.0 for x in sc.get("rotation_deg", [0.0, 360.0]))  # -0.0 → 0.0
     scale = rng.uniform(s_lo, s_hi, size=count)
     rot = rng.uniform(r_lo, r_hi, size=count)
     z = float(sc.get("z", 0.0))
-    return [Placement(species=files[kind[i]], seed=seed + int(variant[i]),
-                      position=(float(pts[i, 0]), float(pts[i, 1]), z),
-                      rotation_deg=float(rot[i]), scale=float(scale[i]), source=f"{where}#{i}")
-            for i in range(count)]   # one small record per tree (not per leaf)
+    return [
+        Placement(
+            species=files[kind[i]],
+            seed=seed + int(variant[i]),
+            position=(float(pts[i, 0]), float(pts[i, 1]), z),
+            rotation_deg=float(rot[i]),
+            scale=float(scale[i]),
+            source=f"{where}#{i}",
+        )
+        for i in range(count)
+    ]  # one small record per tree (not per leaf)

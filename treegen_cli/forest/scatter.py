@@ -1,5 +1,6 @@
 """Scattering trees over a rectangle or polygon: uniform, with a minimum spacing (dart throwing
 against a k-d tree), seeded."""
+
 from __future__ import annotations
 
 import math
@@ -9,7 +10,7 @@ from scipy.spatial import cKDTree
 
 from ..errors import TreegenError
 
-HEX_PACKING = 2.0 / math.sqrt(3.0)    # most disks of diameter s per s² of area (hexagonal)
+HEX_PACKING = 2.0 / math.sqrt(3.0)  # most disks of diameter s per s² of area (hexagonal)
 
 
 def polygon_area(poly: np.ndarray) -> float:
@@ -28,8 +29,14 @@ def inside_polygon(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
     return (np.count_nonzero(crosses & (px < x_at), axis=1) % 2) == 1
 
 
-def scatter_points(region: np.ndarray, is_polygon: bool, count: int, min_spacing: float,
-                   rng: np.random.Generator, where: str = "scatter") -> np.ndarray:
+def scatter_points(
+    region: np.ndarray,
+    is_polygon: bool,
+    count: int,
+    min_spacing: float,
+    rng: np.random.Generator,
+    where: str = "scatter",
+) -> np.ndarray:
     """`count` points (count, 2) uniformly in the region, pairwise ≥ min_spacing apart.
 
     Dart throwing in vectorised batches: a candidate survives if it keeps the spacing to every
@@ -45,15 +52,19 @@ def scatter_points(region: np.ndarray, is_polygon: bool, count: int, min_spacing
         raise TreegenError(f"{where}: the region has zero area")
     if min_spacing > 0:
         # disks of radius s/2 around each point lie in the region grown by s/2
-        per = np.sum(np.linalg.norm(np.roll(region, -1, 0) - region, axis=1)) if is_polygon \
+        per = (
+            np.sum(np.linalg.norm(np.roll(region, -1, 0) - region, axis=1))
+            if is_polygon
             else 2 * float(np.sum(hi - lo))
-        grown = area + per * min_spacing / 2 + math.pi * min_spacing ** 2 / 4
-        most = int(HEX_PACKING * grown / min_spacing ** 2)
+        )
+        grown = area + per * min_spacing / 2 + math.pi * min_spacing**2 / 4
+        most = int(HEX_PACKING * grown / min_spacing**2)
         if count > most:
             raise TreegenError(
                 f"{where}: impossible scatter: {count} trees at min_spacing {min_spacing:g} m need "
-                f"about {count * min_spacing ** 2 / HEX_PACKING:.0f} m², the region has {area:.0f} m² "
-                f"(at most ~{most} fit); lower count/density or min_spacing")
+                f"about {count * min_spacing**2 / HEX_PACKING:.0f} m², the region has {area:.0f} m² "
+                f"(at most ~{most} fit); lower count/density or min_spacing"
+            )
     accepted = np.zeros((0, 2))
     stale = 0
     while len(accepted) < count and stale < 60:
@@ -73,6 +84,8 @@ def scatter_points(region: np.ndarray, is_polygon: bool, count: int, min_spacing
         stale = stale + 1 if len(cand) == 0 else 0
         accepted = np.concatenate([accepted, cand])
     if len(accepted) < count:
-        raise TreegenError(f"{where}: could not place {count} trees at min_spacing {min_spacing:g} m "
-                           f"(placed {len(accepted)}); lower count/density or min_spacing")
+        raise TreegenError(
+            f"{where}: could not place {count} trees at min_spacing {min_spacing:g} m "
+            f"(placed {len(accepted)}); lower count/density or min_spacing"
+        )
     return accepted

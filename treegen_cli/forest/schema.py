@@ -7,6 +7,7 @@ The camera, wind and defaults objects are dataclasses here; their defaults (the 
 screen's read from the stage DEFAULTS) are written into the schema as it is loaded, so the
 published "default"s are never typed twice.
 """
+
 from __future__ import annotations
 
 import json
@@ -20,7 +21,7 @@ from ..lod import LOD_DEFAULTS
 from ..wind import DEFAULTS as WIND_DEFAULTS
 
 SCHEMA_NAME = "layout.schema.json"
-FOREST_LOOP_S = 4.0     # a forest's wind loop: shorter than make's (many trees share one file)
+FOREST_LOOP_S = 4.0  # a forest's wind loop: shorter than make's (many trees share one file)
 FOREST_MAX_JOINTS = 48  # joints per prototype: a forest's trees are seen from afar
 
 
@@ -118,7 +119,7 @@ _TYPES = {
 def _finite(v) -> bool:
     try:
         return math.isfinite(float(v))
-    except OverflowError:          # an integer too large for a float
+    except OverflowError:  # an integer too large for a float
         return False
 
 
@@ -148,8 +149,12 @@ def check_schema(value, schema: dict, root: dict, path: str = "") -> None:
     if kind == "number" or kind == "integer":
         lo, hi = schema.get("minimum"), schema.get("maximum")
         xlo, xhi = schema.get("exclusiveMinimum"), schema.get("exclusiveMaximum")
-        if (lo is not None and value < lo) or (hi is not None and value > hi) \
-                or (xlo is not None and value <= xlo) or (xhi is not None and value >= xhi):
+        if (
+            (lo is not None and value < lo)
+            or (hi is not None and value > hi)
+            or (xlo is not None and value <= xlo)
+            or (xhi is not None and value >= xhi)
+        ):
             left = f"[{lo:g}" if lo is not None else (f"({xlo:g}" if xlo is not None else "(-inf")
             right = f"{hi:g}]" if hi is not None else (f"{xhi:g})" if xhi is not None else "inf)")
             raise TreegenError(f"{where}: {show_value(value)} is out of range; allowed {left}, {right}")
@@ -158,8 +163,7 @@ def check_schema(value, schema: dict, root: dict, path: str = "") -> None:
     if kind == "array":
         n_min, n_max = schema.get("minItems"), schema.get("maxItems")
         if (n_min is not None and len(value) < n_min) or (n_max is not None and len(value) > n_max):
-            want = (f"{n_min}" if n_min == n_max else
-                    f"{n_min or 0}..{n_max if n_max is not None else 'any'}")
+            want = f"{n_min}" if n_min == n_max else f"{n_min or 0}..{n_max if n_max is not None else 'any'}"
             raise TreegenError(f"{where}: expected {want} items, got {len(value)}")
         if "items" in schema:
             for i, item in enumerate(value):
