@@ -10,19 +10,15 @@ import json
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from conftest import DASK_ENV, dask_cluster
 
 ROOT = Path(__file__).resolve().parent.parent
-ENV = {
-    **os.environ,
-    "PYTHONPATH": os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]),
-}
-ENV.pop("DASK_SCHEDULER_ADDRESS", None)
+ENV = DASK_ENV  # this checkout importable, no inherited scheduler
 CLIP = {"duration": 1, "fps": 10, "lod_distances": [0, 30]}
 
 # 12 jobs, 10 trees: aspen 2 seeds × (glb, usdc); a small pair 2 seeds × a 2-value grid; rush 4 seeds
@@ -62,12 +58,6 @@ def treegen(*args, env=None, cwd=None):
 
 def events(stdout: str) -> list[dict]:
     return [json.loads(line) for line in stdout.splitlines() if line.startswith("{")]
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture(scope="module")
@@ -113,47 +103,9 @@ def serial(workspace) -> Path:
 
 @pytest.fixture(scope="module")
 def cluster():
-    """`dask scheduler` and two `dask worker`s, each its own process group (so a worker and
-    its nanny can be killed together), importing this checkout's treegen_cli."""
-    port = free_port()
-    address = f"tcp://127.0.0.1:{port}"
-    common = dict(env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-    procs = [
-        subprocess.Popen(
-            ["dask", "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"], **common
-        )
-    ]
-    for name in ("w1", "w2"):
-        procs.append(
-            subprocess.Popen(
-                [
-                    "dask",
-                    "worker",
-                    address,
-                    "--nthreads",
-                    "1",
-                    "--nworkers",
-                    "1",
-                    "--name",
-                    name,
-                    "--host",
-                    "127.0.0.1",
-                    "--no-dashboard",
-                ],
-                **common,
-            )
-        )
-    from distributed import Client
-
-    try:
-        with Client(address, timeout="30s") as client:
-            client.wait_for_workers(2, timeout=60)
-        yield {"address": address, "workers": {"w1": procs[1], "w2": procs[2]}}
-    finally:
-        for p in procs:
-            if p.poll() is None:
-                os.killpg(p.pid, signal.SIGKILL)
-            p.wait()
+    """`dask scheduler` and two `dask worker`s importing this checkout's treegen_cli."""
+    with dask_cluster(("w1", "w2")) as (address, workers):
+        yield {"address": address, "workers": workers}
 
 
 def assert_outputs(out: Path, serial: Path) -> None:

@@ -34,6 +34,7 @@ from treegen_cli.forest import (
     time_offsets,
 )
 
+from conftest import DASK_ENV, dask_cluster
 from synthetic import synthetic_asset
 
 SPECIES = Path(__file__).resolve().parents[1] / "species"
@@ -513,51 +514,9 @@ def test_dask_prototypes_equal_the_in_process_build_byte_for_byte(scene, tmp_pat
 
 @pytest.fixture(scope="module")
 def dask_scheduler():
-    """A real `dask scheduler` and one `dask worker` (separate processes, this checkout's
-    treegen_cli), as a studio starts them."""
-    import os
-    import signal
-    import socket
-    import subprocess
-
-    root = Path(__file__).resolve().parents[1]
-    env = {
-        **os.environ,
-        "PYTHONPATH": os.pathsep.join([str(root), *filter(None, [os.environ.get("PYTHONPATH")])]),
-    }
-    env.pop("DASK_SCHEDULER_ADDRESS", None)
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    address = f"tcp://127.0.0.1:{port}"
-    common = dict(env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-    procs = [
-        subprocess.Popen(
-            ["dask", "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"], **common
-        ),
-        subprocess.Popen(
-            [
-                "dask",
-                "worker",
-                address,
-                "--nthreads",
-                "1",
-                "--nworkers",
-                "1",
-                "--host",
-                "127.0.0.1",
-                "--no-dashboard",
-            ],
-            **common,
-        ),
-    ]
-    try:
-        yield address, env
-    finally:
-        for p in procs:
-            if p.poll() is None:
-                os.killpg(p.pid, signal.SIGKILL)
-            p.wait()
+    """A real `dask scheduler` and one `dask worker` (this checkout's treegen_cli)."""
+    with dask_cluster() as (address, _workers):
+        yield address, DASK_ENV
 
 
 def test_forest_on_a_dask_scheduler_writes_the_in_process_bytes(dask_scheduler, tmp_path):
