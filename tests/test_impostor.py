@@ -247,10 +247,12 @@ def test_impostor_is_the_last_lod_within_budget_and_shows_the_tree(species):
     )
     assert cover[-2] == pytest.approx(screen_coverage(height, imp.distance, LOD_OPTIONS), rel=0.25)
     # the cards show the tree: their cells are covered, but not solid squares (rush and
-    # shave grass: culms a tenth of an atlas pixel wide, a few pixels are hit)
+    # shave grass: culms a tenth of an atlas pixel wide, a few pixels are hit; the desert
+    # bush: bare twigs with 1 cm leaves, 2 % of a side view)
+    floor = {"rush": 0.003, "shave_grass": 0.003, "desert_bush": 0.01}.get(species, 0.02)
     for col, row in imp.impostor.cards:
         covered = (_alpha(asset, col, row) > 127).mean()
-        assert (0.003 if species in ("rush", "shave_grass") else 0.02) < covered < 0.8, (
+        assert floor < covered < 0.8, (
             species,
             col,
             row,
