@@ -148,7 +148,7 @@ def _generated_pngs(params: Params, size: int) -> tuple[bytes, bytes, bytes]:
 
 
 def has_leaves(params: Params) -> bool:
-    """Whether the generator can grow leaves for these params (its own rule in generate.py)."""
+    """Whether the generator can grow leaves for these params (its own rule in generate/grow.py)."""
     return params.levels >= 1 and params.leaves != 0
 
 
