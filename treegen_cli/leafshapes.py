@@ -2,7 +2,7 @@
 
 A blade lives in card space: x across the blade (−0.5..0.5 of the leaf width), y along it
 (0 = base at the petiole, 1 = tip, in units of the leaf length), z along the blade normal.
-Each outline is a tiny triangle list drawn once at import. By default mesh.py draws every leaf
+Each outline is a tiny triangle list drawn once at import. By default mesh/leaves.py draws every leaf
 as a plain length × width card (the "rectangle" below) and the outline belongs in the leaf
 texture's alpha, at the same UVs (u = x + 0.5, v = y); with `leaf_geometry="shape"` it stamps
 the outline itself with one broadcast. `fill_factor` is the exact area of the outline's
