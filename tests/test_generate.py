@@ -225,13 +225,13 @@ def test_attraction_up_lifts_and_negative_droops():
 
 
 def test_pruning_keeps_stems_inside_the_envelope():
-    from treegen_cli.generate import _inside_envelope
+    from treegen_cli.generate.prune import inside_envelope
 
     p = _params(levels=3, prune_ratio=1.0, prune_width=0.3, prune_width_peak=0.5)
     t = generate(p, seed=0)
     loose = generate(dataclasses.replace(p, prune_ratio=0.0), seed=0)
-    inside = _inside_envelope(p, t.scale, t.node_pos[t.stem_level[t.node_stem] >= 1])
-    inside_loose = _inside_envelope(p, loose.scale, loose.node_pos[loose.stem_level[loose.node_stem] >= 1])
+    inside = inside_envelope(p, t.scale, t.node_pos[t.stem_level[t.node_stem] >= 1])
+    inside_loose = inside_envelope(p, loose.scale, loose.node_pos[loose.stem_level[loose.node_stem] >= 1])
     assert inside.mean() > inside_loose.mean()
     assert inside.mean() > 0.97
 

@@ -109,7 +109,7 @@ def test_streamed_glb_equals_in_memory_bytes(tmp_path):
 
 @pytest.mark.parametrize("geometry", ["card", "shape"])
 def test_real_mesh_is_validator_clean(tmp_path, geometry):
-    """Bark and leaves from mesh.py (5 joints: blended bark, rigid leaves) pass the validator."""
+    """Bark and leaves from mesh/ (5 joints: blended bark, rigid leaves) pass the validator."""
     tree = synthetic_tree()
     rig = build_rig(tree, RigOptions(max_joints=5))
     prims = build_mesh(tree, rig, MeshOptions(leaf_geometry=geometry))

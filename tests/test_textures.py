@@ -146,7 +146,7 @@ def test_card_uvs_vectorised_over_mixed_variants(atlases):
 
 
 def test_card_uvs_on_the_mesh_card_uvs():
-    """mesh.py's cards carry the outline's uvs; mapped, every vertex stays in its cell."""
+    """mesh/leaves.py's cards carry the outline's uvs; mapped, every vertex stays in its cell."""
     from treegen_cli.mesh import CARD
 
     at = T.leaf_atlas(2, GREEN, size=128)

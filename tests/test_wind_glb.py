@@ -224,10 +224,11 @@ def test_jointless_stems_stay_on_their_parents_bark(gale):
     skinned by the file's weights and animation, keeps its centre within the parent's radius of
     the parent's axis point where it attaches (that point: the parent's two bark rings around
     it, skinned the same way, their centres blended). The rings are found from the generator's
-    mesh layout (mesh.py: rings stem by stem, `sides + 1` vertices each) and checked against
+    mesh layout (mesh/bark.py: rings stem by stem, `sides + 1` vertices each) and checked against
     the file's rest positions."""
     from treegen_cli.generate import generate
-    from treegen_cli.mesh import MESH_DEFAULTS, _ring_params, pointed_tips, stem_sides
+    from treegen_cli.mesh import MESH_DEFAULTS, pointed_tips, stem_sides
+    from treegen_cli.mesh.bark import ring_params
 
     tree = generate(load_params(ROOT / "species" / "quaking_aspen.txt"), 0)
     rig = build_rig(tree)
@@ -238,7 +239,7 @@ def test_jointless_stems_stay_on_their_parents_bark(gale):
     pos, joints, weights = get("POSITION").astype(float), get("JOINTS_0").astype(int), get("WEIGHTS_0")
 
     # ring layout: (stem, u) per ring; a pointed tip drops its last ring
-    rs, u = _ring_params(tree, MESH_DEFAULTS)
+    rs, u = ring_params(tree, MESH_DEFAULTS)
     last = np.r_[rs[1:] != rs[:-1], True]
     keep = ~(pointed_tips(tree, MESH_DEFAULTS)[rs] & last)
     rs, u = rs[keep], u[keep]

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from .errors import TreegenError
 
-SUFFIXES = (".txt", ".xml")  # species files: Weber–Penn text or Arbaro XML (params.py)
+SUFFIXES = (".txt", ".xml")  # species files: Weber–Penn text or Arbaro XML (params/)
 LIST_HINT = "`treegen species` lists the bundled ones"
 
 

@@ -1,15 +1,15 @@
-"""Leaf blade outlines, one per LeafShape code (the codes params.py's parser produces).
+"""Leaf blade outlines, one per LeafShape code (the codes params/keys.py's table names).
 
 A blade lives in card space: x across the blade (−0.5..0.5 of the leaf width), y along it
 (0 = base at the petiole, 1 = tip, in units of the leaf length), z along the blade normal.
-Each outline is a tiny triangle list drawn once at import. By default mesh.py draws every leaf
+Each outline is a tiny triangle list drawn once at import. By default mesh/leaves.py draws every leaf
 as a plain length × width card (the "rectangle" below) and the outline belongs in the leaf
 texture's alpha, at the same UVs (u = x + 0.5, v = y); with `leaf_geometry="shape"` it stamps
 the outline itself with one broadcast. `fill_factor` is the exact area of the outline's
 triangles, so `Tree.leaf_area` (what the wind model pushes on) is the physical blade area:
 equal to the drawn area for shape geometry, and card area × fill_factor for cards.
 
-| code | params.py names   | outline here                                        | verts | tris |
+| code | params/keys.py    | outline here                                        | verts | tris |
 |------|-------------------|-----------------------------------------------------|-------|------|
 | 0    | disc, oval, …     | elliptic 8-gon                                      | 8     | 6    |
 | 1    | disc1             | triangle inscribed in the ellipse                   | 3     | 1    |

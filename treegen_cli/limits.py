@@ -33,12 +33,12 @@ LIMITS_DEFAULTS = Limits()
 
 
 def _rings_sides(tree, options) -> tuple[np.ndarray, np.ndarray]:
-    """Rings each stem's bark tube emits and its sides (S,), as mesh._bark makes them."""
-    from .mesh import _per_level, pointed_tips, stem_sides
+    """Rings each stem's bark tube emits and its sides (S,), as mesh.bark makes them."""
+    from .mesh.options import per_level, pointed_tips, stem_sides
 
     level = tree.stem_level.astype(np.int64)
     segments = np.maximum(tree.stem_node_count.astype(np.int64) - 1, 0)
-    rings = segments * _per_level(options.rings_per_segment, level) + 1
+    rings = segments * per_level(options.rings_per_segment, level) + 1
     p = tree.params
     if p.flare > 0 and options.flare_rings > 0:
         rings = rings + np.where((level == 0) & ~tree.stem_clone.astype(bool), options.flare_rings, 0)

@@ -1,9 +1,9 @@
-"""Params → the tree's two materials, [bark, leaf], and the leaf atlas layout mesh.py maps to.
+"""Params → the tree's two materials, [bark, leaf], and the leaf atlas layout mesh/leaves.py maps to.
 
 Why a stage of its own: the leaf texture decides how leaf cards are UV-mapped. The generated
 atlas holds a few leaf variants side by side, an artist's image is one leaf filling the whole
 picture, so the stage returns the layout with the materials (`Materials.leaf_cells`) and
-pipeline.py hands it to mesh.py (`MeshOptions.leaf_cells`) before any leaf is stamped.
+pipeline.py hands it to mesh/ (`MeshOptions.leaf_cells`) before any leaf is stamped.
 
     mats = build_materials(params, MaterialOptions(texture_size=1024))
     mesh = replace(mesh, leaf_cells=mats.leaf_cells)      # Asset(materials=mats.materials, ...)
@@ -148,12 +148,12 @@ def _generated_pngs(params: Params, size: int) -> tuple[bytes, bytes, bytes]:
 
 
 def has_leaves(params: Params) -> bool:
-    """Whether the generator can grow leaves for these params (its own rule in generate.py)."""
+    """Whether the generator can grow leaves for these params (its own rule in generate/grow.py)."""
     return params.levels >= 1 and params.leaves != 0
 
 
 def build_materials(params: Params, options: MaterialOptions = MATERIAL_DEFAULTS) -> Materials:
-    """The [bark, leaf] materials of a species and the leaf cells mesh.py maps cards into.
+    """The [bark, leaf] materials of a species and the leaf cells mesh/leaves.py maps cards into.
     Options and an artist's files are checked here, before anything is grown; generated
     textures are made in the background (see Materials)."""
     check_options(options)

@@ -78,7 +78,7 @@ READERS: dict[str, Callable[[Path, int], object]] = {
     ".usdc": _read_usd,
     ".usdz": _read_usd,
 }
-SPECIES = (".txt", ".xml")  # species files: read by params.py (text or Arbaro XML)
+SPECIES = (".txt", ".xml")  # species files: read by params/ (text or Arbaro XML)
 STILLS = (".png", ".jpg", ".jpeg")
 LOOPS = (".gif",)
 STATIC = (".obj", ".ply")  # formats with no skin or animation

@@ -1,0 +1,79 @@
+"""MeshOptions, and the per-stem choices they make: sides and pointed tips.
+
+Kept apart from the builders because the size estimate (limits.py) must count exactly what
+bark.py will emit, from the same rules, before any vertex exists.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import TreegenError
+
+FULL_CARD_CELL = ((0.0, 0.0, 1.0, 1.0),)  # one cell, the whole image: the card fills it
+
+
+@dataclass(frozen=True)
+class MeshOptions:
+    """Per-level tuples index by stem level; their last entry repeats for deeper levels."""
+
+    sides: tuple[int, ...] = (16, 8, 6, 4, 3)  # cross-section sides per level (>= 3)
+    rings_per_segment: tuple[int, ...] = (2, 1)  # rings per segment per level (>= 1): more rings
+    # bend more smoothly under skinning
+    flare_rings: int = 4  # extra trunk rings in the flare zone (lowest 1/8 of the trunk)
+    thin_radius: float = 0.002  # metres: stems with a thinner base radius get thin_sides
+    thin_sides: int = 3
+    cap_height: float = 0.5  # tip cap cone height / tip radius
+    point_radius: float = 1e-4  # metres: tips thinner than this end in a point, not a cap,
+    point_ratio: float = 0.02  # ... and so do tips thinner than this × the stem's base radius
+    leaves: bool = True  # emit the "leaves" primitive
+    leaf_geometry: str = "card"  # "card": a textured quad per leaf; "shape": the LeafShape
+    # outline as geometry (see leafshapes.py)
+    leaf_cells: tuple[tuple[float, float, float, float], ...] = FULL_CARD_CELL
+    # leaf atlas layout: per variant its card rectangle
+    # (u0, v0, u1, v1) in glTF UVs (top-left origin), as
+    # textures.LeafAtlas.rects; materials.Materials gives it
+
+
+MESH_DEFAULTS = MeshOptions()
+LEAF_GEOMETRIES = ("card", "shape")
+
+
+def per_level(values: tuple, level: np.ndarray) -> np.ndarray:
+    """`values[level]` per stem, the last entry repeating for deeper levels."""
+    v = np.asarray(values)
+    return v[np.minimum(level, len(v) - 1)]
+
+
+def stem_sides(tree, options: MeshOptions) -> np.ndarray:
+    """Cross-section sides per stem (S,): per level, raised on a lobed trunk so the lobes show,
+    cut to thin_sides on stems thinner than thin_radius."""
+    level = tree.stem_level.astype(np.int64)
+    p = tree.params
+    sides = per_level(options.sides, level).astype(np.int64)
+    if p.lobes > 0 and p.lobe_depth != 0:
+        sides = np.where(level == 0, np.maximum(sides, 4 * p.lobes), sides)
+    return np.where(tree.stem_radius < options.thin_radius, np.minimum(sides, options.thin_sides), sides)
+
+
+def pointed_tips(tree, options: MeshOptions) -> np.ndarray:
+    """Bool (S,): stems whose tip is thin enough to close on an apex instead of a capped ring."""
+    tip = tree.stem_node_start.astype(np.int64) + tree.stem_node_count - 1
+    return tree.node_radius[tip] < np.maximum(options.point_radius, options.point_ratio * tree.stem_radius)
+
+
+def check_options(options: MeshOptions) -> None:
+    """Refuse options no mesh can be built from, naming the flag."""
+    if min(options.sides) < 3 or options.thin_sides < 3:
+        raise TreegenError(f"--sides {options.sides}: every level needs at least 3 sides")
+    if min(options.rings_per_segment) < 1:
+        raise TreegenError(f"rings per segment {options.rings_per_segment}: must be >= 1")
+    if options.leaf_geometry not in LEAF_GEOMETRIES:
+        raise TreegenError(
+            f"--leaf-geometry '{options.leaf_geometry}': expected one of {', '.join(LEAF_GEOMETRIES)}"
+        )
+    cells = np.asarray(options.leaf_cells, dtype=np.float64)
+    if cells.ndim != 2 or cells.shape[1] != 4 or not len(cells) or not np.all(np.isfinite(cells)):
+        raise ValueError(f"leaf_cells must be (u0, v0, u1, v1) rectangles, got {options.leaf_cells!r}")

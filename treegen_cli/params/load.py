@@ -1,0 +1,51 @@
+"""One species file → Params: bytes checked, then the text or the XML reader, by content."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..errors import TreegenError
+from .arbaro_xml import parse_params_xml
+from .record import Params
+from .text import parse_params_text
+
+
+def _looks_xml(text: str) -> bool:
+    return text.lstrip("\ufeff \t\r\n").startswith("<")
+
+
+def parse_params_bytes(data: bytes, source: str = "<string>") -> Params:
+    """Parse a species file's raw bytes: Arbaro XML if it starts with '<', else text."""
+    if b"\x00" in data:
+        line = data.count(b"\n", 0, data.index(b"\x00")) + 1
+        raise TreegenError(f"{source}:{line}: binary data (NUL byte): not a species file")
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        if data.lstrip().startswith(b"<?xml") and b"encoding" in data[:200]:
+            return parse_params_xml(data, source)  # declared non-UTF-8 encoding: expat decodes
+        line = data.count(b"\n", 0, exc.start) + 1
+        raise TreegenError(
+            f"{source}:{line}: not UTF-8 text (byte 0x{data[exc.start]:02x} "
+            f"at offset {exc.start}): binary file?"
+        ) from None
+    if not text.strip():
+        raise TreegenError(f"{source}:1: empty species file: no parameters found")
+    if _looks_xml(text):
+        return parse_params_xml(data, source)
+    return parse_params_text(text, source)
+
+
+def load_params(path: str | Path) -> Params:
+    """Read and validate one species file (text or Arbaro XML, decided by content)."""
+    p = Path(path)
+    source = str(path)
+    if p.is_dir():
+        raise TreegenError(f"{source}: is a directory, expected a species file")
+    try:
+        data = p.read_bytes()
+    except FileNotFoundError:
+        raise TreegenError(f"{source}: no such species file") from None
+    except OSError as exc:
+        raise TreegenError(f"{source}: cannot read species file: {exc.strerror or exc}") from None
+    return parse_params_bytes(data, source)
