@@ -24,12 +24,17 @@ Measured 2026-11-23 (2-core box shared with other jobs, load 16-22; 7 prototypes
     prototypes, 2 workers, median of 3: old pool 14.02 s, Dask 18.33 s (1.31×), one process
     11.40 s (0.81×: on a box this loaded two workers gain nothing); same bytes from every path.
     Before the quiet worker settings (executor.QUIET) Dask was 1.53× the old pool.
+Measured 2026-11-26, load 10-17, median of 3, old pool = 1.00: Dask with spawned workers 1.46×
+(16.4 / 24.0 s); with workers forked from a fork server that preloads treegen (executor.STARTUP,
+PRELOAD) 1.13× (25.5 / 28.9 s), one process 0.92×. What is left is the cluster's start-up
+(~1 s of Dask's own processes on a quiet box), which the forked pool never paid.
     Idle-box figures before issue 15: camera glb 2.8 s / 42 MB, all LODs 3.9 s / 106 MB.
 """
 
 from __future__ import annotations
 
 import argparse
+import multiprocessing
 import resource
 import statistics
 import tempfile
@@ -55,6 +60,20 @@ def old_pool(keys, params, options, workers: int) -> list:
     with ProcessPoolExecutor(max_workers=workers) as pool:
         futures = [pool.submit(build_prototype, params[p], s, options) for p, s in keys]
         return [f.result() for f in futures]
+
+
+def _timed_build(keys, options, params) -> tuple[float, list]:
+    t0 = time.perf_counter()
+    built = build_prototypes(keys, options, 1, False, params)
+    return time.perf_counter() - t0, built
+
+
+def in_fresh_process(keys, options, params) -> tuple[float, list]:
+    """One process's build, timed inside a spawned process: the impostor renders with OpenGL,
+    and a fork of a process holding a live llvmpipe context hangs in its first framebuffer
+    read, so this process must never render before the old pool forks it."""
+    with ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn")) as pool:
+        return pool.submit(_timed_build, keys, options, params).result()
 
 
 def sizes(layout_path: str, workers: int | None, tmp: Path) -> None:
@@ -94,11 +113,11 @@ def pools(layout_path: str, workers: int, reps: int, tmp: Path) -> None:
             t0 = time.perf_counter()
             if name == "old pool":
                 built[name] = old_pool(keys, layout.params, options, workers)
+            elif name == "dask":
+                built[name] = build_prototypes(keys, options, workers, False, layout.params)
             else:
-                built[name] = build_prototypes(
-                    keys, options, workers if name == "dask" else 1, False, layout.params
-                )
-            runs[name].append(time.perf_counter() - t0)
+                seconds, built[name] = in_fresh_process(keys, options, layout.params)
+            runs[name].append(seconds if name == "in process" else time.perf_counter() - t0)
     same = all(_bytes(built["dask"], tmp, "d") == _bytes(b, tmp, n[:3]) for n, b in built.items())
     base = statistics.median(runs["old pool"])
     print(f"\nprototypes ({len(keys)}), {workers} workers, median of {reps}:")

@@ -166,8 +166,9 @@ def build_prototypes(
 
 def _on_dask(keys, params, options, workers: int, scheduler: str | None, report: dict | None):
     """Yield (index, prototype) as the cluster finishes them; a worker's TreegenError comes
-    back naming its species file. The embedded cluster spawns its workers: forking a client
-    whose event-loop and texture threads may hold locks can leave a worker hung (seen once)."""
+    back naming its species file. The embedded cluster forks its workers from a fork server
+    (executor.STARTUP), never from this client, whose event-loop, texture and OpenGL threads
+    may hold locks (a fork of it can hang: seen in a worker, and in a GL framebuffer read)."""
     from distributed import as_completed
 
     from ..executor import dask_client
