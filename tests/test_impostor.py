@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from conftest import SPECIES, grown, species_path
+from treegen_cli.axes import to_y_up
 from treegen_cli.drawable import Part, decode_image
 from treegen_cli.impostor import IMPOSTOR_DEFAULTS, card_cells, cell_direction, cell_of, encode, view_basis
 from treegen_cli.lod import LodOptions, measure_error_px, screen_coverage
@@ -326,6 +327,34 @@ def test_cards_ride_one_joint_that_sways_with_the_crown():
         assert np.corrcoef(card_move[:, axis], crown_move[:, axis])[0, 1] > 0.8
 
 
+@needs_gl
+def test_crossed_cards_do_not_shade_each_other_in_a_wedge():
+    """The preview's sun from front-left (its default, 50° up): the card facing the camera is
+    crossed by the other card, edge-on here, which used to cast its solid crown on the far
+    half as a dark wedge (that half at 0.67× the near half's brightness). The cards cast
+    shadows but receive none, as engines set up billboard LODs: both halves within 20 %
+    (the bent normals' shading), on either side of the sun."""
+    from treegen_cli.drawable import from_asset
+    from treegen_cli.render import Renderer, frame_points, look_at
+
+    asset = _asset("quaking_aspen")
+    scene = from_asset(asset, lod=len(asset.lods) - 1)
+    assert [p.receives_shadows for p in scene.parts] == [False]
+    cam = frame_points(scene.parts[0].positions, -90.0, 8.0)
+    centre = to_y_up(asset.lods[-1].impostor.centre)
+    view = cam.view_proj(1.0) @ np.append(centre, 1.0)
+    mid = int(round((0.5 + 0.5 * view[0] / view[3]) * 128))  # the crossing line's column
+    assert look_at(cam.eye, cam.target)[0, 0] > 0.99  # the face-on card is the +b one
+    with Renderer(scene, 128, 128) as r:
+        for sun in (-140.0, -40.0):
+            img = r.render(cam, sun_azimuth_deg=sun).astype(float)
+            bg = r.render(cam, sun_azimuth_deg=sun, draw_tree=False).astype(float)
+            tree = np.abs(img - bg).sum(-1) > 30
+            lum = img.mean(-1)
+            left, right = lum[:, :mid][tree[:, :mid]].mean(), lum[:, mid:][tree[:, mid:]].mean()
+            assert min(left, right) > 0.8 * max(left, right), (sun, left, right)
+
+
 # ------------------------------------------------------------------------ the files
 
 
@@ -354,7 +383,7 @@ def test_written_glb_validator_clean_sidecar_and_preview_at_distance(tmp_path):
         assert decode_image(png, 4).shape == (1024, 1024, 4)
     # the far LOD as a client draws it: the cards, at the impostor's distance, fill pixels
     scene = exchange.read_drawable(out, lod=4)
-    assert [p.name for p in scene.parts] == ["impostor"]
+    assert [(p.name, p.receives_shadows) for p in scene.parts] == [("impostor", False)]
     pts = np.concatenate([p.positions for p in scene.parts])
     target = 0.5 * (pts.min(0) + pts.max(0))
     far = s["lods"][-1]["distance_m"]
@@ -382,6 +411,10 @@ def test_lod_files_and_usd_carry_the_impostor(tmp_path):
     s = api.make(species_path("rush"), tmp_path / "u.usda", duration=1.0, fps=10.0, impostor=True)
     meta = json.loads((tmp_path / "u.usda.impostor.json").read_text())
     assert meta["axes"]["up"] == [0.0, 0.0, 1.0]
+    from treegen_cli import exchange
+
+    scene = exchange.read_drawable(tmp_path / "u.usda", lod=4)
+    assert [p.receives_shadows for p in scene.parts] == [False]  # the cards: no self-shadow
     for f in meta["images"].values():
         assert (tmp_path / f).is_file()
     from pxr import Usd
