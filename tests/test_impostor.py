@@ -399,6 +399,53 @@ def test_written_glb_validator_clean_sidecar_and_preview_at_distance(tmp_path):
     assert abs(xs.mean() - 48) < 15 and abs(ys.mean() - 48) < 25  # the tree, in the middle
 
 
+def test_atlas_side_follows_texture_size_and_profile():
+    """--impostor-size (atlas side) defaults to 2 × --texture-size within [128, 2048]; the
+    profiles set it (mobile and web: 32 px views); the grid stays 16 × 16."""
+    from treegen_cli import api
+    from treegen_cli.errors import TreegenError
+
+    def imp(**options):
+        return api.resolve(options).options.impostor
+
+    assert (imp().grid, imp().cell) == (16, 64)  # 1024² at the default 512 px leaf atlas
+    assert [imp(texture_size=n).cell for n in (64, 128, 256, 1024, 2048)] == [8, 16, 32, 128, 128]
+    assert imp(profile="mobile").cell == imp(profile="web").cell == 32
+    assert imp(profile="desktop").cell == 64 and imp(profile="hero").cell == 128
+    assert imp(profile="web", impostor_size=256).cell == 16  # an option given wins
+    with pytest.raises(TreegenError, match=r"^--impostor-size 300: the atlas side must be a power"):
+        api.resolve({"impostor_size": 300})
+    with pytest.raises(TreegenError, match=r"^--impostor-size 4096: .* in \[128, 2048\] px$"):
+        api.resolve({"impostor_size": 4096})
+
+
+@needs_gl
+def test_a_smaller_atlas_is_written_smaller_and_says_so(tmp_path):
+    """At --impostor-size 512 the PNGs are 512² with 32 px views, the extras and the sidecar
+    say so, and the atlas takes at most a third of the default's bytes."""
+    from treegen_cli import api
+    from treegen_cli.exchange.gltf import read_gltf
+
+    sizes = {}
+    for side in (None, 512):
+        out = tmp_path / f"palm{side}.glb"
+        api.make(species_path("palm"), out, duration=1.0, fps=10.0, impostor_size=side)
+        gltf, blob = read_gltf(out)
+        meta = gltf["asset"]["extras"]["treegen_impostor"]
+        assert json.loads((tmp_path / f"palm{side}.glb.impostor.json").read_text()) == meta | {
+            "file": out.name
+        }
+        px = side or 1024
+        assert (meta["grid"], meta["cell_px"], meta["atlas_px"]) == (16, px // 16, [px, px])
+        sizes[side] = 0
+        for key in ("albedo", "normal_depth"):
+            view = gltf["bufferViews"][gltf["images"][meta["images"][key]]["bufferView"]]
+            png = blob[view.get("byteOffset", 0) : view.get("byteOffset", 0) + view["byteLength"]]
+            assert decode_image(png, 4).shape == (px, px, 4)
+            sizes[side] += len(png)
+    assert sizes[512] < sizes[None] / 3, sizes
+
+
 @needs_gl
 def test_lod_files_and_usd_carry_the_impostor(tmp_path):
     from treegen_cli import api

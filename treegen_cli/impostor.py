@@ -71,6 +71,21 @@ class ImpostorOptions:
 
 
 IMPOSTOR_DEFAULTS = ImpostorOptions()
+IMPOSTOR_SIZES = (128, 2048)  # --impostor-size range (atlas side, px): 8 to 128 px a view
+
+
+def atlas_side(texture_size: int) -> int:
+    """The atlas side `--impostor-size` defaults to: twice the leaf atlas's (1024 px, 64 px
+    views at the default 512), within IMPOSTOR_SIZES, so a smaller texture budget shrinks the
+    impostor with it."""
+    lo, hi = IMPOSTOR_SIZES
+    return min(max(2 * int(texture_size), lo), hi)
+
+
+def sized(side: int, options: ImpostorOptions = IMPOSTOR_DEFAULTS) -> ImpostorOptions:
+    """`options` with an atlas `side` px wide: the grid stays (engine plug-ins expect 16 × 16),
+    the views shrink or grow."""
+    return replace(options, cell=side // options.grid)
 
 
 # ------------------------------------------------------------------ hemi-octahedral mapping
