@@ -396,11 +396,22 @@ void main() {
 )
 
 
+# The GL and EGL libraries by their usual sonames (libglvnd, Mesa): left unnamed, glcontext
+# looks each up with ctypes.util.find_library, which forks `ldconfig -p`, twice per context
+# (13 ms of CPU in a process the size of `make`'s). If they do not load, the lookup runs.
+# GLCONTEXT_LINUX_LIBGL / GLCONTEXT_LINUX_LIBEGL still override either.
+GL_LIBRARIES = {"libgl": "libGL.so.1", "libegl": "libEGL.so.1"}
+
+
 def _context():
     try:
         import moderngl
     except ImportError as e:
         raise TreegenError(f"preview needs moderngl (pip install moderngl): {e}") from None
+    try:
+        return moderngl.create_standalone_context(backend="egl", require=330, **GL_LIBRARIES)
+    except Exception:
+        pass
     try:
         return moderngl.create_standalone_context(backend="egl", require=330)
     except Exception as e:  # no EGL / no GPU driver: say so in one line
