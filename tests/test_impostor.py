@@ -400,8 +400,9 @@ def test_written_glb_validator_clean_sidecar_and_preview_at_distance(tmp_path):
 
 
 def test_atlas_side_follows_texture_size_and_profile():
-    """--impostor-size (atlas side) defaults to 2 × --texture-size within [128, 2048]; the
-    profiles set it (mobile and web: 32 px views); the grid stays 16 × 16."""
+    """--impostor-size (atlas side) defaults to 2 × --texture-size within [128, 1024] (64 px
+    views suffice at the switch); the profiles set it (mobile and web: 32 px views); the grid
+    stays 16 × 16; 2048 only when asked for."""
     from treegen_cli import api
     from treegen_cli.errors import TreegenError
 
@@ -409,9 +410,10 @@ def test_atlas_side_follows_texture_size_and_profile():
         return api.resolve(options).options.impostor
 
     assert (imp().grid, imp().cell) == (16, 64)  # 1024² at the default 512 px leaf atlas
-    assert [imp(texture_size=n).cell for n in (64, 128, 256, 1024, 2048)] == [8, 16, 32, 128, 128]
+    assert [imp(texture_size=n).cell for n in (64, 128, 256, 1024, 2048)] == [8, 16, 32, 64, 64]
     assert imp(profile="mobile").cell == imp(profile="web").cell == 32
-    assert imp(profile="desktop").cell == 64 and imp(profile="hero").cell == 128
+    assert imp(profile="desktop").cell == imp(profile="hero").cell == 64
+    assert imp(impostor_size=2048).cell == 128
     assert imp(profile="web", impostor_size=256).cell == 16  # an option given wins
     with pytest.raises(TreegenError, match=r"^--impostor-size 300: the atlas side must be a power"):
         api.resolve({"impostor_size": 300})

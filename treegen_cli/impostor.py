@@ -74,12 +74,13 @@ IMPOSTOR_DEFAULTS = ImpostorOptions()
 IMPOSTOR_SIZES = (128, 2048)  # --impostor-size range (atlas side, px): 8 to 128 px a view
 
 
-def atlas_side(texture_size: int) -> int:
-    """The atlas side `--impostor-size` defaults to: twice the leaf atlas's (1024 px, 64 px
-    views at the default 512), within IMPOSTOR_SIZES, so a smaller texture budget shrinks the
-    impostor with it."""
-    lo, hi = IMPOSTOR_SIZES
-    return min(max(2 * int(texture_size), lo), hi)
+def atlas_side(texture_size: int, options: ImpostorOptions = IMPOSTOR_DEFAULTS) -> int:
+    """The atlas side `--impostor-size` defaults to: twice the leaf atlas's, so a smaller
+    texture budget shrinks the impostor with it (mobile: 512 px, 32 px views), and at most
+    the default's 64 px views (1024 px), which already give a texel per 1.5 screen pixels
+    where the impostor takes over (switch_px tall); larger views cost CPU and bytes that
+    show only nearer than that."""
+    return min(max(2 * int(texture_size), IMPOSTOR_SIZES[0]), options.grid * options.cell)
 
 
 def sized(side: int, options: ImpostorOptions = IMPOSTOR_DEFAULTS) -> ImpostorOptions:

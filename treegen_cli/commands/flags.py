@@ -93,7 +93,7 @@ HELP: dict[str, tuple[str | None, str, str | None]] = {
     "impostor_size": (
         None,
         "Impostor atlas side in pixels, a power of two in [128, 2048]: 16 × 16 "
-        "views of a sixteenth of it each [default: 2 × --texture-size, at most 2048].",
+        "views of a sixteenth of it each [default: 2 × --texture-size, at most 1024].",
         "PX",
     ),
     "leaf_texture": (
