@@ -249,8 +249,8 @@ def render_atlas(
     scene: Drawable, centre: np.ndarray, radius: float, grid: int, cell: int
 ) -> tuple[np.ndarray, np.ndarray]:
     """(albedo RGBA, normal + depth RGBA) uint8 atlases of `scene`'s rest pose (generator
-    space: pass a Drawable whose parts are Z up), top row first (read-only views). Double-sided parts are
-    leaves (the lean program), the others bark."""
+    space: pass a Drawable whose parts are Z up), top row first, as read-only views.
+    Double-sided parts are leaves (the lean program), the others bark."""
     try:
         ctx = _context()
     except TreegenError as e:  # the default make must say what to do without EGL

@@ -83,8 +83,8 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "wind": ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "stiffness"),
 }
 INTS = ("seed", "max_stems", "max_leaves", "max_joints", "width", "max_vertices", "max_keys", "texture_size")
-OPTIONAL_INTS = ("triangles", "joints", "impostor_size")  # None: no budget / --max-joints
-# decides / from --texture-size
+# None: no budget; --max-joints decides; 2 × --texture-size (impostor.atlas_side)
+OPTIONAL_INTS = ("triangles", "joints", "impostor_size")
 # Options added after assets were first keyed: left out of identity hashes while unset, so a
 # catalogue built before they existed keeps its keys (batch/catalogue.py).
 UNSET_FREE = ("triangles", "joints", "profile", "impostor_size")
