@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -20,6 +21,12 @@ ROOT = Path(__file__).resolve().parent.parent
 DIGESTS = ROOT / "tests" / "fixtures" / "golden.json"
 # short clips keep the suite quick; every stage (LODs, decimation, UsdSkel) still runs
 CLIP = ["--duration", "1", "--fps", "10"]
+# run from a temporary folder, `python -m treegen_cli` would import the installed package (an
+# editable install may point at another worktree): put this checkout first
+ENV = {
+    **os.environ,
+    "PYTHONPATH": os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]),
+}
 
 
 def cases() -> dict[str, list[str]]:
@@ -58,8 +65,12 @@ def digest(name: str, args: list[str]) -> str:
     with tempfile.TemporaryDirectory() as tmp:
         target = Path(tmp) / name
         argv = [a.replace("{out}", str(target)) for a in args]
-        proc = subprocess.run(
-            [sys.executable, "-m", "treegen_cli", *argv, "-q"], capture_output=True, text=True, cwd=tmp
+        proc = subprocess.run(  # this checkout's treegen_cli, not whatever is installed
+            [sys.executable, "-m", "treegen_cli", *argv, "-q"],
+            capture_output=True,
+            text=True,
+            cwd=tmp,
+            env=ENV,
         )
         if proc.returncode != 0:
             raise RuntimeError(f"treegen {' '.join(argv)} failed: {proc.stderr}")

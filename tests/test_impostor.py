@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from conftest import SPECIES, grown, species_path
+from treegen_cli.axes import to_y_up
 from treegen_cli.drawable import Part, decode_image
 from treegen_cli.impostor import IMPOSTOR_DEFAULTS, card_cells, cell_direction, cell_of, encode, view_basis
 from treegen_cli.lod import LodOptions, measure_error_px, screen_coverage
@@ -326,6 +327,34 @@ def test_cards_ride_one_joint_that_sways_with_the_crown():
         assert np.corrcoef(card_move[:, axis], crown_move[:, axis])[0, 1] > 0.8
 
 
+@needs_gl
+def test_crossed_cards_do_not_shade_each_other_in_a_wedge():
+    """The preview's sun from front-left (its default, 50° up): the card facing the camera is
+    crossed by the other card, edge-on here, which used to cast its solid crown on the far
+    half as a dark wedge (that half at 0.67× the near half's brightness). The cards cast
+    shadows but receive none, as engines set up billboard LODs: both halves within 20 %
+    (the bent normals' shading), on either side of the sun."""
+    from treegen_cli.drawable import from_asset
+    from treegen_cli.render import Renderer, frame_points, look_at
+
+    asset = _asset("quaking_aspen")
+    scene = from_asset(asset, lod=len(asset.lods) - 1)
+    assert [p.receives_shadows for p in scene.parts] == [False]
+    cam = frame_points(scene.parts[0].positions, -90.0, 8.0)
+    centre = to_y_up(asset.lods[-1].impostor.centre)
+    view = cam.view_proj(1.0) @ np.append(centre, 1.0)
+    mid = int(round((0.5 + 0.5 * view[0] / view[3]) * 128))  # the crossing line's column
+    assert look_at(cam.eye, cam.target)[0, 0] > 0.99  # the face-on card is the +b one
+    with Renderer(scene, 128, 128) as r:
+        for sun in (-140.0, -40.0):
+            img = r.render(cam, sun_azimuth_deg=sun).astype(float)
+            bg = r.render(cam, sun_azimuth_deg=sun, draw_tree=False).astype(float)
+            tree = np.abs(img - bg).sum(-1) > 30
+            lum = img.mean(-1)
+            left, right = lum[:, :mid][tree[:, :mid]].mean(), lum[:, mid:][tree[:, mid:]].mean()
+            assert min(left, right) > 0.8 * max(left, right), (sun, left, right)
+
+
 # ------------------------------------------------------------------------ the files
 
 
@@ -354,7 +383,7 @@ def test_written_glb_validator_clean_sidecar_and_preview_at_distance(tmp_path):
         assert decode_image(png, 4).shape == (1024, 1024, 4)
     # the far LOD as a client draws it: the cards, at the impostor's distance, fill pixels
     scene = exchange.read_drawable(out, lod=4)
-    assert [p.name for p in scene.parts] == ["impostor"]
+    assert [(p.name, p.receives_shadows) for p in scene.parts] == [("impostor", False)]
     pts = np.concatenate([p.positions for p in scene.parts])
     target = 0.5 * (pts.min(0) + pts.max(0))
     far = s["lods"][-1]["distance_m"]
@@ -370,6 +399,55 @@ def test_written_glb_validator_clean_sidecar_and_preview_at_distance(tmp_path):
     assert abs(xs.mean() - 48) < 15 and abs(ys.mean() - 48) < 25  # the tree, in the middle
 
 
+def test_atlas_side_follows_texture_size_and_profile():
+    """--impostor-size (atlas side) defaults to 2 × --texture-size within [128, 1024] (64 px
+    views suffice at the switch); the profiles set it (mobile and web: 32 px views); the grid
+    stays 16 × 16; 2048 only when asked for."""
+    from treegen_cli import api
+    from treegen_cli.errors import TreegenError
+
+    def imp(**options):
+        return api.resolve(options).options.impostor
+
+    assert (imp().grid, imp().cell) == (16, 64)  # 1024² at the default 512 px leaf atlas
+    assert [imp(texture_size=n).cell for n in (64, 128, 256, 1024, 2048)] == [8, 16, 32, 64, 64]
+    assert imp(profile="mobile").cell == imp(profile="web").cell == 32
+    assert imp(profile="desktop").cell == imp(profile="hero").cell == 64
+    assert imp(impostor_size=2048).cell == 128
+    assert imp(profile="web", impostor_size=256).cell == 16  # an option given wins
+    with pytest.raises(TreegenError, match=r"^--impostor-size 300: the atlas side must be a power"):
+        api.resolve({"impostor_size": 300})
+    with pytest.raises(TreegenError, match=r"^--impostor-size 4096: .* in \[128, 2048\] px$"):
+        api.resolve({"impostor_size": 4096})
+
+
+@needs_gl
+def test_a_smaller_atlas_is_written_smaller_and_says_so(tmp_path):
+    """At --impostor-size 512 the PNGs are 512² with 32 px views, the extras and the sidecar
+    say so, and the atlas takes at most a third of the default's bytes."""
+    from treegen_cli import api
+    from treegen_cli.exchange.gltf import read_gltf
+
+    sizes = {}
+    for side in (None, 512):
+        out = tmp_path / f"palm{side}.glb"
+        api.make(species_path("palm"), out, duration=1.0, fps=10.0, impostor_size=side)
+        gltf, blob = read_gltf(out)
+        meta = gltf["asset"]["extras"]["treegen_impostor"]
+        assert json.loads((tmp_path / f"palm{side}.glb.impostor.json").read_text()) == meta | {
+            "file": out.name
+        }
+        px = side or 1024
+        assert (meta["grid"], meta["cell_px"], meta["atlas_px"]) == (16, px // 16, [px, px])
+        sizes[side] = 0
+        for key in ("albedo", "normal_depth"):
+            view = gltf["bufferViews"][gltf["images"][meta["images"][key]]["bufferView"]]
+            png = blob[view.get("byteOffset", 0) : view.get("byteOffset", 0) + view["byteLength"]]
+            assert decode_image(png, 4).shape == (px, px, 4)
+            sizes[side] += len(png)
+    assert sizes[512] < sizes[None] / 3, sizes
+
+
 @needs_gl
 def test_lod_files_and_usd_carry_the_impostor(tmp_path):
     from treegen_cli import api
@@ -382,6 +460,10 @@ def test_lod_files_and_usd_carry_the_impostor(tmp_path):
     s = api.make(species_path("rush"), tmp_path / "u.usda", duration=1.0, fps=10.0, impostor=True)
     meta = json.loads((tmp_path / "u.usda.impostor.json").read_text())
     assert meta["axes"]["up"] == [0.0, 0.0, 1.0]
+    from treegen_cli import exchange
+
+    scene = exchange.read_drawable(tmp_path / "u.usda", lod=4)
+    assert [p.receives_shadows for p in scene.parts] == [False]  # the cards: no self-shadow
     for f in meta["images"].values():
         assert (tmp_path / f).is_file()
     from pxr import Usd

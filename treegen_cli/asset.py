@@ -101,6 +101,12 @@ class Clip:
     # track (formats with one time list per animation)
 
 
+# The impostor cards' material. Its crown shading is baked into the atlas, so the cards cast
+# shadows but receive none (drawable.Part.receives_shadows): crossed cards in a shadow map
+# would darken each other in a sharp wedge, as the preview showed before.
+IMPOSTOR_MATERIAL = "impostor"
+
+
 @dataclass(frozen=True, eq=False)
 class Impostor:
     """The view atlas behind an impostor LOD (impostor.py): grid × grid orthographic views of

@@ -12,6 +12,7 @@ from typing import Callable
 
 import numpy as np
 
+from .asset import IMPOSTOR_MATERIAL
 from .axes import Z_UP_TO_Y_UP, to_y_up
 from .clip import sample_track
 from .errors import TreegenError
@@ -38,6 +39,7 @@ class Part:
     opacity: float = 1.0  # base colour alpha factor (multiplies texture alpha)
     wrap: tuple[str, str] = ("REPEAT", "REPEAT")  # texture's (u, v): REPEAT CLAMP MIRROR
     normal_wrap: tuple[str, str] = ("REPEAT", "REPEAT")  # normal map's (u, v)
+    receives_shadows: bool = True  # False: impostor cards (cast shadows, receive none)
 
     @property
     def one_sided(self) -> bool:
@@ -87,6 +89,14 @@ class Drawable:
         if self.skinning is None:
             return np.broadcast_to(np.eye(4), (len(t), self.n_joints, 4, 4)).copy()
         return self.skinning(t)
+
+
+def takes_shadows(material: str | None) -> bool:
+    """Whether a part with this material takes the sun's shadow map: not the impostor's
+    cards, as engines set up billboard/impostor LODs (Unity's receiveShadows off, Godot's
+    shadows-not-received flag, three.js's default). Their shading is in the atlas; two
+    crossed cards would otherwise shade each other's far half as a solid wedge."""
+    return material != IMPOSTOR_MATERIAL
 
 
 def z_up_to_y_up() -> np.ndarray:
@@ -183,6 +193,7 @@ def from_asset(asset, lod: int = 0, label: str = "") -> Drawable:
                 opacity=float(m.base_color[3]) if m and len(m.base_color) > 3 else 1.0,
                 wrap=_wrap(base),
                 normal_wrap=_wrap(normal),
+                receives_shadows=takes_shadows(p.material),
             )
         )
     sk = L.skeleton

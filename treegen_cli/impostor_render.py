@@ -249,8 +249,8 @@ def render_atlas(
     scene: Drawable, centre: np.ndarray, radius: float, grid: int, cell: int
 ) -> tuple[np.ndarray, np.ndarray]:
     """(albedo RGBA, normal + depth RGBA) uint8 atlases of `scene`'s rest pose (generator
-    space: pass a Drawable whose parts are Z up), top row first. Double-sided parts are
-    leaves (the lean program), the others bark."""
+    space: pass a Drawable whose parts are Z up), top row first, as read-only views.
+    Double-sided parts are leaves (the lean program), the others bark."""
     try:
         ctx = _context()
     except TreegenError as e:  # the default make must say what to do without EGL
@@ -318,9 +318,9 @@ def render_atlas(
             )
             vao.render(instances=grid * grid)
         out = []
-        for k in range(2):
+        for k in range(2):  # bottom row first: flipped as a view, copied once by the caller
             data = fbo.read(components=4, attachment=k, alignment=1)
-            out.append(np.frombuffer(data, np.uint8).reshape(size, size, 4)[::-1].copy())
+            out.append(np.frombuffer(data, np.uint8).reshape(size, size, 4)[::-1])
         return out[0], out[1]
     finally:
         ctx.release()

@@ -16,7 +16,7 @@ from .budget import BudgetOptions
 from .errors import OptionError, TreegenError
 from .exchange import COMPRESS, GLTF_DEFAULTS, STATIC, GltfOptions, check_compress
 from .generate import DEFAULTS as GENERATE_DEFAULTS, GenerateOptions
-from .impostor import IMPOSTOR_DEFAULTS
+from .impostor import IMPOSTOR_DEFAULTS, IMPOSTOR_SIZES, atlas_side, sized
 from .limits import LIMITS_DEFAULTS, Limits
 from .lod import LOD_DEFAULTS, SCHEDULES, LodOptions, pixel_size
 from .materials import MATERIAL_DEFAULTS, TEXTURE_SIZES, MaterialOptions
@@ -46,6 +46,7 @@ DEFAULTS: dict[str, object] = {
     "sides": None,  # None: MESH_DEFAULTS.sides (budgets may cut)
     "leaf_geometry": MESH_DEFAULTS.leaf_geometry,
     "texture_size": MATERIAL_DEFAULTS.texture_size,
+    "impostor_size": None,  # None: impostor.atlas_side(texture_size)
     "leaf_texture": MATERIAL_DEFAULTS.leaf_texture,
     "bark_texture": MATERIAL_DEFAULTS.bark_texture,
     "no_textures": not MATERIAL_DEFAULTS.textures,
@@ -82,10 +83,11 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "wind": ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "stiffness"),
 }
 INTS = ("seed", "max_stems", "max_leaves", "max_joints", "width", "max_vertices", "max_keys", "texture_size")
-OPTIONAL_INTS = ("triangles", "joints")  # None: no budget / --max-joints decides
+# None: no budget; --max-joints decides; 2 × --texture-size (impostor.atlas_side)
+OPTIONAL_INTS = ("triangles", "joints", "impostor_size")
 # Options added after assets were first keyed: left out of identity hashes while unset, so a
 # catalogue built before they existed keeps its keys (batch/catalogue.py).
-UNSET_FREE = ("triangles", "joints", "profile")
+UNSET_FREE = ("triangles", "joints", "profile", "impostor_size")
 PATHS = ("leaf_texture", "bark_texture")
 FLOATS = (
     "max_size",
@@ -255,6 +257,12 @@ def resolve(
     n = v["texture_size"]
     if not (lo <= n <= hi and n & (n - 1) == 0):
         raise TreegenError(f"{label('texture_size')} {n}: must be a power of two in [{lo}, {hi}]")
+    side = v["impostor_size"]
+    lo, hi = IMPOSTOR_SIZES
+    if side is not None and not (lo <= side <= hi and side & (side - 1) == 0):
+        raise TreegenError(
+            f"{label('impostor_size')} {side}: the atlas side must be a power of two in [{lo}, {hi}] px"
+        )
     static = output is not None and Path(output).suffix.lower() in STATIC
     if output is not None:
         check_compress(output, v["compress"], label("compress"))
@@ -292,7 +300,9 @@ def resolve(
     lod = None if static else lod
 
     make_options = MakeOptions(
-        impostor=IMPOSTOR_DEFAULTS if v["impostor"] and lod is not None else None,
+        impostor=sized(side or atlas_side(n), IMPOSTOR_DEFAULTS)
+        if v["impostor"] and lod is not None
+        else None,
         generate=GenerateOptions(
             max_stems=v["max_stems"], max_leaves=v["max_leaves"], max_size=v["max_size"]
         ),

@@ -19,12 +19,15 @@ from .errors import TreegenError
 # The options each row sets. lod_screen: the tree's height on screen below which LOD1, LOD2, …
 # take over (lod.switch_distances); lod_triangles: their budgets as fractions of LOD0's
 # (lod_budget.py); triangles: the LOD0 budget (budget.py); compress: the glTF encoding (web
-# pages decode meshopt; game engines' importers mostly read only plain files: README).
+# pages decode meshopt; game engines' importers mostly read only plain files: README);
+# impostor_size: the impostor atlas's side (mobile and web: 32 px views, a third of the bytes;
+# 64 px views suffice where the impostor takes over, so hero stays at 1024).
 PROFILES: dict[str, dict[str, object]] = {
     "mobile": {
         "triangles": 20_000,
         "max_joints": 64,
         "texture_size": 256,
+        "impostor_size": 512,
         "duration": 6.0,
         "fps": 15.0,
         "lod_screen": "0.3,0.1",
@@ -35,6 +38,7 @@ PROFILES: dict[str, dict[str, object]] = {
         "triangles": 50_000,
         "max_joints": 128,
         "texture_size": 512,
+        "impostor_size": 512,
         "duration": 8.0,
         "fps": 24.0,
         "lod_screen": "0.4,0.2,0.08",
@@ -45,6 +49,7 @@ PROFILES: dict[str, dict[str, object]] = {
         "triangles": 150_000,
         "max_joints": 256,
         "texture_size": 1024,
+        "impostor_size": 1024,
         "duration": 10.0,
         "fps": 30.0,
         "lod_screen": "0.5,0.25,0.1",
@@ -55,6 +60,7 @@ PROFILES: dict[str, dict[str, object]] = {
         "triangles": 500_000,
         "max_joints": 512,
         "texture_size": 2048,
+        "impostor_size": 1024,
         "duration": 20.0,
         "fps": 30.0,
         "lod_screen": "0.6,0.3,0.12",

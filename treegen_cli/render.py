@@ -5,7 +5,8 @@ What it draws, so a picture says something about the asset before an engine open
   - the tree skinned in the vertex shader exactly like an engine does (per vertex Σ wᵢ·Sᵢ with
     Sᵢ = joint world matrix · inverse bind matrix, four influences), so a broken skin shows,
   - a sun with a shadow map (the tree shades itself and the ground) plus a sky/ground
-    hemisphere ambient; leaves are lit from both sides with some light through them,
+    hemisphere ambient; leaves are lit from both sides with some light through them;
+    impostor cards cast shadows but receive none (Part.receives_shadows),
   - textures as an engine samples them: base colour (sRGB, mipmapped, trilinear) times the
     material colour, alpha-tested cut-outs (also in the shadow pass, so leaf shadows have leaf
     shapes) and tangent-space normal maps with tangents from screen-space derivatives (no
@@ -254,6 +255,7 @@ _TREE_FS = (
     + """
 uniform vec3 base_color;
 uniform bool leaf;
+uniform bool receive_shadows;  // false: impostor cards (their shading is baked in the atlas)
 uniform vec3 crown_center;
 uniform vec3 crown_radius;
 uniform vec3 eye;
@@ -302,7 +304,7 @@ void main() {
         albedo *= 1.0 + k * (vec3(0.3 * h, 0.4 * h, 0.2 * h) - vec3(0.15, 0.2, 0.2));
     }
     float ndl = dot(n, sun_dir);
-    float vis = sun_visibility(v_pos, n);
+    float vis = receive_shadows ? sun_visibility(v_pos, n) : 1.0;
     // Light through a leaf (sun behind it) is filtered twice by the blade: yellower, and
     // brightest when looking into the sun (forward scattering).
     float toward = max(dot(normalize(v_pos - eye), sun_dir), 0.0);
@@ -394,11 +396,22 @@ void main() {
 )
 
 
+# The GL and EGL libraries by their usual sonames (libglvnd, Mesa): left unnamed, glcontext
+# looks each up with ctypes.util.find_library, which forks `ldconfig -p`, twice per context
+# (13 ms of CPU in a process the size of `make`'s). If they do not load, the lookup runs.
+# GLCONTEXT_LINUX_LIBGL / GLCONTEXT_LINUX_LIBEGL still override either.
+GL_LIBRARIES = {"libgl": "libGL.so.1", "libegl": "libEGL.so.1"}
+
+
 def _context():
     try:
         import moderngl
     except ImportError as e:
         raise TreegenError(f"preview needs moderngl (pip install moderngl): {e}") from None
+    try:
+        return moderngl.create_standalone_context(backend="egl", require=330, **GL_LIBRARIES)
+    except Exception:
+        pass
     try:
         return moderngl.create_standalone_context(backend="egl", require=330)
     except Exception as e:  # no EGL / no GPU driver: say so in one line
@@ -686,6 +699,7 @@ class Renderer:
         for g in self.parts if draw_tree else []:
             self._set(self.tree_prog, "base_color", g.part.color)
             self._set(self.tree_prog, "leaf", g.part.double_sided)
+            self._set(self.tree_prog, "receive_shadows", g.part.receives_shadows)
             self._material(self.tree_prog, g)
             if g.part.one_sided:  # an engine culls single-sided faces' backs
                 ctx.enable(ctx.CULL_FACE)

@@ -597,11 +597,12 @@ def png_bytes_unfiltered(array: np.ndarray) -> bytes:
     1024² atlases, 2–3× faster than png_bytes (its per-row adaptive filter), and, on cut-outs
     with a cleared background, smaller overall (normal + depth atlas −27 to −30 %, albedo
     +3 to +10 %, measured on four species)."""
-    a = np.ascontiguousarray(array)
+    a = np.asarray(array)  # any strides (a flipped view): copied once, into the rows below
     if a.dtype != np.uint8 or a.ndim != 3 or a.shape[2] != 4:
         raise ValueError(f"png_bytes_unfiltered wants uint8 H×W×4, got {a.dtype} {a.shape}")
     h, w = a.shape[:2]
-    raw = np.zeros((h, 1 + 4 * w), np.uint8)  # filter byte 0: None
+    raw = np.empty((h, 1 + 4 * w), np.uint8)
+    raw[:, 0] = 0  # filter byte: None
     raw[:, 1:] = a.reshape(h, 4 * w)
 
     def chunk(kind: bytes, data: bytes) -> bytes:
@@ -611,7 +612,7 @@ def png_bytes_unfiltered(array: np.ndarray) -> bytes:
     return (
         b"\x89PNG\r\n\x1a\n"
         + chunk(b"IHDR", header)
-        + chunk(b"IDAT", zlib.compress(raw.tobytes(), 1))
+        + chunk(b"IDAT", zlib.compress(raw, 1))
         + chunk(b"IEND", b"")
     )
 

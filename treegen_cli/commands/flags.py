@@ -69,7 +69,7 @@ HELP: dict[str, tuple[str | None, str, str | None]] = {
     ),
     "profile": (
         None,
-        "Preset triangles, joints, texture size, clip length, fps and LOD "
+        "Preset triangles, joints, texture and impostor sizes, clip length, fps and LOD "
         "distances for a platform (README table); options you give win over it.",
         None,
     ),
@@ -89,6 +89,12 @@ HELP: dict[str, tuple[str | None, str, str | None]] = {
         None,
         "Leaf atlas side in texels, a power of two in [64, 2048]; bark maps are half.",
         None,
+    ),
+    "impostor_size": (
+        None,
+        "Impostor atlas side in pixels, a power of two in [128, 2048]: 16 × 16 "
+        "views of a sixteenth of it each [default: 2 × --texture-size, at most 1024].",
+        "PX",
     ),
     "leaf_texture": (
         None,
@@ -189,6 +195,7 @@ MAKE = (
     "no_lod",
     "lod_files",
     "impostor",
+    "impostor_size",
     "compress",
     "max_vertices",
     "max_keys",

@@ -71,6 +71,7 @@ def describe(asset: Asset, k: int, to_file: np.ndarray, images: dict) -> dict:
         "normal_depth": "rgb = unit normal in (a, b, up) * 0.5 + 0.5 (linear); "
         "alpha = 0.5 + 0.5 * dot(p - centre, d) / radius (1 towards the viewer)",
         "cards": [[int(c), int(r)] for c, r in imp.cards],
+        "cards_receive_shadows": False,  # crossed cards would shade each other in a wedge
         "lod_index": int(asset.extras.get("lod_index", k)),
         "distance_m": float(lod.distance),
     }

@@ -24,7 +24,16 @@ from urllib.parse import unquote
 
 import numpy as np
 
-from ..drawable import Channel, Drawable, Part, PoseRig, check_lod, decode_image, vertex_normals
+from ..drawable import (
+    Channel,
+    Drawable,
+    Part,
+    PoseRig,
+    check_lod,
+    decode_image,
+    takes_shadows,
+    vertex_normals,
+)
 from ..errors import TreegenError
 from ..skeleton import forward, trs
 from .compress import MESHOPT, decode
@@ -164,6 +173,7 @@ def _gltf_scene(gltf, blob, read_accessor, lod, path) -> Drawable:
                 color=tuple(color[:3]),
                 double_sided=bool(mat.get("doubleSided", False)),
                 opacity=float(color[3]) if len(color) > 3 else 1.0,
+                receives_shadows=takes_shadows(mat.get("name")),
                 **looks,
             )
         )
