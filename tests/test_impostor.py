@@ -14,7 +14,8 @@ import pytest
 from conftest import SPECIES, grown, species_path
 from treegen_cli.drawable import Part, decode_image
 from treegen_cli.impostor import IMPOSTOR_DEFAULTS, card_cells, cell_direction, cell_of, encode, view_basis
-from treegen_cli.lod import LodOptions, measure_error_px, screen_coverage
+from treegen_cli.lod import LodOptions, screen_coverage
+from treegen_cli.lod_decimate import measure_error_px
 from treegen_cli.params import load_params
 from treegen_cli.pipeline import MakeOptions, build_asset
 from treegen_cli.render import egl_available

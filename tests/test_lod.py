@@ -19,16 +19,15 @@ from treegen_cli.errors import TreegenError
 from treegen_cli.clip import play_keys as playback
 from treegen_cli.lod import (
     LodOptions,
-    decimate,
-    lod_table_row,
-    measure_error_px,
     near_pixel_size,
     paper_pixel_size,
     pixel_size,
-    probes,
     screen_coverage,
     switch_distances,
 )
+from treegen_cli.lod_decimate import decimate, measure_error_px
+from treegen_cli.lod_probes import probes
+from treegen_cli.lod_report import lod_table_row
 from treegen_cli.params import load_params
 from treegen_cli.pipeline import MakeOptions, build_asset
 from treegen_cli.rig import RigOptions

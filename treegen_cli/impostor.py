@@ -33,7 +33,8 @@ import numpy as np
 
 from .asset import Clip, Impostor, Lod, Material, Primitive, Skeleton, Texture
 from .errors import TreegenError
-from .lod import LodOptions, decimate, screen_distance
+from .lod import LodOptions, screen_distance
+from .lod_decimate import decimate
 from .quat import mul as quat_mul, unit as unit_quat
 
 
