@@ -91,6 +91,12 @@ def test_no_import_cycles():
 
 WRITERS = [
     "exchange.gltf",
+    "exchange.gltf_animation",
+    "exchange.gltf_buffer",
+    "exchange.gltf_container",
+    "exchange.gltf_material",
+    "exchange.gltf_mesh",
+    "exchange.gltf_nodes",
     "exchange.usd",
     "exchange.forest_gltf",
     "exchange.forest_usd",
@@ -151,7 +157,7 @@ def test_every_make_option_is_one_click_option_with_the_table_default():
 # Modules this layout has been cut into so far; each fits one screenful of purpose. The rest of
 # the package joins this list as it is split (issue 11).
 SMALL = ["cli.py", "api.py", "options.py", "commands/*.py", "forest/*.py"]
-SMALL += ["lod*.py"]
+SMALL += ["lod*.py", "exchange/gltf*.py"]
 
 
 def test_split_modules_stay_under_400_lines_or_say_why():

@@ -15,7 +15,7 @@ from scipy.spatial.transform import Rotation
 from treegen_cli.cli import cli
 from treegen_cli.errors import TreegenError
 from treegen_cli.exchange.forest_gltf import build_forest
-from treegen_cli.exchange.gltf import read_accessor, read_gltf
+from treegen_cli.exchange.gltf_container import read_accessor, read_gltf
 from treegen_cli.clip import phase_rotate, playback, repeat_clip
 from treegen_cli.asset import Forest, Instance
 from treegen_cli.exchange import export_forest as write_scene

@@ -333,7 +333,7 @@ def test_cards_ride_one_joint_that_sways_with_the_crown():
 @needs_gl
 def test_written_glb_validator_clean_sidecar_and_preview_at_distance(tmp_path):
     from treegen_cli import api, exchange
-    from treegen_cli.exchange.gltf import read_gltf
+    from treegen_cli.exchange.gltf_container import read_gltf
     from treegen_cli.exchange.validate import validate_gltf
     from treegen_cli.render import Camera, Renderer, direction
 

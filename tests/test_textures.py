@@ -119,7 +119,7 @@ def test_card_uvs_map_card_corners_to_rect_corners(atlases):
 
 
 def test_card_uvs_in_the_asset_convention_round_trip_through_the_gltf_flip(atlases):
-    """Primitive.uvs are bottom-left; exchange/gltf.py writes 1 − v. The texels sampled must be
+    """Primitive.uvs are bottom-left; exchange/gltf_mesh.py writes 1 − v. The texels sampled must be
     the ones atlas.rects name in glTF UVs."""
     at = atlases[1]
     rng = np.random.default_rng(1)
@@ -127,7 +127,7 @@ def test_card_uvs_in_the_asset_convention_round_trip_through_the_gltf_flip(atlas
     var = rng.integers(0, at.variants, 200)
     gltf = T.card_uvs(uv, var, at)
     asset = T.card_uvs(uv, var, at, origin="bottom-left")
-    flipped = np.float32(1.0) - asset[:, 1]  # what gltf.py writes
+    flipped = np.float32(1.0) - asset[:, 1]  # what gltf_mesh.py writes
     np.testing.assert_allclose(flipped, gltf[:, 1], atol=1e-6)
     np.testing.assert_array_equal(asset[:, 0], gltf[:, 0])
     with pytest.raises(ValueError):

@@ -375,7 +375,8 @@ def test_usd_and_gltf_agree(tmp_path):
     def export(a, p):
         return _export(prepare(a), p)
 
-    from treegen_cli.exchange.gltf import quat_to_y_up, read_accessor, read_gltf
+    from treegen_cli.axes import quat_to_y_up
+    from treegen_cli.exchange.gltf_container import read_accessor, read_gltf
 
     asset = synthetic_asset(lods=1)
     export(asset, tmp_path / "t.glb")

@@ -138,7 +138,7 @@ def card_uvs(
     """Map card UVs (u = x + 0.5, v = y, base at v = 0) into each vertex's variant cell.
 
     `origin="top-left"` gives glTF UVs (as `atlas.rects`). Asset Primitive.uvs use the
-    bottom-left origin (OpenGL/USD; exchange/gltf.py writes 1 − v): pass
+    bottom-left origin (OpenGL/USD; exchange/gltf_mesh.py writes 1 − v): pass
     `origin="bottom-left"` for those, and both writers then sample the same texels.
     """
     if origin not in ("top-left", "bottom-left"):
