@@ -98,6 +98,9 @@ WRITERS = [
     "exchange.gltf_mesh",
     "exchange.gltf_nodes",
     "exchange.usd",
+    "exchange.usd_material",
+    "exchange.usd_skel",
+    "exchange.usd_stage",
     "exchange.forest_gltf",
     "exchange.forest_usd",
     "exchange.static",
@@ -157,7 +160,7 @@ def test_every_make_option_is_one_click_option_with_the_table_default():
 # Modules this layout has been cut into so far; each fits one screenful of purpose. The rest of
 # the package joins this list as it is split (issue 11).
 SMALL = ["cli.py", "api.py", "options.py", "commands/*.py", "forest/*.py"]
-SMALL += ["lod*.py", "exchange/gltf*.py"]
+SMALL += ["lod*.py", "exchange/*.py"]
 
 
 def test_split_modules_stay_under_400_lines_or_say_why():

@@ -428,7 +428,7 @@ def test_gltf_phase_variants_share_samplers(scene, tmp_path):
 def test_usd_forest_validator_clean_and_offsets(scene, tmp_path):
     from pxr import Usd
 
-    from treegen_cli.exchange.usd import validate_usd
+    from treegen_cli.exchange.validate import validate_usd
 
     _, sc = scene
     path = tmp_path / "f.usda"
@@ -645,7 +645,7 @@ def test_gltf_instance_references_every_shared_lod_mesh_skin_and_clip(walk):
 def test_usd_instance_has_the_lod_variant_set_and_stays_instanced(walk):
     from pxr import Usd, UsdGeom
 
-    from treegen_cli.exchange.usd import validate_usd
+    from treegen_cli.exchange.validate import validate_usd
 
     _, sc, files = walk
     assert validate_usd(files[".usda"]) == []  # under every variant, too

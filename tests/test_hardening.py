@@ -188,7 +188,7 @@ def test_extreme_refusals_happen_where_expected():
 def test_extreme_parameters_export_readable_files(case, tmp_path):
     from treegen_cli.exchange import export
     from treegen_cli.exchange.gltf_container import read_gltf
-    from treegen_cli.exchange.usd import validate_usd
+    from treegen_cli.exchange.validate import validate_usd
 
     asset, _ = build_asset(species(EXTREME[case]), 3, SMALL)
     glb, usda = tmp_path / "x.glb", tmp_path / "x.usda"

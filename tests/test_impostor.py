@@ -398,7 +398,7 @@ def test_lod_files_and_usd_carry_the_impostor(tmp_path):
     )
     # a .usdz packages both atlases (the normal map unreferenced) and stays AR Quick Look-clean
     import arkit_check
-    from treegen_cli.exchange.usd import validate_usd
+    from treegen_cli.exchange.validate import validate_usd
 
     api.make(species_path("rush"), tmp_path / "z.usdz", duration=1.0, fps=10.0, impostor=True)
     assert validate_usd(tmp_path / "z.usdz") == []

@@ -245,7 +245,7 @@ def test_written_lods_validate(tmp_path):
     def export(a, p):
         return _export(prepare(a), p)
 
-    from treegen_cli.exchange.usd import validate_usd
+    from treegen_cli.exchange.validate import validate_usd
     from treegen_cli.exchange.validate import ValidatorUnavailable, summary, validate_gltf
 
     asset = _asset("quaking_aspen", max_joints=24)
