@@ -206,7 +206,7 @@ def test_leaf_ids_tint_shrink_and_png_helpers():
     atlas shrinks by powers of two to ≥ 256 texels, keeping its coverage; the unfiltered PNG
     decodes to the same pixels."""
     from treegen_cli.impostor_render import leaf_ids, leaf_tint, shrink
-    from treegen_cli.textures import png_bytes_unfiltered
+    from treegen_cli.texture_png import png_bytes_unfiltered
 
     cards = (np.array([0, 1, 3, 0, 3, 2])[None] + 4 * np.arange(5)[:, None]).ravel()
     assert np.array_equal(leaf_ids(cards, 20), np.arange(20) // 4)

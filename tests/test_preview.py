@@ -298,7 +298,7 @@ def _shoot(part, size=96, sun=(-140.0, 50.0)):
 
 def _leaf_rgba(size=128):
     """One-variant oval leaf (LeafShape 0) and the card UVs (bottom-left) that fill the card."""
-    from treegen_cli.textures import card_uvs, leaf_atlas
+    from treegen_cli.texture_leaf import card_uvs, leaf_atlas
 
     atlas = leaf_atlas(0, (0.16, 0.30, 0.06), size=size, variants=1)
     card = np.float32([[0, 0], [1, 0], [1, 1], [0, 1]])
@@ -330,7 +330,7 @@ def test_cut_out_leaf_covers_less_of_the_card_and_of_its_shadow():
 
 @needs_egl
 def test_bark_texture_shows_and_normal_map_follows_the_opengl_convention():
-    from treegen_cli.textures import bark_textures
+    from treegen_cli.texture_bark import bark_textures
 
     albedo, normal = bark_textures((0.2, 0.19, 0.17), size=64, seed=1)
     rgba = np.concatenate([albedo, np.full((64, 64, 1), 255, np.uint8)], axis=2)
@@ -463,7 +463,7 @@ def _tiny_asset(material, uvs):
 @needs_egl
 def test_asset_textures_decode_into_parts_and_render_deterministically():
     from treegen_cli.asset import Material, Texture
-    from treegen_cli.textures import png_bytes
+    from treegen_cli.texture_png import png_bytes
 
     rgba, uv = _leaf_rgba()
     mat = Material(
@@ -506,7 +506,7 @@ def _textured_gltf(rgba, uv_bl, normal, interleaved=False, image_uri=None):
     """(JSON, binary) of a one-card glTF with a MASK leaf material, written by hand to the glTF
     2.0 spec the way other exporters do: TEXCOORD_0 as normalized shorts (glTF's v down), or
     interleaved floats (byteStride); images in bufferViews or behind a URI."""
-    from treegen_cli.textures import png_bytes
+    from treegen_cli.texture_png import png_bytes
 
     pos = np.float32([[-0.5, 0, 0], [0.5, 0, 0], [0.5, 2, 0], [-0.5, 2, 0]])
     uv = np.column_stack([uv_bl[:, 0], 1.0 - uv_bl[:, 1]])  # glTF: origin top-left
@@ -597,7 +597,7 @@ def test_gltf_reader_reads_uvs_textures_and_cut_out_of_a_hand_built_file(tmp_pat
     doc, blob = _textured_gltf(rgba, uv, normal)
     (tmp_path / "card.glb").write_bytes(_glb(doc, blob))
     # the same card as .gltf + .bin, floats interleaved with positions, the atlas a PNG file
-    from treegen_cli.textures import png_bytes
+    from treegen_cli.texture_png import png_bytes
 
     doc2, blob2 = _textured_gltf(rgba, uv, normal, interleaved=True, image_uri="leaf%20atlas.png")
     doc2["buffers"][0]["uri"] = "card.bin"
@@ -653,7 +653,7 @@ def _textured_usd(path, rgba, uv_bl, normal, face_varying=False):
     material interface input; textures in textures/ beside the layer."""
     from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, UsdSkel, Vt
 
-    from treegen_cli.textures import png_bytes
+    from treegen_cli.texture_png import png_bytes
 
     (path.parent / "textures").mkdir(exist_ok=True)
     (path.parent / "textures" / "leaf.png").write_bytes(png_bytes(rgba))

@@ -346,7 +346,7 @@ def build_impostor(
     source = atlas_source(full, coarse)
     centre, radius = sphere(source)
     albedo, normal = render_views(source, materials, centre, radius, options)
-    from .textures import png_bytes_unfiltered as png
+    from .texture_png import png_bytes_unfiltered as png
 
     albedo_tex = Texture("impostor_albedo", png(albedo), wrap="CLAMP")
     normal_tex = Texture("impostor_normal", png(normal), wrap="CLAMP", srgb=False)
