@@ -18,7 +18,7 @@ from treegen_cli.lod import LodOptions, screen_coverage
 from treegen_cli.lod_decimate import measure_error_px
 from treegen_cli.params import load_params
 from treegen_cli.pipeline import MakeOptions, build_asset
-from treegen_cli.render import egl_available
+from treegen_cli.render_gl import egl_available
 from treegen_cli.rig import RigOptions
 from treegen_cli.skeleton import pose_world
 from treegen_cli.wind import WindOptions
@@ -335,7 +335,8 @@ def test_written_glb_validator_clean_sidecar_and_preview_at_distance(tmp_path):
     from treegen_cli import api, exchange
     from treegen_cli.exchange.gltf_container import read_gltf
     from treegen_cli.exchange.validate import validate_gltf
-    from treegen_cli.render import Camera, Renderer, direction
+    from treegen_cli.render import Renderer
+    from treegen_cli.render_view import Camera, direction
 
     out = tmp_path / "palm.glb"
     s = api.make(species_path("palm"), out, duration=1.0, fps=10.0, impostor=True)

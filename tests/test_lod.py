@@ -291,7 +291,7 @@ def test_cli_info_lod_json():
     assert rows[1]["max_error_px"] <= 1.0 and rows[1]["keys_kept_pct"] < 100.0
     # the impostor level, as `make` builds it: after the last LOD (≥ 1.5 × its distance),
     # 8 triangles, its atlas described
-    from treegen_cli.render import egl_available
+    from treegen_cli.render_gl import egl_available
 
     if egl_available():
         imp = rows[2]

@@ -16,7 +16,9 @@ from treegen_cli.drawable import Part, from_asset as scene_from_asset
 from treegen_cli.exchange.read_gltf import read_drawable as scene_from_gltf
 from treegen_cli.exchange.read_usd import read_drawable as scene_from_usd
 from treegen_cli.preview import PreviewOptions, camera_for, load_scene, sun_angles
-from treegen_cli.render import Renderer, egl_available, skin_points
+from treegen_cli.render import Renderer
+from treegen_cli.render_gl import egl_available
+from treegen_cli.render_view import skin_points
 from treegen_cli.species_list import describe, species_dir, species_files
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -237,7 +239,7 @@ def test_preview_json_summary(tmp_path):
     import subprocess
     import sys
 
-    from treegen_cli.render import egl_available
+    from treegen_cli.render_gl import egl_available
 
     if not egl_available():
         pytest.skip("no EGL context on this machine")
@@ -288,7 +290,7 @@ def _shoot(part, size=96, sun=(-140.0, 50.0)):
     """(tree, background) renders of one part, framed from the front; background keeps the
     part's shadow."""
     from treegen_cli.drawable import Drawable
-    from treegen_cli.render import frame_points
+    from treegen_cli.render_view import frame_points
 
     scene = Drawable(parts=[part], n_joints=1)
     cam = frame_points(part.positions, -90.0, 0.0, margin=0.3)
@@ -364,7 +366,7 @@ def test_bark_texture_shows_and_normal_map_follows_the_opengl_convention():
 
 
 def test_mips_average_in_linear_light_weighted_by_alpha():
-    from treegen_cli.render import mip_chain
+    from treegen_cli.render_gl import mip_chain
 
     rng = np.random.default_rng(0)
     rgba = np.zeros((128, 96, 4), np.uint8)

@@ -203,7 +203,7 @@ def info(
         lod_options = resolve(given("lod")).options.lod
         assert lod_options is not None  # no_lod is not an info option
         from .impostor import IMPOSTOR_DEFAULTS
-        from .render import egl_available  # lazy: GL only when the impostor is drawn
+        from .render_gl import egl_available  # lazy: GL only when the impostor is drawn
 
         make_options = MakeOptions(
             generate=generate_options,
