@@ -6,7 +6,7 @@ Table 1, per species at the paper's 30 m and 130 m (fov 60°, width 1920, i = er
 full LOD0 tree and its default 10 s / 30 fps wind): the default bounded schedule and the
 paper's rule side by side — keys kept (% of dense), animation bytes (% of dense), max error
 measured perspective-true (any camera at that distance from the centre of the tree's bounds;
-`lod.measure_error_px`), leaf-vertex updates per frame, decimation seconds.
+`lod_decimate.measure_error_px`), leaf-vertex updates per frame, decimation seconds.
 
 Table 2, per species and clip length: the default `treegen make` (GLB, in-process through
 `api.make`): whole make seconds, LOD stage seconds and its share, LOD seconds per clip second
@@ -21,7 +21,8 @@ import tempfile
 from pathlib import Path
 
 from treegen_cli import api
-from treegen_cli.lod import LOD_DEFAULTS, PAPER_DISTANCES, schedule_rows
+from treegen_cli.lod import LOD_DEFAULTS
+from treegen_cli.lod_report import PAPER_DISTANCES, schedule_rows
 from treegen_cli.params import load_params
 from treegen_cli.pipeline import MakeOptions, build_asset
 

@@ -26,7 +26,7 @@ from pathlib import Path
 
 from treegen_cli import api
 from treegen_cli.exchange import export
-from treegen_cli.exchange.gltf import read_gltf
+from treegen_cli.exchange.gltf_container import read_gltf
 from treegen_cli.params import load_params
 from treegen_cli.pipeline import Timings
 

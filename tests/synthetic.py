@@ -191,7 +191,9 @@ def synthetic_asset(lods: int = 1, with_clip: bool = True) -> Asset:
 def synthetic_textures(size: int = 32) -> dict[str, Texture]:
     """Small real PNGs by role, as the materials stage will attach them: "leaf" (RGBA atlas,
     alpha cut-out, CLAMP), "bark" (sRGB albedo, REPEAT), "bark_normal" (raw, REPEAT)."""
-    from treegen_cli.textures import bark_textures, leaf_atlas, png_bytes
+    from treegen_cli.texture_bark import bark_textures
+    from treegen_cli.texture_leaf import leaf_atlas
+    from treegen_cli.texture_png import png_bytes
 
     atlas = leaf_atlas(0, (0.1, 0.3, 0.05), size=size, variants=1)
     albedo, normal = bark_textures((0.2, 0.15, 0.1), size=size)

@@ -95,7 +95,7 @@ def test_make_refuses_bad_requests_and_writes_nothing(tmp_path):
 
 
 def test_make_respects_the_joint_budget(tmp_path):
-    from treegen_cli.exchange.gltf import read_gltf
+    from treegen_cli.exchange.gltf_container import read_gltf
 
     out = tmp_path / "small.glb"
     proc = treegen("make", ASPEN, "-o", out, "--max-joints", "12", "--no-wind")

@@ -20,7 +20,7 @@ import clients
 from conftest import run_treegen, species_path
 from treegen_cli import api
 from treegen_cli.exchange import GltfOptions, export, export_parts
-from treegen_cli.exchange.gltf import read_accessor, read_gltf
+from treegen_cli.exchange.gltf_container import read_accessor, read_gltf
 from treegen_cli.exchange.read_gltf import _accessor
 from treegen_cli.exchange.validate import summary, validate_gltf
 from treegen_cli.params import load_params

@@ -15,7 +15,7 @@ from scipy.spatial.transform import Rotation
 from treegen_cli.cli import cli
 from treegen_cli.errors import TreegenError
 from treegen_cli.exchange.forest_gltf import build_forest
-from treegen_cli.exchange.gltf import read_accessor, read_gltf
+from treegen_cli.exchange.gltf_container import read_accessor, read_gltf
 from treegen_cli.clip import phase_rotate, playback, repeat_clip
 from treegen_cli.asset import Forest, Instance
 from treegen_cli.exchange import export_forest as write_scene
@@ -428,7 +428,7 @@ def test_gltf_phase_variants_share_samplers(scene, tmp_path):
 def test_usd_forest_validator_clean_and_offsets(scene, tmp_path):
     from pxr import Usd
 
-    from treegen_cli.exchange.usd import validate_usd
+    from treegen_cli.exchange.validate import validate_usd
 
     _, sc = scene
     path = tmp_path / "f.usda"
@@ -645,7 +645,7 @@ def test_gltf_instance_references_every_shared_lod_mesh_skin_and_clip(walk):
 def test_usd_instance_has_the_lod_variant_set_and_stays_instanced(walk):
     from pxr import Usd, UsdGeom
 
-    from treegen_cli.exchange.usd import validate_usd
+    from treegen_cli.exchange.validate import validate_usd
 
     _, sc, files = walk
     assert validate_usd(files[".usda"]) == []  # under every variant, too

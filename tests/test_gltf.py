@@ -18,15 +18,9 @@ from treegen_cli.asset import Asset, Lod
 from treegen_cli.errors import TreegenError
 from treegen_cli.exchange import WRITERS, export as _export, supported_suffixes
 from treegen_cli.prepare import prepare
-from treegen_cli.exchange.gltf import (
-    UNSIGNED_BYTE,
-    UNSIGNED_INT,
-    UNSIGNED_SHORT,
-    quat_to_y_up,
-    read_accessor,
-    read_gltf,
-    to_y_up,
-)
+from treegen_cli.axes import quat_to_y_up, to_y_up
+from treegen_cli.exchange.gltf_buffer import UNSIGNED_BYTE, UNSIGNED_INT, UNSIGNED_SHORT
+from treegen_cli.exchange.gltf_container import read_accessor, read_gltf
 from treegen_cli.exchange.validate import summary, validate_gltf
 
 

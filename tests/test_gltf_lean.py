@@ -14,15 +14,9 @@ from synthetic_tree import synthetic_tree
 from treegen_cli.asset import Asset, Lod, Primitive
 from treegen_cli.exchange import export as _export
 from treegen_cli.prepare import prepare
-from treegen_cli.exchange.gltf import (
-    FLOAT,
-    UNSIGNED_BYTE,
-    UNSIGNED_SHORT,
-    build,
-    glb_bytes,
-    read_accessor,
-    read_gltf,
-)
+from treegen_cli.exchange.gltf import build
+from treegen_cli.exchange.gltf_buffer import FLOAT, UNSIGNED_BYTE, UNSIGNED_SHORT
+from treegen_cli.exchange.gltf_container import glb_bytes, read_accessor, read_gltf
 from treegen_cli.exchange.validate import summary, validate_gltf
 from treegen_cli.mesh import MeshOptions, build_mesh
 from treegen_cli.rig import RigOptions, build_rig
@@ -151,8 +145,8 @@ def test_leaves_always_carry_their_normals(tmp_path):
 def test_y_up_shuffle_of_a_strided_view_is_exact():
     """The writer's Y-up shuffle on a column slice (tangents' xyz) gives the same rows as on a
     contiguous copy (numpy 2.4 mis-reads strided input to negative(out=))."""
-    from treegen_cli.exchange.gltf import _y_up32
+    from treegen_cli.exchange.gltf_mesh import y_up32
 
     t = np.arange(40, dtype=np.float32).reshape(10, 4)
-    np.testing.assert_array_equal(_y_up32(t[:, :3]), _y_up32(t[:, :3].copy()))
-    np.testing.assert_array_equal(_y_up32(t[:, :3])[:, 2], -t[:, 1])
+    np.testing.assert_array_equal(y_up32(t[:, :3]), y_up32(t[:, :3].copy()))
+    np.testing.assert_array_equal(y_up32(t[:, :3])[:, 2], -t[:, 1])

@@ -187,8 +187,8 @@ def test_extreme_refusals_happen_where_expected():
 )
 def test_extreme_parameters_export_readable_files(case, tmp_path):
     from treegen_cli.exchange import export
-    from treegen_cli.exchange.gltf import read_gltf
-    from treegen_cli.exchange.usd import validate_usd
+    from treegen_cli.exchange.gltf_container import read_gltf
+    from treegen_cli.exchange.validate import validate_usd
 
     asset, _ = build_asset(species(EXTREME[case]), 3, SMALL)
     glb, usda = tmp_path / "x.glb", tmp_path / "x.usda"
@@ -405,7 +405,7 @@ def test_verbose_reports_each_stage_on_stderr(tmp_path):
 
 
 def test_make_json_summary_parses_and_matches_the_file(tmp_path):
-    from treegen_cli.exchange.gltf import read_gltf
+    from treegen_cli.exchange.gltf_container import read_gltf
 
     out = tmp_path / "a.glb"
     proc = treegen(

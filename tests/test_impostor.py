@@ -15,10 +15,11 @@ from conftest import SPECIES, grown, species_path
 from treegen_cli.axes import to_y_up
 from treegen_cli.drawable import Part, decode_image
 from treegen_cli.impostor import IMPOSTOR_DEFAULTS, card_cells, cell_direction, cell_of, encode, view_basis
-from treegen_cli.lod import LodOptions, measure_error_px, screen_coverage
+from treegen_cli.lod import LodOptions, screen_coverage
+from treegen_cli.lod_decimate import measure_error_px
 from treegen_cli.params import load_params
 from treegen_cli.pipeline import MakeOptions, build_asset
-from treegen_cli.render import egl_available
+from treegen_cli.render_gl import egl_available
 from treegen_cli.rig import RigOptions
 from treegen_cli.skeleton import pose_world
 from treegen_cli.wind import WindOptions
@@ -206,7 +207,7 @@ def test_leaf_ids_tint_shrink_and_png_helpers():
     atlas shrinks by powers of two to ≥ 256 texels, keeping its coverage; the unfiltered PNG
     decodes to the same pixels."""
     from treegen_cli.impostor_render import leaf_ids, leaf_tint, shrink
-    from treegen_cli.textures import png_bytes_unfiltered
+    from treegen_cli.texture_png import png_bytes_unfiltered
 
     cards = (np.array([0, 1, 3, 0, 3, 2])[None] + 4 * np.arange(5)[:, None]).ravel()
     assert np.array_equal(leaf_ids(cards, 20), np.arange(20) // 4)
@@ -361,9 +362,10 @@ def test_crossed_cards_do_not_shade_each_other_in_a_wedge():
 @needs_gl
 def test_written_glb_validator_clean_sidecar_and_preview_at_distance(tmp_path):
     from treegen_cli import api, exchange
-    from treegen_cli.exchange.gltf import read_gltf
+    from treegen_cli.exchange.gltf_container import read_gltf
     from treegen_cli.exchange.validate import validate_gltf
-    from treegen_cli.render import Camera, Renderer, direction
+    from treegen_cli.render import Renderer
+    from treegen_cli.render_view import Camera, direction
 
     out = tmp_path / "palm.glb"
     s = api.make(species_path("palm"), out, duration=1.0, fps=10.0, impostor=True)
@@ -479,7 +481,7 @@ def test_lod_files_and_usd_carry_the_impostor(tmp_path):
     )
     # a .usdz packages both atlases (the normal map unreferenced) and stays AR Quick Look-clean
     import arkit_check
-    from treegen_cli.exchange.usd import validate_usd
+    from treegen_cli.exchange.validate import validate_usd
 
     api.make(species_path("rush"), tmp_path / "z.usdz", duration=1.0, fps=10.0, impostor=True)
     assert validate_usd(tmp_path / "z.usdz") == []

@@ -19,16 +19,15 @@ from treegen_cli.errors import TreegenError
 from treegen_cli.clip import play_keys as playback
 from treegen_cli.lod import (
     LodOptions,
-    decimate,
-    lod_table_row,
-    measure_error_px,
     near_pixel_size,
     paper_pixel_size,
     pixel_size,
-    probes,
     screen_coverage,
     switch_distances,
 )
+from treegen_cli.lod_decimate import decimate, measure_error_px
+from treegen_cli.lod_probes import probes
+from treegen_cli.lod_report import lod_table_row
 from treegen_cli.params import load_params
 from treegen_cli.pipeline import MakeOptions, build_asset
 from treegen_cli.rig import RigOptions
@@ -246,7 +245,7 @@ def test_written_lods_validate(tmp_path):
     def export(a, p):
         return _export(prepare(a), p)
 
-    from treegen_cli.exchange.usd import validate_usd
+    from treegen_cli.exchange.validate import validate_usd
     from treegen_cli.exchange.validate import ValidatorUnavailable, summary, validate_gltf
 
     asset = _asset("quaking_aspen", max_joints=24)
@@ -292,7 +291,7 @@ def test_cli_info_lod_json():
     assert rows[1]["max_error_px"] <= 1.0 and rows[1]["keys_kept_pct"] < 100.0
     # the impostor level, as `make` builds it: after the last LOD (≥ 1.5 × its distance),
     # 8 triangles, its atlas described
-    from treegen_cli.render import egl_available
+    from treegen_cli.render_gl import egl_available
 
     if egl_available():
         imp = rows[2]

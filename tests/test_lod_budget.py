@@ -146,7 +146,7 @@ def test_lod_switches_keep_cover(species):
     """Consecutive LODs rendered at the tree's size on screen at their switch (fov 60°, 1920
     px, the project's renderer, alpha-tested leaves): covered area within ±5 % and silhouette
     IoU ≥ 0.9 (issue 13), or no worse than measured (MEASURED) where that is not reached."""
-    from treegen_cli.render import egl_available
+    from treegen_cli.render_gl import egl_available
     from treegen_cli.silhouette import lod_pops
 
     if not egl_available():

@@ -24,7 +24,9 @@ from treegen_cli.materials import (
 from treegen_cli.mesh import FULL_CARD_CELL
 from treegen_cli.params import load_params, parse_params_text
 from treegen_cli.pipeline import MakeOptions, build_asset
-from treegen_cli.textures import atlas_rects, species_colors, srgb8_to_linear
+from treegen_cli.texture_color import srgb8_to_linear
+from treegen_cli.texture_leaf import atlas_rects
+from treegen_cli.textures import species_colors
 
 ROOT = Path(__file__).resolve().parent.parent
 SPECIES = ROOT / "species"

@@ -286,7 +286,7 @@ def test_species_mesh_is_bound_and_keeps_every_stem(species):
 
 def atlas_cells(variants=4):
     """A real atlas layout (glTF rects, top-left origin), as the materials stage hands it over."""
-    from treegen_cli.textures import leaf_atlas
+    from treegen_cli.texture_leaf import leaf_atlas
 
     rects = leaf_atlas(0, (0.16, 0.30, 0.06), size=128, variants=variants).rects
     return tuple(tuple(float(x) for x in r) for r in rects)

@@ -16,7 +16,9 @@ from treegen_cli.drawable import Part, from_asset as scene_from_asset
 from treegen_cli.exchange.read_gltf import read_drawable as scene_from_gltf
 from treegen_cli.exchange.read_usd import read_drawable as scene_from_usd
 from treegen_cli.preview import PreviewOptions, camera_for, load_scene, sun_angles
-from treegen_cli.render import Renderer, egl_available, skin_points
+from treegen_cli.render import Renderer
+from treegen_cli.render_gl import egl_available
+from treegen_cli.render_view import skin_points
 from treegen_cli.species_list import describe, species_dir, species_files
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -237,7 +239,7 @@ def test_preview_json_summary(tmp_path):
     import subprocess
     import sys
 
-    from treegen_cli.render import egl_available
+    from treegen_cli.render_gl import egl_available
 
     if not egl_available():
         pytest.skip("no EGL context on this machine")
@@ -288,7 +290,7 @@ def _shoot(part, size=96, sun=(-140.0, 50.0)):
     """(tree, background) renders of one part, framed from the front; background keeps the
     part's shadow."""
     from treegen_cli.drawable import Drawable
-    from treegen_cli.render import frame_points
+    from treegen_cli.render_view import frame_points
 
     scene = Drawable(parts=[part], n_joints=1)
     cam = frame_points(part.positions, -90.0, 0.0, margin=0.3)
@@ -298,7 +300,7 @@ def _shoot(part, size=96, sun=(-140.0, 50.0)):
 
 def _leaf_rgba(size=128):
     """One-variant oval leaf (LeafShape 0) and the card UVs (bottom-left) that fill the card."""
-    from treegen_cli.textures import card_uvs, leaf_atlas
+    from treegen_cli.texture_leaf import card_uvs, leaf_atlas
 
     atlas = leaf_atlas(0, (0.16, 0.30, 0.06), size=size, variants=1)
     card = np.float32([[0, 0], [1, 0], [1, 1], [0, 1]])
@@ -330,7 +332,7 @@ def test_cut_out_leaf_covers_less_of_the_card_and_of_its_shadow():
 
 @needs_egl
 def test_bark_texture_shows_and_normal_map_follows_the_opengl_convention():
-    from treegen_cli.textures import bark_textures
+    from treegen_cli.texture_bark import bark_textures
 
     albedo, normal = bark_textures((0.2, 0.19, 0.17), size=64, seed=1)
     rgba = np.concatenate([albedo, np.full((64, 64, 1), 255, np.uint8)], axis=2)
@@ -364,7 +366,7 @@ def test_bark_texture_shows_and_normal_map_follows_the_opengl_convention():
 
 
 def test_mips_average_in_linear_light_weighted_by_alpha():
-    from treegen_cli.render import mip_chain
+    from treegen_cli.render_gl import mip_chain
 
     rng = np.random.default_rng(0)
     rgba = np.zeros((128, 96, 4), np.uint8)
@@ -463,7 +465,7 @@ def _tiny_asset(material, uvs):
 @needs_egl
 def test_asset_textures_decode_into_parts_and_render_deterministically():
     from treegen_cli.asset import Material, Texture
-    from treegen_cli.textures import png_bytes
+    from treegen_cli.texture_png import png_bytes
 
     rgba, uv = _leaf_rgba()
     mat = Material(
@@ -506,7 +508,7 @@ def _textured_gltf(rgba, uv_bl, normal, interleaved=False, image_uri=None):
     """(JSON, binary) of a one-card glTF with a MASK leaf material, written by hand to the glTF
     2.0 spec the way other exporters do: TEXCOORD_0 as normalized shorts (glTF's v down), or
     interleaved floats (byteStride); images in bufferViews or behind a URI."""
-    from treegen_cli.textures import png_bytes
+    from treegen_cli.texture_png import png_bytes
 
     pos = np.float32([[-0.5, 0, 0], [0.5, 0, 0], [0.5, 2, 0], [-0.5, 2, 0]])
     uv = np.column_stack([uv_bl[:, 0], 1.0 - uv_bl[:, 1]])  # glTF: origin top-left
@@ -597,7 +599,7 @@ def test_gltf_reader_reads_uvs_textures_and_cut_out_of_a_hand_built_file(tmp_pat
     doc, blob = _textured_gltf(rgba, uv, normal)
     (tmp_path / "card.glb").write_bytes(_glb(doc, blob))
     # the same card as .gltf + .bin, floats interleaved with positions, the atlas a PNG file
-    from treegen_cli.textures import png_bytes
+    from treegen_cli.texture_png import png_bytes
 
     doc2, blob2 = _textured_gltf(rgba, uv, normal, interleaved=True, image_uri="leaf%20atlas.png")
     doc2["buffers"][0]["uri"] = "card.bin"
@@ -653,7 +655,7 @@ def _textured_usd(path, rgba, uv_bl, normal, face_varying=False):
     material interface input; textures in textures/ beside the layer."""
     from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, UsdSkel, Vt
 
-    from treegen_cli.textures import png_bytes
+    from treegen_cli.texture_png import png_bytes
 
     (path.parent / "textures").mkdir(exist_ok=True)
     (path.parent / "textures" / "leaf.png").write_bytes(png_bytes(rgba))

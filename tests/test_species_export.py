@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from treegen_cli.exchange import export
-from treegen_cli.exchange.usd import validate_usd
+from treegen_cli.exchange.validate import validate_usd
 from treegen_cli.exchange.validate import summary, validate_gltf
 from treegen_cli.params import load_params
 from treegen_cli.pipeline import MakeOptions, build_asset

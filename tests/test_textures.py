@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from treegen_cli import texture_bark as B, texture_color as C, texture_leaf as L, texture_png as P
 from treegen_cli import textures as T
 from treegen_cli.errors import TreegenError
 from treegen_cli.leafshapes import OUTLINES, fill_factor, outline
@@ -26,12 +27,12 @@ BARK = (0.13, 0.09, 0.06)
 def atlases():
     """One 256² atlas per LeafShape (aspects as the shipped species use them)."""
     aspect = {1: 0.2, 5: 1.0, 6: 0.06, 7: 1.0}
-    return {s: T.leaf_atlas(s, GREEN, size=256, seed=3, aspect=aspect.get(s, 0.5)) for s in OUTLINES}
+    return {s: L.leaf_atlas(s, GREEN, size=256, seed=3, aspect=aspect.get(s, 0.5)) for s in OUTLINES}
 
 
 @pytest.fixture(scope="module")
 def bark():
-    return T.bark_textures(BARK, size=128, seed=5)
+    return B.bark_textures(BARK, size=128, seed=5)
 
 
 def cell_pixels(atlas, k):
@@ -80,7 +81,7 @@ def test_outline_centroid_maps_onto_the_blade(atlases, shape):
     h, w = at.rgba.shape[:2]
     c = outline_centroid(shape)
     for k in range(at.variants):
-        uv = T.card_uvs(c[None, :], np.array([k]), at)[0]
+        uv = L.card_uvs(c[None, :], np.array([k]), at)[0]
         u0, v0, u1, v1 = at.rects[k]
         assert u0 < uv[0] < u1 and v0 < uv[1] < v1
         x0, y0, x1, y1 = cell_pixels(at, k)
@@ -94,7 +95,7 @@ def test_outline_centroid_maps_onto_the_blade(atlases, shape):
 
 @pytest.mark.parametrize("variants", [1, 2, 3, 4, 6, 9])
 def test_rects_inside_unit_square_padded_and_disjoint(variants):
-    at = T.leaf_atlas(0, GREEN, size=256, variants=variants)
+    at = L.leaf_atlas(0, GREEN, size=256, variants=variants)
     r = at.rects.astype(np.float64)
     assert r.shape == (variants, 4)
     assert np.all(r >= 0) and np.all(r <= 1)
@@ -112,26 +113,26 @@ def test_card_uvs_map_card_corners_to_rect_corners(atlases):
     corners = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], dtype=np.float32)
     for k in range(at.variants):
         u0, v0, u1, v1 = at.rects[k]
-        got = T.card_uvs(corners, np.full(4, k), at)
+        got = L.card_uvs(corners, np.full(4, k), at)
         assert got.dtype == np.float32 and got.shape == (4, 2)
         # base (v_card = 0) at the bottom edge v1, tip (v_card = 1) at the top edge v0
         np.testing.assert_allclose(got, [[u0, v1], [u1, v1], [u0, v0], [u1, v0]], atol=1e-7)
 
 
 def test_card_uvs_in_the_asset_convention_round_trip_through_the_gltf_flip(atlases):
-    """Primitive.uvs are bottom-left; exchange/gltf.py writes 1 − v. The texels sampled must be
+    """Primitive.uvs are bottom-left; exchange/gltf_mesh.py writes 1 − v. The texels sampled must be
     the ones atlas.rects name in glTF UVs."""
     at = atlases[1]
     rng = np.random.default_rng(1)
     uv = rng.uniform(0, 1, (200, 2)).astype(np.float32)
     var = rng.integers(0, at.variants, 200)
-    gltf = T.card_uvs(uv, var, at)
-    asset = T.card_uvs(uv, var, at, origin="bottom-left")
-    flipped = np.float32(1.0) - asset[:, 1]  # what gltf.py writes
+    gltf = L.card_uvs(uv, var, at)
+    asset = L.card_uvs(uv, var, at, origin="bottom-left")
+    flipped = np.float32(1.0) - asset[:, 1]  # what gltf_mesh.py writes
     np.testing.assert_allclose(flipped, gltf[:, 1], atol=1e-6)
     np.testing.assert_array_equal(asset[:, 0], gltf[:, 0])
     with pytest.raises(ValueError):
-        T.card_uvs(uv, var, at, origin="centre")
+        L.card_uvs(uv, var, at, origin="centre")
 
 
 def test_card_uvs_vectorised_over_mixed_variants(atlases):
@@ -139,7 +140,7 @@ def test_card_uvs_vectorised_over_mixed_variants(atlases):
     rng = np.random.default_rng(0)
     uv = rng.uniform(0, 1, (1000, 2))
     var = rng.integers(0, at.variants, 1000)
-    got = T.card_uvs(uv, var, at)
+    got = L.card_uvs(uv, var, at)
     r = at.rects[var]
     assert np.all((got[:, 0] >= r[:, 0] - 1e-6) & (got[:, 0] <= r[:, 2] + 1e-6))
     assert np.all((got[:, 1] >= r[:, 1] - 1e-6) & (got[:, 1] <= r[:, 3] + 1e-6))
@@ -149,10 +150,10 @@ def test_card_uvs_on_the_mesh_card_uvs():
     """mesh/leaves.py's cards carry the outline's uvs; mapped, every vertex stays in its cell."""
     from treegen_cli.mesh import CARD
 
-    at = T.leaf_atlas(2, GREEN, size=128)
+    at = L.leaf_atlas(2, GREEN, size=128)
     uv = np.tile(CARD.uvs, (3, 1))
     var = np.repeat([0, 1, 3], len(CARD.uvs))
-    got = T.card_uvs(uv, var, at)
+    got = L.card_uvs(uv, var, at)
     assert np.allclose(got[0], [at.rects[0, 0], at.rects[0, 3]])  # first CARD point: base left
 
 
@@ -177,14 +178,14 @@ def test_transparent_texels_carry_blade_colour(atlases):
             assert clear.any() or shape == 4
             assert np.isin(rgb_key(cell[clear]), rgb_key(cell[solid])).all()
     # and nothing dark anywhere: the padding round the card is leaf colour too
-    lin = T.srgb8_to_linear(atlases[0].rgba[..., :3])
+    lin = C.srgb8_to_linear(atlases[0].rgba[..., :3])
     assert lin.min() > 0.25 * min(GREEN)
 
 
 def test_blade_mean_colour_is_the_colour_given(atlases):
     for shape, at in atlases.items():
         solid = at.rgba[..., 3] >= 128
-        mean = T.srgb8_to_linear(at.rgba[..., :3][solid]).mean(axis=0)
+        mean = C.srgb8_to_linear(at.rgba[..., :3][solid]).mean(axis=0)
         np.testing.assert_allclose(mean, GREEN, rtol=0.04)
 
 
@@ -194,7 +195,7 @@ def test_variants_differ_and_carry_veins(atlases):
         cells = []
         for k in range(at.variants):
             x0, y0, x1, y1 = cell_pixels(at, k)
-            cells.append(T.srgb8_to_linear(at.rgba[y0:y1, x0:x1, :3]))
+            cells.append(C.srgb8_to_linear(at.rgba[y0:y1, x0:x1, :3]))
         means = np.array([c[at.rgba[y0:y1, x0:x1, 3] >= 128].mean(axis=0) for c in cells])
         assert np.ptp(means, axis=0).max() > 0.005  # colour jitter between variants
         lum = cells[0][..., 1][at.rgba[y0:y1, x0:x1, 3] >= 128]
@@ -202,35 +203,35 @@ def test_variants_differ_and_carry_veins(atlases):
 
 
 def test_midrib_is_lighter_than_the_blade_beside_it():
-    at = T.leaf_atlas(4, GREEN, size=256, variants=1)
+    at = L.leaf_atlas(4, GREEN, size=256, variants=1)
     x0, y0, x1, y1 = cell_pixels(at, 0)
-    g = T.srgb8_to_linear(at.rgba[y0:y1, x0:x1, 1])
+    g = C.srgb8_to_linear(at.rgba[y0:y1, x0:x1, 1])
     mid = (x1 - x0) // 2
     rows = slice((y1 - y0) // 4, (y1 - y0) // 2)
     assert g[rows, mid - 1 : mid + 1].mean() > 1.1 * g[rows, mid - 25 : mid - 15].mean()
 
 
 def test_square_leaf_is_a_full_card():
-    at = T.leaf_atlas(4, GREEN, size=128)
+    at = L.leaf_atlas(4, GREEN, size=128)
     x0, y0, x1, y1 = cell_pixels(at, 0)
     assert (at.rgba[y0:y1, x0:x1, 3] == 255).all()
 
 
 def test_atlas_size_not_a_multiple_of_the_grid():
-    at = T.leaf_atlas(0, GREEN, size=200, variants=3)
+    at = L.leaf_atlas(0, GREEN, size=200, variants=3)
     assert at.rgba.shape == (200, 200, 4)
-    assert T.srgb8_to_linear(at.rgba[..., :3]).min() > 0.25 * min(GREEN)
+    assert C.srgb8_to_linear(at.rgba[..., :3]).min() > 0.25 * min(GREEN)
 
 
 def test_leaf_atlas_rejects_bad_input():
     with pytest.raises(TreegenError):
-        T.leaf_atlas(8, GREEN)
+        L.leaf_atlas(8, GREEN)
     with pytest.raises(ValueError):
-        T.leaf_atlas(0, (1.2, 0.5, 0.1))
+        L.leaf_atlas(0, (1.2, 0.5, 0.1))
     with pytest.raises(ValueError):
-        T.leaf_atlas(0, GREEN, variants=0)
+        L.leaf_atlas(0, GREEN, variants=0)
     with pytest.raises(ValueError):
-        T.leaf_atlas(0, GREEN, size=16, variants=16)
+        L.leaf_atlas(0, GREEN, size=16, variants=16)
 
 
 # ------------------------------------------------------------------------------ bark
@@ -254,36 +255,36 @@ def tiles(img, axis):
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_bark_albedo_and_normal_tile_in_both_directions(seed):
-    for img in T.bark_textures(BARK, size=128, seed=seed):
+    for img in B.bark_textures(BARK, size=128, seed=seed):
         assert tiles(img, 0) and tiles(img, 1)
 
 
 @pytest.mark.parametrize("furrow", [0.0, 0.3])
 def test_smooth_bark_tiles_and_is_smoother(furrow):
-    for img in T.bark_textures(BARK, size=128, seed=0, furrow=furrow):
+    for img in B.bark_textures(BARK, size=128, seed=0, furrow=furrow):
         assert tiles(img, 0) and tiles(img, 1)
-    rough = np.abs(np.diff(T.bark_height(128, 0, 1.0), axis=1)).mean()
-    assert np.abs(np.diff(T.bark_height(128, 0, furrow), axis=1)).mean() < 0.8 * rough
+    rough = np.abs(np.diff(B.bark_height(128, 0, 1.0), axis=1)).mean()
+    assert np.abs(np.diff(B.bark_height(128, 0, furrow), axis=1)).mean() < 0.8 * rough
     with pytest.raises(ValueError):
-        T.bark_textures(BARK, furrow=1.5)
+        B.bark_textures(BARK, furrow=1.5)
 
 
 def test_tiling_check_catches_a_texture_that_does_not_tile():
     """Control: a corner crop of a bigger bark is not periodic and the check says so."""
-    albedo, normal = T.bark_textures(BARK, size=256, seed=0)
+    albedo, normal = B.bark_textures(BARK, size=256, seed=0)
     assert not tiles(albedo[:128, :128], 0)
     assert not tiles(normal[:128, :128], 0)
 
 
 def test_bark_tiles_at_512_too():
     """512 runs the Voronoi pass at half resolution and upsamples it on the torus."""
-    for img in T.bark_textures(BARK, size=512, seed=0):
+    for img in B.bark_textures(BARK, size=512, seed=0):
         assert tiles(img, 0) and tiles(img, 1)
 
 
 def test_bark_furrows_run_along_v():
     """Bark runs along the stem: the height changes faster across (u) than along (v)."""
-    h = T.bark_height(256, seed=1).astype(np.float64)
+    h = B.bark_height(256, seed=1).astype(np.float64)
     across = np.abs(np.diff(h, axis=1)).mean()
     along = np.abs(np.diff(h, axis=0)).mean()
     assert across > 1.3 * along
@@ -301,8 +302,8 @@ def test_normal_map_is_opengl_convention():
     """glTF: R = +X right (u), G = +Y up (toward row 0). A texel whose height rises to the right
     tilts left (R < 128); one whose height rises toward the top row tilts down (G < 128)."""
     size, seed = 128, 2
-    h = T.bark_height(size, seed).astype(np.float64)
-    _, nm = T.bark_textures(BARK, size, seed)
+    h = B.bark_height(size, seed).astype(np.float64)
+    _, nm = B.bark_textures(BARK, size, seed)
     n = nm.astype(np.float64) / 127.5 - 1.0
     dh_right = np.roll(h, -1, axis=1) - np.roll(h, 1, axis=1)
     dh_up = np.roll(h, 1, axis=0) - np.roll(h, -1, axis=0)
@@ -312,10 +313,10 @@ def test_normal_map_is_opengl_convention():
 
 def test_bark_albedo_mean_is_the_tint_and_furrows_are_dark():
     size = 128
-    albedo, _ = T.bark_textures(BARK, size, seed=4)
-    lin = T.srgb8_to_linear(albedo)
+    albedo, _ = B.bark_textures(BARK, size, seed=4)
+    lin = C.srgb8_to_linear(albedo)
     np.testing.assert_allclose(lin.reshape(-1, 3).mean(axis=0), BARK, rtol=0.03)
-    h = T.bark_height(size, seed=4)
+    h = B.bark_height(size, seed=4)
     assert lin[h < 0.2].mean() < 0.6 * lin[h > 0.6].mean()
 
 
@@ -327,8 +328,8 @@ def test_bark_shapes_and_types(bark):
 
 def test_bark_same_pattern_at_every_resolution():
     """The noise is drawn per frequency, not per texel: 256² is the 512² picture, downsampled."""
-    a = T.bark_height(256, seed=9).astype(np.float64)
-    b = T.bark_height(512, seed=9).astype(np.float64)
+    a = B.bark_height(256, seed=9).astype(np.float64)
+    b = B.bark_height(512, seed=9).astype(np.float64)
     b = b.reshape(256, 2, 256, 2).mean(axis=(1, 3))
     assert np.corrcoef(a.ravel(), b.ravel())[0, 1] > 0.8
 
@@ -337,20 +338,20 @@ def test_bark_same_pattern_at_every_resolution():
 
 
 def test_png_bytes_deterministic_and_seeded():
-    a1 = T.png_bytes(T.leaf_atlas(0, GREEN, 128, seed=1).rgba)
-    a2 = T.png_bytes(T.leaf_atlas(0, GREEN, 128, seed=1).rgba)
-    a3 = T.png_bytes(T.leaf_atlas(0, GREEN, 128, seed=2).rgba)
+    a1 = P.png_bytes(L.leaf_atlas(0, GREEN, 128, seed=1).rgba)
+    a2 = P.png_bytes(L.leaf_atlas(0, GREEN, 128, seed=1).rgba)
+    a3 = P.png_bytes(L.leaf_atlas(0, GREEN, 128, seed=2).rgba)
     assert a1 == a2 and a1 != a3
-    b1 = [T.png_bytes(x) for x in T.bark_textures(BARK, 64, seed=1)]
-    b2 = [T.png_bytes(x) for x in T.bark_textures(BARK, 64, seed=1)]
-    b3 = [T.png_bytes(x) for x in T.bark_textures(BARK, 64, seed=2)]
+    b1 = [P.png_bytes(x) for x in B.bark_textures(BARK, 64, seed=1)]
+    b2 = [P.png_bytes(x) for x in B.bark_textures(BARK, 64, seed=1)]
+    b3 = [P.png_bytes(x) for x in B.bark_textures(BARK, 64, seed=2)]
     assert b1 == b2 and b1[0] != b3[0] and b1[1] != b3[1]
 
 
 @pytest.mark.parametrize("channels,mode", [(3, "RGB"), (4, "RGBA")])
 def test_png_bytes_round_trip_without_metadata(channels, mode):
     arr = np.random.default_rng(0).integers(0, 256, (17, 23, channels), dtype=np.uint8)
-    data = T.png_bytes(arr)
+    data = P.png_bytes(arr)
     assert data[:8] == b"\x89PNG\r\n\x1a\n"
     for chunk in (b"tEXt", b"zTXt", b"iTXt", b"tIME", b"pHYs", b"eXIf"):
         assert chunk not in data
@@ -361,9 +362,9 @@ def test_png_bytes_round_trip_without_metadata(channels, mode):
 
 def test_png_bytes_rejects_other_arrays():
     with pytest.raises(ValueError):
-        T.png_bytes(np.zeros((4, 4), dtype=np.uint8))
+        P.png_bytes(np.zeros((4, 4), dtype=np.uint8))
     with pytest.raises(ValueError):
-        T.png_bytes(np.zeros((4, 4, 3), dtype=np.float32))
+        P.png_bytes(np.zeros((4, 4, 3), dtype=np.float32))
 
 
 # ------------------------------------------------------------------------------ colours
@@ -396,7 +397,7 @@ def test_species_textures_bundle():
     assert pngs == T.species_textures(p, seed=1, leaf_size=128, bark_size=64, variants=2).pngs()
     solid = tex.leaf.rgba[..., 3] >= 128
     np.testing.assert_allclose(
-        T.srgb8_to_linear(tex.leaf.rgba[..., :3][solid]).mean(axis=0),
+        C.srgb8_to_linear(tex.leaf.rgba[..., :3][solid]).mean(axis=0),
         T.DEFAULT_LEAF_COLOR["weeping_willow"],
         rtol=0.04,
     )
@@ -426,5 +427,5 @@ def test_png_bytes_identical_in_a_fresh_interpreter():
 def test_atlas_rects_is_the_layout_leaf_atlas_draws(variants, size):
     """The layout alone (for UV mapping before the pixels exist) is exactly the atlas's."""
     np.testing.assert_array_equal(
-        T.atlas_rects(variants, size), T.leaf_atlas(0, GREEN, size, variants, seed=1).rects
+        L.atlas_rects(variants, size), L.leaf_atlas(0, GREEN, size, variants, seed=1).rects
     )

@@ -15,7 +15,8 @@ from pxr import Gf, Usd, UsdGeom, UsdLod, UsdShade, UsdSkel, Vt  # noqa: E402
 from synthetic import synthetic_asset  # noqa: E402
 from treegen_cli.axes import to_y_up  # noqa: E402
 from treegen_cli.errors import TreegenError  # noqa: E402
-from treegen_cli.exchange.usd import validate_usd, write_usd as _write_usd  # noqa: E402
+from treegen_cli.exchange.usd import write_usd as _write_usd  # noqa: E402
+from treegen_cli.exchange.validate import validate_usd  # noqa: E402
 from treegen_cli.prepare import prepare  # noqa: E402
 
 FORMATS = ("usda", "usdc", "usdz")
@@ -375,7 +376,8 @@ def test_usd_and_gltf_agree(tmp_path):
     def export(a, p):
         return _export(prepare(a), p)
 
-    from treegen_cli.exchange.gltf import quat_to_y_up, read_accessor, read_gltf
+    from treegen_cli.axes import quat_to_y_up
+    from treegen_cli.exchange.gltf_container import read_accessor, read_gltf
 
     asset = synthetic_asset(lods=1)
     export(asset, tmp_path / "t.glb")
@@ -518,7 +520,8 @@ def test_arkit_checker_is_not_vacuous(tmp_path):
     """A Z-up .usdz with UsdLod prims fails the checker the way the issue reported."""
     if not arkit_check.available():
         pytest.skip("usd-core 24.11 ComplianceChecker not installed: python tests/arkit_check.py --install")
-    from treegen_cli.exchange.usd import build_stage, write_stage
+    from treegen_cli.exchange.usd import build_stage
+    from treegen_cli.exchange.usd_stage import write_stage
 
     path = tmp_path / "z.usdz"
     stage = build_stage(prepare(synthetic_asset(lods=3), bounds=True), "Z", None, lod_schemas=True)

@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from treegen_cli.exchange.gltf import read_accessor, read_gltf, write_gltf
+from treegen_cli.exchange.gltf import write_gltf
+from treegen_cli.exchange.gltf_container import read_accessor, read_gltf
 from treegen_cli.params import load_params
 from treegen_cli.pipeline import MakeOptions, build_asset
 from treegen_cli.rig import build_rig

@@ -32,7 +32,7 @@ from .exchange import GLTF_DEFAULTS, STATIC, check_suffix, check_up_axis, export
 from .forest import run_forest, schema_text as forest_schema_text  # noqa: F401  (the forest door)
 from .generate import generate
 from .limits import MAX_TREES, estimate_triangles  # noqa: F401  (MAX_TREES: forest's default)
-from .lod import PAPER_DISTANCES, lod_table_row, schedule_rows
+from .lod_report import PAPER_DISTANCES, lod_table_row, schedule_rows
 from .mesh import MESH_DEFAULTS
 
 # re-exported: api is the one door (api.DEFAULTS, api.resolve, ...)
@@ -203,7 +203,7 @@ def info(
         lod_options = resolve(given("lod")).options.lod
         assert lod_options is not None  # no_lod is not an info option
         from .impostor import IMPOSTOR_DEFAULTS
-        from .render import egl_available  # lazy: GL only when the impostor is drawn
+        from .render_gl import egl_available  # lazy: GL only when the impostor is drawn
 
         make_options = MakeOptions(
             generate=generate_options,

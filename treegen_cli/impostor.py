@@ -33,7 +33,8 @@ import numpy as np
 
 from .asset import Clip, Impostor, Lod, Material, Primitive, Skeleton, Texture
 from .errors import TreegenError
-from .lod import LodOptions, decimate, screen_distance
+from .lod import LodOptions, screen_distance
+from .lod_decimate import decimate
 from .quat import mul as quat_mul, unit as unit_quat
 
 
@@ -369,7 +370,7 @@ def build_impostor(
     source = atlas_source(full, coarse)
     centre, radius, (lo, hi) = sphere(source)
     albedo, normal = render_views(source, materials, centre, radius, options)
-    from .textures import png_bytes_unfiltered as png
+    from .texture_png import png_bytes_unfiltered as png
 
     albedo_tex = Texture("impostor_albedo", png(albedo), wrap="CLAMP")
     normal_tex = Texture("impostor_normal", png(normal), wrap="CLAMP", srgb=False)

@@ -8,8 +8,8 @@ Each view is an orthographic camera on the bounding sphere (centre, radius) look
 centre from the direction its cell's centre decodes to (impostor.cell_direction: the same
 formula, in GLSL here). One instanced draw call per part: the vertex shader picks the instance's
 cell, projects the rest-pose vertex into the view and places it inside the cell, whose square
-holds the whole sphere, so nothing leaks into a neighbour. Rendered on render.py's context with
-its texture conventions; a plain cut-out test (the views are small: one sample a pixel). Space
+holds the whole sphere, so nothing leaks into a neighbour. Rendered on render_gl.py's context with
+render.py's texture conventions; a plain cut-out test (the views are small: one sample a pixel). Space
 is the generator's (Z up): a, b, up = +X, +Y, +Z.
 
 Cost (llvmpipe, CPU): the leaves are most of it, a fixed price per few-pixel card and view,
@@ -24,7 +24,7 @@ import numpy as np
 
 from .drawable import Drawable
 from .errors import TreegenError
-from .render import GL_SRGB8_ALPHA8, _context
+from .render_gl import GL_SRGB8_ALPHA8, gl_context
 
 # A card faces the light as one surface; a crown's leaves face every way and shade each other.
 # Leaves' albedo is scaled by this so the cards, lit by an engine, match the coarsest LOD's
@@ -252,7 +252,7 @@ def render_atlas(
     space: pass a Drawable whose parts are Z up), top row first, as read-only views.
     Double-sided parts are leaves (the lean program), the others bark."""
     try:
-        ctx = _context()
+        ctx = gl_context()
     except TreegenError as e:  # the default make must say what to do without EGL
         raise TreegenError(
             f"impostor: {str(e).removeprefix('preview: ')} (make it with --no-impostor)"

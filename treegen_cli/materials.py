@@ -40,7 +40,8 @@ from .asset import Material, Texture
 from .errors import TreegenError
 from .mesh import FULL_CARD_CELL
 from .params import Params
-from .textures import atlas_rects, species_colors, species_textures
+from .texture_leaf import atlas_rects
+from .textures import species_colors, species_textures
 
 TEXTURE_SIZES = (64, 2048)  # --texture-size range, powers of two (mip chains, old GPUs)
 ALPHA_CUTOFF = 0.5  # leaf alpha test: the atlas alpha is anti-aliased coverage

@@ -18,8 +18,9 @@ from .generate import DEFAULTS as GENERATE_DEFAULTS, GenerateOptions, generate
 from .impostor import ImpostorOptions, build_impostor, cards, switch_distance
 from .exchange.compress import GLTF_DEFAULTS, GltfOptions
 from .limits import LIMITS_DEFAULTS, Limits, check_keys, check_mesh
-from .lod import LOD_DEFAULTS, LodOptions, decimate, screen_coverage, switch_distances
+from .lod import LOD_DEFAULTS, LodOptions, screen_coverage, switch_distances
 from .lod_budget import lod_tree
+from .lod_decimate import decimate
 from .materials import MATERIAL_DEFAULTS, MaterialOptions, build_materials
 from .mesh import MESH_DEFAULTS, MeshOptions, build_mesh
 from .params import Params

@@ -27,7 +27,7 @@ from .bundled import LIST_HINT, bundled_species, not_found
 from .errors import TreegenError
 from .params import load_params
 from .pipeline import MakeOptions, build_asset
-from .render import frame_points, skin_points
+from .render_view import frame_points, skin_points
 
 
 @dataclass(frozen=True)

@@ -51,7 +51,7 @@ def metres_per_pixel(distance: float, options) -> float:
 
 def _camera(points: np.ndarray, azimuth: float, size_px: tuple[int, int], m_per_px: float):
     """A far camera looking at the points' bounding box whose pixels span `m_per_px` there."""
-    from .render import Camera, direction
+    from .render_view import Camera, direction
 
     lo, hi = points.min(0), points.max(0)
     target = 0.5 * (lo + hi)
@@ -65,7 +65,7 @@ def _camera(points: np.ndarray, azimuth: float, size_px: tuple[int, int], m_per_
 
 def _extent(points: np.ndarray, azimuth: float) -> tuple[float, float]:
     """(width, height) in metres of the points seen from `azimuth` (orthographic)."""
-    from .render import direction, look_at
+    from .render_view import direction, look_at
 
     view = look_at(np.zeros(3), -direction(azimuth, ELEVATION))
     v = points @ view[:3, :3].T

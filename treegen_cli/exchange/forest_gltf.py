@@ -37,31 +37,19 @@ import numpy as np
 from .. import __version__
 from ..asset import Forest, Material
 from .compress import GLTF_DEFAULTS, GltfOptions, UvRange, meshopt_step, position_grid, uv_range
-from .gltf import (
-    Quantization,
-    Textures,
-    _Buffer,
-    _gltf_uvs,
-    _is_default,
-    _primitive,
-    _y_up32,
-    finish,
-    inverse_bind_accessor,
-    joint_fields,
-    lod_extras,
-    material_dict,
-    moving_joints,
-    rotation_samplers,
-    set_msft_lod,
-    to_y_up,
-    write_document,
-)
+from ..axes import to_y_up
+from .gltf_animation import moving_joints, rotation_samplers
+from .gltf_buffer import Buffer, finish
+from .gltf_container import write_document
+from .gltf_material import Textures, material_dict
+from .gltf_mesh import Quantization, gltf_uvs, primitive_dict, y_up32
+from .gltf_nodes import inverse_bind_accessor, is_default, joint_fields, lod_extras, set_msft_lod
 
 
 class _Shared:
     """Lazily written per-(prototype, LOD[, variant]) data, so unused LODs cost nothing."""
 
-    def __init__(self, scene: Forest, buf: _Buffer, options: GltfOptions = GLTF_DEFAULTS):
+    def __init__(self, scene: Forest, buf: Buffer, options: GltfOptions = GLTF_DEFAULTS):
         self.scene, self.buf, self.options = scene, buf, options
         self.uv_boxes = _uv_boxes(scene) if options.quantized else {}
         self._quant: dict = {}
@@ -91,7 +79,7 @@ class _Shared:
             asset = self.scene.prototypes[p]
             lod = asset.lods[k]
             step = meshopt_step(self.options, lod.distance) if self.options.compress == "meshopt" else 0.0
-            grid = position_grid([_y_up32(q.positions) for q in lod.primitives], step)
+            grid = position_grid([y_up32(q.positions) for q in lod.primitives], step)
             self._quant[(p, k)] = Quantization(
                 grid, {m.name: self.uv_boxes[m] for m in asset.materials if m in self.uv_boxes}
             )
@@ -105,7 +93,7 @@ class _Shared:
             J = len(lod.skeleton.names)
             quant = self.quant(p, k)
             prims = [
-                _primitive(self.buf, q, J, self.material(mats[q.material]), quant) for q in lod.primitives
+                primitive_dict(self.buf, q, J, self.material(mats[q.material]), quant) for q in lod.primitives
             ]
             self._mesh[(p, k)] = len(self.meshes)
             self.meshes.append(
@@ -156,7 +144,7 @@ def _uv_boxes(scene: Forest) -> dict[Material, UvRange]:
         mats = {m.name: m for m in asset.materials}
         for lod in asset.lods:
             for q in lod.primitives:
-                by.setdefault(mats[q.material], []).append(_gltf_uvs(q))
+                by.setdefault(mats[q.material], []).append(gltf_uvs(q))
     return {m: uv_range(u) for m, u in by.items()}
 
 
@@ -166,9 +154,9 @@ def build_forest(scene: Forest, options: GltfOptions = GLTF_DEFAULTS) -> tuple[d
     return gltf, buf.blob()
 
 
-def _build_forest(scene: Forest, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, _Buffer]:
+def _build_forest(scene: Forest, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, Buffer]:
     """Scene → (glTF JSON dict without buffer uri, the unjoined buffer)."""
-    buf = _Buffer(meshopt=options.compress == "meshopt", pooled=options.quantized)
+    buf = Buffer(meshopt=options.compress == "meshopt", pooled=options.quantized)
     sh = _Shared(scene, buf, options)
     nodes: list[dict] = []
     skins: list[dict] = []
@@ -193,7 +181,7 @@ def _build_forest(scene: Forest, options: GltfOptions = GLTF_DEFAULTS) -> tuple[
             parent = np.asarray(sk.parent)
             jroots = np.flatnonzero(parent < 0)
             place_node = {"name": f"{name}_LOD{k}_place", "children": [int(x) for x in joint_nodes[jroots]]}
-            if not _is_default(t, [0, 0, 0]):
+            if not is_default(t, [0, 0, 0]):
                 place_node["translation"] = [float(x) for x in t]
             if inst.rotation_deg % 360 != 0:
                 place_node["rotation"] = [float(x) for x in q]

@@ -33,7 +33,8 @@ from ..errors import TreegenError
 from ..asset import Forest
 from ..axes import to_y_up
 from .texture_files import TextureFiles
-from .usd import _identifier, _sample_rate, _snap, build_stage, check_suffix, new_stage, up_axis, write_stage
+from .usd import build_stage
+from .usd_stage import check_suffix, identifier, new_stage, sample_rate, snap, up_axis, write_stage
 
 
 def _prototype_asset(forest: Forest, p: int, lods: list[int], loop: bool):
@@ -83,11 +84,11 @@ def build_forest_stage(
     tcps = None
     clips = [c for a in scene.prototypes for lod in a.lods for c in lod.clips if len(c.times) > 1]
     if clips and scene.loop > 0:
-        tcps = _sample_rate(clips[0].times)
+        tcps = sample_rate(clips[0].times)
         stage.SetTimeCodesPerSecond(tcps)
         stage.SetFramesPerSecond(tcps)
         stage.SetStartTimeCode(0.0)
-        stage.SetEndTimeCode(float(_snap(np.array([scene.loop * tcps]))[0]))
+        stage.SetEndTimeCode(float(snap(np.array([scene.loop * tcps]))[0]))
 
     # one prototype prim per (prototype, LOD) used, or per prototype with all LODs
     wanted: dict[tuple[int, int], None] = {}
@@ -98,7 +99,7 @@ def build_forest_stage(
     for p, k in sorted(wanted):  # per prototype: a few
         asset = scene.prototypes[p]
         lods = list(range(len(asset.lods))) if k < 0 else [k]
-        proto = _identifier(f"{asset.name}_s{asset.extras.get('seed', p)}")
+        proto = identifier(f"{asset.name}_s{asset.extras.get('seed', p)}")
         sub = build_stage(
             _prototype_asset(scene, p, lods, tcps is not None),
             up,
@@ -107,7 +108,7 @@ def build_forest_stage(
             texture_prefix=proto + "_",
         )
         src = sub.GetDefaultPrim().GetPath()
-        name = _identifier(proto + ("" if k < 0 else f"_lod{k}"))
+        name = identifier(proto + ("" if k < 0 else f"_lod{k}"))
         while name in used:
             name += "_"
         used.add(name)

@@ -37,7 +37,7 @@ from ..drawable import (
 from ..errors import TreegenError
 from ..skeleton import forward, trs
 from .compress import MESHOPT, decode
-from .gltf import read_accessor, read_gltf
+from .gltf_container import read_accessor, read_gltf
 
 WRAP = {10497: "REPEAT", 33071: "CLAMP", 33648: "MIRROR"}  # sampler wrapS / wrapT
 

@@ -1,7 +1,8 @@
-"""Run the Khronos glTF-Validator (npm `gltf-validator`, pinned in tools/) on a file.
+"""Validators for what we write: the Khronos glTF-Validator (npm `gltf-validator`, pinned in
+tools/) and USD's own (pxr.UsdValidation, `validate_usd`).
 
-The validator is JavaScript, so we shell out to `node tools/validate.mjs FILE`, which prints
-the validator's JSON report. `make install` runs `cd tools && npm ci` to install it.
+The glTF validator is JavaScript, so we shell out to `node tools/validate.mjs FILE`, which
+prints the validator's JSON report. `make install` runs `cd tools && npm ci` to install it.
 """
 
 from __future__ import annotations
@@ -71,3 +72,43 @@ def summary(report: dict) -> str:
         f"{names.get(m['severity'], m['severity'])} {m['code']} {m.get('pointer', '')}: {m['message']}"
         for m in report["issues"]["messages"]
     )
+
+
+def validate_usd(path, all_variants: bool = True) -> list[str]:
+    """Run every validator registered with pxr.UsdValidation (core, geom, shade, skel, usdz
+    utils, ...) over the stage at `path`; return their messages (empty list = clean).
+
+    all_variants: also validate the stage under every selection of every variant set (our
+    "LOD" set), set in the session layer, so non-default LODs are checked too.
+    """
+    from pxr import Usd, UsdValidation
+
+    stage = Usd.Stage.Open(str(path))
+    if stage is None:
+        return [f"{path}: cannot be opened as a USD stage"]
+    registry = UsdValidation.ValidationRegistry()
+    context = UsdValidation.ValidationContext(registry.GetOrLoadAllValidators())
+    messages: list[str] = []
+
+    def run(label: str) -> None:
+        for e in context.Validate(stage):
+            if not e.HasNoError():
+                msg = e.GetErrorAsString() + label
+                if msg not in messages:
+                    messages.append(msg)
+
+    run("")
+    if all_variants:
+        sets = [
+            (prim.GetPath(), name, prim.GetVariantSets().GetVariantSet(name).GetVariantNames())
+            for prim in stage.Traverse()
+            for name in prim.GetVariantSets().GetNames()
+        ]
+        with Usd.EditContext(stage, stage.GetSessionLayer()):
+            for prim_path, name, variants in sets:
+                vset = stage.GetPrimAtPath(prim_path).GetVariantSets().GetVariantSet(name)
+                for variant in variants:
+                    vset.SetVariantSelection(variant)
+                    run(f" [variant {prim_path}{{{name}={variant}}}]")
+                vset.ClearVariantSelection()
+    return messages

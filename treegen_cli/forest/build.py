@@ -26,7 +26,8 @@ from ..errors import TreegenError, in_file as _in_file
 from ..exchange import FOREST_WRITERS, GltfOptions, check_compress, check_suffix, export_forest
 from ..impostor import IMPOSTOR_DEFAULTS
 from ..limits import MAX_TREES
-from ..lod import LOD_DEFAULTS, leaf_updates as lod_leaf_updates, pixel_size
+from ..lod import LOD_DEFAULTS, pixel_size
+from ..lod_report import leaf_updates as lod_leaf_updates
 from ..params import load_params
 from ..pipeline import MakeOptions, build_asset
 from ..prepare import prepare_forest

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..asset import Primitive
 from ..leafshapes import OUTLINES, outline
-from ..textures import card_uvs
+from ..texture_leaf import card_uvs
 from .options import FULL_CARD_CELL
 
 CARD = OUTLINES[4]  # the full length × width rectangle, UVs 0..1

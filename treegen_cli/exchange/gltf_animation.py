@@ -1,0 +1,66 @@
+"""glTF animation: a Clip's rotation tracks as samplers and channels, each track with only the
+keys its LOD's schedule kept (tracks with the same key set share one input accessor)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..asset import Clip, Skeleton
+from ..axes import quat_to_y_up
+from ..quat import continuous
+from .compress import snorm16
+from .gltf_buffer import Buffer
+from .gltf_mesh import unit
+
+
+def moving_joints(clip: Clip) -> np.ndarray:
+    """Joints that get a channel (prepared in Clip.animated)."""
+    if clip.animated is None:
+        raise ValueError(f"clip {clip.name!r} is not prepared (prepare.prepare before export)")
+    return np.flatnonzero(clip.animated)
+
+
+def rotation_samplers(
+    buf: Buffer, clip: Clip, joints: np.ndarray, inputs: dict, quantized: bool = False
+) -> list[tuple[int, dict]]:
+    """[(joint, sampler)] for the rotation tracks of `joints`, each with only its kept keys
+    (Y up, sign-continuous). `inputs` caches input accessors by (times, key set), so tracks
+    with the same schedule share one. `quantized`: outputs as normalized int16 (core glTF),
+    QUATERNION-filtered under meshopt."""
+    K = len(clip.times)
+    rot = unit(quat_to_y_up(clip.rotations))
+    times = np.asarray(clip.times, dtype=np.float32)
+    out = []
+    for j in joints:  # loop over joints (a few hundred), not keys or vertices
+        keys = np.arange(K) if clip.keys is None else np.asarray(clip.keys[j], dtype=np.int64)
+        ident = (times.tobytes(), keys.tobytes())
+        if ident not in inputs:
+            inputs[ident] = buf.accessor(times[keys], bounds=True)
+        q = continuous(rot[keys, j])
+        output = (
+            buf.accessor(snorm16(q), normalized=True, filter="QUATERNION", source=q.astype(np.float32))
+            if quantized
+            else buf.accessor(q.astype(np.float32))
+        )
+        sampler = {"input": inputs[ident], "output": output}
+        if not (quantized and clip.interpolation == "LINEAR"):  # (LINEAR is glTF's default)
+            sampler["interpolation"] = clip.interpolation
+        out.append((int(j), sampler))
+    return out
+
+
+def animation_dict(
+    buf: Buffer, clip: Clip, skeleton: Skeleton, joint_nodes: np.ndarray, quantized: bool = False
+) -> dict | None:
+    """The clip as one glTF animation: a rotation channel per moving joint, on its node in
+    `joint_nodes`; None when no joint moves."""
+    joints = moving_joints(clip)
+    if len(joints) == 0:
+        return None
+    samplers, channels = [], []
+    for j, sampler in rotation_samplers(buf, clip, joints, {}, quantized):
+        samplers.append(sampler)
+        channels.append(
+            {"sampler": len(samplers) - 1, "target": {"node": int(joint_nodes[j]), "path": "rotation"}}
+        )
+    return {"name": clip.name, "samplers": samplers, "channels": channels}
