@@ -546,6 +546,20 @@ def _bounded(
     return kept, err2, rounds + r, work + w
 
 
+def keys_within(
+    skeleton: Skeleton, primitives: list[Primitive], rotations: np.ndarray, limit: float
+) -> np.ndarray:
+    """Kept keys (K, J) of the dense `rotations` (K, J, 4, unit) whose slerp playback keeps
+    every skinned vertex within `limit` metres of the dense pose on every frame (box-corner
+    probes, composed through the hierarchy): the "bounded" schedule with a bound in metres
+    rather than pixels (compressed files' LOD0, exchange/key_plan.py)."""
+    m = _Model.of(skeleton, probes(skeleton, primitives))
+    kept, _, _, _ = _bounded(
+        m, rotations, pose_world(skeleton, rotations), limit, "LINEAR", LOD_DEFAULTS.max_iterations
+    )
+    return kept
+
+
 def _view_radius(primitives: list[Primitive], world: np.ndarray, hom: np.ndarray) -> float:
     """Farthest distance (m) from the centre of the rest bounds of `primitives` to any box
     corner posed by joint world matrices `world` (K, J, 4, 4): it bounds every skinned vertex

@@ -44,6 +44,7 @@ from .. import __version__
 from ..asset import Asset, Clip, Material, Primitive, Skeleton, Texture
 from ..axes import Z_UP_TO_Y_UP, matrix_to_y_up, quat_to_y_up, to_y_up  # noqa: F401  (re-exported)
 from ..quat import continuous as _continuous
+from . import key_plan
 from .impostor_meta import describe, impostor_lod, write_sidecar
 from .compress import (
     GLTF_DEFAULTS,
@@ -98,12 +99,15 @@ class _Buffer:
         self.view_parts: list[memoryview] = []
         # --compress meshopt: how each accessor's view is encoded (compress.meshopt_views)
         self.meshopt: dict[int, MeshoptView] | None = {} if meshopt else None
-        self.groups: list[tuple[int, list[int]]] = []  # (index view, vertex views) per primitive
-        # --compress: skin and key data pooled into one view per (element type, filter), so
-        # meshopt's codec sees long streams instead of hundreds of 301-key tracks (as gltfpack
-        # does) and the JSON lists a few views instead of one per track
+        # (index accessor, vertex accessors) per primitive: reordered together under meshopt
+        self.groups: list[tuple[int, list[int]]] = []
+        # --compress: data pooled into one view per (target, element type, filter), as gltfpack
+        # does: meshopt's codec sees long streams instead of hundreds of 301-key tracks, and the
+        # JSON lists a few views instead of one per track and vertex attribute
         self.pooled = pooled or meshopt
-        self.pools: dict[tuple, list[tuple[dict, np.ndarray, np.ndarray | None]]] = {}
+        self.pools: dict[tuple, list[tuple[int, np.ndarray, np.ndarray | None]]] = {}
+        # meshopt: a pooled view's members (accessor, data, filter source), encoded as one stream
+        self.members: dict[int, list[tuple[int, np.ndarray, np.ndarray | None]]] = {}
 
     def view(self, data, target: int | None) -> int:
         data = memoryview(data).cast("B")
@@ -137,10 +141,10 @@ class _Buffer:
         a = a.astype(a.dtype.newbyteorder("<"), copy=False)  # no copy on little-endian hosts
         stored = 1 if a.ndim == 1 else math.prod(a.shape[1:])
         comps = stored - 1 if padded else stored
-        if self.pooled and target is None:
-            acc = self._fields(a, comps, stored, normalized, bounds)
-            self.pools.setdefault((a.dtype.str, stored, filter), []).append((acc, a, source))
-            self.accessors.append(acc)
+        if self.pooled:
+            self.accessors.append(self._fields(a, comps, stored, normalized, bounds))
+            key = (target, a.dtype.str, stored, filter)
+            self.pools.setdefault(key, []).append((len(self.accessors) - 1, a, source))
             return len(self.accessors) - 1
         view = self.view(a.reshape(-1).view(np.uint8), target)
         if padded:
@@ -173,27 +177,32 @@ class _Buffer:
         return acc
 
     def flush_pools(self) -> None:
-        """One view per pool, each accessor at its offset in it (meshopt: with its encoding)."""
-        for (_, stored, filter), members in self.pools.items():
+        """One view per pool, each accessor at its offset in it (meshopt: with its encoding).
+        A vertex pool states its byteStride (several accessors share the view); every element
+        is 4 bytes or a multiple, so each accessor stays 4-byte aligned."""
+        for (target, _, stored, filter), members in self.pools.items():
             data = np.concatenate([a.reshape(-1).view(np.uint8) for _, a, _ in members])
-            view = self.view(data, None)
+            view = self.view(data, target)
+            size = members[0][1].itemsize * stored
+            if target == ARRAY_BUFFER:
+                self.views[view]["byteStride"] = size
             offset = 0
             for acc, a, _ in members:
-                acc["bufferView"] = view
+                self.accessors[acc]["bufferView"] = view
                 if offset:
-                    acc["byteOffset"] = offset
+                    self.accessors[acc]["byteOffset"] = offset
                 offset += a.nbytes
             if self.meshopt is None:
                 continue
-            size = members[0][1].itemsize * stored
-            sources = [src for _, _, src in members]
             self.meshopt[view] = MeshoptView(
-                mode="ATTRIBUTES",
+                mode={ARRAY_BUFFER: "ATTRIBUTES", ELEMENT_ARRAY_BUFFER: "TRIANGLES"}.get(
+                    target, "ATTRIBUTES"
+                ),
                 stride=size,
                 count=len(data) // size,
                 filter=filter,
-                source=np.concatenate(sources) if filter != "NONE" else None,
             )
+            self.members[view] = members
         self.pools = {}
 
     def padding(self) -> bytes:
@@ -349,13 +358,8 @@ def _quantized_primitive(
         "material": material,
         "mode": 4,
     }
-    if buf.meshopt is not None:  # one vertex order for all of the primitive's views
-        buf.groups.append(
-            (
-                buf.accessors[prim["indices"]]["bufferView"],
-                [buf.accessors[a]["bufferView"] for a in attrs.values()],
-            )
-        )
+    if buf.meshopt is not None:  # one vertex order for all of the primitive's attributes
+        buf.groups.append((prim["indices"], list(attrs.values())))
     return prim
 
 
@@ -391,28 +395,42 @@ def moving_joints(clip: Clip) -> np.ndarray:
 
 
 def rotation_samplers(
-    buf: _Buffer, clip: Clip, joints: np.ndarray, inputs: dict, quantized: bool = False
+    buf: _Buffer,
+    clip: Clip,
+    joints: np.ndarray,
+    inputs: dict,
+    quantized: bool = False,
+    wide: np.ndarray | None = None,
 ) -> list[tuple[int, dict]]:
     """[(joint, sampler)] for the rotation tracks of `joints`, each with only its kept keys
     (Y up, sign-continuous). `inputs` caches input accessors by (times, key set), so tracks
     with the same schedule share one. `quantized`: outputs as normalized int16 (core glTF),
-    QUATERNION-filtered under meshopt."""
+    QUATERNION-filtered under meshopt, but float32 for the `wide` joints (key_plan.py); a
+    track whose stored keys are all equal is stored as its first key (the first track keeps
+    its span, so the clip keeps its length)."""
     K = len(clip.times)
     rot = _unit(quat_to_y_up(clip.rotations))
     times = np.asarray(clip.times, dtype=np.float32)
     out = []
     for j in joints:  # loop over joints (a few hundred), not keys or vertices
         keys = np.arange(K) if clip.keys is None else np.asarray(clip.keys[j], dtype=np.int64)
+        q = _continuous(rot[keys, j])
+        if not quantized:
+            values, fields = q.astype(np.float32), {}
+        elif wide is not None and wide[j]:  # meshopt: EXPONENTIAL-filtered (compress.EXP_BITS)
+            values = q.astype(np.float32)
+            fields = {"filter": "EXPONENTIAL", "source": values}
+        else:
+            values = snorm16(q)
+            fields = {"normalized": True, "filter": "QUATERNION", "source": q.astype(np.float32)}
+        if quantized and out and len(keys) > 1 and not np.any(values != values[:1]):
+            keys, values = keys[:1], values[:1]
+            if "source" in fields:
+                fields["source"] = fields["source"][:1]
         ident = (times.tobytes(), keys.tobytes())
         if ident not in inputs:
             inputs[ident] = buf.accessor(times[keys], bounds=True)
-        q = _continuous(rot[keys, j])
-        output = (
-            buf.accessor(snorm16(q), normalized=True, filter="QUATERNION", source=q.astype(np.float32))
-            if quantized
-            else buf.accessor(q.astype(np.float32))
-        )
-        sampler = {"input": inputs[ident], "output": output}
+        sampler = {"input": inputs[ident], "output": buf.accessor(values, **fields)}
         if not (quantized and clip.interpolation == "LINEAR"):  # (LINEAR is glTF's default)
             sampler["interpolation"] = clip.interpolation
         out.append((int(j), sampler))
@@ -420,13 +438,18 @@ def rotation_samplers(
 
 
 def _animation(
-    buf: _Buffer, clip: Clip, skeleton: Skeleton, joint_nodes: np.ndarray, quantized: bool = False
+    buf: _Buffer,
+    clip: Clip,
+    skeleton: Skeleton,
+    joint_nodes: np.ndarray,
+    quantized: bool = False,
+    wide: np.ndarray | None = None,
 ) -> dict | None:
     joints = moving_joints(clip)
     if len(joints) == 0:
         return None
     samplers, channels = [], []
-    for j, sampler in rotation_samplers(buf, clip, joints, {}, quantized):
+    for j, sampler in rotation_samplers(buf, clip, joints, {}, quantized, wide):
         samplers.append(sampler)
         channels.append(
             {"sampler": len(samplers) - 1, "target": {"node": int(joint_nodes[j]), "path": "rotation"}}
@@ -626,7 +649,11 @@ def _build(asset: Asset, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, _B
             "extras": lod_extras(asset, k),
         }
         for clip in lod.clips:
-            anim = _animation(buf, clip, sk, joint_nodes, options.quantized)
+            wide = None
+            if options.quantized and clip.keys is None and len(clip.times) > 2:
+                kp = key_plan.plan(lod, clip, options.compress == "meshopt")  # within 1 mm
+                clip, wide = kp.clip, kp.wide
+            anim = _animation(buf, clip, sk, joint_nodes, options.quantized, wide)
             if anim is not None:
                 animations.append(anim)
 
@@ -687,12 +714,26 @@ def finish(gltf: dict, buf: _Buffer, quantized: bool, uv_boxes) -> _Buffer:
 def _meshopt(gltf: dict, buf: _Buffer) -> _Buffer:
     """EXT_meshopt_compression: every view with an encoding (buf.meshopt) is encoded by
     meshoptimizer into buffer 0; its uncompressed layout moves to buffer 1, a fallback buffer
-    with no data (the extension is required, so no client reads it). Images stay as they are."""
+    with no data (the extension is required, so no client reads it). Images stay as they are.
+    A pooled view goes to the encoder as one job per member (a primitive's index and vertex
+    members are reordered together), joined into one stream before encoding."""
     assert buf.meshopt is not None
     order = sorted(buf.meshopt)
-    slot = {v: k for k, v in enumerate(order)}
-    groups = [(slot[i], [slot[v] for v in vs]) for i, vs in buf.groups]
-    encoded = dict(zip(order, encode([(buf.meshopt[i], buf.view_parts[i]) for i in order], groups)))
+    jobs: list[tuple[MeshoptView, memoryview]] = []
+    joins: list[int] = []
+    job_of: dict[int, int] = {}  # accessor → job
+    for k, v in enumerate(order):
+        spec = buf.meshopt[v]
+        for acc, a, source in buf.members.get(v, [(None, None, None)]):
+            if acc is None:  # a view of its own
+                jobs.append((spec, buf.view_parts[v]))
+            else:
+                job_of[acc] = len(jobs)
+                part = MeshoptView(spec.mode, spec.stride, len(a), spec.filter, source)
+                jobs.append((part, memoryview(a.reshape(-1).view(np.uint8))))
+            joins.append(k)
+    groups = [(job_of[i], [job_of[v] for v in vs]) for i, vs in buf.groups]
+    encoded = dict(zip(order, encode(jobs, groups, joins)))
     out = _Buffer()
     for i, view in enumerate(buf.views):
         if i not in encoded:
