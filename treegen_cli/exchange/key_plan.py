@@ -8,7 +8,7 @@ composed through the hierarchy. Two things spend that millimetre:
   * 16-bit keys. A key rounded to c/32767 turns its joint by up to ~6e-5 rad, which moves a
     vertex 23 m away by 1.4 mm, and the joints of a chain add up: with every key at 16 bits
     the CA black oak's crown moves by 3.5 mm. Joints get float32 keys, longest reach first,
-    until the 16-bit rounding alone stays within QUANT_SHARE of the bound.
+    until the 16-bit rounding alone stays within a share of the bound (QUANT_SHARES).
     meshopt stores them with its EXPONENTIAL filter (compress.EXP_BITS of mantissa) instead.
   * Keys (quantize only). The rest of the bound goes to lod.keys_within: slerp between kept
     keys instead of every frame, so a slow track keeps a fraction of its keys and a nearly
@@ -35,7 +35,9 @@ from ..skeleton import pose_world
 from .compress import EXP_BITS
 
 ANIMATION_ERROR = 1e-3  # metres, LOD0's bound for compressed files (geometry has its own)
-QUANT_SHARE = 0.3e-3  # metres of it the 16-bit rounding may take; the rest goes to keys
+# metres of it the 16-bit rounding may take (quantize tries each, largest first); the rest
+# goes to dropping keys
+QUANT_SHARES = (0.9e-3, 0.6e-3, 0.3e-3)
 MARGIN = 0.05e-3  # metres kept back from the key bound (box probes vs hull corners)
 INPUT_JSON = 95  # bytes of JSON a key-time accessor takes
 
@@ -94,44 +96,74 @@ class _Check:
         return out
 
 
-def plan(lod: Lod, clip: Clip, meshopt: bool = False) -> KeyPlan:
-    """The float32 joints and kept keys of dense `clip` (of `lod`) within ANIMATION_ERROR
-    (see the module doc: quantize drops keys, meshopt keeps them)."""
-    rot = unit(np.asarray(clip.rotations, dtype=np.float64))
+def _widen(check: _Check, rot: np.ndarray, wide: np.ndarray, share: float, meshopt: bool) -> float:
+    """Widen joints (in place) until the rounding alone keeps every vertex within `share`
+    metres: a few rounds, each widening, per joint too far off, its longest-reach ancestor
+    not yet wide. Returns the rounding's error (metres)."""
     K, J = rot.shape[:2]
-    check = _Check(lod, rot, exact=False)
     every = np.ones((K, J), dtype=bool)
-    wide = np.zeros(J, dtype=bool)
-    anc = _ancestors(np.asarray(lod.skeleton.parent, dtype=np.int64))
-    reach = check.probes.reach
-    share = ANIMATION_ERROR - MARGIN if meshopt else QUANT_SHARE
-    while True:  # a few rounds: each widens, per joint too far off, its longest-reach ancestor
+    anc = _ancestors(np.asarray(check.skeleton.parent, dtype=np.int64))
+    while True:
         err = check.errors(stored(rot, wide, meshopt), every)
         bad = np.flatnonzero(err > share)
         chains = anc[bad]
-        lever = np.where(wide[chains], -1.0, reach[chains])
+        lever = np.where(wide[chains], -1.0, check.probes.reach[chains])
         pick = chains[np.arange(len(bad)), lever.argmax(axis=1)][lever.max(axis=1) >= 0]
         if not pick.size:
-            break
+            return float(err.max())
         wide[pick] = True
-    values = stored(rot, wide, meshopt)
-    limit = ANIMATION_ERROR - float(err.max()) - MARGIN
-    kept = every
-    for _ in range(0 if meshopt else 4):  # met at once unless slerp of rounded keys strays
-        if limit <= 0:
-            break
-        trial = keys_within(lod.skeleton, lod.primitives, rot, limit)
-        trial_error = float(check.errors(values, trial).max())
-        if trial_error <= ANIMATION_ERROR:
-            kept = trial
-            break
-        limit -= trial_error - ANIMATION_ERROR + MARGIN
-    kept = _cheaper(kept, wide, check, values)
-    keys = [np.flatnonzero(kept[:, j]) for j in range(J)]
-    return KeyPlan(replace(clip, keys=keys), wide, meshopt)
 
 
-def _cheaper(kept: np.ndarray, wide: np.ndarray, check: _Check, values: np.ndarray) -> np.ndarray:
+def _decimated(lod: Lod, check: _Check, rot: np.ndarray, wide: np.ndarray, limit: float) -> np.ndarray:
+    """Kept keys (K, J) whose playback of the stored keys stays within ANIMATION_ERROR: keys found
+    within `limit` metres of the dense clip, the limit shrunk if slerp of rounded keys strays
+    further (met at once, as a rule); every key when no limit is left."""
+    values = stored(rot, wide)
+    for _ in range(4):
+        if limit <= MARGIN:
+            break
+        kept = keys_within(lod.skeleton, lod.primitives, rot, limit)
+        error = float(check.errors(values, kept).max())
+        if error <= ANIMATION_ERROR:
+            return _cheaper(kept, wide, values, check)
+        limit -= error - ANIMATION_ERROR + MARGIN
+    return np.ones(rot.shape[:2], dtype=bool)
+
+
+def _bytes(kept: np.ndarray, wide: np.ndarray) -> int:
+    """What a plan costs in a quantize file: 8 bytes a 16-bit key, 16 a float32 one, and per
+    distinct key set but the full one its times (4 bytes a key) and accessor."""
+    n = kept.sum(axis=0)
+    sets = {kept[:, j].tobytes(): int(n[j]) for j in range(kept.shape[1]) if n[j] < kept.shape[0]}
+    return int((n * np.where(wide, 16, 8)).sum()) + sum(4 * c + INPUT_JSON for c in sets.values())
+
+
+def plan(lod: Lod, clip: Clip, meshopt: bool = False) -> KeyPlan:
+    """The float32 joints and kept keys of dense `clip` (of `lod`) within ANIMATION_ERROR
+    (see the module doc: quantize drops keys, meshopt keeps them). quantize tries each of
+    QUANT_SHARES for the rounding (the wide set only grows as the share shrinks) and keeps
+    the plan that costs the fewest bytes: a calm tree gains by dropping keys, a restless one
+    by rounding fewer joints wide."""
+    rot = unit(np.asarray(clip.rotations, dtype=np.float64))
+    K, J = rot.shape[:2]
+    check = _Check(lod, rot, exact=False)
+    wide = np.zeros(J, dtype=bool)
+    if meshopt:
+        _widen(check, rot, wide, ANIMATION_ERROR - MARGIN, True)
+        return KeyPlan(replace(clip, keys=[np.arange(K)] * J), wide, True)
+    best: tuple[int, np.ndarray, np.ndarray] | None = None
+    for share in QUANT_SHARES:
+        quant = _widen(check, rot, wide, share, False)
+        kept = _decimated(lod, check, rot, wide, ANIMATION_ERROR - quant - MARGIN)
+        cost = _bytes(kept, wide)
+        if best is None or cost < best[0]:
+            best = (cost, kept, wide.copy())
+    assert best is not None
+    _, kept, wide = best
+    return KeyPlan(replace(clip, keys=[np.flatnonzero(kept[:, j]) for j in range(J)]), wide, False)
+
+
+def _cheaper(kept: np.ndarray, wide: np.ndarray, values: np.ndarray, check: _Check) -> np.ndarray:
     """`kept` with every key back on the tracks where dropping keys costs more than it saves:
     a decimated track needs its own key times (4 bytes a key and ~INPUT_JSON bytes of
     accessor) while full tracks share one; kept as is if that strays past the bound."""
