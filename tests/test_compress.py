@@ -172,7 +172,7 @@ def test_compressed_lod0_animation_within_one_millimetre(files, monkeypatch):
     lod = files["asset"].lods[0]
     dense = lod.clips[0]
     J = len(lod.skeleton.names)
-    naive = key_plan.KeyPlan(replace(dense, keys=[np.arange(len(dense.times))] * J), np.zeros(J, bool), False)
+    naive = key_plan.KeyPlan(replace(dense, keys=[np.arange(len(dense.times))] * J), np.zeros(J, bool))
     assert key_plan.error(lod, dense, naive) > 1 * MM
     for meshopt in (False, True):
         kp = key_plan.plan(lod, dense, meshopt)

@@ -171,6 +171,7 @@ class MeshoptView:
     count: int
     filter: str = "NONE"
     source: np.ndarray | None = None
+    bits: int | None = None  # the filter's bits (None: FILTER_BITS)
 
 
 def _node(who: str = "--compress meshopt", what: str = "encoder") -> str:
@@ -271,7 +272,7 @@ def encode(
                 "stride": spec.stride,
                 "count": spec.count,
                 "bytes": raw.nbytes,
-                "bits": FILTER_BITS.get(spec.filter, QUAT_BITS),
+                "bits": spec.bits or FILTER_BITS.get(spec.filter, QUAT_BITS),
                 "join": k if joins is None else joins[k],
             }
         )

@@ -108,6 +108,7 @@ class _Buffer:
         self.pools: dict[tuple, list[tuple[int, np.ndarray, np.ndarray | None]]] = {}
         # meshopt: a pooled view's members (accessor, data, filter source), encoded as one stream
         self.members: dict[int, list[tuple[int, np.ndarray, np.ndarray | None]]] = {}
+        self.bits: dict[int, int] = {}  # accessor → its filter's bits, where not the default
 
     def view(self, data, target: int | None) -> int:
         data = memoryview(data).cast("B")
@@ -133,15 +134,19 @@ class _Buffer:
         padded: bool = False,
         filter: str = "NONE",
         source: np.ndarray | None = None,
+        bits: int | None = None,
     ) -> int:
         """`padded`: a's last component is alignment padding, not data (the view's byteStride
-        keeps it, the accessor type drops it). `filter`/`source`: the meshopt filter for this
-        view and the float32 (count, 4) data it encodes."""
+        keeps it, the accessor type drops it). `filter`/`source`/`bits`: the meshopt filter
+        for this view, the float32 (count, 4) data it encodes and its bits (a pooled
+        QUATERNION view's members may differ: each key states its own)."""
         a = np.ascontiguousarray(a)
         a = a.astype(a.dtype.newbyteorder("<"), copy=False)  # no copy on little-endian hosts
         stored = 1 if a.ndim == 1 else math.prod(a.shape[1:])
         comps = stored - 1 if padded else stored
         if self.pooled:
+            if bits is not None:
+                self.bits[len(self.accessors)] = bits
             self.accessors.append(self._fields(a, comps, stored, normalized, bounds))
             key = (target, a.dtype.str, stored, filter)
             self.pools.setdefault(key, []).append((len(self.accessors) - 1, a, source))
@@ -401,11 +406,13 @@ def rotation_samplers(
     inputs: dict,
     quantized: bool = False,
     wide: np.ndarray | None = None,
+    bits: np.ndarray | None = None,
 ) -> list[tuple[int, dict]]:
     """[(joint, sampler)] for the rotation tracks of `joints`, each with only its kept keys
     (Y up, sign-continuous). `inputs` caches input accessors by (times, key set), so tracks
     with the same schedule share one. `quantized`: outputs as normalized int16 (core glTF),
-    QUATERNION-filtered under meshopt, but float32 for the `wide` joints (key_plan.py); a
+    QUATERNION-filtered under meshopt (at `bits` per joint when given), but float32 for the
+    `wide` joints (key_plan.py); a
     track whose stored keys are all equal is stored as its first key (the first track keeps
     its span, so the clip keeps its length)."""
     K = len(clip.times)
@@ -417,12 +424,16 @@ def rotation_samplers(
         q = _continuous(rot[keys, j])
         if not quantized:
             values, fields = q.astype(np.float32), {}
-        elif wide is not None and wide[j]:  # meshopt: EXPONENTIAL-filtered (compress.EXP_BITS)
+        elif wide is not None and wide[j]:  # meshopt: EXPONENTIAL-filtered
             values = q.astype(np.float32)
             fields = {"filter": "EXPONENTIAL", "source": values}
+            if bits is not None:
+                fields["bits"] = int(bits[j])
         else:
             values = snorm16(q)
             fields = {"normalized": True, "filter": "QUATERNION", "source": q.astype(np.float32)}
+            if bits is not None:
+                fields["bits"] = int(bits[j])
         if quantized and out and len(keys) > 1 and not np.any(values != values[:1]):
             keys, values = keys[:1], values[:1]
             if "source" in fields:
@@ -443,13 +454,16 @@ def _animation(
     skeleton: Skeleton,
     joint_nodes: np.ndarray,
     quantized: bool = False,
-    wide: np.ndarray | None = None,
+    plan: key_plan.KeyPlan | None = None,
 ) -> dict | None:
     joints = moving_joints(clip)
     if len(joints) == 0:
         return None
+    if plan is not None:
+        clip = plan.clip
+    wide, bits = (plan.wide, plan.bits) if plan is not None else (None, None)
     samplers, channels = [], []
-    for j, sampler in rotation_samplers(buf, clip, joints, {}, quantized, wide):
+    for j, sampler in rotation_samplers(buf, clip, joints, {}, quantized, wide, bits):
         samplers.append(sampler)
         channels.append(
             {"sampler": len(samplers) - 1, "target": {"node": int(joint_nodes[j]), "path": "rotation"}}
@@ -649,11 +663,10 @@ def _build(asset: Asset, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, _B
             "extras": lod_extras(asset, k),
         }
         for clip in lod.clips:
-            wide = None
+            kp = None
             if options.quantized and clip.keys is None and len(clip.times) > 2:
                 kp = key_plan.plan(lod, clip, options.compress == "meshopt")  # within 1 mm
-                clip, wide = kp.clip, kp.wide
-            anim = _animation(buf, clip, sk, joint_nodes, options.quantized, wide)
+            anim = _animation(buf, clip, sk, joint_nodes, options.quantized, kp)
             if anim is not None:
                 animations.append(anim)
 
@@ -729,7 +742,7 @@ def _meshopt(gltf: dict, buf: _Buffer) -> _Buffer:
                 jobs.append((spec, buf.view_parts[v]))
             else:
                 job_of[acc] = len(jobs)
-                part = MeshoptView(spec.mode, spec.stride, len(a), spec.filter, source)
+                part = MeshoptView(spec.mode, spec.stride, len(a), spec.filter, source, buf.bits.get(acc))
                 jobs.append((part, memoryview(a.reshape(-1).view(np.uint8))))
             joins.append(k)
     groups = [(job_of[i], [job_of[v] for v in vs]) for i, vs in buf.groups]

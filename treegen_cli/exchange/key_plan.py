@@ -9,7 +9,10 @@ composed through the hierarchy. Two things spend that millimetre:
     vertex 23 m away by 1.4 mm, and the joints of a chain add up: with every key at 16 bits
     the CA black oak's crown moves by 3.5 mm. Joints get float32 keys, longest reach first,
     until the 16-bit rounding alone stays within a share of the bound (QUANT_SHARES).
-    meshopt stores them with its EXPONENTIAL filter (compress.EXP_BITS of mantissa) instead.
+    meshopt's QUATERNION filter rounds twice (its bits, then the decoder's int16 output), so
+    there a joint starts at 12 bits and is raised, longest reach first, through 14 and 16 to
+    float32 keys under the EXPONENTIAL filter (compress.EXP_BITS of mantissa): short twigs
+    stay cheap, long levers exact enough.
   * Keys (quantize only). The rest of the bound goes to lod.keys_within: slerp between kept
     keys instead of every frame, so a slow track keeps a fraction of its keys and a nearly
     still one only its end keys (which the writer stores as one key: the track is constant).
@@ -40,28 +43,50 @@ ANIMATION_ERROR = 1e-3  # metres, LOD0's bound for compressed files (geometry ha
 QUANT_SHARES = (0.9e-3, 0.6e-3, 0.3e-3)
 MARGIN = 0.05e-3  # metres kept back from the key bound (box probes vs hull corners)
 INPUT_JSON = 95  # bytes of JSON a key-time accessor takes
+# meshopt: a joint's filter bits, raised step by step: QUATERNION up to 16, then EXPONENTIAL
+# (float32 keys, `wide`) with that many bits of mantissa
+MESHOPT_LEVELS = (12, 14, 16, EXP_BITS)
 
 
 @dataclass(frozen=True)
 class KeyPlan:
     """A dense clip as a compressed file stores it: `clip` with per-joint kept keys, `wide`
-    (J,) joints whose keys stay float32."""
+    (J,) joints whose keys stay float32, and under meshopt the QUATERNION filter's `bits`
+    (J,) of the others (None: int16, quantize)."""
 
     clip: Clip
     wide: np.ndarray
-    meshopt: bool
+    bits: np.ndarray | None = None
 
 
-def stored(rotations: np.ndarray, wide: np.ndarray, meshopt: bool = False) -> np.ndarray:
+def quat_filter(q: np.ndarray, bits: np.ndarray) -> np.ndarray:
+    """Unit quaternions (K, J, 4) as meshopt's QUATERNION filter at `bits` (J,) gives them back:
+    the three smallest components times √2 rounded to bits − 1 bits (half away from zero), the
+    largest recovered as √(1 − Σ), all four then stored as normalized int16."""
+    top = np.argmax(np.abs(q), axis=-1)[..., None]
+    sign = np.where(np.take_along_axis(q, top, axis=-1) < 0, -1.0, 1.0)
+    scale = (2.0 ** (np.asarray(bits, np.float64) - 1) - 1)[:, None]
+    v = np.clip(q * sign * np.sqrt(2.0), -1.0, 1.0) * scale
+    small = np.trunc(v + np.where(v >= 0, 0.5, -0.5)) / scale / np.sqrt(2.0)
+    np.put_along_axis(small, top, 0.0, axis=-1)
+    w = np.sqrt(np.maximum(0.0, 1.0 - (small**2).sum(axis=-1, keepdims=True)))
+    np.put_along_axis(small, top, w, axis=-1)
+    return np.rint(small * 32767.0) / 32767.0
+
+
+def stored(rotations: np.ndarray, wide: np.ndarray, bits: np.ndarray | None = None) -> np.ndarray:
     """Rotations (K, J, 4) as a client reads them back: normalized int16 (c / 32767, as
-    compress.snorm16 writes them) except the `wide` joints' float32, which meshopt's
-    EXPONENTIAL filter rounds to steps of 2^(2 − EXP_BITS) at most (a unit quaternion's
-    shared exponent is ≤ 1)."""
-    out = np.rint(np.clip(rotations, -1.0, 1.0) * 32767.0) / 32767.0
+    compress.snorm16 writes them), or meshopt's QUATERNION filter at `bits` per joint when
+    given, except the `wide` joints' float32 (meshopt: its EXPONENTIAL filter at `bits`
+    of mantissa, steps of 2^(2 − bits) at most: a unit quaternion's shared exponent is ≤ 1)."""
+    if bits is None:
+        out = np.rint(np.clip(rotations, -1.0, 1.0) * 32767.0) / 32767.0
+    else:
+        out = quat_filter(rotations, np.minimum(bits, 16))
     wide_values = rotations[:, wide].astype(np.float32).astype(np.float64)
-    if meshopt:
-        step = 2.0 ** (2 - EXP_BITS)
-        wide_values = np.rint(wide_values / step) * step
+    if bits is not None:
+        step = 2.0 ** (2.0 - bits[wide])
+        wide_values = np.rint(wide_values / step[:, None]) * step[:, None]
     out[:, wide] = wide_values
     return out
 
@@ -96,22 +121,33 @@ class _Check:
         return out
 
 
-def _widen(check: _Check, rot: np.ndarray, wide: np.ndarray, share: float, meshopt: bool) -> float:
-    """Widen joints (in place) until the rounding alone keeps every vertex within `share`
-    metres: a few rounds, each widening, per joint too far off, its longest-reach ancestor
-    not yet wide. Returns the rounding's error (metres)."""
+def _widen(
+    check: _Check, rot: np.ndarray, wide: np.ndarray, share: float, bits: np.ndarray | None = None
+) -> float:
+    """Raise joints' precision (in place) until the rounding alone keeps every vertex within
+    `share` metres: rounds, each raising, per joint too far off, its longest-reach ancestor
+    not yet wide by one step (meshopt: `bits` through MESHOPT_LEVELS; quantize:
+    int16, then wide). Returns the rounding's error (metres)."""
     K, J = rot.shape[:2]
     every = np.ones((K, J), dtype=bool)
     anc = _ancestors(np.asarray(check.skeleton.parent, dtype=np.int64))
     while True:
-        err = check.errors(stored(rot, wide, meshopt), every)
+        err = check.errors(stored(rot, wide, bits), every)
         bad = np.flatnonzero(err > share)
         chains = anc[bad]
-        lever = np.where(wide[chains], -1.0, check.probes.reach[chains])
-        pick = chains[np.arange(len(bad)), lever.argmax(axis=1)][lever.max(axis=1) >= 0]
+        done = wide[chains] if bits is None else bits[chains] >= MESHOPT_LEVELS[-1]
+        lever = np.where(done, -1.0, check.probes.reach[chains])
+        pick = np.unique(chains[np.arange(len(bad)), lever.argmax(axis=1)][lever.max(axis=1) >= 0])
         if not pick.size:
             return float(err.max())
-        wide[pick] = True
+        if bits is None:
+            wide[pick] = True
+            continue
+        pick = pick[bits[pick] < MESHOPT_LEVELS[-1]]
+        if not pick.size:
+            return float(err.max())
+        bits[pick] = [MESHOPT_LEVELS[MESHOPT_LEVELS.index(b) + 1] for b in bits[pick]]
+        wide[pick] = bits[pick] > 16
 
 
 def _decimated(lod: Lod, check: _Check, rot: np.ndarray, wide: np.ndarray, limit: float) -> np.ndarray:
@@ -149,18 +185,19 @@ def plan(lod: Lod, clip: Clip, meshopt: bool = False) -> KeyPlan:
     check = _Check(lod, rot, exact=False)
     wide = np.zeros(J, dtype=bool)
     if meshopt:
-        _widen(check, rot, wide, ANIMATION_ERROR - MARGIN, True)
-        return KeyPlan(replace(clip, keys=[np.arange(K)] * J), wide, True)
+        bits = np.full(J, MESHOPT_LEVELS[0])
+        _widen(check, rot, wide, ANIMATION_ERROR - MARGIN, bits)
+        return KeyPlan(replace(clip, keys=[np.arange(K)] * J), wide, bits)
     best: tuple[int, np.ndarray, np.ndarray] | None = None
     for share in QUANT_SHARES:
-        quant = _widen(check, rot, wide, share, False)
+        quant = _widen(check, rot, wide, share)
         kept = _decimated(lod, check, rot, wide, ANIMATION_ERROR - quant - MARGIN)
         cost = _bytes(kept, wide)
         if best is None or cost < best[0]:
             best = (cost, kept, wide.copy())
     assert best is not None
     _, kept, wide = best
-    return KeyPlan(replace(clip, keys=[np.flatnonzero(kept[:, j]) for j in range(J)]), wide, False)
+    return KeyPlan(replace(clip, keys=[np.flatnonzero(kept[:, j]) for j in range(J)]), wide)
 
 
 def _cheaper(kept: np.ndarray, wide: np.ndarray, values: np.ndarray, check: _Check) -> np.ndarray:
@@ -185,4 +222,4 @@ def error(lod: Lod, dense: Clip, kp: KeyPlan) -> float:
     kept = np.zeros(rot.shape[:2], dtype=bool)
     for j, k in enumerate(kp.clip.keys):  # per joint (hundreds)
         kept[k, j] = True
-    return float(_Check(lod, rot, exact=True).errors(stored(rot, kp.wide, kp.meshopt), kept).max())
+    return float(_Check(lod, rot, exact=True).errors(stored(rot, kp.wide, kp.bits), kept).max())
