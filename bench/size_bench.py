@@ -9,10 +9,12 @@ tools/) on the uncompressed file: its default (quantized) and `-cc -af 0` (mesho
 kept), with the ratios ours / gltfpack. Targets: quantize ≤ gltfpack default, meshopt ≤
 gltfpack -cc -af 0. Each tree is built once and written three ways.
 
-`tracks` is LOD0's rotation tracks in ours / with more than one key in gltfpack's default
-output: gltfpack drops or collapses to one key every track it finds nearly still, including
-ones whose motion moves the geometry by millimetres (beyond treegen's 1 mm LOD0 bound), which is
-where a ratio above 1 comes from.
+`err q / m` is how far LOD0's animation moves any skinned vertex from the float file's on any
+frame in our quantize / meshopt files (mm; exchange/key_plan.py's measure on hull corners;
+bound 1 mm). `tracks` is LOD0's rotation tracks in ours / with more than one key in
+gltfpack's default output: gltfpack drops or collapses to one key every track it finds nearly
+still, including ones whose motion moves the geometry by millimetres (beyond the 1 mm LOD0
+bound), which is where a ratio above 1 comes from.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from treegen_cli import api
-from treegen_cli.exchange import export
+from treegen_cli.exchange import export, key_plan
 from treegen_cli.exchange.gltf_container import read_gltf
 from treegen_cli.params import load_params
 from treegen_cli.pipeline import Timings
@@ -74,6 +76,10 @@ def row(name: str, set_name: str, options: dict, tmp: Path) -> dict:
         export(asset, path, job.options.gltf)
         out[compress] = path.stat().st_size
         out[f"{compress}_s"] = time.perf_counter() - t0
+    lod0 = asset.lods[0]
+    for compress in ("quantize", "meshopt"):
+        kp = key_plan.plan(lod0, lod0.clips[0], compress == "meshopt")
+        out[f"{compress}_err"] = key_plan.error(lod0, lod0.clips[0], kp)
     src = tmp / f"{name}_{set_name}_none.glb"
     out["gp"] = gltfpack(src, tmp / "gp.glb")
     out["tracks"], out["gp_tracks"] = moving_tracks(src), moving_tracks(tmp / "gp.glb")
@@ -92,7 +98,7 @@ def main() -> None:
     print(
         f"{'species':<16}{'set':<9}{'tris':>9}{'joints':>7}{'none MB':>9}{'quant MB':>9}"
         f"{'gp MB':>8}{'q/gp':>6}{'meshopt':>9}{'gp -cc':>8}{'m/gp':>6}{'none/m':>7}"
-        f"{'tracks':>10}"
+        f"{'err q/m mm':>11}{'tracks':>10}"
     )
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.species.split(","):
@@ -101,9 +107,10 @@ def main() -> None:
                 print(
                     f"{name:<16}{set_name:<9}{r['triangles']:>9,}{r['joints']:>7}"
                     f"{r['none'] / mb:>9.2f}{r['quantize'] / mb:>9.2f}{r['gp'] / mb:>8.2f}"
-                    f"{r['quantize'] / r['gp']:>6.2f}{r['meshopt'] / mb:>9.2f}"
-                    f"{r['gp_cc'] / mb:>8.2f}{r['meshopt'] / r['gp_cc']:>6.2f}"
+                    f"{r['quantize'] / r['gp']:>6.3f}{r['meshopt'] / mb:>9.2f}"
+                    f"{r['gp_cc'] / mb:>8.2f}{r['meshopt'] / r['gp_cc']:>6.3f}"
                     f"{r['none'] / r['meshopt']:>7.1f}"
+                    f"{r['quantize_err'] * 1e3:>6.2f}/{r['meshopt_err'] * 1e3:<4.2f}"
                     f"{r['tracks']:>5}/{r['gp_tracks']:<4}",
                     flush=True,
                 )

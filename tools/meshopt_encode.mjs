@@ -1,8 +1,9 @@
 // meshoptimizer's own encoder for treegen's `--compress meshopt` (EXT_meshopt_compression).
 // One call per file. stdin: uint32 LE JSON length, JSON {jobs: [{mode, filter, stride, count,
-// bytes, bits}], groups: [{indices, vertices}]}, then each job's bytes (the view's data, or for a
+// bytes, bits, join}], groups: [{indices, vertices}]}, then each job's bytes (the data, or for a
 // filter its float32 (count, 4) source). stdout: uint32 LE JSON length, JSON [encoded lengths],
-// then the encoded views in job order.
+// then the encoded streams in order: consecutive jobs with the same `join` are one bufferView,
+// filtered job by job, then joined and encoded once.
 // A group is one primitive: its index job and its vertex jobs are first reordered together by
 // reorderMesh (vertex cache order for size, then vertex fetch order), the same triangles and
 // vertices in another order. Vertex codec version 0: the one EXT_meshopt_compression defines.
@@ -43,15 +44,33 @@ for (const g of groups) {
   }
 }
 
-const encoded = jobs.map((job, k) => {
+// filters per job, then each stream's jobs (consecutive, same `join`) joined and encoded once
+const filtered = jobs.map((job, k) => {
   let d = data[k];
   if (job.filter !== "NONE") {
-    const fn = { OCTAHEDRAL: "encodeFilterOct", QUATERNION: "encodeFilterQuat" }[job.filter];
+    const fn = { OCTAHEDRAL: "encodeFilterOct", QUATERNION: "encodeFilterQuat", EXPONENTIAL: "encodeFilterExp" }[job.filter];
     if (!fn) throw new Error(`unknown filter ${job.filter}`);
-    d = MeshoptEncoder[fn](new Float32Array(d.buffer), job.count, job.stride, job.bits);
+    // EXPONENTIAL: one exponent per vector (SharedVector), `bits` of mantissa
+    const extra = job.filter === "EXPONENTIAL" ? ["SharedVector"] : [];
+    d = MeshoptEncoder[fn](new Float32Array(d.buffer), job.count, job.stride, job.bits, ...extra);
   }
-  return MeshoptEncoder.encodeGltfBuffer(d, job.count, job.stride, job.mode, 0);
+  return d;
 });
+const encoded = [];
+for (let k = 0; k < jobs.length; ) {
+  let end = k + 1;
+  while (end < jobs.length && jobs[end].join === jobs[k].join) end++;
+  const parts = filtered.slice(k, end);
+  const joined = new Uint8Array(parts.reduce((n, p) => n + p.length, 0));
+  let at = 0;
+  for (const p of parts) {
+    joined.set(p, at);
+    at += p.length;
+  }
+  const count = jobs.slice(k, end).reduce((n, j) => n + j.count, 0);
+  encoded.push(MeshoptEncoder.encodeGltfBuffer(joined, count, jobs[k].stride, jobs[k].mode, 0));
+  k = end;
+}
 const head = Buffer.from(JSON.stringify(encoded.map((o) => o.length)), "utf8");
 const len = Buffer.alloc(4);
 len.writeUInt32LE(head.length, 0);

@@ -272,3 +272,17 @@ def measure_error_px(
     near = near_pixel_size(distance, radius, options)
     err = float(np.linalg.norm(x - dense_x, axis=2).max())
     return err / near if near > 0 else math.inf
+
+
+def keys_within(
+    skeleton: Skeleton, primitives: list[Primitive], rotations: np.ndarray, limit: float
+) -> np.ndarray:
+    """Kept keys (K, J) of the dense `rotations` (K, J, 4, unit) whose slerp playback keeps
+    every skinned vertex within `limit` metres of the dense pose on every frame (box-corner
+    probes, composed through the hierarchy): the "bounded" schedule with a bound in metres
+    rather than pixels (compressed files' LOD0, exchange/key_plan.py)."""
+    m = PlaybackModel.of(skeleton, probes(skeleton, primitives))
+    kept, _, _, _ = _bounded(
+        m, rotations, pose_world(skeleton, rotations), limit, "LINEAR", LOD_DEFAULTS.max_iterations
+    )
+    return kept

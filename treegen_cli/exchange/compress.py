@@ -6,10 +6,12 @@
               beyond [0, 1], bark's, through KHR_texture_transform), rotation keys as normalized
               int16 (core glTF). A skinned mesh ignores its node's transform, so the grid's
               dequantization (offset + uniform scale: normals stay normals) is folded into the
-              skin's inverse bind matrices, as gltfpack does.
+              skin's inverse bind matrices, as gltfpack does. A dense clip's keys (LOD0's)
+              follow key_plan.py: float32 for long levers, fewer keys, within 1 mm.
     meshopt   quantize, then EXT_meshopt_compression on every vertex, index, skin and animation
               view with the extension's filters (OCTAHEDRAL for normals and tangents, QUATERNION
-              for rotations); a fallback buffer without data. Encoded by meshoptimizer's own
+              for rotations, EXPONENTIAL for float32 rotations); a fallback buffer without
+              data. Encoded by meshoptimizer's own
               encoder (npm `meshoptimizer`, pinned in tools/) in one `node
               tools/meshopt_encode.mjs` call per file: the PyPI `meshoptimizer` package is an
               unofficial 0.x binding; the npm package is the library author's own build.
@@ -59,6 +61,10 @@ GLTF_DEFAULTS = GltfOptions()
 # bits of the meshopt filters: int8 octahedral normals/tangents as in quantize; 16-bit
 # quaternions keep the rotation keys as exact as quantize's normalized int16
 OCT_BITS, QUAT_BITS = 8, 16
+# mantissa bits of the EXPONENTIAL filter on float32 rotation keys (key_plan's `wide` joints,
+# whose 16-bit keys would move a long lever by more than the bound): steps of 2^(2 − bits)
+EXP_BITS = 20
+FILTER_BITS = {"OCTAHEDRAL": OCT_BITS, "QUATERNION": QUAT_BITS, "EXPONENTIAL": EXP_BITS}
 # metres: LOD0's grid (and any LOD's seen from nearer than 2 mm / pixel size); a step of 1.15 mm
 # rounds each coordinate by ≤ 0.575 mm, a position by ≤ √3 · 0.575 = 0.996 mm
 MESHOPT_POSITION_STEP = 0.00115
@@ -165,6 +171,7 @@ class MeshoptView:
     count: int
     filter: str = "NONE"
     source: np.ndarray | None = None
+    bits: int | None = None  # the filter's bits (None: FILTER_BITS)
 
 
 def _node(who: str = "--compress meshopt", what: str = "encoder") -> str:
@@ -244,16 +251,19 @@ def decode(views: list[tuple[dict, bytes]], who: str) -> list[bytes]:
 
 
 def encode(
-    views: list[tuple[MeshoptView, memoryview]], groups: list[tuple[int, list[int]]] = ()
-) -> list[bytes]:  # type: ignore[assignment]
-    """Encode every view with meshoptimizer in one node process: stdin is a little-endian
-    uint32 JSON length, the JSON {jobs, groups}, then each job's bytes (the view, or the
-    float32 filter source); stdout the same with the encoded views. `groups` (index job,
-    vertex jobs) are primitives the encoder first reorders with meshoptimizer's
-    reorderMesh (vertex cache, then fetch order), as gltfpack does: the same triangles,
-    in the order its codecs compress best."""
+    views: list[tuple[MeshoptView, memoryview]],
+    groups: list[tuple[int, list[int]]] = (),  # type: ignore[assignment]
+    joins: list[int] | None = None,
+) -> list[bytes]:
+    """Encode views with meshoptimizer in one node process: stdin is a little-endian uint32
+    JSON length, the JSON {jobs, groups}, then each job's bytes (the data, or the float32
+    filter source); stdout the same with the encoded streams. `groups` (index job, vertex
+    jobs) are primitives the encoder first reorders with meshoptimizer's reorderMesh (vertex
+    cache, then fetch order), as gltfpack does: the same triangles, in the order its codecs
+    compress best. `joins[k]`: the stream job k belongs to (default: its own); consecutive
+    jobs of one stream are filtered, joined and encoded as one view, one result per stream."""
     jobs, payloads = [], []
-    for spec, data in views:
+    for k, (spec, data) in enumerate(views):
         raw = memoryview(spec.source.astype("<f4", copy=False)).cast("B") if spec.source is not None else data
         jobs.append(
             {
@@ -262,7 +272,8 @@ def encode(
                 "stride": spec.stride,
                 "count": spec.count,
                 "bytes": raw.nbytes,
-                "bits": OCT_BITS if spec.filter == "OCTAHEDRAL" else QUAT_BITS,
+                "bits": spec.bits or FILTER_BITS.get(spec.filter, QUAT_BITS),
+                "join": k if joins is None else joins[k],
             }
         )
         payloads.append(raw)

@@ -37,6 +37,7 @@ import numpy as np
 from .. import __version__
 from ..asset import Asset
 from ..axes import Z_UP_TO_Y_UP
+from .key_plan import plan as plan_keys
 from .compress import GLTF_DEFAULTS, GltfOptions, meshopt_step
 from .gltf_animation import animation_dict
 from .gltf_buffer import Buffer, finish
@@ -117,7 +118,10 @@ def _build(asset: Asset, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, Bu
             "extras": lod_extras(asset, k),
         }
         for clip in lod.clips:
-            anim = animation_dict(buf, clip, sk, joint_nodes, options.quantized)
+            kp = None
+            if options.quantized and clip.keys is None and len(clip.times) > 2:
+                kp = plan_keys(lod, clip, options.compress == "meshopt")  # within 1 mm
+            anim = animation_dict(buf, clip, sk, joint_nodes, options.quantized, kp)
             if anim is not None:
                 animations.append(anim)
 

@@ -44,12 +44,16 @@ class Buffer:
         self.view_parts: list[memoryview] = []
         # --compress meshopt: how each accessor's view is encoded (compress.meshopt_views)
         self.meshopt: dict[int, MeshoptView] | None = {} if meshopt else None
-        self.groups: list[tuple[int, list[int]]] = []  # (index view, vertex views) per primitive
-        # --compress: skin and key data pooled into one view per (element type, filter), so
-        # meshopt's codec sees long streams instead of hundreds of 301-key tracks (as gltfpack
-        # does) and the JSON lists a few views instead of one per track
+        # (index accessor, vertex accessors) per primitive: reordered together under meshopt
+        self.groups: list[tuple[int, list[int]]] = []
+        # --compress: data pooled into one view per (target, element type, filter), as gltfpack
+        # does: meshopt's codec sees long streams instead of hundreds of 301-key tracks, and the
+        # JSON lists a few views instead of one per track and vertex attribute
         self.pooled = pooled or meshopt
-        self.pools: dict[tuple, list[tuple[dict, np.ndarray, np.ndarray | None]]] = {}
+        self.pools: dict[tuple, list[tuple[int, np.ndarray, np.ndarray | None]]] = {}
+        # meshopt: a pooled view's members (accessor, data, filter source), encoded as one stream
+        self.members: dict[int, list[tuple[int, np.ndarray, np.ndarray | None]]] = {}
+        self.bits: dict[int, int] = {}  # accessor → its filter's bits, where not the default
 
     def view(self, data, target: int | None) -> int:
         data = memoryview(data).cast("B")
@@ -75,18 +79,22 @@ class Buffer:
         padded: bool = False,
         filter: str = "NONE",
         source: np.ndarray | None = None,
+        bits: int | None = None,
     ) -> int:
         """`padded`: a's last component is alignment padding, not data (the view's byteStride
-        keeps it, the accessor type drops it). `filter`/`source`: the meshopt filter for this
-        view and the float32 (count, 4) data it encodes."""
+        keeps it, the accessor type drops it). `filter`/`source`/`bits`: the meshopt filter
+        for this view, the float32 (count, 4) data it encodes and its bits (a pooled
+        QUATERNION view's members may differ: each key states its own)."""
         a = np.ascontiguousarray(a)
         a = a.astype(a.dtype.newbyteorder("<"), copy=False)  # no copy on little-endian hosts
         stored = 1 if a.ndim == 1 else math.prod(a.shape[1:])
         comps = stored - 1 if padded else stored
-        if self.pooled and target is None:
-            acc = self._fields(a, comps, stored, normalized, bounds)
-            self.pools.setdefault((a.dtype.str, stored, filter), []).append((acc, a, source))
-            self.accessors.append(acc)
+        if self.pooled:
+            if bits is not None:
+                self.bits[len(self.accessors)] = bits
+            self.accessors.append(self._fields(a, comps, stored, normalized, bounds))
+            key = (target, a.dtype.str, stored, filter)
+            self.pools.setdefault(key, []).append((len(self.accessors) - 1, a, source))
             return len(self.accessors) - 1
         view = self.view(a.reshape(-1).view(np.uint8), target)
         if padded:
@@ -119,27 +127,32 @@ class Buffer:
         return acc
 
     def flush_pools(self) -> None:
-        """One view per pool, each accessor at its offset in it (meshopt: with its encoding)."""
-        for (_, stored, filter), members in self.pools.items():
+        """One view per pool, each accessor at its offset in it (meshopt: with its encoding).
+        A vertex pool states its byteStride (several accessors share the view); every element
+        is 4 bytes or a multiple, so each accessor stays 4-byte aligned."""
+        for (target, _, stored, filter), members in self.pools.items():
             data = np.concatenate([a.reshape(-1).view(np.uint8) for _, a, _ in members])
-            view = self.view(data, None)
+            view = self.view(data, target)
+            size = members[0][1].itemsize * stored
+            if target == ARRAY_BUFFER:
+                self.views[view]["byteStride"] = size
             offset = 0
             for acc, a, _ in members:
-                acc["bufferView"] = view
+                self.accessors[acc]["bufferView"] = view
                 if offset:
-                    acc["byteOffset"] = offset
+                    self.accessors[acc]["byteOffset"] = offset
                 offset += a.nbytes
             if self.meshopt is None:
                 continue
-            size = members[0][1].itemsize * stored
-            sources = [src for _, _, src in members]
             self.meshopt[view] = MeshoptView(
-                mode="ATTRIBUTES",
+                mode={ARRAY_BUFFER: "ATTRIBUTES", ELEMENT_ARRAY_BUFFER: "TRIANGLES"}.get(
+                    target, "ATTRIBUTES"
+                ),
                 stride=size,
                 count=len(data) // size,
                 filter=filter,
-                source=np.concatenate(sources) if filter != "NONE" else None,
             )
+            self.members[view] = members
         self.pools = {}
 
     def padding(self) -> bytes:
@@ -182,12 +195,26 @@ def finish(gltf: dict, buf: Buffer, quantized: bool, uv_boxes) -> Buffer:
 def _meshopt(gltf: dict, buf: Buffer) -> Buffer:
     """EXT_meshopt_compression: every view with an encoding (buf.meshopt) is encoded by
     meshoptimizer into buffer 0; its uncompressed layout moves to buffer 1, a fallback buffer
-    with no data (the extension is required, so no client reads it). Images stay as they are."""
+    with no data (the extension is required, so no client reads it). Images stay as they are.
+    A pooled view goes to the encoder as one job per member (a primitive's index and vertex
+    members are reordered together), joined into one stream before encoding."""
     assert buf.meshopt is not None
     order = sorted(buf.meshopt)
-    slot = {v: k for k, v in enumerate(order)}
-    groups = [(slot[i], [slot[v] for v in vs]) for i, vs in buf.groups]
-    encoded = dict(zip(order, encode([(buf.meshopt[i], buf.view_parts[i]) for i in order], groups)))
+    jobs: list[tuple[MeshoptView, memoryview]] = []
+    joins: list[int] = []
+    job_of: dict[int, int] = {}  # accessor → job
+    for k, v in enumerate(order):
+        spec = buf.meshopt[v]
+        for acc, a, source in buf.members.get(v, [(None, None, None)]):
+            if acc is None:  # a view of its own
+                jobs.append((spec, buf.view_parts[v]))
+            else:
+                job_of[acc] = len(jobs)
+                part = MeshoptView(spec.mode, spec.stride, len(a), spec.filter, source, buf.bits.get(acc))
+                jobs.append((part, memoryview(a.reshape(-1).view(np.uint8))))
+            joins.append(k)
+    groups = [(job_of[i], [job_of[v] for v in vs]) for i, vs in buf.groups]
+    encoded = dict(zip(order, encode(jobs, groups, joins)))
     out = Buffer()
     for i, view in enumerate(buf.views):
         if i not in encoded:

@@ -160,13 +160,8 @@ def _quantized_primitive(
         "material": material,
         "mode": 4,
     }
-    if buf.meshopt is not None:  # one vertex order for all of the primitive's views
-        buf.groups.append(
-            (
-                buf.accessors[prim["indices"]]["bufferView"],
-                [buf.accessors[a]["bufferView"] for a in attrs.values()],
-            )
-        )
+    if buf.meshopt is not None:  # one vertex order for all of the primitive's attributes
+        buf.groups.append((prim["indices"], list(attrs.values())))
     return prim
 
 

@@ -1,0 +1,226 @@
+"""Compressed glTF's dense clips (LOD0's): what to store within the 1 mm bound.
+
+A compressed file (--compress quantize|meshopt) keeps every skinned vertex of a dense clip
+within ANIMATION_ERROR (1 mm) of the float file's playback on every frame, measured on each
+joint's convex-hull corners (lod.probes(exact=True): the true maximum over its vertices),
+composed through the hierarchy. Two things spend that millimetre:
+
+  * 16-bit keys. A key rounded to c/32767 turns its joint by up to ~6e-5 rad, which moves a
+    vertex 23 m away by 1.4 mm, and the joints of a chain add up: with every key at 16 bits
+    the CA black oak's crown moves by 3.5 mm. Joints get float32 keys, longest reach first,
+    until the 16-bit rounding alone stays within a share of the bound (QUANT_SHARES).
+    meshopt's QUATERNION filter rounds twice (its bits, then the decoder's int16 output), so
+    there a joint starts at 12 bits and is raised, longest reach first, through 14 and 16 to
+    float32 keys under the EXPONENTIAL filter (compress.EXP_BITS of mantissa): short twigs
+    stay cheap, long levers exact enough.
+  * Keys (quantize only). The rest of the bound goes to lod.keys_within: slerp between kept
+    keys instead of every frame, so a slow track keeps a fraction of its keys and a nearly
+    still one only its end keys (which the writer stores as one key: the track is constant).
+    meshopt keeps every key: its codec packs a dense, smooth 16-bit track into ~1.2 bytes a
+    key, less than fewer keys with their own key times cost; its rounding gets the bound.
+
+The plan is checked as a client plays it (stored keys, slerp, normalised) against the dense
+float clip on box corners (never below the hull's error), and the key bound shrinks until the
+check passes; `error` measures a plan on the hull corners (tests, bench).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..asset import Clip, Lod
+from ..clip import play_keys
+from ..lod_decimate import keys_within
+from ..lod_probes import probe_world, probes
+from ..quat import unit
+from ..skeleton import pose_world
+from .compress import EXP_BITS
+
+ANIMATION_ERROR = 1e-3  # metres, LOD0's bound for compressed files (geometry has its own)
+# metres of it the 16-bit rounding may take (quantize tries each, largest first); the rest
+# goes to dropping keys
+QUANT_SHARES = (0.9e-3, 0.6e-3, 0.3e-3)
+MARGIN = 0.05e-3  # metres kept back from the key bound (box probes vs hull corners)
+INPUT_JSON = 95  # bytes of JSON a key-time accessor takes
+# meshopt: a joint's filter bits, raised step by step: QUATERNION up to 16, then EXPONENTIAL
+# (float32 keys, `wide`) with that many bits of mantissa
+MESHOPT_LEVELS = (12, 14, 16, EXP_BITS)
+
+
+@dataclass(frozen=True)
+class KeyPlan:
+    """A dense clip as a compressed file stores it: `clip` with per-joint kept keys, `wide`
+    (J,) joints whose keys stay float32, and under meshopt the QUATERNION filter's `bits`
+    (J,) of the others (None: int16, quantize)."""
+
+    clip: Clip
+    wide: np.ndarray
+    bits: np.ndarray | None = None
+
+
+def quat_filter(q: np.ndarray, bits: np.ndarray) -> np.ndarray:
+    """Unit quaternions (K, J, 4) as meshopt's QUATERNION filter at `bits` (J,) gives them back:
+    the three smallest components times √2 rounded to bits − 1 bits (half away from zero), the
+    largest recovered as √(1 − Σ), all four then stored as normalized int16."""
+    top = np.argmax(np.abs(q), axis=-1)[..., None]
+    sign = np.where(np.take_along_axis(q, top, axis=-1) < 0, -1.0, 1.0)
+    scale = (2.0 ** (np.asarray(bits, np.float64) - 1) - 1)[:, None]
+    v = np.clip(q * sign * np.sqrt(2.0), -1.0, 1.0) * scale
+    small = np.trunc(v + np.where(v >= 0, 0.5, -0.5)) / scale / np.sqrt(2.0)
+    np.put_along_axis(small, top, 0.0, axis=-1)
+    w = np.sqrt(np.maximum(0.0, 1.0 - (small**2).sum(axis=-1, keepdims=True)))
+    np.put_along_axis(small, top, w, axis=-1)
+    return np.rint(small * 32767.0) / 32767.0
+
+
+def stored(rotations: np.ndarray, wide: np.ndarray, bits: np.ndarray | None = None) -> np.ndarray:
+    """Rotations (K, J, 4) as a client reads them back: normalized int16 (c / 32767, as
+    compress.snorm16 writes them), or meshopt's QUATERNION filter at `bits` per joint when
+    given, except the `wide` joints' float32 (meshopt: its EXPONENTIAL filter at `bits`
+    of mantissa, steps of 2^(2 − bits) at most: a unit quaternion's shared exponent is ≤ 1)."""
+    if bits is None:
+        out = np.rint(np.clip(rotations, -1.0, 1.0) * 32767.0) / 32767.0
+    else:
+        out = quat_filter(rotations, np.minimum(bits, 16))
+    wide_values = rotations[:, wide].astype(np.float32).astype(np.float64)
+    if bits is not None:
+        step = 2.0 ** (2.0 - bits[wide])
+        wide_values = np.rint(wide_values / step[:, None]) * step[:, None]
+    out[:, wide] = wide_values
+    return out
+
+
+def _ancestors(parent: np.ndarray) -> np.ndarray:
+    """(J, D): each joint, its parent, grandparent, … (the root repeats once reached)."""
+    chain = [np.arange(len(parent))]
+    while True:
+        up = np.where(parent[chain[-1]] >= 0, parent[chain[-1]], chain[-1])
+        if np.array_equal(up, chain[-1]):
+            return np.stack(chain, axis=1)
+        chain.append(up)
+
+
+class _Check:
+    """The dense float clip's probes on every frame, to measure a plan against: box corners
+    (`exact=False`, 8 per joint, never below the hull's error: for the search) or hull
+    corners (the true maximum: for the result)."""
+
+    def __init__(self, lod: Lod, rotations: np.ndarray, exact: bool):
+        self.skeleton = lod.skeleton
+        self.probes = probes(lod.skeleton, lod.primitives, exact=exact)
+        self.dense = probe_world(pose_world(lod.skeleton, rotations), self.probes)
+
+    def errors(self, values: np.ndarray, kept: np.ndarray) -> np.ndarray:
+        """Per joint (J,), the farthest any of its hull corners strays from the dense pose
+        over the clip when `values` (K, J, 4) are played from the `kept` keys (K, J)."""
+        x = probe_world(pose_world(self.skeleton, play_keys(values, kept, "LINEAR")), self.probes)
+        err = np.linalg.norm(x - self.dense, axis=2).max(axis=0)
+        out = np.zeros(len(self.skeleton.names))
+        np.maximum.at(out, self.probes.joint, err)
+        return out
+
+
+def _widen(
+    check: _Check, rot: np.ndarray, wide: np.ndarray, share: float, bits: np.ndarray | None = None
+) -> float:
+    """Raise joints' precision (in place) until the rounding alone keeps every vertex within
+    `share` metres: rounds, each raising, per joint too far off, its longest-reach ancestor
+    not yet wide by one step (meshopt: `bits` through MESHOPT_LEVELS; quantize:
+    int16, then wide). Returns the rounding's error (metres)."""
+    K, J = rot.shape[:2]
+    every = np.ones((K, J), dtype=bool)
+    anc = _ancestors(np.asarray(check.skeleton.parent, dtype=np.int64))
+    while True:
+        err = check.errors(stored(rot, wide, bits), every)
+        bad = np.flatnonzero(err > share)
+        chains = anc[bad]
+        done = wide[chains] if bits is None else bits[chains] >= MESHOPT_LEVELS[-1]
+        lever = np.where(done, -1.0, check.probes.reach[chains])
+        pick = np.unique(chains[np.arange(len(bad)), lever.argmax(axis=1)][lever.max(axis=1) >= 0])
+        if not pick.size:
+            return float(err.max())
+        if bits is None:
+            wide[pick] = True
+            continue
+        pick = pick[bits[pick] < MESHOPT_LEVELS[-1]]
+        if not pick.size:
+            return float(err.max())
+        bits[pick] = [MESHOPT_LEVELS[MESHOPT_LEVELS.index(b) + 1] for b in bits[pick]]
+        wide[pick] = bits[pick] > 16
+
+
+def _decimated(lod: Lod, check: _Check, rot: np.ndarray, wide: np.ndarray, limit: float) -> np.ndarray:
+    """Kept keys (K, J) whose playback of the stored keys stays within ANIMATION_ERROR: keys found
+    within `limit` metres of the dense clip, the limit shrunk if slerp of rounded keys strays
+    further (met at once, as a rule); every key when no limit is left."""
+    values = stored(rot, wide)
+    for _ in range(4):
+        if limit <= MARGIN:
+            break
+        kept = keys_within(lod.skeleton, lod.primitives, rot, limit)
+        error = float(check.errors(values, kept).max())
+        if error <= ANIMATION_ERROR:
+            return _cheaper(kept, wide, values, check)
+        limit -= error - ANIMATION_ERROR + MARGIN
+    return np.ones(rot.shape[:2], dtype=bool)
+
+
+def _bytes(kept: np.ndarray, wide: np.ndarray) -> int:
+    """What a plan costs in a quantize file: 8 bytes a 16-bit key, 16 a float32 one, and per
+    distinct key set but the full one its times (4 bytes a key) and accessor."""
+    n = kept.sum(axis=0)
+    sets = {kept[:, j].tobytes(): int(n[j]) for j in range(kept.shape[1]) if n[j] < kept.shape[0]}
+    return int((n * np.where(wide, 16, 8)).sum()) + sum(4 * c + INPUT_JSON for c in sets.values())
+
+
+def plan(lod: Lod, clip: Clip, meshopt: bool = False) -> KeyPlan:
+    """The float32 joints and kept keys of dense `clip` (of `lod`) within ANIMATION_ERROR
+    (see the module doc: quantize drops keys, meshopt keeps them). quantize tries each of
+    QUANT_SHARES for the rounding (the wide set only grows as the share shrinks) and keeps
+    the plan that costs the fewest bytes: a calm tree gains by dropping keys, a restless one
+    by rounding fewer joints wide."""
+    rot = unit(np.asarray(clip.rotations, dtype=np.float64))
+    K, J = rot.shape[:2]
+    check = _Check(lod, rot, exact=False)
+    wide = np.zeros(J, dtype=bool)
+    if meshopt:
+        bits = np.full(J, MESHOPT_LEVELS[0])
+        _widen(check, rot, wide, ANIMATION_ERROR - MARGIN, bits)
+        return KeyPlan(replace(clip, keys=[np.arange(K)] * J), wide, bits)
+    best: tuple[int, np.ndarray, np.ndarray] | None = None
+    for share in QUANT_SHARES:
+        quant = _widen(check, rot, wide, share)
+        kept = _decimated(lod, check, rot, wide, ANIMATION_ERROR - quant - MARGIN)
+        cost = _bytes(kept, wide)
+        if best is None or cost < best[0]:
+            best = (cost, kept, wide.copy())
+    assert best is not None
+    _, kept, wide = best
+    return KeyPlan(replace(clip, keys=[np.flatnonzero(kept[:, j]) for j in range(J)]), wide)
+
+
+def _cheaper(kept: np.ndarray, wide: np.ndarray, values: np.ndarray, check: _Check) -> np.ndarray:
+    """`kept` with every key back on the tracks where dropping keys costs more than it saves:
+    a decimated track needs its own key times (4 bytes a key and ~INPUT_JSON bytes of
+    accessor) while full tracks share one; kept as is if that strays past the bound."""
+    K = kept.shape[0]
+    n = kept.sum(axis=0)
+    per_key = np.where(wide, 16, 8)
+    full = (n * (per_key + 4) + INPUT_JSON >= K * per_key) & (n > 1)
+    if not full.any():
+        return kept
+    trial = kept.copy()
+    trial[:, full] = True
+    return trial if check.errors(values, trial).max() <= ANIMATION_ERROR else kept
+
+
+def error(lod: Lod, dense: Clip, kp: KeyPlan) -> float:
+    """Metres: the farthest any skinned vertex of `lod` strays from the dense float clip's
+    pose on any frame when played from plan `kp` (hull corners: the true maximum)."""
+    rot = unit(np.asarray(dense.rotations, dtype=np.float64))
+    kept = np.zeros(rot.shape[:2], dtype=bool)
+    for j, k in enumerate(kp.clip.keys):  # per joint (hundreds)
+        kept[k, j] = True
+    return float(_Check(lod, rot, exact=True).errors(stored(rot, kp.wide, kp.bits), kept).max())
