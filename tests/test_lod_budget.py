@@ -141,6 +141,40 @@ def test_pruned_stems_keep_their_leaves_in_place():
     assert thin.leaf_area.sum() == pytest.approx(lod.leaf_area.sum(), rel=0.05)
 
 
+def test_coarsened_branches_stay_within_the_tolerance():
+    """coarsen_nodes drops branch nodes only where the kept polyline passes within `tol` of
+    them: every dropped node lies within tol of its stem's new polyline, trunks keep all their
+    nodes, tables stay consistent (leaves and child stems on kept nodes of their own stem),
+    and the bark it saves is real."""
+    from treegen_cli.lod_nodes import coarsen_nodes
+
+    tree = grown("european_larch")
+    tol = 0.02
+    lod = coarsen_nodes(tree, tol)
+    assert lod.n_nodes < 0.8 * tree.n_nodes and lod.n_stems == tree.n_stems
+    trunk = tree.stem_level == 0
+    assert np.array_equal(lod.stem_node_count[trunk], tree.stem_node_count[trunk])
+    assert np.array_equal(lod.node_stem[lod.stem_node_start], np.arange(lod.n_stems))
+    assert np.array_equal(lod.node_stem[lod.leaf_node], lod.leaf_stem)
+    child = lod.stem_parent >= 0
+    assert np.array_equal(lod.node_stem[lod.stem_parent_node[child]], lod.stem_parent[child])
+    # each dropped node within tol of its stem's coarse polyline
+    kept = {tuple(p) for p in lod.node_pos}
+    gone = np.array([i for i, p in enumerate(tree.node_pos) if tuple(p) not in kept])
+    assert gone.size
+    for i in gone[:: max(1, gone.size // 400)]:
+        s = tree.node_stem[i]
+        q = lod.node_pos[lod.stem_node_start[s] : lod.stem_node_start[s] + lod.stem_node_count[s]]
+        a, b = q[:-1], q[1:]
+        d = b - a
+        t = np.clip(np.einsum("ij,ij->i", tree.node_pos[i] - a, d) / np.einsum("ij,ij->i", d, d), 0, 1)
+        dist = np.linalg.norm(a + t[:, None] * d - tree.node_pos[i], axis=1).min()
+        assert dist <= tol * (1 + 1e-9), (i, dist)
+    assert bark_triangles(lod, MESH_DEFAULTS).sum() < bark_triangles(tree, MESH_DEFAULTS).sum()
+    assert build_rig(lod).leaf_joint.max() < len(build_rig(lod).skeleton.names)
+    assert coarsen_nodes(tree, 0.0) is tree
+
+
 @pytest.mark.parametrize("species", SPECIES)
 def test_lod_switches_keep_cover(species):
     """Consecutive LODs rendered at the tree's size on screen at their switch (fov 60°, 1920
