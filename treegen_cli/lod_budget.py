@@ -7,9 +7,9 @@ Each LOD is cut from LOD0's tree (lod_leaves.py), in this order:
      dropped (lod_nodes.py): a far twig needs fewer rings, so more twigs fit the budget;
   3. bark: stems kept thickest first (their ancestors always) while their bark, counted from the
      mesh's own ring and side formulas, fits the bark share of the budget — LOD0's share of bark
-     in its triangles, so bark and leaves shrink together; a leafy tree keeps only stems that
-     show as much area per triangle as its leaves (`worth_keeping`), a leafless one spreads its
-     kept branches over the crown (`keep_stems`);
+     in its triangles, so bark and leaves shrink together; a leafy tree keeps stems under
+     MIN_RADIUS_PX only if they show as much area per triangle as its leaves (`worth_keeping`),
+     a leafless one spreads its kept branches over the crown (`keep_stems`);
   4. leaves: as many stratified leaves as the rest of the budget holds (nested: each LOD's
      leaves are a subset of the LOD before's), their blades scaled so the LOD covers on screen,
      at its switch distance, what LOD0 covers (`cover_factors`, lod_cover.py): each region of a
@@ -40,7 +40,8 @@ REGION_PX = 4.0  # cells (pixels at the switch) over which a LOD keeps LOD0's ar
 REGION_CLIP = 2.0  # a region's leaves grow at most this much more (or less) than the crown's
 NODE_TOL_PX = 1.0  # a branch node within this many pixels of its neighbours' chord is dropped
 STEM_WORTH = 1.0  # a leafy tree keeps stems showing at least this × a leaf's area per triangle
-MIN_RADIUS_PX = 0.5  # a lobed trunk whose lobes are shallower than this many pixels is round
+MIN_RADIUS_PX = 0.5  # stems thinner than this many pixels are kept only if worth_keeping;
+# a lobed trunk whose lobes are shallower than this is drawn round
 
 
 @dataclass(frozen=True, eq=False)
@@ -109,7 +110,9 @@ def plan_lod(
     coarse = coarsen_nodes(tree, NODE_TOL_PX * px)
     per_stem = bark_triangles(coarse, mesh)
     share = bark0 / total0 if total0 else 1.0
-    worth = worth_keeping(coarse, per_stem, leaf0 / tree.n_leaves) if leaf0 else None
+    worth = None
+    if leaf0:  # stems a pixel wide carry the crown (and its joints); thinner ones must show
+        worth = (coarse.stem_radius >= min_radius) | worth_keeping(coarse, per_stem, leaf0 / tree.n_leaves)
     keep = keep_stems(coarse, per_stem, budget * share, worth)
     pruned = prune_stems(coarse, keep)
     L = tree.n_leaves
