@@ -29,26 +29,27 @@ COVERAGE_TOL = 0.05  # issue 13: covered area within ±5 % at every switch
 IOU_TARGET = 0.9  # issue 13: silhouette IoU at least this at every switch
 # Measured per species (worst switch, RENDER_PX, the view below; bench/lod_pop_bench.py --views 1
 # --max-px 384): (covered area off by at most, IoU at least), a regression guard a little
-# below what the LODs reach, not the target. Cover is within ±5 % but for the oak, palms,
-# poplar, cottonwood and tamarack (5–9 % off); IoU ≥ 0.9 only for the fir, the willow and the rush:
-# kept leaves are fewer and larger, and their scatter differs from LOD0's at the 3-pixel scale;
-# shave grass keeps few whole branches of its whorls at 5 % of the triangles.
+# below what the LODs reach where the target is not met (None: the target itself). Cover is
+# within ±5 % for all but the larch (6 %), the fan palm (5.3 %) and shave grass (10 %); IoU
+# ≥ 0.9 only for the fir and the willow: kept leaves are fewer and larger, and their scatter
+# differs from LOD0's at the 3-pixel scale (the crown's fringe); shave grass, leafless, keeps
+# part of its whorls' branches, thickened, at 15 % and 5 % of the triangles.
 MEASURED = {
-    "balsam_fir": (0.024, 0.926),
-    "black_tupelo": (0.056, 0.863),
-    "ca_black_oak": (0.088, 0.813),
-    "desert_bush": (0.034, 0.734),
-    "eastern_cottonwood": (0.061, 0.792),
-    "european_larch": (0.042, 0.742),
-    "fan_palm": (0.063, 0.784),
-    "lombardy_poplar": (0.075, 0.767),
-    "palm": (0.10, 0.723),
-    "quaking_aspen": (0.038, 0.869),
-    "rush": (0.057, 0.891),
-    "sassafras": (0.041, 0.861),
-    "shave_grass": (0.068, 0.443),
-    "tamarack": (0.069, 0.844),
-    "weeping_willow": (0.05, 0.90),
+    "balsam_fir": (None, None),
+    "black_tupelo": (None, 0.872),
+    "ca_black_oak": (None, 0.83),
+    "desert_bush": (None, 0.809),
+    "eastern_cottonwood": (None, 0.819),
+    "european_larch": (0.065, 0.771),
+    "fan_palm": (0.058, 0.756),
+    "lombardy_poplar": (None, 0.784),
+    "palm": (None, 0.757),
+    "quaking_aspen": (None, 0.874),
+    "rush": (None, 0.881),
+    "sassafras": (None, 0.875),
+    "shave_grass": (0.105, 0.456),
+    "tamarack": (None, 0.85),
+    "weeping_willow": (None, None),
 }
 
 
@@ -189,8 +190,8 @@ def test_lod_switches_keep_cover(species):
     asset = replace(asset, lods=[lod for lod in asset.lods if lod.impostor is None])  # (test_impostor)
     cover_off, iou = MEASURED[species]
     for pop in lod_pops(asset, LodOptions(), views=(-90.0,), max_px=RENDER_PX):
-        assert abs(pop.coverage - 1.0) <= max(cover_off, COVERAGE_TOL), (species, pop)
-        assert pop.iou >= min(iou, IOU_TARGET), (species, pop)
+        assert abs(pop.coverage - 1.0) <= (cover_off or COVERAGE_TOL), (species, pop)
+        assert pop.iou >= (iou or IOU_TARGET), (species, pop)
 
 
 def test_default_options_build_the_planned_tree():
