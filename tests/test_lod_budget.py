@@ -29,26 +29,27 @@ COVERAGE_TOL = 0.05  # issue 13: covered area within ±5 % at every switch
 IOU_TARGET = 0.9  # issue 13: silhouette IoU at least this at every switch
 # Measured per species (worst switch, RENDER_PX, the view below; bench/lod_pop_bench.py --views 1
 # --max-px 384): (covered area off by at most, IoU at least), a regression guard a little
-# below what the LODs reach, not the target. Cover is within ±5 % but for the oak, palms,
-# poplar, cottonwood and tamarack (5–9 % off); IoU ≥ 0.9 only for the fir, the willow and the rush:
-# kept leaves are fewer and larger, and their scatter differs from LOD0's at the 3-pixel scale;
-# shave grass keeps few whole branches of its whorls at 5 % of the triangles.
+# below what the LODs reach where the target is not met (None: the target itself). Cover is
+# within ±5 % for all but the larch (6 %), the fan palm (5.3 %) and shave grass (10 %); IoU
+# ≥ 0.9 only for the fir and the willow: kept leaves are fewer and larger, and their scatter
+# differs from LOD0's at the 3-pixel scale (the crown's fringe); shave grass, leafless, keeps
+# part of its whorls' branches, thickened, at 15 % and 5 % of the triangles.
 MEASURED = {
-    "balsam_fir": (0.024, 0.926),
-    "black_tupelo": (0.056, 0.863),
-    "ca_black_oak": (0.088, 0.813),
-    "desert_bush": (0.034, 0.734),
-    "eastern_cottonwood": (0.061, 0.792),
-    "european_larch": (0.042, 0.742),
-    "fan_palm": (0.063, 0.784),
-    "lombardy_poplar": (0.075, 0.767),
-    "palm": (0.10, 0.723),
-    "quaking_aspen": (0.038, 0.869),
-    "rush": (0.057, 0.891),
-    "sassafras": (0.041, 0.861),
-    "shave_grass": (0.068, 0.443),
-    "tamarack": (0.069, 0.844),
-    "weeping_willow": (0.05, 0.90),
+    "balsam_fir": (None, None),
+    "black_tupelo": (None, 0.872),
+    "ca_black_oak": (None, 0.83),
+    "desert_bush": (None, 0.809),
+    "eastern_cottonwood": (None, 0.819),
+    "european_larch": (0.065, 0.771),
+    "fan_palm": (0.058, 0.756),
+    "lombardy_poplar": (None, 0.784),
+    "palm": (None, 0.757),
+    "quaking_aspen": (None, 0.874),
+    "rush": (None, 0.881),
+    "sassafras": (None, 0.875),
+    "shave_grass": (0.105, 0.456),
+    "tamarack": (None, 0.85),
+    "weeping_willow": (None, None),
 }
 
 
@@ -141,6 +142,40 @@ def test_pruned_stems_keep_their_leaves_in_place():
     assert thin.leaf_area.sum() == pytest.approx(lod.leaf_area.sum(), rel=0.05)
 
 
+def test_coarsened_branches_stay_within_the_tolerance():
+    """coarsen_nodes drops branch nodes only where the kept polyline passes within `tol` of
+    them: every dropped node lies within tol of its stem's new polyline, trunks keep all their
+    nodes, tables stay consistent (leaves and child stems on kept nodes of their own stem),
+    and the bark it saves is real."""
+    from treegen_cli.lod_nodes import coarsen_nodes
+
+    tree = grown("european_larch")
+    tol = 0.02
+    lod = coarsen_nodes(tree, tol)
+    assert lod.n_nodes < 0.8 * tree.n_nodes and lod.n_stems == tree.n_stems
+    trunk = tree.stem_level == 0
+    assert np.array_equal(lod.stem_node_count[trunk], tree.stem_node_count[trunk])
+    assert np.array_equal(lod.node_stem[lod.stem_node_start], np.arange(lod.n_stems))
+    assert np.array_equal(lod.node_stem[lod.leaf_node], lod.leaf_stem)
+    child = lod.stem_parent >= 0
+    assert np.array_equal(lod.node_stem[lod.stem_parent_node[child]], lod.stem_parent[child])
+    # each dropped node within tol of its stem's coarse polyline
+    kept = {tuple(p) for p in lod.node_pos}
+    gone = np.array([i for i, p in enumerate(tree.node_pos) if tuple(p) not in kept])
+    assert gone.size
+    for i in gone[:: max(1, gone.size // 400)]:
+        s = tree.node_stem[i]
+        q = lod.node_pos[lod.stem_node_start[s] : lod.stem_node_start[s] + lod.stem_node_count[s]]
+        a, b = q[:-1], q[1:]
+        d = b - a
+        t = np.clip(np.einsum("ij,ij->i", tree.node_pos[i] - a, d) / np.einsum("ij,ij->i", d, d), 0, 1)
+        dist = np.linalg.norm(a + t[:, None] * d - tree.node_pos[i], axis=1).min()
+        assert dist <= tol * (1 + 1e-9), (i, dist)
+    assert bark_triangles(lod, MESH_DEFAULTS).sum() < bark_triangles(tree, MESH_DEFAULTS).sum()
+    assert build_rig(lod).leaf_joint.max() < len(build_rig(lod).skeleton.names)
+    assert coarsen_nodes(tree, 0.0) is tree
+
+
 @pytest.mark.parametrize("species", SPECIES)
 def test_lod_switches_keep_cover(species):
     """Consecutive LODs rendered at the tree's size on screen at their switch (fov 60°, 1920
@@ -155,8 +190,8 @@ def test_lod_switches_keep_cover(species):
     asset = replace(asset, lods=[lod for lod in asset.lods if lod.impostor is None])  # (test_impostor)
     cover_off, iou = MEASURED[species]
     for pop in lod_pops(asset, LodOptions(), views=(-90.0,), max_px=RENDER_PX):
-        assert abs(pop.coverage - 1.0) <= max(cover_off, COVERAGE_TOL), (species, pop)
-        assert pop.iou >= min(iou, IOU_TARGET), (species, pop)
+        assert abs(pop.coverage - 1.0) <= (cover_off or COVERAGE_TOL), (species, pop)
+        assert pop.iou >= (iou or IOU_TARGET), (species, pop)
 
 
 def test_default_options_build_the_planned_tree():

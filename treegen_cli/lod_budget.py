@@ -3,14 +3,19 @@ triangles (`--lod-triangles`, default 1, 0.5, 0.15, 0.05), and never more than L
 
 Each LOD is cut from LOD0's tree (lod_leaves.py), in this order:
   1. sides: the LOD table's sides per level, never more than LOD0's (`--sides 5,3` caps them);
-  2. bark: stems kept thickest first (their ancestors always) while their bark, counted from the
+  2. nodes: branch nodes within NODE_TOL_PX pixels of the chord between their neighbours are
+     dropped (lod_nodes.py): a far twig needs fewer rings, so more twigs fit the budget;
+  3. bark: stems kept thickest first (their ancestors always) while their bark, counted from the
      mesh's own ring and side formulas, fits the bark share of the budget — LOD0's share of bark
-     in its triangles, so bark and leaves shrink together;
-  3. leaves: as many stratified leaves as the rest of the budget holds, their blades scaled so
-     the LOD covers on screen, at its switch distance, what LOD0 covers (`cover_factors`,
-     lod_cover.py): each region of a few pixels keeps LOD0's area (dropped twigs' bark and
-     leaves included), one factor then matches the whole. A leafless tree thickens its kept
-     branches instead.
+     in its triangles, so bark and leaves shrink together; a leafy tree keeps stems under
+     MIN_RADIUS_PX only if they show as much area per triangle as its leaves (`worth_keeping`),
+     a leafless one spreads its kept branches over the crown (`keep_stems`);
+  4. leaves: as many stratified leaves as the rest of the budget holds (nested: each LOD's
+     leaves are a subset of the LOD before's), their blades scaled so the LOD covers on screen,
+     at its switch distance, what LOD0 covers (`cover_factors`, lod_cover.py): each region of a
+     few pixels keeps LOD0's area (dropped twigs' bark and leaves included) within REGION_CLIP
+     of the crown's growth, one factor then matches the whole. A leafless tree thickens its
+     kept branches instead.
 
     plan = plan_lod(tree, bark0, leaf0, budget=0.15 * (bark0 + leaf0), mesh=mesh_k, px=0.03)
     # Result: plan.tree (pruned, thinned), plan.bark_estimate + plan.leaf_triangles <= budget
@@ -25,14 +30,18 @@ import numpy as np
 
 from .limits import bark_triangles
 from .lod_cover import Blades, Grid, solve_factor, stem_area, tree_area
-from .lod_leaves import LENGTH_SHARE, grow_leaves, prune_stems, stem_closure, thin_leaves
-from .mesh import MeshOptions
+from .lod_nodes import coarsen_nodes
+from .lod_leaves import LENGTH_SHARE, grow_leaves, prune_stems, stem_closure, stratified_keys, thin_leaves
+from .mesh import MeshOptions, stem_sides
 from .tree import Tree
 
 
 REGION_PX = 4.0  # cells (pixels at the switch) over which a LOD keeps LOD0's area
-REGION_CLIP = 4.0  # a region's leaves grow at most this much more (or less) than the crown's
-MIN_RADIUS_PX = 0.5  # stems thinner than this many pixels at the LOD's distance are dropped
+REGION_CLIP = 2.0  # a region's leaves grow at most this much more (or less) than the crown's
+NODE_TOL_PX = 1.0  # a branch node within this many pixels of its neighbours' chord is dropped
+STEM_WORTH = 1.0  # a leafy tree keeps stems showing at least this × a leaf's area per triangle
+MIN_RADIUS_PX = 0.5  # stems thinner than this many pixels are kept only if worth_keeping;
+# a lobed trunk whose lobes are shallower than this is drawn round
 
 
 @dataclass(frozen=True, eq=False)
@@ -50,18 +59,39 @@ def capped_sides(table: tuple[int, ...], cap: tuple[int, ...]) -> tuple[int, ...
     return tuple(min(table[min(i, len(table) - 1)], cap[min(i, len(cap) - 1)]) for i in range(n))
 
 
-def keep_stems(tree: Tree, per_stem: np.ndarray, budget: float, min_radius: float = 0.0) -> np.ndarray:
-    """Stems kept thickest first (trunks always) while their triangles fit `budget` and their
-    base radius is at least `min_radius`; closed under ancestors."""
-    order = np.lexsort((np.arange(tree.n_stems), -tree.stem_radius, (tree.stem_level != 0).astype(np.int8)))
+def keep_stems(
+    tree: Tree, per_stem: np.ndarray, budget: float, allowed: np.ndarray | None = None
+) -> np.ndarray:
+    """Stems kept (trunks always) among the `allowed` ones (S,) while their triangles fit
+    `budget`; closed under ancestors. A leafy tree keeps its thickest stems first (the kept
+    leaves make up for dropped twigs); a leafless one keeps its branches level by level,
+    spread over the crown within a level (stratified by their middles), so every whorl and
+    limb keeps a share of its branches rather than the thick lower ones keeping all."""
+    trunk = (tree.stem_level != 0).astype(np.int8)
+    if tree.n_leaves:
+        order = np.lexsort((np.arange(tree.n_stems), -tree.stem_radius, trunk))
+    else:
+        last = tree.stem_node_start + tree.stem_node_count - 1
+        mid = 0.5 * (tree.node_pos[tree.stem_node_start] + tree.node_pos[last])
+        key = stratified_keys(mid, tree.seed)
+        order = np.lexsort((np.arange(tree.n_stems), key, tree.stem_level, trunk))
+    if allowed is not None:
+        order = order[(allowed | (tree.stem_level == 0))[order]]
     total = np.cumsum(per_stem[order])
     keep = np.zeros(tree.n_stems, dtype=bool)
     keep[order[total <= budget]] = True
-    keep &= tree.stem_radius >= min_radius
     return stem_closure(tree, keep)
 
 
-def plan_lod(tree: Tree, bark0: int, leaf0: int, budget: float, mesh: MeshOptions, px: float) -> LodPlan:
+def plan_lod(
+    tree: Tree,
+    bark0: int,
+    leaf0: int,
+    budget: float,
+    mesh: MeshOptions,
+    px: float,
+    mesh0: MeshOptions | None = None,
+) -> LodPlan:
     """LOD `tree` within `budget` triangles for `mesh` (see the module doc). `bark0`, `leaf0`:
     LOD0's bark and leaf triangles; `px`: metres a pixel spans at the LOD's switch distance."""
     min_radius = MIN_RADIUS_PX * px
@@ -77,14 +107,20 @@ def plan_lod(tree: Tree, bark0: int, leaf0: int, budget: float, mesh: MeshOption
     per_stem = bark_triangles(tree, mesh)
     if budget >= total0 and per_stem.sum() <= bark0:
         return LodPlan(tree, int(per_stem.sum()), leaf0, 1.0)
+    coarse = coarsen_nodes(tree, NODE_TOL_PX * px)
+    per_stem = bark_triangles(coarse, mesh)
     share = bark0 / total0 if total0 else 1.0
-    keep = keep_stems(tree, per_stem, budget * share, min_radius if leaf0 else 0.0)
-    pruned = prune_stems(tree, keep)
+    worth = None
+    if leaf0:  # stems a pixel wide carry the crown (and its joints); thinner ones must show
+        worth = (coarse.stem_radius >= min_radius) | worth_keeping(coarse, per_stem, leaf0 / tree.n_leaves)
+    keep = keep_stems(coarse, per_stem, budget * share, worth)
+    pruned = prune_stems(coarse, keep)
     L = tree.n_leaves
     per_leaf = leaf0 / L if L else 0.0
     n_keep = int(min(L, max(1, math.floor((budget - per_stem[keep].sum()) / per_leaf)))) if L else 0
     thin = thin_leaves(pruned, n_keep, 1.0)
-    leaf, radius = cover_factors(tree, thin, px)
+    sides = (stem_sides(tree, mesh0 or mesh), stem_sides(thin, mesh))
+    leaf, radius = cover_factors(tree, thin, px, sides)
     mesh_thin = mesh
     if radius != 1.0:  # thicker stems draw the same rings; sides cut to the bark table's
         thin = thicken(thin, radius)
@@ -95,21 +131,23 @@ def plan_lod(tree: Tree, bark0: int, leaf0: int, budget: float, mesh: MeshOption
     )
 
 
-def cover_factors(full: Tree, thin: Tree, px: float) -> tuple[np.ndarray | float, float]:
+def cover_factors(full: Tree, thin: Tree, px: float, sides=(None, None)) -> tuple[np.ndarray | float, float]:
     """(leaf area factors (L,), stem radius factor) so that `thin` (pruned and thinned from
     `full`) covers on screen what `full` covers, at `px` metres per pixel (lod_cover): each
     kept leaf grows by what its region (cells of REGION_PX pixels) lost in leaves and stems,
     times one factor solved so the whole covers as `full` does. A leafless tree thickens its
     kept branches instead."""
     grid = Grid.around(full, px)
-    target = grid.cover(tree_area(full, grid))
+    target = grid.cover(tree_area(full, grid, sides[0]))
     if thin.n_leaves and full.n_leaves:
         local = regional_factors(full, thin, REGION_PX * px)
-        stems = stem_area(thin, grid)
+        stems = stem_area(thin, grid, sides=sides[1])
         blades = Blades(thin, grid.px, LENGTH_SHARE, float(np.median(local)))
         f = solve_factor(lambda f: grid.cover(stems + blades.area(grid, f * local)), target, 0.25, 4.0)
         return f * local, 1.0
-    r = solve_factor(lambda r: grid.cover(stem_area(thicken(thin, r), grid)), target, 0.5, 32.0)
+    r = solve_factor(
+        lambda r: grid.cover(stem_area(thicken(thin, r), grid, sides=sides[1])), target, 0.5, 32.0
+    )
     return 1.0, r
 
 
@@ -157,6 +195,19 @@ def regional_factors(full: Tree, thin: Tree, cell: float) -> np.ndarray:
     return ratio * np.clip(g, 1.0 / REGION_CLIP, REGION_CLIP)
 
 
+def worth_keeping(tree: Tree, per_stem: np.ndarray, per_leaf: float) -> np.ndarray:
+    """Stems (S,) that show at least as much area per triangle as the leaves do (seen from
+    the side, mean over directions: a stem 2r × length × π/4, a blade its area / 2): twigs
+    dropped for leaves would have to be made up by growing the kept leaves further."""
+    a = np.arange(max(tree.n_nodes - 1, 0))
+    seg = a[tree.node_stem[a] == tree.node_stem[a + 1]]
+    length = np.linalg.norm(tree.node_pos[seg + 1] - tree.node_pos[seg], axis=1)
+    width = tree.node_radius[seg] + tree.node_radius[seg + 1]
+    area = np.bincount(tree.node_stem[seg], weights=width * length, minlength=tree.n_stems) * (np.pi / 4)
+    leaf = 0.5 * float(np.mean(tree.leaf_area)) / per_leaf
+    return area / np.maximum(per_stem, 1) >= STEM_WORTH * leaf
+
+
 def _triangles(lod, name: str | None = None) -> int:
     return sum(len(p.indices) // 3 for p in lod.primitives if name is None or p.name == name)
 
@@ -188,5 +239,6 @@ def lod_tree(tree: Tree, k: int, lod0, previous, rig_options, mesh_options, opti
         lod_budget(k, lod0, previous, options),
         mesh,
         px,
+        mesh_options,
     )
     return plan.tree, rig, plan.mesh or mesh

@@ -80,33 +80,40 @@ def prune_stems(tree: Tree, keep: np.ndarray) -> Tree:
     )
 
 
-def stratified_pick(points: np.ndarray, n_keep: int, seed: int) -> np.ndarray:
-    """Sorted indices of `n_keep` of `points` (n, 3) spread like all of them: each cell of a
-    GRID³ grid over their bounds keeps its share (n_keep/n of its points, rounded by a seeded
-    phase per cell so the total is unbiased), then the total is trimmed or topped up at random."""
+def stratified_keys(points: np.ndarray, seed: int) -> np.ndarray:
+    """(n,) keys in [0, 1) whose smallest k pick k of `points` (n, 3) spread like all of them,
+    for every k (nested: fewer picks are a subset of more). A point's key is its place in its
+    GRID³ cell's seeded random order, (rank + phase) / count with a seeded phase per cell, so
+    every cell gives its share k/n of its points, within one."""
     n = points.shape[0]
-    if n_keep >= n:
-        return np.arange(n)
-    if n_keep <= 0:
-        return np.zeros(0, dtype=np.int64)
-    rng = np.random.default_rng([int(seed), 0x57EA7, n_keep])
+    if n == 0:
+        return np.zeros(0)
+    rng = np.random.default_rng([int(seed), 0x57EA7])
     lo, hi = points.min(0), points.max(0)
     cell = np.floor((points - lo) / np.maximum(hi - lo, 1e-12) * (GRID - 1e-9)).astype(np.int64)
     cid = (cell[:, 0] * GRID + cell[:, 1]) * GRID + cell[:, 2]
     order = np.lexsort((rng.random(n), cid))  # by cell, random within a cell
     sc = cid[order]
     start = np.flatnonzero(np.r_[True, sc[1:] != sc[:-1]])
-    rank = np.arange(n) - np.repeat(start, np.diff(np.r_[start, n]))
-    phase = rng.random(start.size)[np.repeat(np.arange(start.size), np.diff(np.r_[start, n]))]
-    q = n_keep / n
-    take = np.floor((rank + 1) * q + phase) - np.floor(rank * q + phase) > 0
-    picked = order[take]
-    if picked.size > n_keep:
-        picked = rng.choice(picked, n_keep, replace=False)
-    elif picked.size < n_keep:
-        rest = np.setdiff1d(np.arange(n), picked)
-        picked = np.concatenate([picked, rng.choice(rest, n_keep - picked.size, replace=False)])
-    return np.sort(picked)
+    count = np.diff(np.r_[start, n])
+    which = np.repeat(np.arange(start.size), count)
+    rank = np.arange(n) - start[which]
+    key = np.empty(n)
+    key[order] = (rank + rng.random(start.size)[which]) / count[which]
+    return key
+
+
+def stratified_pick(points: np.ndarray, n_keep: int, seed: int) -> np.ndarray:
+    """Sorted indices of `n_keep` of `points` (n, 3) spread like all of them, nested: the
+    picks for fewer points are a subset of the picks for more, so consecutive LODs share
+    their leaves (stratified_keys)."""
+    n = points.shape[0]
+    if n_keep >= n:
+        return np.arange(n)
+    if n_keep <= 0:
+        return np.zeros(0, dtype=np.int64)
+    key = stratified_keys(points, seed)
+    return np.sort(np.lexsort((np.arange(n), key))[:n_keep])
 
 
 def thin_leaves(tree: Tree, n_keep: int, area_factor, seed: int = 0) -> Tree:

@@ -1,0 +1,109 @@
+"""Coarser branches for far LODs: nodes a branch does not need at the LOD's pixel size dropped.
+
+A branch's bark costs two triangles per side per ring, one ring per node; at a far switch a
+gently curving twig drawn with five nodes looks the same with two. Dropping such nodes leaves
+room in the bark budget for more branches, so fewer are cut and the crown's twigs, which the
+silhouette shows, stay (a whorled horsetail kept its lower whorls whole and lost the top ones).
+
+A node goes when the chord between its kept neighbours passes within `tol` metres of every
+original node it replaces (and their radii within `tol` of the interpolated ones), so the
+coarse branch stays within `tol` of the full one; every other node at most per pass, so a
+curve is never flattened by removing neighbours together. Trunks keep their nodes (their flare and
+bends carry the silhouette). Leaves and child stems on a dropped node move to the kept node
+below it, where the skin binds them; their positions do not change.
+
+    coarse = coarsen_nodes(tree, tol=0.5 * px)
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from .tree import Tree
+
+PASSES = 3  # halving passes, at most: a stem keeps at least 1/8 of its interior nodes' spans
+
+
+def _droppable(tree: Tree, keep: np.ndarray, tol: float) -> np.ndarray:
+    """Nodes (N,) that one pass may drop: interior kept nodes of branches at odd places among
+    their stem's kept nodes, where the chord between their kept neighbours passes within `tol`
+    of every original node between those neighbours (radii likewise), so the error does not
+    build up over passes."""
+    idx = np.flatnonzero(keep)
+    stem = tree.node_stem[idx]
+    head = np.r_[True, stem[1:] != stem[:-1]]
+    tail = np.r_[stem[1:] != stem[:-1], True]
+    start = np.maximum.accumulate(np.where(head, np.arange(idx.size), 0))
+    rank = np.arange(idx.size) - start
+    j = np.flatnonzero(~head & ~tail & (rank % 2 == 1) & (tree.stem_level[stem] > 0))
+    a, c = idx[j - 1], idx[j + 1]
+    span = c - a - 1  # original nodes strictly between the neighbours (>= 1)
+    which = np.repeat(np.arange(j.size), span)
+    node = a[which] + 1 + np.arange(which.size) - np.repeat(np.cumsum(span) - span, span)
+    p0, d = tree.node_pos[a][which], (tree.node_pos[c] - tree.node_pos[a])[which]
+    t = np.clip(
+        np.einsum("ij,ij->i", tree.node_pos[node] - p0, d) / np.maximum(np.einsum("ij,ij->i", d, d), 1e-30),
+        0.0,
+        1.0,
+    )
+    off = np.linalg.norm(p0 + t[:, None] * d - tree.node_pos[node], axis=1)
+    r = tree.node_radius
+    dr = np.abs(r[a][which] + t * (r[c] - r[a])[which] - r[node])
+    worst = np.maximum.reduceat(np.maximum(off, dr), np.cumsum(span) - span) if j.size else np.zeros(0)
+    out = np.zeros(tree.n_nodes, dtype=bool)
+    out[idx[j][worst <= tol]] = True
+    return out
+
+
+def coarsen_nodes(tree: Tree, tol: float) -> Tree:
+    """`tree` with the branch nodes within `tol` metres of their kept neighbours' chord dropped
+    (see the module doc); the same tree when none is."""
+    if tol <= 0 or tree.n_nodes < 3:
+        return tree
+    keep = np.ones(tree.n_nodes, dtype=bool)
+    for _ in range(PASSES):
+        drop = _droppable(tree, keep, tol)
+        if not drop.any():
+            break
+        keep &= ~drop
+    if keep.all():
+        return tree
+    new_node = np.cumsum(keep) - 1  # a dropped node maps to the kept node below it
+    pnode = tree.stem_parent_node
+    return replace(
+        tree,
+        stem_parent_node=np.where(pnode >= 0, new_node[np.maximum(pnode, 0)], -1).astype(np.int32),
+        stem_node_start=new_node[tree.stem_node_start].astype(np.int32),
+        stem_node_count=np.bincount(tree.node_stem[keep], minlength=tree.n_stems).astype(np.int32),
+        node_stem=tree.node_stem[keep],
+        node_pos=tree.node_pos[keep],
+        node_frame=_frames(tree, keep),
+        node_radius=tree.node_radius[keep],
+        node_z=tree.node_z[keep],
+        leaf_node=new_node[tree.leaf_node].astype(np.int32),
+    )
+
+
+def _frames(tree: Tree, keep: np.ndarray) -> np.ndarray:
+    """Kept nodes' frames, each turned so its column 2 follows its new segment (to the next
+    kept node of its stem); a stem's last node keeps its own."""
+    idx = np.flatnonzero(keep)
+    F = tree.node_frame[idx].copy()
+    same = tree.node_stem[idx[:-1]] == tree.node_stem[idx[1:]]
+    i = np.flatnonzero(same)
+    d = tree.node_pos[idx[i + 1]] - tree.node_pos[idx[i]]
+    d /= np.maximum(np.linalg.norm(d, axis=1), 1e-30)[:, None]
+    z = F[i, :, 2]
+    # the smallest rotation taking z to d (Rodrigues), applied to the whole frame
+    v = np.cross(z, d)
+    c = np.einsum("ij,ij->i", z, d)
+    k = 1.0 / np.maximum(1.0 + c, 1e-12)
+    vx = np.zeros((i.size, 3, 3))
+    vx[:, 0, 1], vx[:, 0, 2], vx[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
+    vx[:, 1, 0], vx[:, 2, 0], vx[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
+    R = np.eye(3)[None] + vx + k[:, None, None] * (vx @ vx)
+    ok = c > -0.999  # a reversed segment (never on a smooth branch): leave the frame
+    F[i[ok]] = R[ok] @ F[i[ok]]
+    return F
