@@ -24,17 +24,24 @@ Measured 2026-11-23 (2-core box shared with other jobs, load 16-22; 7 prototypes
     prototypes, 2 workers, median of 3: old pool 14.02 s, Dask 18.33 s (1.31×), one process
     11.40 s (0.81×: on a box this loaded two workers gain nothing); same bytes from every path.
     Before the quiet worker settings (executor.QUIET) Dask was 1.53× the old pool.
-Measured 2026-11-26, load 10-17, median of 3, old pool = 1.00: Dask with spawned workers 1.46×
-(16.4 / 24.0 s); with workers forked from a fork server that preloads treegen (executor.STARTUP,
-PRELOAD) 1.13× (25.5 / 28.9 s), one process 0.92×. What is left is the cluster's start-up
-(~1 s of Dask's own processes on a quiet box), which the forked pool never paid.
+Measured 2026-11-26, old pool = 1.00, each run in its own process (`--pools-only`):
+    load 10-17, median of 3: Dask with spawned workers 1.46× (16.4 / 24.0 s); with workers
+    forked from a fork server that preloads treegen (executor.STARTUP, PRELOAD) 1.13×
+    (25.5 / 28.9 s), one process 0.92×.
+    quiet box (load ~1), median of 5: old pool 3.99 s, Dask 5.15 s (1.29×; 5.64 s with spawned
+    workers), one process 5.75 s. What is left is the cluster's start-up, ~1.2 s, which the
+    forked pool never paid; building in this process while the cluster starts was tried and
+    gained nothing (6.16 s).
     Idle-box figures before issue 15: camera glb 2.8 s / 42 MB, all LODs 3.9 s / 106 MB.
 """
 
 from __future__ import annotations
 
 import argparse
-import multiprocessing
+import hashlib
+import json
+import subprocess
+import sys
 import resource
 import statistics
 import tempfile
@@ -60,20 +67,6 @@ def old_pool(keys, params, options, workers: int) -> list:
     with ProcessPoolExecutor(max_workers=workers) as pool:
         futures = [pool.submit(build_prototype, params[p], s, options) for p, s in keys]
         return [f.result() for f in futures]
-
-
-def _timed_build(keys, options, params) -> tuple[float, list]:
-    t0 = time.perf_counter()
-    built = build_prototypes(keys, options, 1, False, params)
-    return time.perf_counter() - t0, built
-
-
-def in_fresh_process(keys, options, params) -> tuple[float, list]:
-    """One process's build, timed inside a spawned process: the impostor renders with OpenGL,
-    and a fork of a process holding a live llvmpipe context hangs in its first framebuffer
-    read, so this process must never render before the old pool forks it."""
-    with ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn")) as pool:
-        return pool.submit(_timed_build, keys, options, params).result()
 
 
 def sizes(layout_path: str, workers: int | None, tmp: Path) -> None:
@@ -102,36 +95,50 @@ def sizes(layout_path: str, workers: int | None, tmp: Path) -> None:
             )
 
 
-def pools(layout_path: str, workers: int, reps: int, tmp: Path) -> None:
+METHODS = ("old pool", "dask", "in process")
+
+
+def one_build(layout_path: str, method: str, workers: int) -> None:
+    """`--one METHOD`: build the prototypes once, in this fresh process, and print the
+    seconds and a digest of their GLB bytes as JSON. Each run gets its own process because
+    the impostor renders with OpenGL, and a fork of a process holding a live llvmpipe context
+    hangs in its first framebuffer read: the old pool forks its parent, and the Dask path
+    now builds in this process while its cluster starts."""
     layout = load_layout(layout_path)
     keys = sorted({(p.species, p.seed) for p in layout.placements}, key=lambda k: (str(k[0]), k[1]))
     options = make_options(layout)
-    runs: dict[str, list[float]] = {"old pool": [], "dask": [], "in process": []}
-    built = {}
+    t0 = time.perf_counter()
+    if method == "old pool":
+        built = old_pool(keys, layout.params, options, workers)
+    else:
+        built = build_prototypes(keys, options, workers if method == "dask" else 1, False, layout.params)
+    seconds = time.perf_counter() - t0
+    digest = hashlib.sha256()
+    with tempfile.TemporaryDirectory() as tmp:
+        for k, a in enumerate(built):
+            digest.update(export(a, Path(tmp) / f"p{k}.glb")[0].read_bytes())
+    print(json.dumps({"seconds": seconds, "sha": digest.hexdigest(), "prototypes": len(keys)}))
+
+
+def pools(layout_path: str, workers: int, reps: int) -> None:
+    runs: dict[str, list[float]] = {m: [] for m in METHODS}
+    shas, n = set(), 0
     for _ in range(reps):  # interleaved, so a busy spell hits every method alike
-        for name in runs:
-            t0 = time.perf_counter()
-            if name == "old pool":
-                built[name] = old_pool(keys, layout.params, options, workers)
-            elif name == "dask":
-                built[name] = build_prototypes(keys, options, workers, False, layout.params)
-            else:
-                seconds, built[name] = in_fresh_process(keys, options, layout.params)
-            runs[name].append(seconds if name == "in process" else time.perf_counter() - t0)
-    same = all(_bytes(built["dask"], tmp, "d") == _bytes(b, tmp, n[:3]) for n, b in built.items())
+        for method in METHODS:
+            cmd = [sys.executable, __file__, layout_path, "--workers", str(workers), "--one", method]
+            out = json.loads(subprocess.run(cmd, check=True, capture_output=True, text=True).stdout)
+            runs[method].append(out["seconds"])
+            shas.add(out["sha"])
+            n = out["prototypes"]
     base = statistics.median(runs["old pool"])
-    print(f"\nprototypes ({len(keys)}), {workers} workers, median of {reps}:")
+    print(f"\nprototypes ({n}), {workers} workers, median of {reps}:")
     for name, ts in runs.items():
         m = statistics.median(ts)
         print(
             f"  {name:>10}  {m:6.2f} s  ({m / base:.2f} × the old pool)  runs "
             + " ".join(f"{t:.2f}" for t in ts)
         )
-    print(f"  same bytes from every path: {same}")
-
-
-def _bytes(assets: list, tmp: Path, tag: str) -> list[bytes]:
-    return [export(a, tmp / f"{tag}{k}.glb")[0].read_bytes() for k, a in enumerate(assets)]
+    print(f"  same bytes from every path: {len(shas) == 1}")
 
 
 def main() -> None:
@@ -139,10 +146,15 @@ def main() -> None:
     ap.add_argument("layout", nargs="?", default=str(ROOT / "examples" / "forest_1000.json"))
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--reps", type=int, default=3)
+    ap.add_argument("--one", choices=METHODS, help="one timed prototype build (used by the table)")
+    ap.add_argument("--pools-only", action="store_true", help="only the prototype-pool table")
     args = ap.parse_args()
-    with tempfile.TemporaryDirectory() as tmp:
-        sizes(args.layout, args.workers, Path(tmp))
-        pools(args.layout, args.workers, args.reps, Path(tmp))
+    if args.one:
+        return one_build(args.layout, args.one, args.workers)
+    if not args.pools_only:
+        with tempfile.TemporaryDirectory() as tmp:
+            sizes(args.layout, args.workers, Path(tmp))
+    pools(args.layout, args.workers, args.reps)
     own, kids = _peak_mb()
     print(f"peak MB: main process {own:.0f}, largest worker {kids:.0f}")
 
