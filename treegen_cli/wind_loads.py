@@ -134,13 +134,14 @@ def _span_compliance(
 
 def weeping_levels(params) -> np.ndarray:
     """Bool per stem level: does the species draw this level hanging under its weight? A level
-    ≥ 1 whose Curve and CurveBack both bend it down (≥ 0, not both 0), or a level ≥ 2 that
-    AttractionUp < 0 droops (the paper's weeping willow). Upturned and S-curved levels
-    (aspen, tupelo, oak) and every trunk are drawn by growth, not by weight."""
+    ≥ 1 whose Curve and CurveBack both bend it down (≥ 0) by more in all than its random
+    CurveV, or a level ≥ 2 that AttractionUp < 0 droops (the paper's weeping willow).
+    Upturned, S-curved and randomly wandering levels (aspen, tupelo, oak, shave grass) and every
+    trunk are drawn by growth, not by weight."""
     out = np.zeros(len(params.level), dtype=bool)
     for lev in range(1, len(params.level)):
         lp = params.level[lev]
-        down = lp.curve >= 0.0 and lp.curve_back >= 0.0 and lp.curve + lp.curve_back > 0.0
+        down = lp.curve >= 0.0 and lp.curve_back >= 0.0 and lp.curve + lp.curve_back > abs(lp.curve_v)
         out[lev] = down or (lev >= 2 and params.attraction_up < 0.0)
     return out
 
@@ -164,8 +165,8 @@ def _sag_compliance(
 
     Why: a weeping stem's rest shape is the equilibrium of its own weight, κ = M/EI_eff ⇒
     EI_eff = M/κ. Weber–Penn radii (Ratio, RatioPower) draw a willow's limbs 30 cm thick, and
-    wood that thick would sag 20 times less than drawn; young, pendulous wood is that much more
-    compliant than a solid rod of the drawn radius."""
+    wood that thick would sag 15–50 times less than drawn (median 25); young, pendulous wood
+    is that much more compliant than a solid rod of the drawn radius."""
     n_j = rig.skeleton.parent.shape[0]
     weeps = weeping_levels(tree.params)[tree.stem_level[np.asarray(rig.joint_stem)]]
     seg = np.flatnonzero(tree.node_stem[:-1] == tree.node_stem[1:])
