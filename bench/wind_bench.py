@@ -9,19 +9,21 @@ Target (issue 14): bake under 0.5 s at the default budget, the willow ≤ 1 s.
     (default: the paper's four species; OPENBLAS_NUM_THREADS=1 is faster on a busy machine;
     --joints: the median leaf movement at 4 m/s per joint budget instead)
 
-Measured 2026-11-23 18:00, seed 0, OPENBLAS_NUM_THREADS=1, 2 shared cores at load average 13-18
-(wall time ran 7-10x the CPU time; read the cpu column; all 15 bundled species bake in
-0.07-0.28 CPU s, the willow 0.41):
+Measured 2026-11-26 07:50, seed 0, OPENBLAS_NUM_THREADS=1, 2 shared cores at load average 8-11
+(wall time ran 2-3x the CPU time; read the cpu column). The willow's limbs weep (sag stiffness,
+wind.py): before it, its sway mode was 0.535 Hz and the median leaf moved 2.1 / 13.8 cm at 4 / 12
+m/s in 0.29 CPU s; the other three species are unchanged:
 species          joints              modes Hz  sway Hz  bake s  cpu s    m/s     ζ  lean m  sway m  max ° leaf cm
-black_tupelo        210      0.39, 0.39, 0.70    0.393   0.967  0.100      4  0.23    0.23    0.07    4.9    17.8
-                                                                          12  0.29    1.28    0.49   21.4   115.5
-ca_black_oak        238      0.51, 0.51, 0.87    0.511   1.330  0.122      4  0.16    0.03    0.01    8.5     2.0
-                                                                          12  0.17    0.14    0.07   29.1    14.5
-quaking_aspen       256      0.56, 0.56, 0.85    0.565   1.325  0.146      4  0.22    0.10    0.03    5.9    14.5
+quaking_aspen       256      0.56, 0.56, 0.85    0.565   0.367  0.168      4  0.22    0.10    0.03    5.9    14.5
                                                                           12  0.28    0.56    0.24   19.5    93.7
-weeping_willow      222      0.14, 0.14, 0.14    0.535   3.924  0.408      4  0.16    0.02    0.01   10.8     2.1
-                                                                          12  0.17    0.12    0.07   30.4    13.8
---joints on the willow (median leaf cm at 4 m/s): 2.07 / 2.07 / 2.16 at 256 / 512 / 900 joints.
+black_tupelo        210      0.39, 0.39, 0.70    0.393   0.267  0.099      4  0.23    0.23    0.07    4.9    17.8
+                                                                          12  0.29    1.28    0.49   21.4   115.5
+weeping_willow      222      0.14, 0.14, 0.14    0.201   0.863  0.306      4  0.18    0.02    0.00   11.1     8.7
+                                                                          12  0.20    0.14    0.03   33.5    47.5
+ca_black_oak        238      0.51, 0.51, 0.87    0.511   0.473  0.133      4  0.16    0.03    0.01    8.5     2.0
+                                                                          12  0.17    0.14    0.07   29.1    14.5
+--joints on the willow before the sag stiffness (median leaf cm at 4 m/s): 2.07 / 2.07 / 2.16 at
+256 / 512 / 900 joints.
 """
 
 from __future__ import annotations

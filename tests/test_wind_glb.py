@@ -185,25 +185,7 @@ def test_trunk_resonance_in_the_field_range_and_as_info_says(gale, species):
     assert abs(peak - info["sway_hz"]) <= 0.15 * info["sway_hz"], (peak, info["sway_hz"])
 
 
-@pytest.mark.parametrize(
-    "species",
-    [
-        "quaking_aspen",
-        "black_tupelo",
-        pytest.param(
-            "weeping_willow",
-            marks=pytest.mark.xfail(
-                strict=True,
-                reason=(
-                    "median 2.1 cm, and joints are not what limits it: 2.2 cm with 900 joints, 1.9-2.4 cm "
-                    "with the budget spent by visible motion (bench/wind_bench.py --joints). Its level-2 "
-                    "strands are 8 m rods 5 cm thick at the base (Weber-Penn radii) that barely bend at "
-                    "4 m/s; the leaves hang on 59,625 twigs of 0.57 m, far more than any joint budget"
-                ),
-            ),
-        ),
-    ],
-)
+@pytest.mark.parametrize("species", ["quaking_aspen", "black_tupelo", "weeping_willow"])
 def test_leaves_move_in_a_gentle_breeze(tmp_path, species):
     """4 m/s: the median leaf vertex moves at least 5 cm from rest at some time of the loop."""
     scene = Scene(_make(tmp_path, species, speed=4.0))

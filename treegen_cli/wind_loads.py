@@ -2,7 +2,8 @@
 
 Drag areas and their moments, masses and their first and second moments (each joint's whole
 subtree, about its pivot), and each joint's spring k = E·π r⁴/4 over the wood it bends, with the
-load-bearing radius where a Weber–Penn radius is too thin to hold its load (wind.py's model).
+load-bearing radius where a Weber–Penn radius is too thin to hold its load, and softened to the
+stiffness its drawn sag implies where the species weeps (wind.py's model).
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ class JointLoads:
     first_moment: np.ndarray  # (J, 3) s = Σ m (x − pivot) over the subtree, kg·m
     second_moment: np.ndarray  # (J, 3, 3) S = Σ m (x − pivot)(x − pivot)ᵀ (+ rods' own), kg·m²
     radius: np.ndarray  # (J,) r used for the stiffness: max(node radius, load-bearing radius)
-    stiffness: np.ndarray  # (J,) k = E / ∫ (M/M₀)² dz / (π r⁴/4), N·m/rad
+    stiffness: np.ndarray  # (J,) k = E / ∫ (M/M₀)² dz / (π r⁴/4), N·m/rad (weeping: ≥ M₀/Δφ)
     span: np.ndarray  # (J,) ℓ, m
     area_first: np.ndarray  # (J, 3) Σ C_d·A (x − pivot) over the subtree (aerodynamic damping)
     area_second: np.ndarray  # (J, 3, 3) Σ C_d·A (x − pivot)(x − pivot)ᵀ over the subtree
@@ -90,6 +91,14 @@ def wood_radius(tree: Tree) -> np.ndarray:
     return np.where(trunk, r / flare_factor(tree.params.flare, rel), r)
 
 
+def _moment_fraction(z: np.ndarray, L: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """M(z)/M(0): the moment a joint's load puts on its stem at distance z from the joint, the
+    load spread evenly over [L − a, L + a] along the lever (L its centre)."""
+    ramp = np.clip(L + a - z, 0.0, None) ** 2 / np.maximum(4.0 * a, 1e-12)
+    beyond = np.where(z <= L - a, L - z, np.where(a > 0.0, ramp, 0.0))  # E[(x − z)⁺] / 1
+    return beyond / L
+
+
 def _span_compliance(
     tree: Tree, rig: Rig, carrier: np.ndarray, bearing: np.ndarray, lever: np.ndarray, spread: np.ndarray
 ) -> np.ndarray:
@@ -118,11 +127,73 @@ def _span_compliance(
     z = z0[:, None] + (z1 - z0)[:, None] * t
     L = np.maximum(lever[joint], 1e-6)[:, None]
     a = np.minimum(spread[joint], lever[joint])[:, None]
-    ramp = np.clip(L + a - z, 0.0, None) ** 2 / np.maximum(4.0 * a, 1e-12)
-    beyond = np.where(z <= L - a, L - z, np.where(a > 0.0, ramp, 0.0))  # E[(x − z)⁺] / 1
-    w = (beyond / L) ** 2
+    w = _moment_fraction(z, L, a) ** 2
     per = ell * np.sum(wq * w / (0.25 * np.pi * np.maximum(rr, 1e-9) ** 4), axis=1)
     return np.bincount(joint, weights=per, minlength=n_j)
+
+
+def weeping_levels(params) -> np.ndarray:
+    """Bool per stem level: does the species draw this level hanging under its weight? A level
+    ≥ 1 whose Curve and CurveBack both bend it down (≥ 0) by more in all than its random
+    CurveV, or a level ≥ 2 that AttractionUp < 0 droops (the paper's weeping willow).
+    Upturned, S-curved and randomly wandering levels (aspen, tupelo, oak, shave grass) and every
+    trunk are drawn by growth, not by weight."""
+    out = np.zeros(len(params.level), dtype=bool)
+    for lev in range(1, len(params.level)):
+        lp = params.level[lev]
+        down = lp.curve >= 0.0 and lp.curve_back >= 0.0 and lp.curve + lp.curve_back > abs(lp.curve_v)
+        out[lev] = down or (lev >= 2 and params.attraction_up < 0.0)
+    return out
+
+
+def _sag_compliance(
+    tree: Tree,
+    rig: Rig,
+    carrier: np.ndarray,
+    first_moment: np.ndarray,
+    direction: np.ndarray,
+    lever: np.ndarray,
+    spread: np.ndarray,
+    modulus: float,
+) -> np.ndarray:
+    """Per joint of a weeping level, the hinge compliance (× E, as `_span_compliance`) that lets
+    its weight bend it as drawn: c = E·Δφ/M₀, M₀ the bending moment of the subtree's weight at
+    the joint and Δφ = Σ (M(z)/M₀)·(turn · M̂₀) the drawn turn of its span toward that moment
+    (each node's turn weighted by the share of M₀ still acting there). Only turns where the stem
+    still rises count: below the horizontal the weight pulls along a hanging stem rather than
+    bending it, and its drawn curve there is growth form (CurveBack), not sag. 0 elsewhere.
+
+    Why: a weeping stem's rest shape is the equilibrium of its own weight, κ = M/EI_eff ⇒
+    EI_eff = M/κ. Weber–Penn radii (Ratio, RatioPower) draw a willow's limbs 30 cm thick, and
+    wood that thick would sag 15–50 times less than drawn (median 25); young, pendulous wood
+    is that much more compliant than a solid rod of the drawn radius."""
+    n_j = rig.skeleton.parent.shape[0]
+    weeps = weeping_levels(tree.params)[tree.stem_level[np.asarray(rig.joint_stem)]]
+    seg = np.flatnonzero(tree.node_stem[:-1] == tree.node_stem[1:])
+    joint = carrier[seg]
+    keep = (np.asarray(rig.joint_stem)[joint] == tree.node_stem[seg]) & weeps[joint]
+    d0 = tree.node_frame[seg, :, 2]
+    keep &= d0[:, 2] > 0.0  # the stem still rises
+    seg, joint, d0 = seg[keep], joint[keep], d0[keep]
+    d1 = tree.node_frame[seg + 1, :, 2]  # direction after the turn at the segment's far node
+    axis = np.cross(d0, d1)
+    sin = np.linalg.norm(axis, axis=1)
+    turn = axis * (np.arctan2(sin, np.sum(d0 * d1, axis=1)) / np.maximum(sin, 1e-12))[:, None]
+    # the weight's moment about each joint, g ẑ × s, without its twisting part
+    moment = GRAVITY * np.cross(np.array([0.0, 0.0, 1.0]), first_moment)
+    moment -= np.sum(moment * direction, axis=1, keepdims=True) * direction
+    m0 = np.linalg.norm(moment, axis=1)
+    unit = moment / np.maximum(m0, 1e-300)[:, None]
+    z = tree.node_z[seg + 1] - tree.node_z[np.asarray(rig.joint_node)[joint]]
+    share = _moment_fraction(z, np.maximum(lever[joint], 1e-6), np.minimum(spread[joint], lever[joint]))
+    dphi = np.bincount(joint, weights=share * np.sum(turn * unit[joint], axis=1), minlength=n_j)
+    sagging = weeps & (m0 > 0.0) & (dphi > 0.0)
+    k = m0 / np.where(sagging, dphi, 1.0)
+    # weight above the pivot topples it (gravity's stiffness −g·s_z): keep it standing with a
+    # safety factor of 2 against that, as living stems do (McMahon 1973: trees stand at about a
+    # quarter of their buckling height)
+    k = np.maximum(k, 2.0 * GRAVITY * np.maximum(first_moment[:, 2], 0.0))
+    return np.where(sagging, modulus / np.where(sagging, k, 1.0), 0.0)
 
 
 def subtree_moments(
@@ -214,6 +285,9 @@ def joint_loads(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS) -> JointL
     lever = np.linalg.norm(s_sub, axis=1) / np.maximum(m_sub, 1e-12)  # load centre's lever
     spread = np.sqrt(3.0 * np.maximum(inertia / np.maximum(m_sub, 1e-12) - lever**2, 0.0))
     compliance = _span_compliance(tree, rig, carrier, bearing, lever, spread)
+    # a weeping stem is as compliant as its drawn sag says, never stiffer than its wood
+    sag = _sag_compliance(tree, rig, carrier, s_sub, direction, lever, spread, options.elastic_modulus)
+    compliance = np.maximum(compliance, sag)
     # a joint whose span has no length (a LOD's joint on a kept stem's base, where its parent's
     # sits) is rigid: a thousand times as stiff as the stiffest real joint, not infinitely (a
     # floor relative to the most compliant joint reached the willow's trunk: its strands are
