@@ -10,7 +10,7 @@ kept), with the ratios ours / gltfpack. Targets: quantize ≤ gltfpack default, 
 gltfpack -cc -af 0. Each tree is built once and written three ways.
 
 `err q / m` is how far LOD0's animation moves any skinned vertex from the float file's on any
-frame in our quantize / meshopt files (mm; exchange/key_plan.py's measure on hull corners;
+frame in our quantize / meshopt files (mm; key_plan.py's measure on hull corners;
 bound 1 mm). `tracks` is LOD0's rotation tracks in ours / with more than one key in
 gltfpack's default output: gltfpack drops or collapses to one key every track it finds nearly
 still, including ones whose motion moves the geometry by millimetres (beyond the 1 mm LOD0
@@ -26,8 +26,8 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from treegen_cli import api
-from treegen_cli.exchange import export, key_plan
+from treegen_cli import api, key_plan
+from treegen_cli.exchange import export
 from treegen_cli.exchange.gltf_container import read_gltf
 from treegen_cli.params import load_params
 from treegen_cli.pipeline import Timings

@@ -167,7 +167,7 @@ def test_compressed_lod0_animation_within_one_millimetre(files, monkeypatch):
     key at 16 bits would not (the 19 m aspen's trunk carries its crown); some joints, not all,
     keep float32 keys; meshopt keeps every key (quantize drops keys when that is cheaper: on
     this short 10 fps clip it is not)."""
-    from treegen_cli.exchange import key_plan
+    from treegen_cli import key_plan
 
     lod = files["asset"].lods[0]
     dense = lod.clips[0]
@@ -386,7 +386,8 @@ def test_default_options_leave_the_writer_alone():
 def test_quaternion_filter_model_matches_meshoptimizer(bits):
     """key_plan.quat_filter (what the 1 mm check plays) gives exactly what meshoptimizer's
     own encoder and decoder give back for the QUATERNION filter at `bits`."""
-    from treegen_cli.exchange import compress, key_plan
+    from treegen_cli import key_plan
+    from treegen_cli.exchange import compress
 
     rng = np.random.default_rng(1)
     q = rng.normal(size=(64, 1, 4))

@@ -99,6 +99,24 @@ class Clip:
     # animated joints (the root if none) keyed together at
     # the union of their kept keys, each playing its own
     # track (formats with one time list per animation)
+    plan: KeyPlan | None = None  # a compressed file's keys, bits and float32 joints
+    # (key_plan.with_key_plans; None: every kept key as it is)
+
+
+# meshopt's EXPONENTIAL filter: bits of mantissa kept for a KeyPlan's float32 (`wide`) joints
+# (steps of 2^(2 − bits)); the writer encodes with it, key_plan.py models its error
+EXP_BITS = 20
+
+
+@dataclass(frozen=True)
+class KeyPlan:
+    """A dense clip as a compressed file stores it: `clip` with per-joint kept keys, `wide`
+    (J,) joints whose keys stay float32, and under meshopt the QUATERNION filter's `bits`
+    (J,) of the others (None: int16, quantize)."""
+
+    clip: Clip
+    wide: np.ndarray
+    bits: np.ndarray | None = None
 
 
 # The impostor cards' material. Its crown shading is baked into the atlas, so the cards cast

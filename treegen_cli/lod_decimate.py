@@ -280,7 +280,7 @@ def keys_within(
     """Kept keys (K, J) of the dense `rotations` (K, J, 4, unit) whose slerp playback keeps
     every skinned vertex within `limit` metres of the dense pose on every frame (box-corner
     probes, composed through the hierarchy): the "bounded" schedule with a bound in metres
-    rather than pixels (compressed files' LOD0, exchange/key_plan.py)."""
+    rather than pixels (compressed files' LOD0, key_plan.py)."""
     m = PlaybackModel.of(skeleton, probes(skeleton, primitives))
     kept, _, _, _ = _bounded(
         m, rotations, pose_world(skeleton, rotations), limit, "LINEAR", LOD_DEFAULTS.max_iterations

@@ -23,6 +23,7 @@ import numpy as np
 
 from ..asset import Asset, Forest
 from ..errors import TreegenError
+from ..key_plan import with_key_plans
 from ..prepare import with_bounds
 from . import gltf, image, read_gltf
 from .compress import COMPRESS, GLTF_DEFAULTS, GltfOptions, check_encoder  # noqa: F401  (re-exported)
@@ -146,6 +147,13 @@ def _writer(path: Path, options: GltfOptions) -> Callable[[Asset, Path], None]:
     writer = WRITERS[path.suffix.lower()]
     if options == GLTF_DEFAULTS:
         return writer
+    if options.quantized:  # LOD0's keys planned within 1 mm before the writer encodes them
+
+        def compressed(asset: Asset, target: Path) -> None:
+            planned = with_key_plans(asset, options.compress == "meshopt")
+            gltf.write_gltf(planned, target, options=options)
+
+        return compressed
     return lambda asset, target: gltf.write_gltf(asset, target, options=options)
 
 

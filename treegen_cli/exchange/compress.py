@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..asset import EXP_BITS
 from ..errors import TreegenError
 
 COMPRESS = ("none", "quantize", "meshopt")
@@ -61,9 +62,8 @@ GLTF_DEFAULTS = GltfOptions()
 # bits of the meshopt filters: int8 octahedral normals/tangents as in quantize; 16-bit
 # quaternions keep the rotation keys as exact as quantize's normalized int16
 OCT_BITS, QUAT_BITS = 8, 16
-# mantissa bits of the EXPONENTIAL filter on float32 rotation keys (key_plan's `wide` joints,
-# whose 16-bit keys would move a long lever by more than the bound): steps of 2^(2 − bits)
-EXP_BITS = 20
+# EXP_BITS (asset.py): mantissa bits of the EXPONENTIAL filter on float32 rotation keys
+# (key_plan's `wide` joints, whose 16-bit keys would move a long lever by more than the bound)
 FILTER_BITS = {"OCTAHEDRAL": OCT_BITS, "QUATERNION": QUAT_BITS, "EXPONENTIAL": EXP_BITS}
 # metres: LOD0's grid (and any LOD's seen from nearer than 2 mm / pixel size); a step of 1.15 mm
 # rounds each coordinate by ≤ 0.575 mm, a position by ≤ √3 · 0.575 = 0.996 mm

@@ -37,7 +37,6 @@ import numpy as np
 from .. import __version__
 from ..asset import Asset
 from ..axes import Z_UP_TO_Y_UP
-from .key_plan import plan as plan_keys
 from .compress import GLTF_DEFAULTS, GltfOptions, meshopt_step
 from .gltf_animation import animation_dict
 from .gltf_buffer import Buffer, finish
@@ -118,10 +117,8 @@ def _build(asset: Asset, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, Bu
             "extras": lod_extras(asset, k),
         }
         for clip in lod.clips:
-            kp = None
-            if options.quantized and clip.keys is None and len(clip.times) > 2:
-                kp = plan_keys(lod, clip, options.compress == "meshopt")  # within 1 mm
-            anim = animation_dict(buf, clip, sk, joint_nodes, options.quantized, kp)
+            plan = clip.plan if options.quantized else None  # key_plan.with_key_plans
+            anim = animation_dict(buf, clip, sk, joint_nodes, options.quantized, plan)
             if anim is not None:
                 animations.append(anim)
 

@@ -5,10 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..asset import Clip, Skeleton
+from ..asset import Clip, KeyPlan, Skeleton
 from ..axes import quat_to_y_up
 from ..quat import continuous
-from .key_plan import KeyPlan
 from .compress import snorm16
 from .gltf_buffer import Buffer
 from .gltf_mesh import unit

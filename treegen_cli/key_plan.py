@@ -1,5 +1,8 @@
 """Compressed glTF's dense clips (LOD0's): what to store within the 1 mm bound.
 
+Result: with_key_plans(asset, meshopt) → the same asset with every dense clip's `Clip.plan`
+set; the export table runs it for --compress, so the glTF writer only encodes the plan.
+
 A compressed file (--compress quantize|meshopt) keeps every skinned vertex of a dense clip
 within ANIMATION_ERROR (1 mm) of the float file's playback on every frame, measured on each
 joint's convex-hull corners (lod.probes(exact=True): the true maximum over its vertices),
@@ -11,7 +14,7 @@ composed through the hierarchy. Two things spend that millimetre:
     until the 16-bit rounding alone stays within a share of the bound (QUANT_SHARES).
     meshopt's QUATERNION filter rounds twice (its bits, then the decoder's int16 output), so
     there a joint starts at 12 bits and is raised, longest reach first, through 14 and 16 to
-    float32 keys under the EXPONENTIAL filter (compress.EXP_BITS of mantissa): short twigs
+    float32 keys under the EXPONENTIAL filter (asset.EXP_BITS of mantissa): short twigs
     stay cheap, long levers exact enough.
   * Keys (quantize only). The rest of the bound goes to lod.keys_within: slerp between kept
     keys instead of every frame, so a slow track keeps a fraction of its keys and a nearly
@@ -26,17 +29,16 @@ check passes; `error` measures a plan on the hull corners (tests, bench).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
-from ..asset import Clip, Lod
-from ..clip import play_keys
-from ..lod_decimate import keys_within
-from ..lod_probes import probe_world, probes
-from ..quat import unit
-from ..skeleton import pose_world
-from .compress import EXP_BITS
+from .asset import EXP_BITS, Asset, Clip, KeyPlan, Lod
+from .clip import play_keys
+from .lod_decimate import keys_within
+from .lod_probes import probe_world, probes
+from .quat import unit
+from .skeleton import pose_world
 
 ANIMATION_ERROR = 1e-3  # metres, LOD0's bound for compressed files (geometry has its own)
 # metres of it the 16-bit rounding may take (quantize tries each, largest first); the rest
@@ -47,17 +49,6 @@ INPUT_JSON = 95  # bytes of JSON a key-time accessor takes
 # meshopt: a joint's filter bits, raised step by step: QUATERNION up to 16, then EXPONENTIAL
 # (float32 keys, `wide`) with that many bits of mantissa
 MESHOPT_LEVELS = (12, 14, 16, EXP_BITS)
-
-
-@dataclass(frozen=True)
-class KeyPlan:
-    """A dense clip as a compressed file stores it: `clip` with per-joint kept keys, `wide`
-    (J,) joints whose keys stay float32, and under meshopt the QUATERNION filter's `bits`
-    (J,) of the others (None: int16, quantize)."""
-
-    clip: Clip
-    wide: np.ndarray
-    bits: np.ndarray | None = None
 
 
 def quat_filter(q: np.ndarray, bits: np.ndarray) -> np.ndarray:
@@ -224,3 +215,15 @@ def error(lod: Lod, dense: Clip, kp: KeyPlan) -> float:
     for j, k in enumerate(kp.clip.keys):  # per joint (hundreds)
         kept[k, j] = True
     return float(_Check(lod, rot, exact=True).errors(stored(rot, kp.wide, kp.bits), kept).max())
+
+
+def with_key_plans(asset: Asset, meshopt: bool) -> Asset:
+    """Every dense clip (every key kept: LOD0's) planned for a compressed file (`plan`)."""
+    lods = []
+    for lod in asset.lods:  # a handful of LODs and clips
+        clips = [
+            replace(c, plan=plan(lod, c, meshopt)) if c.keys is None and len(c.times) > 2 else c
+            for c in lod.clips
+        ]
+        lods.append(replace(lod, clips=clips))
+    return replace(asset, lods=lods)
