@@ -180,3 +180,25 @@ def test_split_modules_stay_under_400_lines_or_say_why():
             assert n <= 400 or "400 lines" in doc, (
                 f"{path.relative_to(PKG)}: {n} lines; split it or say why in its docstring"
             )
+
+
+def test_readme_module_list_names_every_module():
+    """The README's module list is how a newcomer finds a job's module: a module it does not
+    name (by file, or by its package folder) is missing there, and a name it gives that no
+    longer exists is stale."""
+    import re
+
+    text = (PKG.parent / "README.md").read_text()
+    section = text[text.index("One direction, one module per job") : text.index("## Gallery")]
+    missing = [
+        str(p.relative_to(PKG))
+        for p in sorted(PKG.rglob("*.py"))
+        if p.stem not in ("__init__", "__main__")
+        and f"`{p.name}`" not in section
+        and f"{p.name}" not in section
+        and f"`{p.parent.name}/`" not in section
+    ]
+    assert not missing, f"README's module list does not name {missing}"
+    named = set(re.findall(r"`([a-z_]+\.py)`", section))
+    files = {p.name for p in PKG.rglob("*.py")}
+    assert named <= files, f"README names modules that do not exist: {sorted(named - files)}"
