@@ -126,12 +126,17 @@ def main() -> None:
     args = ap.parse_args()
     sys.path.insert(0, str((args.root or ROOT).resolve()))  # before treegen_cli is imported
     import treegen_cli
-    from treegen_cli import impostor_render, textures
+    from treegen_cli import impostor_render
+
+    try:  # the PNG encoders' module since textures.py was split (--root may be older code)
+        from treegen_cli import texture_png as png_module
+    except ImportError:
+        from treegen_cli import textures as png_module
 
     acc: dict[str, float] = {}
     _timed(impostor_render, "render_atlas", acc, "gl")
     for fn in ("png_bytes", "png_bytes_unfiltered"):
-        _timed(textures, fn, acc, "png")
+        _timed(png_module, fn, acc, "png")
     print(
         f"impostor stage ({Path(treegen_cli.__file__).parent.parent}), median of {RUNS}, "
         "16×16 views, CPU seconds unless wall"

@@ -336,7 +336,8 @@ def test_crossed_cards_do_not_shade_each_other_in_a_wedge():
     shadows but receive none, as engines set up billboard LODs: both halves within 20 %
     (the bent normals' shading), on either side of the sun."""
     from treegen_cli.drawable import from_asset
-    from treegen_cli.render import Renderer, frame_points, look_at
+    from treegen_cli.render import Renderer
+    from treegen_cli.render_view import frame_points, look_at
 
     asset = _asset("quaking_aspen")
     scene = from_asset(asset, lod=len(asset.lods) - 1)
@@ -428,7 +429,7 @@ def test_a_smaller_atlas_is_written_smaller_and_says_so(tmp_path):
     """At --impostor-size 512 the PNGs are 512² with 32 px views, the extras and the sidecar
     say so, and the atlas takes at most a third of the default's bytes."""
     from treegen_cli import api
-    from treegen_cli.exchange.gltf import read_gltf
+    from treegen_cli.exchange.gltf_container import read_gltf
 
     sizes = {}
     for side in (None, 512):
