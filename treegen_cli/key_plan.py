@@ -30,12 +30,14 @@ check passes; `error` measures a plan on the hull corners (tests, bench).
 from __future__ import annotations
 
 from dataclasses import replace
+from functools import cached_property
 
 import numpy as np
 
 from .asset import EXP_BITS, Asset, Clip, KeyPlan, Lod
 from .clip import play_keys
 from .lod_decimate import keys_within
+from .lod_playback import PlaybackModel, ancestors
 from .lod_probes import probe_world, probes
 from .quat import unit
 from .skeleton import pose_world
@@ -83,16 +85,6 @@ def stored(rotations: np.ndarray, wide: np.ndarray, bits: np.ndarray | None = No
     return out
 
 
-def _ancestors(parent: np.ndarray) -> np.ndarray:
-    """(J, D): each joint, its parent, grandparent, … (the root repeats once reached)."""
-    chain = [np.arange(len(parent))]
-    while True:
-        up = np.where(parent[chain[-1]] >= 0, parent[chain[-1]], chain[-1])
-        if np.array_equal(up, chain[-1]):
-            return np.stack(chain, axis=1)
-        chain.append(up)
-
-
 class _Check:
     """The dense float clip's probes on every frame, to measure a plan against: box corners
     (`exact=False`, 8 per joint, never below the hull's error: for the search) or hull
@@ -101,7 +93,13 @@ class _Check:
     def __init__(self, lod: Lod, rotations: np.ndarray, exact: bool):
         self.skeleton = lod.skeleton
         self.probes = probes(lod.skeleton, lod.primitives, exact=exact)
-        self.dense = probe_world(pose_world(lod.skeleton, rotations), self.probes)
+        self.world = pose_world(lod.skeleton, rotations)
+        self.dense = probe_world(self.world, self.probes)
+
+    @cached_property
+    def model(self) -> PlaybackModel:
+        """The box-corner playback model keys_within searches with (built once per clip)."""
+        return PlaybackModel.of(self.skeleton, self.probes)
 
     def errors(self, values: np.ndarray, kept: np.ndarray) -> np.ndarray:
         """Per joint (J,), the farthest any of its hull corners strays from the dense pose
@@ -122,7 +120,7 @@ def _widen(
     int16, then wide). Returns the rounding's error (metres)."""
     K, J = rot.shape[:2]
     every = np.ones((K, J), dtype=bool)
-    anc = _ancestors(np.asarray(check.skeleton.parent, dtype=np.int64))
+    anc = ancestors(np.asarray(check.skeleton.parent, dtype=np.int64))
     while True:
         err = check.errors(stored(rot, wide, bits), every)
         bad = np.flatnonzero(err > share)
@@ -142,7 +140,7 @@ def _widen(
         wide[pick] = bits[pick] > 16
 
 
-def _decimated(lod: Lod, check: _Check, rot: np.ndarray, wide: np.ndarray, limit: float) -> np.ndarray:
+def _decimated(check: _Check, rot: np.ndarray, wide: np.ndarray, limit: float) -> np.ndarray:
     """Kept keys (K, J) whose playback of the stored keys stays within ANIMATION_ERROR: keys found
     within `limit` metres of the dense clip, the limit shrunk if slerp of rounded keys strays
     further (met at once, as a rule); every key when no limit is left."""
@@ -150,7 +148,7 @@ def _decimated(lod: Lod, check: _Check, rot: np.ndarray, wide: np.ndarray, limit
     for _ in range(4):
         if limit <= MARGIN:
             break
-        kept = keys_within(lod.skeleton, lod.primitives, rot, limit)
+        kept = keys_within(check.model, rot, check.world, limit)
         error = float(check.errors(values, kept).max())
         if error <= ANIMATION_ERROR:
             return _cheaper(kept, wide, values, check)
@@ -183,7 +181,7 @@ def plan(lod: Lod, clip: Clip, meshopt: bool = False) -> KeyPlan:
     best: tuple[int, np.ndarray, np.ndarray] | None = None
     for share in QUANT_SHARES:
         quant = _widen(check, rot, wide, share)
-        kept = _decimated(lod, check, rot, wide, ANIMATION_ERROR - quant - MARGIN)
+        kept = _decimated(check, rot, wide, ANIMATION_ERROR - quant - MARGIN)
         cost = _bytes(kept, wide)
         if best is None or cost < best[0]:
             best = (cost, kept, wide.copy())

@@ -275,14 +275,12 @@ def measure_error_px(
 
 
 def keys_within(
-    skeleton: Skeleton, primitives: list[Primitive], rotations: np.ndarray, limit: float
+    model: PlaybackModel, rotations: np.ndarray, dense_world: np.ndarray, limit: float
 ) -> np.ndarray:
-    """Kept keys (K, J) of the dense `rotations` (K, J, 4, unit) whose slerp playback keeps
-    every skinned vertex within `limit` metres of the dense pose on every frame (box-corner
-    probes, composed through the hierarchy): the "bounded" schedule with a bound in metres
-    rather than pixels (compressed files' LOD0, key_plan.py)."""
-    m = PlaybackModel.of(skeleton, probes(skeleton, primitives))
-    kept, _, _, _ = _bounded(
-        m, rotations, pose_world(skeleton, rotations), limit, "LINEAR", LOD_DEFAULTS.max_iterations
-    )
+    """Kept keys (K, J) of the dense `rotations` (K, J, 4, unit), posed as `dense_world`,
+    whose slerp playback keeps every skinned vertex within `limit` metres of the dense pose on
+    every frame (`model`'s box-corner probes, composed through the hierarchy): the "bounded"
+    schedule with a bound in metres rather than pixels (compressed files' LOD0, key_plan.py,
+    which calls it several times on one clip and so builds the model and pose once)."""
+    kept, _, _, _ = _bounded(model, rotations, dense_world, limit, "LINEAR", LOD_DEFAULTS.max_iterations)
     return kept
