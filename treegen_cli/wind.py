@@ -23,13 +23,12 @@ The model (Kondo et al., after Weber–Penn; REFERENCE.md §1, §3):
   (σ = 4M/πr³); the drawn geometry is unchanged. The trunk-base joint also rocks on the root
   plate (anchorage, in series), so the trunk bends from the ground up, without an elbow.
 * Weeping stems are as compliant as their drawn sag. A level the species draws hanging under
-  its weight (its Curve and CurveBack bend it down by more than its random CurveV, or AttractionUp < 0
-  droops it) has the
-  shape its weight bends it to: κ = M/EI ⇒ EI_eff = M/κ, the drawn turn of each joint's span
-  toward its weight's moment where the stem still rises (below the horizontal the weight pulls
-  along a hanging stem, so the curve there is growth), bounded above by E·π r⁴/4 so stems that
-  do not sag keep the radius law, and below by twice the toppling moment of weight standing
-  above the joint (a buckling safety factor of 2). Why: Weber–Penn draws the willow's limbs
+  its weight (its Curve and CurveBack bend it down by more than its random CurveV, or
+  AttractionUp < 0 droops it) has the shape its weight bends it to: κ = M/EI ⇒ EI_eff = M/κ,
+  the drawn turn of each joint's span toward its weight's moment where the stem still rises
+  (below the horizontal the weight pulls along a hanging stem, so the curve there is growth),
+  bounded above by E·π r⁴/4 so stems that do not sag keep the radius law, and below by twice
+  the toppling moment of weight standing above the joint (a buckling safety factor of 2). Why: Weber–Penn draws the willow's limbs
   30 cm thick (Ratio 0.03, RatioPower 2); wood that thick would sag a small fraction of the
   drawn 120° arc and barely move in a breeze, while young, pendulous wood is far more compliant
   than a solid rod of that radius. Upturned and S-curved species (aspen, tupelo, oak) and every
