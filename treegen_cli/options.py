@@ -197,6 +197,13 @@ def _scalar(key: str, value, label: Callable[[str], str]):
     return value
 
 
+def _power_of_two(flag: str, n: int, bounds: tuple[int, int], rule: str) -> None:
+    """Image sides: a power of two within `bounds` (`rule` words the message, {lo}/{hi})."""
+    lo, hi = bounds
+    if not (lo <= n <= hi and n & (n - 1) == 0):
+        raise TreegenError(f"{flag} {n}: " + rule.format(lo=lo, hi=hi))
+
+
 def resolve(
     options: dict, label: Callable[[str], str] = cli_name, output: str | os.PathLike | None = None
 ) -> Resolved:
@@ -253,15 +260,15 @@ def resolve(
         raise TreegenError(
             f"{label('max_joints')} {v['max_joints']}: the joint budget must be in 1..{MAX_JOINTS}"
         )
-    lo, hi = TEXTURE_SIZES
     n = v["texture_size"]
-    if not (lo <= n <= hi and n & (n - 1) == 0):
-        raise TreegenError(f"{label('texture_size')} {n}: must be a power of two in [{lo}, {hi}]")
+    _power_of_two(label("texture_size"), n, TEXTURE_SIZES, "must be a power of two in [{lo}, {hi}]")
     side = v["impostor_size"]
-    lo, hi = IMPOSTOR_SIZES
-    if side is not None and not (lo <= side <= hi and side & (side - 1) == 0):
-        raise TreegenError(
-            f"{label('impostor_size')} {side}: the atlas side must be a power of two in [{lo}, {hi}] px"
+    if side is not None:
+        _power_of_two(
+            label("impostor_size"),
+            side,
+            IMPOSTOR_SIZES,
+            "the atlas side must be a power of two in [{lo}, {hi}] px",
         )
     static = output is not None and Path(output).suffix.lower() in STATIC
     if output is not None:
