@@ -166,8 +166,7 @@ def _seen(tree: Tree, leaves: bool) -> tuple[np.ndarray, np.ndarray]:
         F = tree.leaf_frame
         mid = tree.leaf_pos + (0.5 * tree.leaf_size[:, 0])[:, None] * F[:, :, 1]
         return mid, tree.leaf_area * (1.0 - 0.5 * np.abs(F[:, 2, 2]))
-    a = np.arange(max(tree.n_nodes - 1, 0))
-    seg = a[tree.node_stem[a] == tree.node_stem[a + 1]]
+    seg = tree.segments
     d = tree.node_pos[seg + 1] - tree.node_pos[seg]
     length = np.linalg.norm(d, axis=1)
     width = tree.node_radius[seg] + tree.node_radius[seg + 1]
@@ -199,8 +198,7 @@ def worth_keeping(tree: Tree, per_stem: np.ndarray, per_leaf: float) -> np.ndarr
     """Stems (S,) that show at least as much area per triangle as the leaves do (seen from
     the side, mean over directions: a stem 2r × length × π/4, a blade its area / 2): twigs
     dropped for leaves would have to be made up by growing the kept leaves further."""
-    a = np.arange(max(tree.n_nodes - 1, 0))
-    seg = a[tree.node_stem[a] == tree.node_stem[a + 1]]
+    seg = tree.segments
     length = np.linalg.norm(tree.node_pos[seg + 1] - tree.node_pos[seg], axis=1)
     width = tree.node_radius[seg] + tree.node_radius[seg + 1]
     area = np.bincount(tree.node_stem[seg], weights=width * length, minlength=tree.n_stems) * (np.pi / 4)

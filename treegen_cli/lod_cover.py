@@ -114,8 +114,7 @@ def polygon_width(sides: np.ndarray) -> np.ndarray:
 def _segments(tree: Tree, px: float, radius_factor: float, sides: np.ndarray | None = None):
     """Stem segments (between consecutive nodes of a stem) sampled along and across; a stem
     drawn with `sides` (S,) sides is as wide as its polygon (polygon_width)."""
-    a = np.arange(tree.n_nodes - 1)
-    seg = a[tree.node_stem[a] == tree.node_stem[a + 1]]
+    seg = tree.segments
     p0, p1 = tree.node_pos[seg], tree.node_pos[seg + 1]
     d = p1 - p0
     length = np.linalg.norm(d, axis=1)

@@ -68,6 +68,11 @@ class Tree:
         return int(self.leaf_pos.shape[0])
 
     @property
+    def segments(self) -> np.ndarray:
+        """(G,) the first node of every segment: consecutive nodes of one stem (node g to g + 1)."""
+        return np.flatnonzero(self.node_stem[:-1] == self.node_stem[1:])
+
+    @property
     def leaf_area(self) -> np.ndarray:
         """Blade area per leaf (m²), from the leaf shape's fill factor."""
         from .leafshapes import fill_factor

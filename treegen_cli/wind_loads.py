@@ -113,7 +113,7 @@ def _span_compliance(
     whose radius tapers to nothing carries almost no moment where it is thin, so it no longer
     whips round, while a trunk span under the crown bends along its whole length."""
     n_j = rig.skeleton.parent.shape[0]
-    seg = np.flatnonzero(tree.node_stem[:-1] == tree.node_stem[1:])
+    seg = tree.segments
     joint = carrier[seg]
     own = np.asarray(rig.joint_stem)[joint] == tree.node_stem[seg]  # rigid stems bend nothing
     seg, joint = seg[own], joint[own]
@@ -169,7 +169,7 @@ def _sag_compliance(
     is that much more compliant than a solid rod of the drawn radius."""
     n_j = rig.skeleton.parent.shape[0]
     weeps = weeping_levels(tree.params)[tree.stem_level[np.asarray(rig.joint_stem)]]
-    seg = np.flatnonzero(tree.node_stem[:-1] == tree.node_stem[1:])
+    seg = tree.segments
     joint = carrier[seg]
     keep = (np.asarray(rig.joint_stem)[joint] == tree.node_stem[seg]) & weeps[joint]
     d0 = tree.node_frame[seg, :, 2]
@@ -241,7 +241,7 @@ def joint_loads(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS) -> JointL
     carrier = _node_carrier(tree, rig, n_j)
 
     # wood: one frustum per segment (consecutive nodes of one stem), carried by its lower node
-    seg = np.flatnonzero(tree.node_stem[:-1] == tree.node_stem[1:])
+    seg = tree.segments
     a, b = tree.node_pos[seg], tree.node_pos[seg + 1]
     r0, r1 = tree.node_radius[seg], tree.node_radius[seg + 1]
     length = np.linalg.norm(b - a, axis=1)
