@@ -129,16 +129,20 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
 def treegen_version() -> str:
     """Run on each worker by check_workers (by reference: it fails where treegen_cli is
     not importable, which is the point)."""
-    from . import __version__
+    from .build_id import build_id
 
-    return __version__
+    return build_id()
 
 
 def check_workers(client, address: str, wait_s: float = 30.0) -> int:
     """Refuse a cluster whose workers cannot run our jobs, before any is sent: no worker
     (after `wait_s`), a worker without treegen_cli, or one with another treegen version
-    (whose bytes could differ from `treegen make` here). Returns the number of workers."""
+    (whose bytes could differ from `treegen make` here): same version and same package files
+    (build_id). Returns the number of workers."""
     from . import __version__
+    from .build_id import build_id
+
+    here = build_id()
 
     try:
         client.wait_for_workers(1, timeout=wait_s)
@@ -155,10 +159,10 @@ def check_workers(client, address: str, wait_s: float = 30.0) -> int:
                 f"({type(v).__name__}: {v}); install treegen {__version__} "
                 "on every worker"
             ) from None
-        if v != __version__:
+        if v != here:
             raise TreegenError(
                 f"--scheduler {address}: worker {worker} has treegen {v}, this "
-                f"is {__version__}; install the same version on every worker"
+                f"is {here}; install the same version (the same files) on every worker"
             )
     return len(found)
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path, PurePosixPath
 
-from .. import __version__
+from ..build_id import build_id
 from ..errors import TreegenError
 from ..forest.schema import check_schema, read_json_file
 from ..generate import check_trunk
@@ -263,9 +263,7 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
                 if k != "seed" and not (k in api.UNSET_FREE and v is None)
             }
             for seed in seeds:
-                task = short_hash(
-                    {"species": digest, "seed": seed, "options": values, "treegen": __version__}
-                )
+                task = short_hash({"species": digest, "seed": seed, "options": values, "treegen": build_id()})
                 resolved[task] = api.Resolved(
                     seed=seed, options=base_job.options, values={**base_job.values, "seed": seed}
                 )

@@ -9,7 +9,7 @@ import json
 import os
 from pathlib import Path
 
-from .. import __version__
+from ..build_id import build_id
 from .catalogue import Catalogue, Job, options_sha, species_sha
 
 MANIFEST, MANIFEST_CSV, JOURNAL = "manifest.json", "manifest.csv", ".manifest.jsonl"
@@ -92,7 +92,7 @@ CSV_COLUMNS = (
 def write_manifest(out_dir: Path, cat: Catalogue, rows: list[dict], totals: dict) -> None:
     """DIR/manifest.json and manifest.csv (one row per job, catalogue order), each replaced
     atomically; then the journal they now contain is removed."""
-    doc = {"catalogue": str(cat.path), "treegen": __version__, **totals, "assets": rows}
+    doc = {"catalogue": str(cat.path), "treegen": build_id(), **totals, "assets": rows}
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(CSV_COLUMNS)
