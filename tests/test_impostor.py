@@ -270,6 +270,25 @@ def test_impostor_is_the_last_lod_within_budget_and_shows_the_tree(species):
 
 
 @needs_gl
+@pytest.mark.parametrize("species", ["balsam_fir", "desert_bush"])
+def test_the_switch_to_the_impostor_keeps_the_crowns_cover(species):
+    """Rendered at the switch (the coarsest LOD at the impostor's distance, the project's
+    renderer, the side view a card faces), the cards cover what that LOD covers, within ±5 %.
+    The fir's clumped needles, thinned for the atlas, covered +47 % when kept at their summed
+    area; the desert bush, its twigs dropped from the atlas, −64 % (impostor_atlas)."""
+    from treegen_cli.drawable import from_asset
+    from treegen_cli.silhouette import compare, coverage_masks, metres_per_pixel
+
+    asset = _asset(species)
+    k = len(asset.lods) - 1
+    pair = [from_asset(asset, k - 1), from_asset(asset, k)]
+    masks, px = coverage_masks(pair, metres_per_pixel(asset.lods[k].distance, LOD_OPTIONS), (-90.0,))
+    assert px <= IMPOSTOR_DEFAULTS.switch_px * 1.3, px  # the size the switch is for
+    iou, cover = compare(masks[0][0], masks[1][0])
+    assert abs(cover - 1.0) <= 0.05, (species, cover, iou)
+
+
+@needs_gl
 def test_top_and_side_views_of_the_aspen():
     """The atlas centre shows the crown from above, round and centred; the +a card cell shows
     it from the side, taller than wide, standing on the trunk base."""

@@ -38,6 +38,8 @@ _VIEW = """
 uniform vec3 centre;
 uniform float radius;
 uniform int grid;
+uniform int n_cells;                              // > 0: instance i draws only cells[i]
+uniform ivec2 cells[4];
 
 vec3 cell_direction(int col, int row) {        // hemi-octahedral decode of the cell centre
     vec2 q = (vec2(col, row) + 0.5) / float(grid) * 2.0 - 1.0;
@@ -48,6 +50,7 @@ vec3 cell_direction(int col, int row) {        // hemi-octahedral decode of the 
 
 vec3 project(vec3 pos) {                          // sets gl_Position; returns the view coords
     int col = gl_InstanceID % grid, row = gl_InstanceID / grid;
+    if (n_cells > 0) { col = cells[gl_InstanceID].x; row = cells[gl_InstanceID].y; }
     vec3 d = cell_direction(col, row);            // from the centre towards the viewer
     vec3 right = cross(vec3(0.0, 0.0, 1.0), d);
     right = dot(right, right) > 1e-10 ? normalize(right) : vec3(0.0, 1.0, 0.0);
@@ -245,33 +248,64 @@ def _buffer(ctx, array, dtype: str):
     return ctx.buffer(np.ascontiguousarray(array, dtype).tobytes())
 
 
-def render_atlas(
-    scene: Drawable, centre: np.ndarray, radius: float, grid: int, cell: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """(albedo RGBA, normal + depth RGBA) uint8 atlases of `scene`'s rest pose (generator
-    space: pass a Drawable whose parts are Z up), top row first, as read-only views.
-    Double-sided parts are leaves (the lean program), the others bark."""
-    try:
-        ctx = gl_context()
-    except TreegenError as e:  # the default make must say what to do without EGL
-        raise TreegenError(
-            f"impostor: {str(e).removeprefix('preview: ')} (make it with --no-impostor)"
-        ) from None
-    try:
-        bark = ctx.program(vertex_shader=_BARK_VS, fragment_shader=_BARK_FS)
-        leaf = ctx.program(vertex_shader=_LEAF_VS, fragment_shader=_LEAF_FS)
-        size = grid * cell
-        albedo = ctx.texture((size, size), 4, internal_format=GL_SRGB8_ALPHA8)
-        normal = ctx.texture((size, size), 4)
-        depth = ctx.depth_renderbuffer((size, size))
-        fbo = ctx.framebuffer(color_attachments=[albedo, normal], depth_attachment=depth)
+MAX_CELLS = 4  # cells one partial draw can pick (the shader's `cells` array)
+
+
+class AtlasRenderer:
+    """One GL context, pair of programs and framebuffer for several draws of one atlas layout
+    (centre, radius, grid × grid cells of `cell` pixels): the atlas, and the quick draws of a
+    few cells that calibrate its thinned leaves (impostor.render_views)."""
+
+    def __init__(self, centre: np.ndarray, radius: float, grid: int, cell: int):
+        try:
+            self.ctx = ctx = gl_context()
+        except TreegenError as e:  # the default make must say what to do without EGL
+            raise TreegenError(
+                f"impostor: {str(e).removeprefix('preview: ')} (make it with --no-impostor)"
+            ) from None
+        try:
+            self.grid, self.cell, self.size = grid, cell, grid * cell
+            self.centre, self.radius = np.asarray(centre, np.float64), float(radius)
+            self.bark = ctx.program(vertex_shader=_BARK_VS, fragment_shader=_BARK_FS)
+            self.leaf = ctx.program(vertex_shader=_LEAF_VS, fragment_shader=_LEAF_FS)
+            size = self.size
+            albedo = ctx.texture((size, size), 4, internal_format=GL_SRGB8_ALPHA8)
+            normal = ctx.texture((size, size), 4)
+            depth = ctx.depth_renderbuffer((size, size))
+            self.fbo = ctx.framebuffer(color_attachments=[albedo, normal], depth_attachment=depth)
+            for prog in (self.bark, self.leaf):
+                _set(prog, "centre", tuple(float(x) for x in self.centre))
+                _set(prog, "radius", self.radius)
+                _set(prog, "grid", int(grid))
+                _set(prog, "base_tex", 0)
+            self._white = np.full((1, 1, 4), 255, np.uint8)
+            self._textures: dict[int, object] = {}
+        except BaseException:
+            ctx.release()
+            raise
+
+    def __enter__(self) -> AtlasRenderer:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.ctx.release()
+
+    def draw(self, scene: Drawable, cells=None) -> None:
+        """Clear and draw `scene`'s rest pose into every cell, or only `cells` [(col, row)]."""
+        ctx, c, radius = self.ctx, self.centre, self.radius
+        fbo = self.fbo
         fbo.use()
-        ctx.viewport = (0, 0, size, size)
+        ctx.viewport = (0, 0, self.size, self.size)
         fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         ctx.enable(ctx.DEPTH_TEST)
         ctx.enable_direct(0x8DB9)  # GL_FRAMEBUFFER_SRGB: linear → sRGB
         ctx.disable(ctx.CULL_FACE)
-        c = np.asarray(centre, np.float64)
+        picked = list(cells or [])[:MAX_CELLS]
+        pad = picked + [(0, 0)] * (MAX_CELLS - len(picked))
+        for prog in (self.bark, self.leaf):
+            _set(prog, "n_cells", len(picked))
+            if "cells" in prog:
+                prog["cells"].value = [tuple(int(v) for v in rc) for rc in pad]
         leaves = [p.positions for p in scene.parts if p.double_sided and len(p.positions)]
         crown = (
             np.concatenate(leaves).astype(np.float64)
@@ -280,14 +314,9 @@ def render_atlas(
         )
         clo, chi = (crown.min(0) - c) / radius, (crown.max(0) - c) / radius
         crown_centre, crown_radius = 0.5 * (clo + chi), np.maximum(0.5 * (chi - clo), 0.05)
-        for prog in (bark, leaf):
-            _set(prog, "centre", tuple(float(x) for x in c))
-            _set(prog, "radius", float(radius))
-            _set(prog, "grid", int(grid))
-            _set(prog, "base_tex", 0)
+        bark, leaf = self.bark, self.leaf
         _set(bark, "crown_centre", tuple(float(x) for x in crown_centre))
         _set(bark, "crown_radius", tuple(float(x) for x in crown_radius))
-        white = np.full((1, 1, 4), 255, np.uint8)
         for p in scene.parts:
             if not len(p.indices) or (p.double_sided and p.opacity <= 0):
                 continue
@@ -303,10 +332,10 @@ def render_atlas(
                 shade = leaf_shading(p, c, radius, crown_centre, crown_radius)
                 bufs.append((_buffer(ctx, shade, "f4"), "3f", "in_shade"))
                 _set(prog, "alpha_cutoff", float(cut) / float(p.opacity))
-                tex = _texture(ctx, shrink(p.texture) if p.textured else white, p.wrap)
+                tex = self._texture(p.texture if p.textured else None, p.wrap, small=True)
             else:
                 prog = bark
-                tex = _texture(ctx, p.texture, p.wrap) if p.textured else None
+                tex = self._texture(p.texture, p.wrap) if p.textured else None
                 _set(prog, "has_tex", tex is not None)
                 _set(prog, "alpha_cutoff", float(cut))
                 _set(prog, "opacity", float(p.opacity))
@@ -316,11 +345,45 @@ def render_atlas(
             vao = ctx.vertex_array(
                 prog, bufs, index_buffer=_buffer(ctx, p.indices, "u4"), index_element_size=4
             )
-            vao.render(instances=grid * grid)
+            vao.render(instances=len(picked) or self.grid * self.grid)
+            vao.release()
+            for b in bufs:
+                b[0].release()
+
+    def _texture(self, image, wrap, small: bool = False):
+        """The GL texture of a part's image, made once per image (calibration draws reuse it)."""
+        key = (id(image), small)
+        if key not in self._textures:
+            img = self._white if image is None else (shrink(image) if small else image)
+            self._textures[key] = (_texture(self.ctx, img, wrap), image)  # keeps `image` alive
+        return self._textures[key][0]
+
+    def read(self) -> tuple[np.ndarray, np.ndarray]:
+        """(albedo RGBA, normal + depth RGBA) uint8 images of the last draw, top row first."""
         out = []
         for k in range(2):  # bottom row first: flipped as a view, copied once by the caller
-            data = fbo.read(components=4, attachment=k, alignment=1)
-            out.append(np.frombuffer(data, np.uint8).reshape(size, size, 4)[::-1])
+            data = self.fbo.read(components=4, attachment=k, alignment=1)
+            out.append(np.frombuffer(data, np.uint8).reshape(self.size, self.size, 4)[::-1])
         return out[0], out[1]
-    finally:
-        ctx.release()
+
+    def covered(self, cells) -> int:
+        """Texels the last draw covered in `cells` [(col, row)] (alpha > 0)."""
+        n, cell = 0, self.cell
+        for col, row in cells:
+            y = self.size - (row + 1) * cell  # GL rows count from the bottom
+            data = self.fbo.read(
+                viewport=(col * cell, y, cell, cell), components=4, attachment=0, alignment=1
+            )
+            n += int(np.count_nonzero(np.frombuffer(data, np.uint8)[3::4]))
+        return n
+
+
+def render_atlas(
+    scene: Drawable, centre: np.ndarray, radius: float, grid: int, cell: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """(albedo RGBA, normal + depth RGBA) uint8 atlases of `scene`'s rest pose (generator
+    space: pass a Drawable whose parts are Z up), top row first, as read-only views.
+    Double-sided parts are leaves (the lean program), the others bark."""
+    with AtlasRenderer(centre, radius, grid, cell) as r:
+        r.draw(scene)
+        return r.read()

@@ -117,9 +117,7 @@ def add_impostor(
     over at the impostor's distance."""
     lo, height = options.lod, tree_height(tree)
     distance = switch_distance(height, lods[-1].distance, lo, options.impostor)
-    imp, material = build_impostor(
-        lods[0], lods[-1], materials, lo, distance, clip_name(len(lods)), options.impostor
-    )
+    imp, material = build_impostor(lods[-1], materials, lo, distance, clip_name(len(lods)), options.impostor)
     last = replace(lods[-1], screen_coverage=screen_coverage(height, distance, lo))
     return [*lods[:-1], last, imp], [*materials, material]
 

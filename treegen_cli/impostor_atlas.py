@@ -1,0 +1,159 @@
+"""The impostor's atlas, drawn: which of a LOD's triangles go in, and how thinned leaves keep
+the crown's cover.
+
+    albedo, normal_depth = render_views(coarse_lod, materials, centre, radius, options, cells)
+    # Result: the two (size, size, 4) uint8 atlases; transparent texels carry their cell's
+    # mean colour (_dilate).
+
+The views are a few pixels per leaf, so a crown of many leaves is drawn from every k-th leaf,
+enlarged; the enlargement is measured (render_views), not assumed, and bark is drawn from its
+widest triangles. impostor_render.py does the GL work.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from .asset import Lod, Material, Primitive
+
+
+def _fewer_leaves(prim: Primitive, cap: int) -> Primitive:
+    """Every k-th leaf card of a 4-vertex-card primitive of more than `cap` cards, at its own
+    size (render_views enlarges them until they cover what all the cards did); `prim` itself
+    when there is nothing to thin."""
+    V, T = len(prim.positions), len(prim.indices) // 3
+    n = V // 4
+    if V != 4 * n or T != 2 * n or n <= cap:
+        return prim
+    keep = np.arange(0, n, math.ceil(n / cap))
+    verts = (4 * keep[:, None] + np.arange(4)).ravel()
+    first = np.asarray(prim.indices[:6], np.int64)  # the cards' shared index pattern
+    idx = (first[None, :] + 4 * np.arange(len(keep))[:, None]).ravel().astype(np.uint32)
+    return replace(
+        prim,
+        positions=np.asarray(prim.positions, np.float32)[verts],
+        normals=np.asarray(prim.normals)[verts],
+        uvs=np.asarray(prim.uvs)[verts],
+        indices=idx,
+        joints=np.asarray(prim.joints)[verts],
+        weights=np.asarray(prim.weights)[verts],
+    )
+
+
+def _enlarged(part, area: float):
+    """A drawable part of 4-vertex cards with each card scaled about its centre to `area`×."""
+    quads = np.asarray(part.positions, np.float64).reshape(-1, 4, 3)
+    mid = quads.mean(1, keepdims=True)
+    pos = (mid + (quads - mid) * math.sqrt(area)).reshape(-1, 3).astype(np.float32)
+    return replace(part, positions=pos)
+
+
+def _widest_bark(prim: Primitive, cap: int) -> Primitive:
+    """The `cap` bark triangles with the longest shortest edge (a tube's is its side width):
+    trunk and limbs; twigs far below an atlas pixel are left out."""
+    tri = np.asarray(prim.indices, np.int64).reshape(-1, 3)
+    if len(tri) <= cap or prim.material != "bark":
+        return prim
+    p = np.asarray(prim.positions, np.float64)
+    edge = np.stack([np.linalg.norm(p[tri[:, i]] - p[tri[:, (i + 1) % 3]], axis=1) for i in range(3)], 1)
+    keep = np.sort(np.argsort(-edge.min(1), kind="stable")[:cap])
+    return replace(prim, indices=tri[keep].ravel().astype(np.uint32))
+
+
+def _dilate(rgba: np.ndarray, grid: int, cell: int) -> np.ndarray:
+    """Transparent texels take their cell's mean visible colour (alpha stays 0), so clients'
+    mipmaps and bilinear filtering do not darken the cut-out's edges. The renderer clears to
+    0, so a cell's colour sum needs no mask; texels are filled as whole uint32 words."""
+    rgba = np.ascontiguousarray(rgba)
+    rows = rgba.reshape(grid, cell, grid, cell * 4).sum(axis=1, dtype=np.uint32)
+    total = rows.reshape(grid, grid, cell, 4).sum(axis=2)[..., :3]  # (grid, grid, 3)
+    empty = (rgba[..., 3] == 0).reshape(grid, cell, grid, cell)
+    count = np.maximum(cell * cell - np.count_nonzero(empty, axis=(1, 3)), 1).astype(np.uint32)
+    fill = np.zeros((grid, grid, 4), np.uint8)
+    fill[..., :3] = (total + count[..., None] // 2) // count[..., None]
+    texels = rgba.view(np.uint32).reshape(grid, cell, grid, cell)
+    out = np.where(empty, fill.view(np.uint32).reshape(grid, 1, grid, 1), texels)
+    return out.view(np.uint8).reshape(rgba.shape)
+
+
+def _atlas_parts(prims: list[Primitive], materials: list[Material]) -> list:
+    """What render_atlas draws, in generator space (Z up): each primitive with its material's
+    colour, cut-out and base texture (decoded once). Not drawable.from_asset: that would
+    turn everything Y up and back, decode the unused normal maps and build a rig."""
+    from .drawable import Part, decode_image
+
+    mats = {m.name: m for m in materials}
+    decoded: dict[int, np.ndarray] = {}
+    parts = []
+    for p in prims:
+        m = mats.get(p.material)
+        has_uv = p.uvs is not None and len(p.uvs) == len(p.positions)
+        tex = m.base_texture if m is not None and has_uv else None
+        if tex is not None and id(tex) not in decoded:
+            decoded[id(tex)] = decode_image(tex.png, 4, f"texture {tex.name!r}")
+        wrap = tex.wrap if tex is not None and tex.wrap in ("REPEAT", "CLAMP", "MIRROR") else "REPEAT"
+        parts.append(
+            Part(
+                name=p.name,
+                positions=np.asarray(p.positions, np.float32),
+                normals=np.asarray(p.normals, np.float32),
+                indices=np.asarray(p.indices, np.uint32),
+                joints=np.asarray(p.joints),
+                weights=np.asarray(p.weights, np.float32),
+                color=(m.base_color[0], m.base_color[1], m.base_color[2])
+                if m is not None
+                else (0.6, 0.6, 0.6),
+                double_sided=bool(m is not None and m.double_sided),
+                uvs=np.asarray(p.uvs, np.float32) if has_uv else None,
+                texture=None if tex is None else decoded[id(tex)],
+                alpha_cutoff=m.alpha_cutoff if m is not None else None,
+                opacity=float(m.base_color[3]) if m is not None and len(m.base_color) > 3 else 1.0,
+                wrap=(wrap, wrap),
+            )
+        )
+    return parts
+
+
+CALIBRATION_STEPS = 8  # bisections of the thinned cards' area factor (log scale)
+
+
+def render_views(
+    lod: Lod, materials: list[Material], centre: np.ndarray, radius: float, options, cells
+) -> tuple[np.ndarray, np.ndarray]:
+    """The two atlases (albedo + alpha, normals + depth) of `lod`'s rest pose; `options` an
+    ImpostorOptions, `cells` [(col, row)] the cards' cells.
+
+    Beyond max_leaf_cards, every k-th leaf is drawn, enlarged so that the card views cover
+    what all the leaves cover there (a few quick draws of the card cells): clumped leaves
+    (needles on a shoot, leaflets on a frond) overlap, so keeping their summed area (k×)
+    covered up to 47 % more than the tree (the fir) and the impostor popped at its switch."""
+    from .drawable import Drawable
+    from .impostor_render import AtlasRenderer
+
+    prims = [_widest_bark(p, options.max_bark_triangles) for p in lod.primitives]
+    thin = [_fewer_leaves(p, options.max_leaf_cards) for p in prims]
+    parts = _atlas_parts(thin, materials)
+    thinned = [t is not p for t, p in zip(thin, prims)]
+    with AtlasRenderer(centre, radius, options.grid, options.cell) as r:
+        if any(thinned):
+
+            def cover(area: float) -> int:
+                scaled = [_enlarged(q, area) if t else q for q, t in zip(parts, thinned)]
+                r.draw(Drawable(parts=scaled, n_joints=1), cells)
+                return r.covered(cells)
+
+            r.draw(Drawable(parts=_atlas_parts(prims, materials), n_joints=1), cells)
+            target = r.covered(cells)
+            k = max(len(p.positions) / max(len(t.positions), 1) for p, t in zip(prims, thin))
+            lo, hi = 0.0, math.log(2.0 * k)  # area factor 1 (never more cover) .. 2k
+            for _ in range(CALIBRATION_STEPS):
+                mid = 0.5 * (lo + hi)
+                lo, hi = (mid, hi) if cover(math.exp(mid)) < target else (lo, mid)
+            area = math.exp(0.5 * (lo + hi))
+            parts = [_enlarged(q, area) if t else q for q, t in zip(parts, thinned)]
+        r.draw(Drawable(parts=parts, n_joints=1))
+        albedo, normal = r.read()
+    return _dilate(albedo, options.grid, options.cell), normal
