@@ -93,6 +93,7 @@ uniform float opacity;
 uniform vec3 base_color;
 uniform vec3 crown_centre;
 uniform vec3 crown_radius;
+uniform float crown_shade;     // LEAF_SHADE
 in vec3 v_normal;
 in vec2 v_uv;
 in vec3 v_rel;
@@ -108,6 +109,9 @@ void main() {
     // occlusion)
     float r = length((v_rel - crown_centre) / crown_radius);
     float ao = mix(0.45, 1.0, smoothstep(0.1, 1.0, r));
+    // branches inside the crown are shaded by its leaves as the leaves shade each other (the
+    // aspen's white limbs showed as bright specks in the crown); the trunk below keeps its light
+    ao *= mix(crown_shade, 1.0, smoothstep(0.8, 1.1, r));
     f_albedo = vec4(base_color * texel.rgb * ao, 1.0);     // linear; sRGB-encoded by the target
     f_normal = vec4(n * 0.5 + 0.5, 1.0 - gl_FragCoord.z);
 }
@@ -317,6 +321,7 @@ class AtlasRenderer:
         bark, leaf = self.bark, self.leaf
         _set(bark, "crown_centre", tuple(float(x) for x in crown_centre))
         _set(bark, "crown_radius", tuple(float(x) for x in crown_radius))
+        _set(bark, "crown_shade", float(LEAF_SHADE))
         for p in scene.parts:
             if not len(p.indices) or (p.double_sided and p.opacity <= 0):
                 continue
