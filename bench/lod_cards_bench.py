@@ -1,13 +1,14 @@
 """Leaf-cluster cards for the far LODs, measured before any plumbing (issue 13, item 1).
 
     python bench/lod_cards_bench.py [--species quaking_aspen,...] [--views -90,-45]
-        [--texel 1.0] [--measure-ss 2] [--stems] [--nest] [--keep 1,1] [--floor]
+        [--texel 1.0] [--measure-ss 2] [--stems] [--nest] [--keep 1,1] [--planes 2]
+        [--floor]
 
 LOD2 and LOD3's leaves are replaced by cluster cards in memory and the switches are measured as
 tests/test_lod_budget.py does (silhouette.compare, 384 px), on the test's view and others:
   * clusters: LOD0's leaves (and, with the twigs the LOD drops, their bark segments) grouped
     in voxels sized so that the clusters' crossed cards (two vertical quads, a seeded azimuth
-    per cluster, 4 triangles) use the triangles LOD k's leaves had;
+    per cluster, 4 triangles; `--planes 3`: three at 60°) use the triangles LOD k's leaves had;
   * each card's texture is its cluster projected along the card's normal, point-sampled at
     `--texel` pixels of the switch distance (binary alpha from the leaf atlas; bark opaque),
     shelf-packed into one atlas per LOD.
@@ -45,6 +46,10 @@ Variants (same measure unless said):
   --texel 0.35 --stems with 8×8 samples: oak 0.891 / 0.919, palm 0.824 / 0.848; the oak's LOD2
     atlas is then 4096 × 2048 (2.4 MB PNG). Cards all facing the view (one azimuth, −90°):
     oak 0.925 / 0.939; the rest is a cluster projected on a card seen from another side.
+  --planes 3 (three cards at 60°, fewer and larger clusters): switch 3 rises (aspen 0.924,
+    sassafras 0.909, tupelo 0.899, oak 0.841) but a leaf on three cards over-covers LOD2 by +5
+    to +11 % (switch 2 aspen 0.902, sassafras 0.898, tupelo 0.881); thinning the texels back
+    (--keep 0.88,0.95) moves cover 3 % for 12 % of the texels and costs IoU.
   8×8 samples a pixel (silhouette.SUPERSAMPLE = 8) raises the floor (0.1 px: oak LOD3 0.916 →
     0.979, poplar 0.892 → 0.967, palm 0.854 → 0.952) but not the LODs' own scores (oak LOD2→3
     0.858 → 0.875, poplar 0.790 → 0.805, palm 0.762 → 0.795): their gap is real.
@@ -118,7 +123,9 @@ def shelf_pack(w: np.ndarray, h: np.ndarray, side: int) -> tuple[np.ndarray, np.
     return X, Y, int(row_h.sum())
 
 
-def cluster_cards(items: dict, labels: np.ndarray, leaf_img: np.ndarray, texel: float, seed: int, phi=None):
+def cluster_cards(
+    items: dict, labels: np.ndarray, leaf_img: np.ndarray, texel: float, seed: int, phi=None, planes: int = 2
+):
     """(Primitive, RGBA atlas) of crossed cards, one pair per cluster `labels` (N,) of `items`
     (b, l: base and along of each quad, a: its across vector or None for a stem of radius r,
     rect: leaf atlas cell or None for bark)."""
@@ -130,7 +137,7 @@ def cluster_cards(items: dict, labels: np.ndarray, leaf_img: np.ndarray, texel: 
     centre /= np.maximum(wsum, 1e-30)[:, None]
     phi0 = np.random.default_rng([seed, 0xCA7D]).uniform(0.0, np.pi, C) if phi is None else phi
     cards = []
-    for phi in (phi0, phi0 + 0.5 * np.pi):
+    for phi in [phi0 + j * np.pi / planes for j in range(planes)]:
         nrm = np.stack([np.cos(phi), np.sin(phi), np.zeros(C)], 1)
         eu = np.stack([-np.sin(phi), np.cos(phi), np.zeros(C)], 1)
         a = items["a"].copy()
@@ -272,7 +279,7 @@ def nested(points: np.ndarray, n2: int, n3: int, seed: int):
 
 
 def with_cards(
-    asset, tree, lod: LodOptions, texel_px: float, stems: bool, keep: float = 1.0, nest: bool = False
+    asset, tree, lod: LodOptions, texel_px: float, stems: bool, keep=(1.0, 1.0), nest=False, planes=2
 ):
     """`asset` with LOD2 and LOD3's leaves replaced by cluster cards in the same triangles."""
     leaf = next(m for m in asset.materials if m.name == "leaf")
@@ -282,15 +289,20 @@ def with_cards(
     plan = {}
     if nest:
         it = items_of(tree, None)
-        l2, p2, l3, p3 = nested(it["b"] + 0.5 * it["l"], n[2] // 4, n[3] // 4, tree.seed)
+        l2, p2, l3, p3 = nested(
+            it["b"] + 0.5 * it["l"], n[2] // (2 * planes), n[3] // (2 * planes), tree.seed
+        )
         plan = {2: (l2, p2), 3: (l3, p3)}
     for k in (2, 3):
         prims = lods[k].primitives
         n_tris = n[k]
         items = items_of(tree, dropped_stems(asset, tree, k, lod) if stems else None)
-        labels, phi = plan.get(k) or (voxel_clusters(items["b"] + 0.5 * items["l"], n_tris // 4), None)
+        labels, phi = plan.get(k) or (
+            voxel_clusters(items["b"] + 0.5 * items["l"], n_tris // (2 * planes)),
+            None,
+        )
         texel = texel_px * pixel_size(lods[k].distance, lod)
-        prim, rgba = cluster_cards(items, labels, img, texel, k, phi)
+        prim, rgba = cluster_cards(items, labels, img, texel, k, phi, planes)
         if keep[k - 2] < 1.0:  # a leaf is on both crossed cards: seen obliquely, sparse ones double
             rgba[..., 3] *= np.random.default_rng([k, 0x7A1]).random(rgba.shape[:2]) < keep[k - 2]
         name = f"cards{k}"
@@ -328,6 +340,7 @@ def main() -> None:
     ap.add_argument("--texel", type=float, default=1.0, help="card texel, in pixels at the switch")
     ap.add_argument("--measure-ss", type=int, default=silhouette.SUPERSAMPLE)
     ap.add_argument("--stems", action="store_true", help="draw the dropped twigs' bark into the cards")
+    ap.add_argument("--planes", type=int, default=2, help="vertical cards per cluster (2: crossed)")
     ap.add_argument("--nest", action="store_true", help="LOD3's clusters are unions of LOD2's")
     ap.add_argument("--keep", default="1,1", help="LOD2,LOD3: share of the cards' texels kept (thinning)")
     ap.add_argument("--floor", action="store_true", help="also LOD0 against itself moved 0.1 / 0.25 px")
@@ -357,7 +370,14 @@ def main() -> None:
         if args.nest and args.stems:
             ap.error("--nest draws leaves only (no --stems)")
         carded = with_cards(
-            asset, tree, lod, args.texel, args.stems, tuple(float(x) for x in args.keep.split(",")), args.nest
+            asset,
+            tree,
+            lod,
+            args.texel,
+            args.stems,
+            tuple(float(x) for x in args.keep.split(",")),
+            args.nest,
+            args.planes,
         )
         print(f"   cards: {time.process_time() - t0:.2f} CPU-s")
         for k in (2, 3):
