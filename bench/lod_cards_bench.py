@@ -2,7 +2,7 @@
 
     python bench/lod_cards_bench.py [--species quaking_aspen,...] [--views -90,-45]
         [--texel 1.0] [--measure-ss 2] [--stems] [--nest] [--keep 1,1] [--planes 2]
-        [--floor]
+        [--area 1,1] [--floor]
 
 LOD2 and LOD3's leaves are replaced by cluster cards in memory and the switches are measured as
 tests/test_lod_budget.py does (silhouette.compare, 384 px), on the test's view and others:
@@ -42,14 +42,16 @@ Variants (same measure unless said):
     fan_palm 0.767 +7.5% / 0.790 −6.3%.
   --nest (LOD3's clusters unions of LOD2's, same card azimuths): no gain (oak switch 3 0.831,
     sassafras 0.890, aspen 0.909).
-  --keep 1,0.93 (thin LOD3's texels): cover +5.4 → +2.8 % (sassafras) but IoU 0.889 → 0.891.
+  --keep 1,0.93 --nest (thin LOD3's texels): cover +5.3 → +2.8 % (sassafras), IoU 0.890 → 0.891.
   --texel 0.35 --stems with 8×8 samples: oak 0.891 / 0.919, palm 0.824 / 0.848; the oak's LOD2
     atlas is then 4096 × 2048 (2.4 MB PNG). Cards all facing the view (one azimuth, −90°):
     oak 0.925 / 0.939; the rest is a cluster projected on a card seen from another side.
   --planes 3 (three cards at 60°, fewer and larger clusters): switch 3 rises (aspen 0.924,
     sassafras 0.909, tupelo 0.899, oak 0.841) but a leaf on three cards over-covers LOD2 by +5
     to +11 % (switch 2 aspen 0.902, sassafras 0.898, tupelo 0.881); thinning the texels back
-    (--keep 0.88,0.95) moves cover 3 % for 12 % of the texels and costs IoU.
+    (--keep 0.88,0.95) moves cover 3 % for 12 % of the texels and costs IoU; shrinking the
+    blades drawn into the cards (--area 0.85,0.93) moves it 3 % too, switch 3 sassafras 0.892
+    (+6.7 %), tupelo 0.881 (+8.6 %), aspen 0.912.
   8×8 samples a pixel (silhouette.SUPERSAMPLE = 8) raises the floor (0.1 px: oak LOD3 0.916 →
     0.979, poplar 0.892 → 0.967, palm 0.854 → 0.952) but not the LODs' own scores (oak LOD2→3
     0.858 → 0.875, poplar 0.790 → 0.805, palm 0.762 → 0.795): their gap is real.
@@ -78,6 +80,7 @@ from treegen_cli.asset import Material, Primitive, Texture
 from treegen_cli.drawable import decode_image, from_asset
 from treegen_cli.lod import LodOptions, pixel_size, switch_distances
 from treegen_cli.lod_budget import lod_tree
+from treegen_cli.lod_leaves import grow_leaves
 from treegen_cli.materials import LEAF_VARIANTS, MaterialOptions
 from treegen_cli.mesh.leaves import leaf_variants
 from treegen_cli.params import load_params
@@ -279,7 +282,15 @@ def nested(points: np.ndarray, n2: int, n3: int, seed: int):
 
 
 def with_cards(
-    asset, tree, lod: LodOptions, texel_px: float, stems: bool, keep=(1.0, 1.0), nest=False, planes=2
+    asset,
+    tree,
+    lod: LodOptions,
+    texel_px: float,
+    stems: bool,
+    keep=(1.0, 1.0),
+    nest=False,
+    planes=2,
+    area=(1.0, 1.0),
 ):
     """`asset` with LOD2 and LOD3's leaves replaced by cluster cards in the same triangles."""
     leaf = next(m for m in asset.materials if m.name == "leaf")
@@ -296,7 +307,8 @@ def with_cards(
     for k in (2, 3):
         prims = lods[k].primitives
         n_tris = n[k]
-        items = items_of(tree, dropped_stems(asset, tree, k, lod) if stems else None)
+        grown = grow_leaves(tree, area[k - 2])  # about each blade's middle: clusters stay
+        items = items_of(grown, dropped_stems(asset, tree, k, lod) if stems else None)
         labels, phi = plan.get(k) or (
             voxel_clusters(items["b"] + 0.5 * items["l"], n_tris // (2 * planes)),
             None,
@@ -340,6 +352,7 @@ def main() -> None:
     ap.add_argument("--texel", type=float, default=1.0, help="card texel, in pixels at the switch")
     ap.add_argument("--measure-ss", type=int, default=silhouette.SUPERSAMPLE)
     ap.add_argument("--stems", action="store_true", help="draw the dropped twigs' bark into the cards")
+    ap.add_argument("--area", default="1,1", help="LOD2,LOD3: leaves' area factor as drawn into the cards")
     ap.add_argument("--planes", type=int, default=2, help="vertical cards per cluster (2: crossed)")
     ap.add_argument("--nest", action="store_true", help="LOD3's clusters are unions of LOD2's")
     ap.add_argument("--keep", default="1,1", help="LOD2,LOD3: share of the cards' texels kept (thinning)")
@@ -378,6 +391,7 @@ def main() -> None:
             tuple(float(x) for x in args.keep.split(",")),
             args.nest,
             args.planes,
+            tuple(float(x) for x in args.area.split(",")),
         )
         print(f"   cards: {time.process_time() - t0:.2f} CPU-s")
         for k in (2, 3):
