@@ -46,7 +46,7 @@ from .skeleton import depth_levels, pose_world
 ANIMATION_ERROR = 1e-3  # metres, LOD0's bound for compressed files (geometry has its own)
 # metres of it the 16-bit rounding may take (quantize tries each, largest first); the rest
 # goes to dropping keys
-QUANT_SHARES = (0.9e-3, 0.6e-3, 0.3e-3)
+QUANT_SHARES = (0.9e-3, 0.6e-3, 0.3e-3, 0.15e-3)
 MARGIN = 0.05e-3  # metres kept back from the key bound (box probes vs hull corners)
 INPUT_JSON = 95  # bytes of JSON a key-time accessor takes
 # meshopt: a joint's filter bits, raised step by step: QUATERNION up to 16, then EXPONENTIAL
@@ -184,6 +184,27 @@ def _widen(
         wide[pick] = bits[pick] > 16
 
 
+def _trim(check: _Check, rot: np.ndarray, kept: np.ndarray, wide: np.ndarray) -> None:
+    """quantize: float32 joints back to int16 (in place) wherever the plan (its `kept` keys)
+    stays within ANIMATION_ERROR: `_widen` widens whole chains, longest lever first, before
+    any key is dropped, and aimed children let many of them round again. Each round rounds
+    every wide joint not yet tried and puts back, per joint that then strays too far, its
+    rounded ancestor with the longest reach, until a round stands; a joint put back stays
+    wide. (meshopt's `_widen` already stops each joint at the fewest bits its own error
+    needs: stepping any back down breaks the bound.)"""
+    anc = ancestors(check.parent)
+    limit = max(ANIMATION_ERROR, float(check.errors(aimed(check, rot, kept, wide)[1], kept).max()))
+    cand = wide.copy()
+    while cand.any():  # a few rounds
+        err = check.errors(aimed(check, rot, kept, wide & ~cand)[1], kept)
+        chains = anc[err > limit]
+        if not chains.size:
+            wide &= ~cand
+            return
+        lever = np.where(cand[chains], check.probes.reach[chains], -1.0)
+        cand[chains[np.arange(len(chains)), lever.argmax(axis=1)][lever.max(axis=1) >= 0]] = False
+
+
 def _decimated(check: _Check, rot: np.ndarray, wide: np.ndarray, limit: float) -> np.ndarray:
     """Kept keys (K, J) whose playback of the stored keys stays within ANIMATION_ERROR: keys found
     within `limit` metres of the dense clip, the limit shrunk if slerp of rounded keys strays
@@ -219,16 +240,19 @@ def plan(lod: Lod, clip: Clip, meshopt: bool = False) -> KeyPlan:
     wide = np.zeros(J, dtype=bool)
     if meshopt:
         bits = np.full(J, MESHOPT_LEVELS[0])
+        every = np.ones((K, J), dtype=bool)
         _widen(check, rot, wide, ANIMATION_ERROR - MARGIN, bits)
-        targets = aimed(check, rot, np.ones((K, J), dtype=bool), wide, bits)[0]
+        targets = aimed(check, rot, every, wide, bits)[0]
         return KeyPlan(replace(clip, rotations=targets, keys=[np.arange(K)] * J), wide, bits)
     best: tuple[int, np.ndarray, np.ndarray] | None = None
     for share in QUANT_SHARES:
         quant = _widen(check, rot, wide, share)
         kept = _decimated(check, rot, wide, ANIMATION_ERROR - quant - MARGIN)
-        cost = _bytes(kept, wide)
+        narrow = wide.copy()
+        _trim(check, rot, kept, narrow)
+        cost = _bytes(kept, narrow)
         if best is None or cost < best[0]:
-            best = (cost, kept, wide.copy())
+            best = (cost, kept, narrow)
     assert best is not None
     _, kept, wide = best
     targets = aimed(check, rot, kept, wide)[0]
