@@ -51,7 +51,7 @@ MARGIN = 0.05e-3  # metres kept back from the key bound (box probes vs hull corn
 INPUT_JSON = 95  # bytes of JSON a key-time accessor takes
 # meshopt: a joint's filter bits, raised step by step: QUATERNION up to 16, then EXPONENTIAL
 # (float32 keys, `wide`) with that many bits of mantissa
-MESHOPT_LEVELS = (12, 14, 16, EXP_BITS)
+MESHOPT_LEVELS = (12, 13, 14, 15, 16, 18, EXP_BITS)
 # a lower LOD's compressed clip: how far (pixels at the LOD's distance) its vertices may stray
 # from the float file's playback, 16-bit rounding and left-out still tracks together
 STILL_PIXELS = 0.25
