@@ -216,6 +216,25 @@ def test_compressed_lod0_animation_within_one_millimetre(files, monkeypatch):
     assert key_plan.error(lod, dense, kp) <= 1 * MM
 
 
+def test_compressed_joint_nodes_are_the_float_rest_pose(files):
+    """Joint nodes' rest TRS in a compressed file are the float file's to float32 precision,
+    arithmetic noise (a 1e-17 m component beside a 2 m one) written as 0, not as digits."""
+    none, _ = read_gltf(files["none"])
+    for c in ("quantize", "meshopt"):
+        gltf, _ = read_gltf(files[c])
+        assert len(gltf["nodes"]) == len(none["nodes"])
+        tiny = 0
+        for n0, n1 in zip(none["nodes"], gltf["nodes"]):
+            for key, default in (("translation", [0, 0, 0]), ("rotation", [0, 0, 0, 1])):
+                v0 = np.asarray(n0.get(key, default), dtype=np.float64)
+                v1 = np.asarray(n1.get(key, default), dtype=np.float64)
+                scale = np.abs(v0).max()
+                assert np.abs(v1 - v0).max() <= scale * 2.0**-23
+                assert not np.any((v1 != 0) & (np.abs(v1) < scale * 2.0**-25))
+                tiny += int(np.sum((v0 != 0) & (v1 == 0)))
+        assert tiny > 0  # the aspen's rig has such noise
+
+
 def test_compressed_previews_match_the_float_one(files):
     """`treegen preview` reads quantize (dequantized in numpy) and meshopt (meshoptimizer's
     own decoder, tools/meshopt_decode.mjs) files. quantize keeps the triangle order: its
@@ -412,7 +431,7 @@ def test_default_options_leave_the_writer_alone():
     assert replace(_job("meshopt").options.gltf, compress="none", pixel_size=0.0) == GltfOptions()
 
 
-@pytest.mark.parametrize("bits", [12, 16])
+@pytest.mark.parametrize("bits", [12, 13, 16])
 def test_quaternion_filter_model_matches_meshoptimizer(bits):
     """key_plan.quat_filter (what the 1 mm check plays) gives exactly what meshoptimizer's
     own encoder and decoder give back for the QUATERNION filter at `bits`."""
