@@ -1,21 +1,25 @@
-"""Compressed glTF's dense clips (LOD0's): what to store within the 1 mm bound.
+"""Compressed glTF's clips: what to store of LOD0's within 1 mm, of lower LODs' within ¼ px.
 
-Result: with_key_plans(asset, meshopt) → the same asset with every dense clip's `Clip.plan`
-set; the export table runs it for --compress, so the glTF writer only encodes the plan.
+Result: with_key_plans(asset, meshopt) → the same asset with every clip's `Clip.plan` set;
+the export table runs it for --compress, so the glTF writer only encodes the plan.
 
 A compressed file (--compress quantize|meshopt) keeps every skinned vertex of a dense clip
-within ANIMATION_ERROR (1 mm) of the float file's playback on every frame, measured on each
-joint's convex-hull corners (lod.probes(exact=True): the true maximum over its vertices),
-composed through the hierarchy. Two things spend that millimetre:
+(LOD0's) within ANIMATION_ERROR (1 mm) of the float file's playback on every frame, measured
+on each joint's convex-hull corners (lod.probes(exact=True): the true maximum over its
+vertices), composed through the hierarchy. Two things spend that millimetre:
 
   * 16-bit keys. A key rounded to c/32767 turns its joint by up to ~6e-5 rad, which moves a
-    vertex 23 m away by 1.4 mm, and the joints of a chain add up: with every key at 16 bits
-    the CA black oak's crown moves by 3.5 mm. Joints get float32 keys, longest reach first,
-    until the 16-bit rounding alone stays within a share of the bound (QUANT_SHARES).
-    meshopt's QUATERNION filter rounds twice (its bits, then the decoder's int16 output), so
-    there a joint starts at 12 bits and is raised, longest reach first, through 14 and 16 to
-    float32 keys under the EXPONENTIAL filter (asset.EXP_BITS of mantissa): short twigs
-    stay cheap, long levers exact enough.
+    vertex 23 m away by 1.4 mm. Rounded on its own, each key's error is passed down the
+    chain (the CA black oak's crown: 2.7 mm). So keys are `aimed`: parents first, a child's
+    key is its dense world rotation seen through its parent's rotation *as played* (stored,
+    kept and slerped), and the child takes out its parent's rounding instead of adding to it
+    (the oak: 0.9 mm). Joints whose lever still needs it get float32 keys, longest reach
+    first, until the rounding alone stays within a share of the bound (QUANT_SHARES), and
+    quantize then puts back to int16 every float32 joint the finished plan can spare
+    (`_trim`). meshopt's QUATERNION filter rounds twice (its bits, then the decoder's int16
+    output), so there a joint starts at 12 bits and is raised one bit at a time, largest
+    step × reach first, to 16 bits, then to float32 keys under the EXPONENTIAL filter (18,
+    then asset.EXP_BITS of mantissa): short twigs stay cheap, long levers exact enough.
   * Keys (quantize only). The rest of the bound goes to lod.keys_within: slerp between kept
     keys instead of every frame, so a slow track keeps a fraction of its keys and a nearly
     still one only its end keys (which the writer stores as one key: the track is constant).
@@ -25,6 +29,10 @@ composed through the hierarchy. Two things spend that millimetre:
 The plan is checked as a client plays it (stored keys, slerp, normalised) against the dense
 float clip on box corners (never below the hull's error), and the key bound shrinks until the
 check passes; `error` measures a plan on the hull corners (tests, bench).
+
+A lower LOD's clip keeps the keys lod_decimate scheduled, but `still` leaves out the tracks
+that schedule holds constant where the joint's rest rotation keeps every vertex within
+STILL_PIXELS (¼) of a pixel at the LOD's distance: each is ~180 bytes of JSON for one key.
 """
 
 from __future__ import annotations
