@@ -137,53 +137,102 @@ def test_quantized_geometry_decodes_within_tolerance(files):
     assert "KHR_texture_transform" in bark["pbrMetallicRoughness"]["baseColorTexture"]["extensions"]
 
 
-def test_quantized_rotations_are_the_float_keys_within_one_step(files):
-    """Each compressed key is the float file's key at the same time: int16 within half a step,
-    the long levers' float32 (key_plan's `wide` joints) as they are; quantize keeps a subset
-    of LOD0's keys (a constant track one key), every lower LOD's keys as the float file does."""
+def test_quantized_rotations_are_the_planned_keys_within_one_step(files):
+    """Each compressed key is its plan's key at the same time (key_plan.py): int16 within half
+    a step, the long levers' float32 (`wide` joints) as they are. LOD0 keeps a subset of its
+    keys, each aimed through its parent's played rotation (the float key corrected by the
+    parent's rounding and dropped keys: within 1e-3 of it); lower LODs keep the float file's
+    keys, and leave out only tracks the float file holds constant (key_plan.still)."""
+    from treegen_cli import key_plan
+    from treegen_cli.axes import quat_to_y_up
+
     none = read_gltf(files["none"])
-    for c in ("quantize",):
-        quant = read_gltf(files[c])
-        kinds = set()
-        for k, (a0, a1) in enumerate(zip(none[0]["animations"], quant[0]["animations"])):
-            assert [ch["target"] for ch in a0["channels"]] == [ch["target"] for ch in a1["channels"]]
-            for s0, s1 in zip(a0["samplers"], a1["samplers"]):
-                t0, t1 = read_accessor(*none, s0["input"]), read_accessor(*quant, s1["input"])
-                at = np.searchsorted(t0, t1)
-                assert np.array_equal(t0[at], t1)
-                kind = quant[0]["accessors"][s1["output"]]["componentType"]
-                kinds.add((k, kind))
-                r0 = read_accessor(*none, s0["output"])[at]
-                r1 = _accessor(*quant, s1["output"])
-                assert np.abs(r1 - r0).max() <= (0.5 / 32767 + 1e-7 if kind == 5122 else 1e-7)
-                if k > 0 and len(t1) > 1:
-                    assert len(t1) == len(t0)
-        assert {(0, 5122), (0, 5126)} <= kinds and all(kind == 5122 for k, kind in kinds if k > 0)
+    quant = read_gltf(files["quantize"])
+    planned = key_plan.with_key_plans(files["asset"], meshopt=False)
+    kinds, left_out = set(), 0
+    for k, (a0, a1) in enumerate(zip(none[0]["animations"], quant[0]["animations"])):
+        clip = planned.lods[k].clips[0]
+        want = quat_to_y_up(np.asarray(clip.plan.clip.rotations, dtype=np.float64))
+        joint_of = {
+            int(ch["target"]["node"]): j for j, ch in zip(np.flatnonzero(clip.animated), a0["channels"])
+        }
+        ch0 = {ch["target"]["node"]: a0["samplers"][ch["sampler"]] for ch in a0["channels"]}
+        ch1 = {ch["target"]["node"]: a1["samplers"][ch["sampler"]] for ch in a1["channels"]}
+        assert set(ch1) <= set(ch0) and len(ch1) > 0
+        for node, s0 in ch0.items():
+            t0, r0 = read_accessor(*none, s0["input"]), read_accessor(*none, s0["output"])
+            if node not in ch1:  # left out: constant in the float file
+                assert k > 0 and np.abs(r0 - r0[:1]).max() == 0.0
+                left_out += 1
+                continue
+            s1 = ch1[node]
+            t1 = read_accessor(*quant, s1["input"])
+            at = np.searchsorted(t0, t1)
+            assert np.array_equal(t0[at], t1)
+            kind = quant[0]["accessors"][s1["output"]]["componentType"]
+            kinds.add((k, kind))
+            r1 = _accessor(*quant, s1["output"])
+            aim = want[np.searchsorted(np.asarray(clip.times, np.float32), t1), joint_of[node]]
+            aim *= np.where((aim * r1).sum(axis=1) < 0, -1.0, 1.0)[:, None]  # sign-continuous
+            assert np.abs(r1 - aim).max() <= (0.5 / 32767 + 1e-7 if kind == 5122 else 1e-7)
+            assert np.abs(r1 - r0[at]).max() <= 1e-3
+            if k > 0 and len(t1) > 1:
+                assert len(t1) == len(t0)
+    assert (0, 5122) in kinds and all(kind == 5122 for k, kind in kinds if k > 0)
+    assert left_out > 0
 
 
 def test_compressed_lod0_animation_within_one_millimetre(files, monkeypatch):
     """key_plan's measure (every skinned vertex's hull corner on every frame, played from the
     stored keys) keeps LOD0 within 1 mm of the dense float clip in both settings, while every
-    key at 16 bits would not (the 19 m aspen's trunk carries its crown); some joints, not all,
-    keep float32 keys; meshopt keeps every key (quantize drops keys when that is cheaper: on
-    this short 10 fps clip it is not)."""
+    key rounded to 16 bits on its own would not (the 19 m aspen's trunk carries its crown):
+    keys aimed through their parents' played rotations (key_plan.aimed) take a parent's
+    rounding out instead of passing it down the chain; no more than some joints keep float32
+    keys; meshopt keeps every key (quantize drops keys when that is cheaper: on this short
+    10 fps clip it is not)."""
     from treegen_cli import key_plan
+    from treegen_cli.quat import unit
 
     lod = files["asset"].lods[0]
     dense = lod.clips[0]
     J = len(lod.skeleton.names)
-    naive = key_plan.KeyPlan(replace(dense, keys=[np.arange(len(dense.times))] * J), np.zeros(J, bool))
+    every = [np.arange(len(dense.times))] * J
+    naive = key_plan.KeyPlan(replace(dense, keys=every), np.zeros(J, bool))
     assert key_plan.error(lod, dense, naive) > 1 * MM
+    rot = unit(np.asarray(dense.rotations, dtype=np.float64))
+    check = key_plan._Check(lod, rot, exact=False)
+    targets, _ = key_plan.aimed(check, rot, np.ones(rot.shape[:2], bool), np.zeros(J, bool))
+    aimed = key_plan.KeyPlan(replace(dense, rotations=targets, keys=every), np.zeros(J, bool))
+    assert key_plan.error(lod, dense, aimed) < 0.75 * key_plan.error(lod, dense, naive)
     for meshopt in (False, True):
         kp = key_plan.plan(lod, dense, meshopt)
         assert key_plan.error(lod, dense, kp) <= 1 * MM
-        assert 0 < kp.wide.sum() < J
+        assert kp.wide.sum() < J
         kept = sum(len(k) for k in kp.clip.keys)
         assert kept == J * len(dense.times) if meshopt else kept <= J * len(dense.times)
     monkeypatch.setattr(key_plan, "QUANT_SHARES", (0.3e-3,))  # rounding 0.3 mm, keys 0.65
     kp = key_plan.plan(lod, dense)
     assert sum(len(k) for k in kp.clip.keys) < J * len(dense.times)
     assert key_plan.error(lod, dense, kp) <= 1 * MM
+
+
+def test_compressed_joint_nodes_are_the_float_rest_pose(files):
+    """Joint nodes' rest TRS in a compressed file are the float file's to float32 precision,
+    arithmetic noise (a 1e-17 m component beside a 2 m one) written as 0, not as digits."""
+    none, _ = read_gltf(files["none"])
+    for c in ("quantize", "meshopt"):
+        gltf, _ = read_gltf(files[c])
+        assert len(gltf["nodes"]) == len(none["nodes"])
+        tiny = 0
+        for n0, n1 in zip(none["nodes"], gltf["nodes"]):
+            for key, default in (("translation", [0, 0, 0]), ("rotation", [0, 0, 0, 1])):
+                v0 = np.asarray(n0.get(key, default), dtype=np.float64)
+                v1 = np.asarray(n1.get(key, default), dtype=np.float64)
+                scale = np.abs(v0).max()
+                assert np.abs(v1 - v0).max() <= scale * 2.0**-23
+                assert not np.any((v1 != 0) & (np.abs(v1) < scale * 2.0**-25))
+                tiny += int(np.sum((v0 != 0) & (v1 == 0)))
+        assert tiny > 0  # the aspen's rig has such noise
 
 
 def test_compressed_previews_match_the_float_one(files):
@@ -382,7 +431,7 @@ def test_default_options_leave_the_writer_alone():
     assert replace(_job("meshopt").options.gltf, compress="none", pixel_size=0.0) == GltfOptions()
 
 
-@pytest.mark.parametrize("bits", [12, 16])
+@pytest.mark.parametrize("bits", [12, 13, 16])
 def test_quaternion_filter_model_matches_meshoptimizer(bits):
     """key_plan.quat_filter (what the 1 mm check plays) gives exactly what meshoptimizer's
     own encoder and decoder give back for the QUATERNION filter at `bits`."""

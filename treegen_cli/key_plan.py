@@ -1,21 +1,25 @@
-"""Compressed glTF's dense clips (LOD0's): what to store within the 1 mm bound.
+"""Compressed glTF's clips: what to store of LOD0's within 1 mm, of lower LODs' within ¼ px.
 
-Result: with_key_plans(asset, meshopt) → the same asset with every dense clip's `Clip.plan`
-set; the export table runs it for --compress, so the glTF writer only encodes the plan.
+Result: with_key_plans(asset, meshopt) → the same asset with every clip's `Clip.plan` set;
+the export table runs it for --compress, so the glTF writer only encodes the plan.
 
 A compressed file (--compress quantize|meshopt) keeps every skinned vertex of a dense clip
-within ANIMATION_ERROR (1 mm) of the float file's playback on every frame, measured on each
-joint's convex-hull corners (lod.probes(exact=True): the true maximum over its vertices),
-composed through the hierarchy. Two things spend that millimetre:
+(LOD0's) within ANIMATION_ERROR (1 mm) of the float file's playback on every frame, measured
+on each joint's convex-hull corners (lod.probes(exact=True): the true maximum over its
+vertices), composed through the hierarchy. Two things spend that millimetre:
 
   * 16-bit keys. A key rounded to c/32767 turns its joint by up to ~6e-5 rad, which moves a
-    vertex 23 m away by 1.4 mm, and the joints of a chain add up: with every key at 16 bits
-    the CA black oak's crown moves by 3.5 mm. Joints get float32 keys, longest reach first,
-    until the 16-bit rounding alone stays within a share of the bound (QUANT_SHARES).
-    meshopt's QUATERNION filter rounds twice (its bits, then the decoder's int16 output), so
-    there a joint starts at 12 bits and is raised, longest reach first, through 14 and 16 to
-    float32 keys under the EXPONENTIAL filter (asset.EXP_BITS of mantissa): short twigs
-    stay cheap, long levers exact enough.
+    vertex 23 m away by 1.4 mm. Rounded on its own, each key's error is passed down the
+    chain (the CA black oak's crown: 2.7 mm). So keys are `aimed`: parents first, a child's
+    key is its dense world rotation seen through its parent's rotation *as played* (stored,
+    kept and slerped), and the child takes out its parent's rounding instead of adding to it
+    (the oak: 0.9 mm). Joints whose lever still needs it get float32 keys, longest reach
+    first, until the rounding alone stays within a share of the bound (QUANT_SHARES), and
+    quantize then puts back to int16 every float32 joint the finished plan can spare
+    (`_trim`). meshopt's QUATERNION filter rounds twice (its bits, then the decoder's int16
+    output), so there a joint starts at 12 bits and is raised one bit at a time, largest
+    step × reach first, to 16 bits, then to float32 keys under the EXPONENTIAL filter (18,
+    then asset.EXP_BITS of mantissa): short twigs stay cheap, long levers exact enough.
   * Keys (quantize only). The rest of the bound goes to lod.keys_within: slerp between kept
     keys instead of every frame, so a slow track keeps a fraction of its keys and a nearly
     still one only its end keys (which the writer stores as one key: the track is constant).
@@ -25,6 +29,10 @@ composed through the hierarchy. Two things spend that millimetre:
 The plan is checked as a client plays it (stored keys, slerp, normalised) against the dense
 float clip on box corners (never below the hull's error), and the key bound shrinks until the
 check passes; `error` measures a plan on the hull corners (tests, bench).
+
+A lower LOD's clip keeps the keys lod_decimate scheduled, but `still` leaves out the tracks
+that schedule holds constant where the joint's rest rotation keeps every vertex within
+STILL_PIXELS (¼) of a pixel at the LOD's distance: each is ~180 bytes of JSON for one key.
 """
 
 from __future__ import annotations
@@ -35,22 +43,27 @@ from functools import cached_property
 import numpy as np
 
 from .asset import EXP_BITS, Asset, Clip, KeyPlan, Lod
-from .clip import play_keys
+from .clip import kept_mask, play_keys
+from .lod import pixel_size
 from .lod_decimate import keys_within
 from .lod_playback import PlaybackModel, ancestors
 from .lod_probes import probe_world, probes
-from .quat import unit
-from .skeleton import pose_world
+from .quat import angle, mul, unit
+from .skeleton import depth_levels, pose_world
 
 ANIMATION_ERROR = 1e-3  # metres, LOD0's bound for compressed files (geometry has its own)
 # metres of it the 16-bit rounding may take (quantize tries each, largest first); the rest
 # goes to dropping keys
-QUANT_SHARES = (0.9e-3, 0.6e-3, 0.3e-3)
+QUANT_SHARES = (0.9e-3, 0.6e-3, 0.3e-3, 0.15e-3)
 MARGIN = 0.05e-3  # metres kept back from the key bound (box probes vs hull corners)
 INPUT_JSON = 95  # bytes of JSON a key-time accessor takes
 # meshopt: a joint's filter bits, raised step by step: QUATERNION up to 16, then EXPONENTIAL
 # (float32 keys, `wide`) with that many bits of mantissa
-MESHOPT_LEVELS = (12, 14, 16, EXP_BITS)
+MESHOPT_LEVELS = (12, 13, 14, 15, 16, 18, EXP_BITS)
+# a lower LOD's compressed clip: how far (pixels at the LOD's distance) its vertices may stray
+# from the float file's playback, 16-bit rounding and left-out still tracks together
+STILL_PIXELS = 0.25
+LOWER_BITS = 16  # meshopt: the QUATERNION filter's bits on lower LODs' keys (the default)
 
 
 def quat_filter(q: np.ndarray, bits: np.ndarray) -> np.ndarray:
@@ -95,6 +108,9 @@ class _Check:
         self.probes = probes(lod.skeleton, lod.primitives, exact=exact)
         self.world = pose_world(lod.skeleton, rotations)
         self.dense = probe_world(self.world, self.probes)
+        self.parent = np.asarray(lod.skeleton.parent, dtype=np.int64)
+        self.levels = depth_levels(self.parent)
+        self.turn = _world_turns(self.parent, self.levels, rotations)
 
     @cached_property
     def model(self) -> PlaybackModel:
@@ -111,6 +127,41 @@ class _Check:
         return out
 
 
+_CONJ = np.array([-1.0, -1.0, -1.0, 1.0])
+
+
+def _world_turns(parent: np.ndarray, levels: list[np.ndarray], local: np.ndarray) -> np.ndarray:
+    """World rotations (K, J, 4) of local ones (K, J, 4), parents before children."""
+    world = np.empty_like(local)
+    for idx in levels:  # depth levels (tens), not joints
+        kids = parent[idx] >= 0
+        world[:, idx] = local[:, idx]
+        world[:, idx[kids]] = mul(world[:, parent[idx[kids]]], local[:, idx[kids]])
+    return world
+
+
+def aimed(
+    check: _Check, rot: np.ndarray, kept: np.ndarray, wide: np.ndarray, bits: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """(targets, values), each (K, J, 4): the keys to write and what a client reads back
+    (`stored`). Parents first, each child's key aims at its dense *world* rotation through its
+    parent's world rotation as played from the parent's stored keys (kept and slerped), so
+    a parent's rounding (and, at the child's keys, its dropped keys) is taken out by its
+    children instead of adding up along the chain: with every key at 16 bits the CA black
+    oak's crown strays 2.7 mm from the float file the naive way and 0.9 mm aimed."""
+    parent, every = check.parent, bool(kept.all())
+    targets, values, played = rot.copy(), np.empty_like(rot), np.empty_like(rot)
+    for idx in check.levels:  # depth levels (tens), not joints
+        kids = idx[parent[idx] >= 0]
+        targets[:, kids] = unit(mul(played[:, parent[kids]] * _CONJ, check.turn[:, kids]))
+        values[:, idx] = stored(targets[:, idx], wide[idx], None if bits is None else bits[idx])
+        local = unit(values[:, idx]) if every else play_keys(values[:, idx], kept[:, idx], "LINEAR")
+        played[:, idx] = local
+        kid = parent[idx] >= 0
+        played[:, idx[kid]] = mul(played[:, parent[idx[kid]]], local[:, kid])
+    return targets, values
+
+
 def _widen(
     check: _Check, rot: np.ndarray, wide: np.ndarray, share: float, bits: np.ndarray | None = None
 ) -> float:
@@ -122,11 +173,12 @@ def _widen(
     every = np.ones((K, J), dtype=bool)
     anc = ancestors(np.asarray(check.skeleton.parent, dtype=np.int64))
     while True:
-        err = check.errors(stored(rot, wide, bits), every)
+        err = check.errors(aimed(check, rot, every, wide, bits)[1], every)
         bad = np.flatnonzero(err > share)
         chains = anc[bad]
         done = wide[chains] if bits is None else bits[chains] >= MESHOPT_LEVELS[-1]
-        lever = np.where(done, -1.0, check.probes.reach[chains])
+        lever = check.probes.reach[chains] * (1.0 if bits is None else 2.0 ** -bits[chains])
+        lever = np.where(done, -1.0, lever)
         pick = np.unique(chains[np.arange(len(bad)), lever.argmax(axis=1)][lever.max(axis=1) >= 0])
         if not pick.size:
             return float(err.max())
@@ -140,18 +192,38 @@ def _widen(
         wide[pick] = bits[pick] > 16
 
 
+def _trim(check: _Check, rot: np.ndarray, kept: np.ndarray, wide: np.ndarray) -> None:
+    """quantize: float32 joints back to int16 (in place) wherever the plan (its `kept` keys)
+    stays within ANIMATION_ERROR: `_widen` widens whole chains, longest lever first, before
+    any key is dropped, and aimed children let many of them round again. Each round rounds
+    every wide joint not yet tried and puts back, per joint that then strays too far, its
+    rounded ancestor with the longest reach, until a round stands; a joint put back stays
+    wide. (meshopt's `_widen` already stops each joint at the fewest bits its own error
+    needs: stepping any back down breaks the bound.)"""
+    anc = ancestors(check.parent)
+    limit = max(ANIMATION_ERROR, float(check.errors(aimed(check, rot, kept, wide)[1], kept).max()))
+    cand = wide.copy()
+    while cand.any():  # a few rounds
+        err = check.errors(aimed(check, rot, kept, wide & ~cand)[1], kept)
+        chains = anc[err > limit]
+        if not chains.size:
+            wide &= ~cand
+            return
+        lever = np.where(cand[chains], check.probes.reach[chains], -1.0)
+        cand[chains[np.arange(len(chains)), lever.argmax(axis=1)][lever.max(axis=1) >= 0]] = False
+
+
 def _decimated(check: _Check, rot: np.ndarray, wide: np.ndarray, limit: float) -> np.ndarray:
     """Kept keys (K, J) whose playback of the stored keys stays within ANIMATION_ERROR: keys found
     within `limit` metres of the dense clip, the limit shrunk if slerp of rounded keys strays
     further (met at once, as a rule); every key when no limit is left."""
-    values = stored(rot, wide)
     for _ in range(4):
         if limit <= MARGIN:
             break
         kept = keys_within(check.model, rot, check.world, limit)
-        error = float(check.errors(values, kept).max())
+        error = float(check.errors(aimed(check, rot, kept, wide)[1], kept).max())
         if error <= ANIMATION_ERROR:
-            return _cheaper(kept, wide, values, check)
+            return _cheaper(kept, wide, rot, check)
         limit -= error - ANIMATION_ERROR + MARGIN
     return np.ones(rot.shape[:2], dtype=bool)
 
@@ -176,21 +248,27 @@ def plan(lod: Lod, clip: Clip, meshopt: bool = False) -> KeyPlan:
     wide = np.zeros(J, dtype=bool)
     if meshopt:
         bits = np.full(J, MESHOPT_LEVELS[0])
+        every = np.ones((K, J), dtype=bool)
         _widen(check, rot, wide, ANIMATION_ERROR - MARGIN, bits)
-        return KeyPlan(replace(clip, keys=[np.arange(K)] * J), wide, bits)
+        targets = aimed(check, rot, every, wide, bits)[0]
+        return KeyPlan(replace(clip, rotations=targets, keys=[np.arange(K)] * J), wide, bits)
     best: tuple[int, np.ndarray, np.ndarray] | None = None
     for share in QUANT_SHARES:
         quant = _widen(check, rot, wide, share)
         kept = _decimated(check, rot, wide, ANIMATION_ERROR - quant - MARGIN)
-        cost = _bytes(kept, wide)
+        narrow = wide.copy()
+        _trim(check, rot, kept, narrow)
+        cost = _bytes(kept, narrow)
         if best is None or cost < best[0]:
-            best = (cost, kept, wide.copy())
+            best = (cost, kept, narrow)
     assert best is not None
     _, kept, wide = best
-    return KeyPlan(replace(clip, keys=[np.flatnonzero(kept[:, j]) for j in range(J)]), wide)
+    targets = aimed(check, rot, kept, wide)[0]
+    keys = [np.flatnonzero(kept[:, j]) for j in range(J)]
+    return KeyPlan(replace(clip, rotations=targets, keys=keys), wide)
 
 
-def _cheaper(kept: np.ndarray, wide: np.ndarray, values: np.ndarray, check: _Check) -> np.ndarray:
+def _cheaper(kept: np.ndarray, wide: np.ndarray, rot: np.ndarray, check: _Check) -> np.ndarray:
     """`kept` with every key back on the tracks where dropping keys costs more than it saves:
     a decimated track needs its own key times (4 bytes a key and ~INPUT_JSON bytes of
     accessor) while full tracks share one; kept as is if that strays past the bound."""
@@ -202,26 +280,74 @@ def _cheaper(kept: np.ndarray, wide: np.ndarray, values: np.ndarray, check: _Che
         return kept
     trial = kept.copy()
     trial[:, full] = True
-    return trial if check.errors(values, trial).max() <= ANIMATION_ERROR else kept
+    return trial if check.errors(aimed(check, rot, trial, wide)[1], trial).max() <= ANIMATION_ERROR else kept
 
 
 def error(lod: Lod, dense: Clip, kp: KeyPlan) -> float:
     """Metres: the farthest any skinned vertex of `lod` strays from the dense float clip's
-    pose on any frame when played from plan `kp` (hull corners: the true maximum)."""
+    pose on any frame when played from plan `kp`'s keys (hull corners: the true maximum)."""
     rot = unit(np.asarray(dense.rotations, dtype=np.float64))
     kept = np.zeros(rot.shape[:2], dtype=bool)
     for j, k in enumerate(kp.clip.keys):  # per joint (hundreds)
         kept[k, j] = True
-    return float(_Check(lod, rot, exact=True).errors(stored(rot, kp.wide, kp.bits), kept).max())
+    values = stored(unit(np.asarray(kp.clip.rotations, dtype=np.float64)), kp.wide, kp.bits)
+    return float(_Check(lod, rot, exact=True).errors(values, kept).max())
+
+
+def still(lod: Lod, clip: Clip, meshopt: bool = False) -> KeyPlan:
+    """A lower LOD's clip (its keys already scheduled by lod_decimate) in a compressed file:
+    the keys as they are, but tracks the schedule holds constant left out, the joint resting
+    at its node's rotation instead, as long as every vertex (hull corners, through the
+    hierarchy, 16-bit rounding included) stays within STILL_PIXELS of a pixel at the LOD's
+    distance of the float file's playback. A constant track is one key of data but ~180
+    bytes of JSON (sampler, channel, accessor); the tracks nearest their rest go first. One
+    track is always kept, so the clip keeps its animation."""
+    rot = unit(np.asarray(clip.rotations, dtype=np.float64))
+    K, J = rot.shape[:2]
+    kept = kept_mask(clip)
+    check = _Check(lod, play_keys(rot, kept, "LINEAR"), exact=True)
+    bits = np.full(J, LOWER_BITS) if meshopt else None
+    values = stored(rot, np.zeros(J, dtype=bool), bits)
+    first = np.argmax(kept, axis=0)
+    constant = np.array([not np.any(values[kept[:, j], j] != values[first[j], j]) for j in range(J)])
+    animated = np.asarray(clip.animated, dtype=bool)
+    candidates = np.flatnonzero(animated & constant)
+    rest = unit(np.asarray(lod.skeleton.rest_rotation, dtype=np.float32).astype(np.float64))
+    shift = angle(rot[first[candidates], candidates], rest[candidates]) * check.probes.reach[candidates]
+    order = candidates[np.argsort(shift, kind="stable")][: max(0, min(len(candidates), animated.sum() - 1))]
+    bound = STILL_PIXELS * pixel_size(lod.distance)
+
+    def fits(n: int) -> bool:
+        trial, every = values.copy(), kept.copy()
+        trial[:, order[:n]] = rest[order[:n]]
+        every[:, order[:n]] = True
+        return bool(check.errors(trial, every).max() <= bound)
+
+    lo, hi = 0, len(order)  # the longest prefix of `order` that fits (fits(0): rounding only)
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        lo, hi = (mid, hi) if fits(mid) else (lo, mid - 1)
+    animated = animated.copy()
+    animated[order[:lo]] = False
+    return KeyPlan(replace(clip, animated=animated), np.zeros(J, dtype=bool), bits)
 
 
 def with_key_plans(asset: Asset, meshopt: bool) -> Asset:
-    """Every dense clip (every key kept: LOD0's) planned for a compressed file (`plan`)."""
+    """Every clip planned for a compressed file: dense ones (every key kept: LOD0's) by `plan`,
+    lower LODs' scheduled LINEAR ones by `still`."""
     lods = []
     for lod in asset.lods:  # a handful of LODs and clips
-        clips = [
-            replace(c, plan=plan(lod, c, meshopt)) if c.keys is None and len(c.times) > 2 else c
-            for c in lod.clips
-        ]
+        clips = []
+        for c in lod.clips:
+            if c.keys is None and len(c.times) > 2:
+                c = replace(c, plan=plan(lod, c, meshopt))
+            elif (
+                c.keys is not None
+                and c.animated is not None
+                and c.interpolation == "LINEAR"
+                and lod.distance > 0
+            ):
+                c = replace(c, plan=still(lod, c, meshopt))
+            clips.append(c)
         lods.append(replace(lod, clips=clips))
     return replace(asset, lods=lods)

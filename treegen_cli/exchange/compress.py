@@ -7,7 +7,9 @@
               int16 (core glTF). A skinned mesh ignores its node's transform, so the grid's
               dequantization (offset + uniform scale: normals stay normals) is folded into the
               skin's inverse bind matrices, as gltfpack does. A dense clip's keys (LOD0's)
-              follow key_plan.py: float32 for long levers, fewer keys, within 1 mm.
+              follow key_plan.py: aimed through their parents, float32 for long levers,
+              fewer keys, within 1 mm; lower LODs leave out tracks held near their rest.
+              Joint nodes' TRS as float32 text, arithmetic noise (1e-17 m) as 0.
     meshopt   quantize, then EXT_meshopt_compression on every vertex, index, skin and animation
               view with the extension's filters (OCTAHEDRAL for normals and tangents, QUATERNION
               for rotations, EXPONENTIAL for float32 rotations); a fallback buffer without

@@ -79,11 +79,11 @@ def animation_dict(
     """The clip as one glTF animation: a rotation channel per moving joint, on its node in
     `joint_nodes`; None when no joint moves. `plan`: a compressed LOD0's keys, bits and
     float32 joints (key_plan.py)."""
+    if plan is not None:  # (its clip may leave still tracks out: key_plan.still)
+        clip = plan.clip
     joints = moving_joints(clip)
     if len(joints) == 0:
         return None
-    if plan is not None:
-        clip = plan.clip
     wide, bits = (plan.wide, plan.bits) if plan is not None else (None, None)
     samplers, channels = [], []
     for j, sampler in rotation_samplers(buf, clip, joints, {}, quantized, wide, bits):
