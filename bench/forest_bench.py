@@ -6,8 +6,10 @@ Three tables:
      prototypes' own files (what `treegen make` writes for each; issue 15: all LODs ≤ 1.2 ×);
   2. building the prototypes: the process pool `treegen forest` used before issue 15 (kept
      here only as the reference) against the Dask cluster it uses now (executor.dask_client,
-     embedded, forked workers) and against one process; medians of --reps runs, and whether
-     Dask's prototypes write the same bytes (they must);
+     embedded: "dask", its workers forked from the client; "dask fs", from the fork server,
+     as when the client cannot fork safely and as `treegen batch` starts them) and against
+     one process; wall and CPU seconds (the whole process tree) as medians of --reps
+     interleaved runs, and whether every path's prototypes write the same bytes (they must);
   3. peak MB (this process + its worker processes, ru_maxrss).
 
     python bench/forest_bench.py [layout.json] [--workers N] [--reps R]
@@ -49,6 +51,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+from treegen_cli import executor
 from treegen_cli.exchange import export, export_forest
 from treegen_cli.forest import build_prototypes, build_scene, load_layout
 from treegen_cli.forest.build import build_prototype, make_options
@@ -95,23 +98,27 @@ def sizes(layout_path: str, workers: int | None, tmp: Path) -> None:
             )
 
 
-METHODS = ("old pool", "dask", "in process")
+METHODS = ("old pool", "dask", "dask fs", "in process")
 
 
 def one_build(layout_path: str, method: str, workers: int) -> None:
     """`--one METHOD`: build the prototypes once, in this fresh process, and print the
     seconds and a digest of their GLB bytes as JSON. Each run gets its own process because
     the impostor renders with OpenGL, and a fork of a process holding a live llvmpipe context
-    hangs in its first framebuffer read: the old pool forks its parent, and the Dask path
-    now builds in this process while its cluster starts."""
+    hangs in its first framebuffer read: the old pool and the forest's Dask cluster fork
+    their parent."""
     layout = load_layout(layout_path)
     keys = sorted({(p.species, p.seed) for p in layout.placements}, key=lambda k: (str(k[0]), k[1]))
     options = make_options(layout)
     t0 = time.perf_counter()
+    if method == "dask fs":  # the embedded cluster's other start: workers from the fork server
+        executor.can_fork = lambda: False
     if method == "old pool":
         built = old_pool(keys, layout.params, options, workers)
     else:
-        built = build_prototypes(keys, options, workers if method == "dask" else 1, False, layout.params)
+        built = build_prototypes(
+            keys, options, 1 if method == "in process" else workers, False, layout.params
+        )
     seconds = time.perf_counter() - t0
     digest = hashlib.sha256()
     with tempfile.TemporaryDirectory() as tmp:
@@ -120,22 +127,54 @@ def one_build(layout_path: str, method: str, workers: int) -> None:
     print(json.dumps({"seconds": seconds, "sha": digest.hexdigest(), "prototypes": len(keys)}))
 
 
+def run_one(cmd: list[str]) -> tuple[dict, float]:
+    """Run `--one` and return its JSON and the CPU seconds of its whole process tree (the
+    fork server's workers are not its children), sampled every 20 ms from here: a thread in
+    that process would stop its cluster forking."""
+    import psutil
+
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    cpu: dict[int, float] = {}
+    root = psutil.Process(proc.pid)
+    while proc.poll() is None:
+        try:
+            tree = [root, *root.children(recursive=True)]
+        except psutil.Error:
+            tree = []
+        for p in tree:
+            try:
+                t = p.cpu_times()
+                cpu[p.pid] = t.user + t.system
+            except psutil.Error:
+                pass
+        time.sleep(0.02)
+    out, _ = proc.communicate()
+    if proc.returncode:
+        raise SystemExit(f"{' '.join(cmd)} failed ({proc.returncode})")
+    return json.loads(out), sum(cpu.values())
+
+
 def pools(layout_path: str, workers: int, reps: int) -> None:
     runs: dict[str, list[float]] = {m: [] for m in METHODS}
+    cpus: dict[str, list[float]] = {m: [] for m in METHODS}
     shas, n = set(), 0
     for _ in range(reps):  # interleaved, so a busy spell hits every method alike
         for method in METHODS:
             cmd = [sys.executable, __file__, layout_path, "--workers", str(workers), "--one", method]
-            out = json.loads(subprocess.run(cmd, check=True, capture_output=True, text=True).stdout)
+            out, cpu = run_one(cmd)
             runs[method].append(out["seconds"])
+            cpus[method].append(cpu)
             shas.add(out["sha"])
             n = out["prototypes"]
     base = statistics.median(runs["old pool"])
-    print(f"\nprototypes ({n}), {workers} workers, median of {reps}:")
+    cbase = statistics.median(cpus["old pool"])
+    print(
+        f"\nprototypes ({n}), {workers} workers, median of {reps} (CPU: the whole process, with import and digest):"
+    )
     for name, ts in runs.items():
-        m = statistics.median(ts)
+        m, c = statistics.median(ts), statistics.median(cpus[name])
         print(
-            f"  {name:>10}  {m:6.2f} s  ({m / base:.2f} × the old pool)  runs "
+            f"  {name:>10}  {m:6.2f} s ({m / base:.2f}×)  CPU {c:6.2f} s ({c / cbase:.2f}×)  runs "
             + " ".join(f"{t:.2f}" for t in ts)
         )
     print(f"  same bytes from every path: {len(shas) == 1}")
