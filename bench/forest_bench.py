@@ -35,6 +35,23 @@ Measured 2026-11-26, old pool = 1.00, each run in its own process (`--pools-only
     forked pool never paid; building in this process while the cluster starts was tried and
     gained nothing (6.16 s).
     Idle-box figures before issue 15: camera glb 2.8 s / 42 MB, all LODs 3.9 s / 106 MB.
+Where the start-up went (load ~8, CPU seconds): the fork server is a fresh interpreter that
+    imports distributed and treegen again, 1.2-1.3 s (0.3 s of it compiling treegen's sources:
+    this box sets PYTHONDONTWRITEBYTECODE and the checkouts have no __pycache__), and it was
+    launched only after the client had imported distributed (0.3-0.5 s) and started the
+    scheduler; workers were ready 2.4-3.7 s after the start. Now the forest's workers are forks
+    of the client (executor.dask_client(fork=True), while can_fork(): one Python thread, no
+    OpenGL), like the old pool's: ready 0.7-1.4 s after the start, nothing imported again. The
+    fork server, still used by batch and when the client cannot fork, is launched first thing.
+Measured 2026-11-26 after that, three `--pools-only --reps 5` runs (load 4-13; wall median,
+    paired = median of each round's ratio to its old pool run, CPU of the process tree):
+                   old pool      dask (forked)             dask fs (fork server)   in process
+      load  8-11   22.80 s  25.27 s 1.11× p1.05 cpu1.12×  28.06 s 1.23× p1.13 cpu1.23×  1.03×
+      load  4-6    22.77 s  26.38 s 1.16× p1.02 cpu1.03×  28.92 s 1.27× p1.12 cpu1.14×  0.96×
+      load  5-9    20.05 s  22.49 s 1.12× p1.13 cpu1.10×  24.79 s 1.24× p1.34 cpu1.22×  1.07×
+    same bytes from every path. What is left against the old pool is the client's import of
+    distributed and the scheduler (~0.8-1 CPU-s in the client). Not measured on a quiet box
+    (none today).
 """
 
 from __future__ import annotations
@@ -169,13 +186,16 @@ def pools(layout_path: str, workers: int, reps: int) -> None:
     base = statistics.median(runs["old pool"])
     cbase = statistics.median(cpus["old pool"])
     print(
-        f"\nprototypes ({n}), {workers} workers, median of {reps} (CPU: the whole process, with import and digest):"
+        f"\nprototypes ({n}), {workers} workers, median of {reps} (CPU: the whole process tree, "
+        "imports and digest included; paired: median of each round's ratio to that round's "
+        "old pool, steadier when the load drifts):"
     )
     for name, ts in runs.items():
         m, c = statistics.median(ts), statistics.median(cpus[name])
+        paired = statistics.median(t / b for t, b in zip(ts, runs["old pool"]))
         print(
-            f"  {name:>10}  {m:6.2f} s ({m / base:.2f}×)  CPU {c:6.2f} s ({c / cbase:.2f}×)  runs "
-            + " ".join(f"{t:.2f}" for t in ts)
+            f"  {name:>10}  {m:6.2f} s ({m / base:.2f}×, paired {paired:.2f}×)  CPU {c:6.2f} s "
+            f"({c / cbase:.2f}×)  runs " + " ".join(f"{t:.2f}" for t in ts)
         )
     print(f"  same bytes from every path: {len(shas) == 1}")
 
