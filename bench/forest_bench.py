@@ -6,8 +6,10 @@ Three tables:
      prototypes' own files (what `treegen make` writes for each; issue 15: all LODs ≤ 1.2 ×);
   2. building the prototypes: the process pool `treegen forest` used before issue 15 (kept
      here only as the reference) against the Dask cluster it uses now (executor.dask_client,
-     embedded, forked workers) and against one process; medians of --reps runs, and whether
-     Dask's prototypes write the same bytes (they must);
+     embedded: "dask", its workers forked from the client; "dask fs", from the fork server,
+     as when the client cannot fork safely and as `treegen batch` starts them) and against
+     one process; wall and CPU seconds (the whole process tree) as medians of --reps
+     interleaved runs, and whether every path's prototypes write the same bytes (they must);
   3. peak MB (this process + its worker processes, ru_maxrss).
 
     python bench/forest_bench.py [layout.json] [--workers N] [--reps R]
@@ -33,6 +35,23 @@ Measured 2026-11-26, old pool = 1.00, each run in its own process (`--pools-only
     forked pool never paid; building in this process while the cluster starts was tried and
     gained nothing (6.16 s).
     Idle-box figures before issue 15: camera glb 2.8 s / 42 MB, all LODs 3.9 s / 106 MB.
+Where the start-up went (load ~8, CPU seconds): the fork server is a fresh interpreter that
+    imports distributed and treegen again, 1.2-1.3 s (0.3 s of it compiling treegen's sources:
+    this box sets PYTHONDONTWRITEBYTECODE and the checkouts have no __pycache__), and it was
+    launched only after the client had imported distributed (0.3-0.5 s) and started the
+    scheduler; workers were ready 2.4-3.7 s after the start. Now the forest's workers are forks
+    of the client (executor.dask_client(fork=True), while can_fork(): one Python thread, no
+    OpenGL), like the old pool's: ready 0.7-1.4 s after the start, nothing imported again. The
+    fork server, still used by batch and when the client cannot fork, is launched first thing.
+Measured 2026-11-26 after that, three `--pools-only --reps 5` runs (load 4-13; wall median,
+    paired = median of each round's ratio to its old pool run, CPU of the process tree):
+                   old pool      dask (forked)             dask fs (fork server)   in process
+      load  8-11   22.80 s  25.27 s 1.11× p1.05 cpu1.12×  28.06 s 1.23× p1.13 cpu1.23×  1.03×
+      load  4-6    22.77 s  26.38 s 1.16× p1.02 cpu1.03×  28.92 s 1.27× p1.12 cpu1.14×  0.96×
+      load  5-9    20.05 s  22.49 s 1.12× p1.13 cpu1.10×  24.79 s 1.24× p1.34 cpu1.22×  1.07×
+    same bytes from every path. What is left against the old pool is the client's import of
+    distributed and the scheduler (~0.8-1 CPU-s in the client). Not measured on a quiet box
+    (none today).
 """
 
 from __future__ import annotations
@@ -49,6 +68,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+from treegen_cli import executor
 from treegen_cli.exchange import export, export_forest
 from treegen_cli.forest import build_prototypes, build_scene, load_layout
 from treegen_cli.forest.build import build_prototype, make_options
@@ -95,23 +115,27 @@ def sizes(layout_path: str, workers: int | None, tmp: Path) -> None:
             )
 
 
-METHODS = ("old pool", "dask", "in process")
+METHODS = ("old pool", "dask", "dask fs", "in process")
 
 
 def one_build(layout_path: str, method: str, workers: int) -> None:
     """`--one METHOD`: build the prototypes once, in this fresh process, and print the
     seconds and a digest of their GLB bytes as JSON. Each run gets its own process because
     the impostor renders with OpenGL, and a fork of a process holding a live llvmpipe context
-    hangs in its first framebuffer read: the old pool forks its parent, and the Dask path
-    now builds in this process while its cluster starts."""
+    hangs in its first framebuffer read: the old pool and the forest's Dask cluster fork
+    their parent."""
     layout = load_layout(layout_path)
     keys = sorted({(p.species, p.seed) for p in layout.placements}, key=lambda k: (str(k[0]), k[1]))
     options = make_options(layout)
     t0 = time.perf_counter()
+    if method == "dask fs":  # the embedded cluster's other start: workers from the fork server
+        executor.can_fork = lambda: False
     if method == "old pool":
         built = old_pool(keys, layout.params, options, workers)
     else:
-        built = build_prototypes(keys, options, workers if method == "dask" else 1, False, layout.params)
+        built = build_prototypes(
+            keys, options, 1 if method == "in process" else workers, False, layout.params
+        )
     seconds = time.perf_counter() - t0
     digest = hashlib.sha256()
     with tempfile.TemporaryDirectory() as tmp:
@@ -120,23 +144,58 @@ def one_build(layout_path: str, method: str, workers: int) -> None:
     print(json.dumps({"seconds": seconds, "sha": digest.hexdigest(), "prototypes": len(keys)}))
 
 
+def run_one(cmd: list[str]) -> tuple[dict, float]:
+    """Run `--one` and return its JSON and the CPU seconds of its whole process tree (the
+    fork server's workers are not its children), sampled every 20 ms from here: a thread in
+    that process would stop its cluster forking."""
+    import psutil
+
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    cpu: dict[int, float] = {}
+    root = psutil.Process(proc.pid)
+    while proc.poll() is None:
+        try:
+            tree = [root, *root.children(recursive=True)]
+        except psutil.Error:
+            tree = []
+        for p in tree:
+            try:
+                t = p.cpu_times()
+                cpu[p.pid] = t.user + t.system
+            except psutil.Error:
+                pass
+        time.sleep(0.02)
+    out, _ = proc.communicate()
+    if proc.returncode:
+        raise SystemExit(f"{' '.join(cmd)} failed ({proc.returncode})")
+    return json.loads(out), sum(cpu.values())
+
+
 def pools(layout_path: str, workers: int, reps: int) -> None:
     runs: dict[str, list[float]] = {m: [] for m in METHODS}
+    cpus: dict[str, list[float]] = {m: [] for m in METHODS}
     shas, n = set(), 0
     for _ in range(reps):  # interleaved, so a busy spell hits every method alike
         for method in METHODS:
             cmd = [sys.executable, __file__, layout_path, "--workers", str(workers), "--one", method]
-            out = json.loads(subprocess.run(cmd, check=True, capture_output=True, text=True).stdout)
+            out, cpu = run_one(cmd)
             runs[method].append(out["seconds"])
+            cpus[method].append(cpu)
             shas.add(out["sha"])
             n = out["prototypes"]
     base = statistics.median(runs["old pool"])
-    print(f"\nprototypes ({n}), {workers} workers, median of {reps}:")
+    cbase = statistics.median(cpus["old pool"])
+    print(
+        f"\nprototypes ({n}), {workers} workers, median of {reps} (CPU: the whole process tree, "
+        "imports and digest included; paired: median of each round's ratio to that round's "
+        "old pool, steadier when the load drifts):"
+    )
     for name, ts in runs.items():
-        m = statistics.median(ts)
+        m, c = statistics.median(ts), statistics.median(cpus[name])
+        paired = statistics.median(t / b for t, b in zip(ts, runs["old pool"]))
         print(
-            f"  {name:>10}  {m:6.2f} s  ({m / base:.2f} × the old pool)  runs "
-            + " ".join(f"{t:.2f}" for t in ts)
+            f"  {name:>10}  {m:6.2f} s ({m / base:.2f}×, paired {paired:.2f}×)  CPU {c:6.2f} s "
+            f"({c / cbase:.2f}×)  runs " + " ".join(f"{t:.2f}" for t in ts)
         )
     print(f"  same bytes from every path: {len(shas) == 1}")
 

@@ -512,6 +512,38 @@ def test_dask_prototypes_equal_the_in_process_build_byte_for_byte(scene, tmp_pat
         assert a.read_bytes() == b.read_bytes(), suffix
 
 
+def test_embedded_cluster_forks_workers_only_from_a_threadless_client():
+    """A client with one thread and no OpenGL (the forest command's) forks its workers
+    (executor.dask_client(fork=True): their parent is the client); with another thread
+    running they come from the fork server instead. Both run tasks, and leave no process."""
+    import subprocess
+    import sys
+
+    code = """
+import json, os, threading, time
+import psutil
+from treegen_cli.executor import can_fork, dask_client
+def run():
+    safe = can_fork()
+    with dask_client(None, 2, fork=True) as (client, where):
+        client.wait_for_workers(2, timeout=60)
+        parents = sorted(set(client.run(os.getppid).values()))
+        return safe, parents, client.submit(pow, 2, 10).result(), where
+first = run()
+threading.Thread(target=time.sleep, args=(600,), daemon=True).start()
+second = run()
+helpers = ('multiprocessing.forkserver', 'multiprocessing.resource_tracker')
+kids = [p for p in psutil.Process().children(recursive=True) if not any(h in ' '.join(p.cmdline()) for h in helpers)]
+print(json.dumps([os.getpid(), first, second, len(kids)]))
+"""
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=DASK_ENV)
+    assert proc.returncode == 0, proc.stderr
+    pid, first, second, kids = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert first == [True, [pid], 1024, "2 local worker(s)"]
+    assert second[0] is False and pid not in second[1] and second[2:] == [1024, "2 local worker(s)"]
+    assert kids == 0  # no worker left behind (the fork server's helpers stay, as multiprocessing's do)
+
+
 @pytest.fixture(scope="module")
 def dask_scheduler():
     """A real `dask scheduler` and one `dask worker` (this checkout's treegen_cli)."""

@@ -3,10 +3,12 @@
     with dask_client(scheduler=None, workers=2) as (client, where):
         futures = [client.submit(fn, *args) for ...]
 
-No scheduler (and no DASK_SCHEDULER_ADDRESS): an embedded LocalCluster with one single-threaded
+No scheduler (and no DASK_SCHEDULER_ADDRESS): an embedded cluster with one single-threaded
 worker process per core (the pipeline is numpy-bound and holds the GIL between calls, so
-processes, not threads). With an address: the same jobs go to an existing cluster, whose
-workers must see the same file system paths (outputs are written by the workers).
+processes, not threads), started from a fork server, or (`fork=True`, the forest) forked
+from this process while that is safe (can_fork). With an address: the same jobs go to an
+existing cluster, whose workers must see the same file system paths (outputs are written by
+the workers).
 Closing the block closes the client and, if embedded, the cluster and its processes.
 """
 
@@ -16,6 +18,8 @@ import contextlib
 import logging
 import os
 import signal
+import sys
+import threading
 
 from .errors import TreegenError
 
@@ -51,7 +55,11 @@ QUIET = {
 # interpreter per worker that imports distributed, numpy and then treegen again, and stopping
 # it waits ~1 s; a fork server (exec'd once, single-threaded, so no lock is inherited) imports
 # them once (PRELOAD) and forks workers that are ready at once and stop at once. Measured on
-# the loaded 2-core box, 2 workers, start + first job's imports + close: 7.1 → 3.8 s.
+# the loaded 2-core box, 2 workers, start + first job's imports + close: 7.1 → 3.8 s. The fork
+# server is launched first thing (start_fork_server), so its imports overlap the client's.
+# Forking the client itself (dask_client(fork=True)) costs neither: the forest's 7 prototypes,
+# loaded box, 1.23 × the old process pool's time from the fork server, 1.11 × forked
+# (bench/forest_bench.py).
 STARTUP = {"distributed.worker.multiprocessing-method": "forkserver"}
 PRELOAD = [
     "distributed",
@@ -63,23 +71,53 @@ PRELOAD = [
 ]
 
 
-def _preload_fork_server() -> None:
-    """Replace Dask's preload list (its own dependencies) with ours, which imports them too.
-    Only before the fork server's first start; later calls change nothing."""
-    from distributed.utils import get_mp_context
+def start_fork_server() -> None:
+    """Launch the fork server now, with our preload list (Dask's own dependencies are in it),
+    so that its imports (~1 s) run beside the client's own start-up (importing distributed,
+    starting the scheduler) rather than after it, when the first nanny would ask for it.
+    SIGINT is ignored while it starts, so it and every worker it forks ignore it (see
+    dask_client). Idempotent: a running fork server is kept, and Dask's later preload list
+    changes nothing."""
+    import multiprocessing
+    from multiprocessing import forkserver
 
-    get_mp_context().set_forkserver_preload(PRELOAD)
+    multiprocessing.get_context("forkserver").set_forkserver_preload(PRELOAD)
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        forkserver.ensure_running()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def can_fork() -> bool:
+    """Whether a fork of this process is as safe as the old process pool's were: one Python
+    thread (no event-loop, progress or texture thread that may hold a lock the child needs)
+    and no OpenGL loaded (a fork of a process with a live llvmpipe context hangs in its first
+    framebuffer read)."""
+    return hasattr(os, "fork") and threading.active_count() == 1 and "moderngl" not in sys.modules
 
 
 @contextlib.contextmanager
-def dask_client(scheduler: str | None = None, workers: int | None = None):
-    """Yield (client, description); the cluster is closed on exit, even on Ctrl-C. The embedded
-    cluster starts its workers from a fork server (STARTUP): a fork of this process, whose
-    threads are running, can inherit a held lock and hang."""
-    import dask
-    from distributed import Client, LocalCluster
+def dask_client(scheduler: str | None = None, workers: int | None = None, fork: bool = False):
+    """Yield (client, description); the cluster is closed on exit, even on Ctrl-C.
 
+    The embedded cluster's workers start from a fork server (STARTUP): a fork of this process
+    once its event loop runs can inherit a held lock and hang. With `fork` (the forest) and
+    while can_fork(), they are forked from this process instead, before the scheduler's loop
+    starts: they inherit everything imported here and are ready at once, where the fork
+    server is a fresh interpreter importing it all again (~1 s of CPU). Such workers have no
+    nanny (not restarted if they die: their tasks go to the others)."""
     address = scheduler_address(scheduler)
+    n = workers or default_workers()
+    forked = fork and not address and can_fork()
+    if not address and not forked:
+        start_fork_server()  # first: its imports overlap ours below
+    import dask
+    from distributed import Client
+
+    if forked and not can_fork():  # the imports started a thread after all
+        forked = False
+        start_fork_server()
     if address:
         try:
             client = Client(address, timeout="10s", set_as_default=False)
@@ -95,35 +133,120 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
         finally:
             client.close()
         return
-    n = workers or default_workers()
-    # Worker processes inherit an ignored SIGINT (Python keeps SIG_IGN across exec), so a
-    # Ctrl-C reaches only this process, which then closes the cluster in order; without
-    # this every worker prints its own KeyboardInterrupt traceback.
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        config: dict = {f"distributed.nanny.pre-spawn-environ.{TRIM}": None, **QUIET, **STARTUP}
-        with dask.config.set(config):
-            _preload_fork_server()
-            # the scheduler's HTTP server (health routes) always starts; on a free port, so a
-            # busy 8787 (someone's dashboard) costs no "Port 8787 is already in use" warning
-            cluster = LocalCluster(
-                n_workers=n,
-                threads_per_worker=1,
-                processes=True,
-                dashboard_address=None,
-                silence_logs=logging.CRITICAL,
-                scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
-            )
-    finally:
-        signal.signal(signal.SIGINT, previous)
-    try:
-        client = Client(cluster, set_as_default=False)
+    config: dict = {f"distributed.nanny.pre-spawn-environ.{TRIM}": None, **QUIET, **STARTUP}
+    if forked:  # no nanny restarts them: should all die, their tasks fail instead of waiting
+        config["distributed.scheduler.no-workers-timeout"] = "60s"
+    with dask.config.set(config), contextlib.ExitStack() as stack:
+        # Worker processes inherit an ignored SIGINT (Python keeps SIG_IGN across fork and
+        # exec), so a Ctrl-C reaches only this process, which then closes the cluster in
+        # order; without this every worker prints its own KeyboardInterrupt traceback.
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
         try:
-            yield client, f"{n} local worker(s)"
+            children = stack.enter_context(forked_workers(n)) if forked else None
+            cluster = _local_cluster(0 if forked else n)
         finally:
-            client.close()
+            signal.signal(signal.SIGINT, previous)
+        stack.callback(cluster.close)
+        if children is not None:
+            children.send(cluster.scheduler_address)
+        client = Client(cluster, set_as_default=False)
+        stack.callback(client.close)
+        yield client, f"{n} local worker(s)"
+
+
+def _local_cluster(n: int):
+    from distributed import LocalCluster
+
+    # the scheduler's HTTP server (health routes) always starts; on a free port, so a busy
+    # 8787 (someone's dashboard) costs no "Port 8787 is already in use" warning
+    return LocalCluster(
+        n_workers=n,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=None,
+        silence_logs=logging.CRITICAL,
+        scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+    )
+
+
+class _Forked:
+    """The forked worker processes and this end of their pipes."""
+
+    def __init__(self, processes, pipes):
+        self.processes, self.pipes = processes, pipes
+
+    def send(self, address: str) -> None:
+        for pipe in self.pipes:
+            pipe.send(address)
+
+
+@contextlib.contextmanager
+def forked_workers(n: int):
+    """Fork `n` processes that each wait for the scheduler's address on a pipe and then run
+    one single-threaded Dask worker until the scheduler closes it (or this process goes: the
+    pipe's end then closes and they exit). On exit, wait for them (then kill stragglers)."""
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("fork")
+    pipes = [ctx.Pipe(duplex=False) for _ in range(n)]
+    mine = [w for _r, w in pipes]
+    processes = []
+    try:
+        for k, (r, _w) in enumerate(pipes):
+            p = ctx.Process(
+                target=_worker_main, args=(r, mine, n, k), name=f"treegen-worker-{k}", daemon=True
+            )
+            p.start()
+            processes.append(p)
+        for r, _w in pipes:
+            r.close()
+        yield _Forked(processes, mine)
     finally:
-        cluster.close()
+        for w in mine:
+            w.close()
+        for p in processes:
+            p.join(10)
+            if p.exitcode is None:
+                p.kill()
+                p.join()
+
+
+def _worker_main(pipe, parents, n: int, k: int) -> None:
+    """In a forked process: wait for the scheduler's address, then serve as a Dask worker."""
+    import asyncio
+
+    for w in parents:  # this process keeps no write end: EOF then means the client is gone
+        w.close()
+    logging.getLogger("distributed").setLevel(logging.CRITICAL)  # as the nannies' workers
+    try:
+        address = pipe.recv()
+    except EOFError:
+        return
+
+    def watch() -> None:
+        try:
+            pipe.recv()
+        except (EOFError, OSError):
+            pass
+        os._exit(0)
+
+    threading.Thread(target=watch, name="treegen-parent-watch", daemon=True).start()
+
+    async def serve() -> None:
+        from distributed import Worker
+
+        async with Worker(
+            address,
+            nthreads=1,
+            host="127.0.0.1",
+            dashboard=False,
+            memory_limit=1.0 / n,
+            name=f"forked-{k}",
+            silence_logs=logging.CRITICAL,
+        ) as worker:
+            await worker.finished()
+
+    asyncio.run(serve())
 
 
 def treegen_version() -> str:

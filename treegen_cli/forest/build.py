@@ -10,6 +10,7 @@ plus a seeded jitter of `phase_jitter` × the loop, wrapped to the loop.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import sys
@@ -141,51 +142,58 @@ def build_prototypes(
     if progress is None:
         progress = sys.stderr.isatty()
     out: list[Asset | None] = [None] * len(keys)
-    bar = None
-    if progress:
-        bar = Progress(console=Console(stderr=True), transient=True)
-        bar.start()
-        task = bar.add_task("prototypes", total=len(keys))
-    try:
-        if not remote and workers == 1:
-            if report is not None:
-                report["cluster"] = "this process"
-            for i, (path, seed) in enumerate(keys):
-                out[i] = _in_file(path, build_prototype, params[path], seed, options)
-                if bar:
-                    bar.advance(task)
+    with contextlib.ExitStack() as stack:
+        client = None
+        if remote or workers > 1:  # before the bar: its thread would stop workers forking
+            client = stack.enter_context(_cluster(scheduler, workers, report))
+        elif report is not None:
+            report["cluster"] = "this process"
+        bar = None
+        if progress:
+            bar = Progress(console=Console(stderr=True), transient=True)
+            bar.start()
+            stack.callback(bar.stop)
+            task = bar.add_task("prototypes", total=len(keys))
+        if client is None:
+            results = (
+                (i, _in_file(p, build_prototype, params[p], s, options)) for i, (p, s) in enumerate(keys)
+            )
         else:
-            for i, asset in _on_dask(keys, params, options, workers, scheduler, report):
-                out[i] = asset
-                if bar:
-                    bar.advance(task)
-    finally:
-        if bar:
-            bar.stop()
+            results = _on_dask(client, keys, params, options)
+        for i, asset in results:
+            out[i] = asset
+            if bar:
+                bar.advance(task)
     return out  # type: ignore[return-value]
 
 
-def _on_dask(keys, params, options, workers: int, scheduler: str | None, report: dict | None):
-    """Yield (index, prototype) as the cluster finishes them; a worker's TreegenError comes
-    back naming its species file. The embedded cluster forks its workers from a fork server
-    (executor.STARTUP), never from this client, whose event-loop, texture and OpenGL threads
-    may hold locks (a fork of it can hang: seen in a worker, and in a GL framebuffer read)."""
-    from distributed import as_completed
-
+@contextlib.contextmanager
+def _cluster(scheduler: str | None, workers: int, report: dict | None):
+    """The Dask client the prototypes are built on. The embedded cluster's workers are forks
+    of this process (executor.dask_client(fork=True)): it has not rendered, and no thread of
+    ours runs yet; otherwise they come from the fork server."""
     from ..executor import dask_client
 
-    run = f"{os.getpid():x}{time.time_ns() & 0xFFFFFF:x}"
-    with dask_client(scheduler, workers) as (client, where):
+    with dask_client(scheduler, workers, fork=True) as (client, where):
         if report is not None:
             report["cluster"] = where
-        futures = {
-            client.submit(build_prototype, params[p], s, options, key=f"treegen-forest-{p.stem}-{s}-{run}"): i
-            for i, (p, s) in enumerate(keys)
-        }
-        for fut in as_completed(list(futures), loop=client.loop):
-            i = futures.pop(fut)
-            yield i, _in_file(keys[i][0], fut.result)
-            fut.release()
+        yield client
+
+
+def _on_dask(client, keys, params, options):
+    """Yield (index, prototype) as the cluster finishes them; a worker's TreegenError comes
+    back naming its species file."""
+    from distributed import as_completed
+
+    run = f"{os.getpid():x}{time.time_ns() & 0xFFFFFF:x}"
+    futures = {
+        client.submit(build_prototype, params[p], s, options, key=f"treegen-forest-{p.stem}-{s}-{run}"): i
+        for i, (p, s) in enumerate(keys)
+    }
+    for fut in as_completed(list(futures), loop=client.loop):
+        i = futures.pop(fut)
+        yield i, _in_file(keys[i][0], fut.result)
+        fut.release()
 
 
 def _crown_center(asset: Asset) -> np.ndarray:
