@@ -138,6 +138,7 @@ def twig_keys(tree: Tree) -> np.ndarray:
     last = start + tree.stem_node_count - 1
     d = tree.node_pos[last] - tree.node_pos[start]
     z = 0.5 * (tree.node_pos[start, 2] + tree.node_pos[last, 2])
-    pts = np.stack([np.arctan2(d[:, 1], d[:, 0]), z, np.zeros(tree.n_stems)], axis=1)
+    az = np.mod(np.arctan2(d[:, 1], d[:, 0]), np.pi)  # a side view sees az and az + π alike
+    pts = np.stack([az, z, np.zeros(tree.n_stems)], axis=1)
     grid = max(1, int(round(np.sqrt(tree.n_stems / TWIGS_PER_CELL))))
     return stratified_keys(pts, tree.seed, grid)
