@@ -206,10 +206,24 @@ class Blades:
 
 def _opaque_blades(grid: Grid, u: np.ndarray, w: np.ndarray, seen: np.ndarray) -> np.ndarray:
     """(V, cells) effective area of blade samples at (u, w) (V, L, S), each carrying its
-    blade's `seen` (V, L): _opaque with one piece per blade."""
+    blade's `seen` (V, L): _opaque with one piece per blade, its runs found by sorting each
+    blade's S samples (a sort of all samples at once costs several times more)."""
     V, L, S = u.shape
-    piece = np.repeat(np.arange(L), S)
-    return _opaque(grid, u.reshape(V, -1), w.reshape(V, -1), np.repeat(seen, S, axis=1), piece)
+    nu, nw = grid.shape
+    a = grid.px * grid.px
+    out = np.zeros((V, nu * nw))
+    for v in range(V):
+        iu = np.clip(np.floor((u[v] - grid.origin[v, 0]) / grid.px).astype(np.int64), 0, nu - 1)
+        iw = np.clip(np.floor((w[v] - grid.origin[v, 1]) / grid.px).astype(np.int64), 0, nw - 1)
+        cell = np.sort(iu * nw + iw, axis=1)  # (L, S): runs of one blade's samples in a cell
+        first = np.ones((L, S), dtype=bool)
+        first[:, 1:] = cell[:, 1:] != cell[:, :-1]
+        at = np.flatnonzero(first)
+        runs = np.diff(np.r_[at, L * S])
+        c = runs * seen[v][at // S] / a
+        eff = -np.log1p(-np.minimum(c, 1.0 - OPAQUE_EPS)) * a
+        out[v] = np.bincount(cell.reshape(-1)[at], weights=eff, minlength=nu * nw)
+    return out
 
 
 def _opaque(grid: Grid, u: np.ndarray, w: np.ndarray, seen: np.ndarray, piece: np.ndarray) -> np.ndarray:
