@@ -9,7 +9,9 @@ Each LOD is cut from LOD0's tree (lod_leaves.py), in this order:
      mesh's own ring and side formulas, fits the bark share of the budget — LOD0's share of bark
      in its triangles, so bark and leaves shrink together; a leafy tree keeps stems under
      MIN_RADIUS_PX only if they show as much area per triangle as its leaves (`worth_keeping`),
-     a leafless one spreads its kept branches over the crown (`keep_stems`);
+     a leafless one spreads its kept branches over the crown (`keep_stems`), its trunks'
+     nodes are coarsened too and its branches end in points (cones: a twig of one segment
+     costs a third of its triangles, lod_nodes.point_tips);
   4. leaves: as many stratified leaves as the rest of the budget holds (nested: each LOD's
      leaves are a subset of the LOD before's), their blades scaled so the LOD covers on screen,
      at its switch distance, what LOD0 covers (`cover_factors`, lod_cover.py): each region of a
@@ -30,8 +32,8 @@ import numpy as np
 
 from .limits import bark_triangles
 from .lod_cover import Blades, Grid, solve_factor, stem_area, tree_area
-from .lod_nodes import coarsen_nodes
-from .lod_leaves import LENGTH_SHARE, grow_leaves, prune_stems, stem_closure, stratified_keys, thin_leaves
+from .lod_nodes import coarsen_nodes, point_tips, twig_keys
+from .lod_leaves import LENGTH_SHARE, grow_leaves, prune_stems, stem_closure, thin_leaves
 from .mesh import MeshOptions, stem_sides
 from .tree import Tree
 
@@ -40,6 +42,7 @@ REGION_PX = 4.0  # cells (pixels at the switch) over which a LOD keeps LOD0's ar
 REGION_CLIP = 2.0  # a region's leaves grow at most this much more (or less) than the crown's
 NODE_TOL_PX = 1.0  # a branch node within this many pixels of its neighbours' chord is dropped
 STEM_WORTH = 1.0  # a leafy tree keeps stems showing at least this × a leaf's area per triangle
+FILL_PASSES = 3  # keep_stems: passes filling what forks cut with their parent left free
 MIN_RADIUS_PX = 0.5  # stems thinner than this many pixels are kept only if worth_keeping;
 # a lobed trunk whose lobes are shallower than this is drawn round
 
@@ -63,24 +66,31 @@ def keep_stems(
     tree: Tree, per_stem: np.ndarray, budget: float, allowed: np.ndarray | None = None
 ) -> np.ndarray:
     """Stems kept (trunks always) among the `allowed` ones (S,) while their triangles fit
-    `budget`; closed under ancestors. A leafy tree keeps its thickest stems first (the kept
-    leaves make up for dropped twigs); a leafless one keeps its branches level by level,
-    spread over the crown within a level (stratified by their middles), so every whorl and
-    limb keeps a share of its branches rather than the thick lower ones keeping all."""
+    `budget`; closed under ancestors, and the budget a fork frees when its parent is cut
+    goes to the next stems whose parent is kept. A leafy tree keeps its thickest stems first
+    (the kept leaves make up for dropped twigs); a leafless one keeps its branches level by
+    level, spread over heights and sides within a level (lod_nodes.twig_keys), so every whorl
+    and limb keeps a share of its branches rather than the thick lower ones keeping all."""
     trunk = (tree.stem_level != 0).astype(np.int8)
     if tree.n_leaves:
         order = np.lexsort((np.arange(tree.n_stems), -tree.stem_radius, trunk))
     else:
-        last = tree.stem_node_start + tree.stem_node_count - 1
-        mid = 0.5 * (tree.node_pos[tree.stem_node_start] + tree.node_pos[last])
-        key = stratified_keys(mid, tree.seed)
+        key = twig_keys(tree)
         order = np.lexsort((np.arange(tree.n_stems), key, tree.stem_level, trunk))
     if allowed is not None:
         order = order[(allowed | (tree.stem_level == 0))[order]]
     total = np.cumsum(per_stem[order])
     keep = np.zeros(tree.n_stems, dtype=bool)
     keep[order[total <= budget]] = True
-    return stem_closure(tree, keep)
+    keep = stem_closure(tree, keep)
+    parent = tree.stem_parent
+    for _ in range(FILL_PASSES):  # budget freed by stems whose parent was cut: their siblings
+        rest = order[~keep[order] & (parent[order] >= 0) & keep[np.maximum(parent[order], 0)]]
+        add = rest[float(per_stem[keep].sum()) + np.cumsum(per_stem[rest]) <= budget]
+        if not add.size:
+            break
+        keep[add] = True
+    return keep
 
 
 def plan_lod(
@@ -96,7 +106,7 @@ def plan_lod(
     LOD0's bark and leaf triangles; `px`: metres a pixel spans at the LOD's switch distance."""
     min_radius = MIN_RADIUS_PX * px
     total0 = bark0 + leaf0
-    p = tree.params
+    full, p = tree, tree.params  # LOD0 as drawn (lobes included): the cover to keep
     if (
         p.lobes > 0
         and p.lobe_depth != 0
@@ -107,7 +117,9 @@ def plan_lod(
     per_stem = bark_triangles(tree, mesh)
     if budget >= total0 and per_stem.sum() <= bark0:
         return LodPlan(tree, int(per_stem.sum()), leaf0, 1.0)
-    coarse = coarsen_nodes(tree, NODE_TOL_PX * px)
+    coarse = coarsen_nodes(tree, NODE_TOL_PX * px, trunks=not leaf0)
+    if not leaf0:  # a leafless crown is its twigs: cones, three for the price of one
+        coarse = point_tips(coarse)
     per_stem = bark_triangles(coarse, mesh)
     share = bark0 / total0 if total0 else 1.0
     worth = None
@@ -119,8 +131,8 @@ def plan_lod(
     per_leaf = leaf0 / L if L else 0.0
     n_keep = int(min(L, max(1, math.floor((budget - per_stem[keep].sum()) / per_leaf)))) if L else 0
     thin = thin_leaves(pruned, n_keep, 1.0)
-    sides = (stem_sides(tree, mesh0 or mesh), stem_sides(thin, mesh))
-    leaf, radius = cover_factors(tree, thin, px, sides)
+    sides = (stem_sides(full, mesh0 or mesh), stem_sides(thin, mesh))
+    leaf, radius = cover_factors(full, thin, px, sides)
     mesh_thin = mesh
     if radius != 1.0:  # thicker stems draw the same rings; sides cut to the bark table's
         thin = thicken(thin, radius)

@@ -26,13 +26,17 @@ from .tree import Tree
 
 AZIMUTHS = (0.0, 90.0)  # side views, degrees about Z (orthographic: 180° mirrors 0°)
 SAMPLES_PER_PX = 1.5  # sample points per pixel of blade or stem extent
-MAX_ALONG = 64  # samples per stem segment, at most
-MAX_ACROSS = 8  # samples across a stem, at most
+STEM_SAMPLES_PER_PX = 3.0  # along and across a stem: a stem wider than a pixel fills the
+# cells inside it only if each gets its share of samples whatever the stem's slant
+MAX_ALONG = 256  # samples per stem segment, at most
+MAX_ACROSS = 64  # samples across a stem, at most
 MAX_BLADE = 64  # samples along a blade, at most (and across it)
 MAX_SAMPLES = 300_000  # blade samples of a whole crown, about: a crown of many blades is
 # measured in cells coarser than a pixel (cell_size)
 MAX_CELLS = 1024  # cells across the tree, at most (a near switch is measured coarser)
 OPAQUE_EPS = 0.01  # a blade covers at most 1 − this of a cell (keeps the log finite)
+LOBE_REACH = 0.85  # a lobed trunk's seen width over its round one, per unit LobeDepth: the
+# outline touches a lobe's tip within half a lobe of the side (mean cos over that arc)
 MARGIN = 0.25  # the grid reaches this share of the tree's size beyond its bounds
 
 
@@ -88,58 +92,70 @@ class Grid:
         shape = np.ceil(((hi - lo).max(0) + 2 * pad) / px).astype(np.int64) + 1
         return Grid(px, lo - pad, (int(shape[0]), int(shape[1])))
 
-    def bins(self, u: np.ndarray, w: np.ndarray, seen: np.ndarray) -> np.ndarray:
-        """(V, nu·nw) area (m²) per cell of sample points (V, P) carrying `seen` (V, P)."""
-        nu, nw = self.shape
-        out = np.zeros((u.shape[0], nu * nw))
-        for v in range(u.shape[0]):
-            iu = np.clip(np.floor((u[v] - self.origin[v, 0]) / self.px).astype(np.int64), 0, nu - 1)
-            iw = np.clip(np.floor((w[v] - self.origin[v, 1]) / self.px).astype(np.int64), 0, nw - 1)
-            out[v] = np.bincount(iu * nw + iw, weights=seen[v], minlength=nu * nw)
-        return out
-
     def cover(self, area: np.ndarray) -> float:
         """Covered area (m²), mean over the views, of per-cell areas (V, cells): Boolean model."""
         a = self.px * self.px
         return float(np.sum(-np.expm1(-area / a))) * a / area.shape[0]
 
 
-def polygon_width(sides: np.ndarray) -> np.ndarray:
-    """Mean seen width of a prism of `sides` sides inscribed in a circle, over the directions
-    about its axis, in diameters: perimeter / π over 2 (0.83 for 3 sides, 0.95 for 6)."""
-    n = np.maximum(np.asarray(sides, dtype=np.float64), 3.0)
-    return n * np.sin(np.pi / n) / np.pi
-
-
 def _segments(tree: Tree, px: float, radius_factor: float, sides: np.ndarray | None = None):
     """Stem segments (between consecutive nodes of a stem) sampled along and across; a stem
-    drawn with `sides` (S,) sides is as wide as its polygon (polygon_width)."""
+    drawn with `sides` (S,) sides is as wide, in each view, as its polygon turned as the mesh
+    turns it (polygon_widths), or round."""
     seg = tree.segments
     p0, p1 = tree.node_pos[seg], tree.node_pos[seg + 1]
     d = p1 - p0
     length = np.linalg.norm(d, axis=1)
     width = (tree.node_radius[seg] + tree.node_radius[seg + 1]) * radius_factor  # 2 × mean radius
-    if sides is not None:
-        width = width * polygon_width(sides)[tree.node_stem[seg]]
-    n = np.clip(np.ceil(SAMPLES_PER_PX * length / max(px, 1e-12)), 1, MAX_ALONG).astype(np.int64)
-    m = np.clip(np.ceil(SAMPLES_PER_PX * width / max(px, 1e-12)), 1, MAX_ACROSS).astype(np.int64)
-    nm = n * m
-    which = np.repeat(np.arange(seg.size), nm)
-    k = np.arange(which.size) - np.repeat(np.cumsum(nm) - nm, nm)
-    along = (k // m[which] + 0.5) / n[which]
-    across = (k % m[which] + 0.5) / m[which] - 0.5
+    lobed = tree.params.lobes > 0 and tree.params.lobe_depth != 0
+    if lobed:  # a lobed trunk's outline reaches its lobes' tips
+        width = width * np.where(
+            tree.stem_level[tree.node_stem[seg]] == 0, 1.0 + LOBE_REACH * abs(tree.params.lobe_depth), 1.0
+        )
     view, side = _axes()
     axis = d / np.maximum(length, 1e-12)[:, None]
     sin = np.sqrt(np.maximum(1.0 - (view @ axis.T) ** 2, 0.0))  # (V, seg)
     # across the stem on screen: perpendicular to its projected axis
     au, aw = side @ axis.T, np.broadcast_to(axis[:, 2], sin.shape)
     norm = np.maximum(np.hypot(au, aw), 1e-12)
+    width = np.broadcast_to(width, sin.shape)  # (V, seg)
+    if sides is not None:
+        across3 = (-aw / norm)[:, :, None] * side[:, None, :] + (au / norm)[:, :, None] * np.array(
+            [0.0, 0.0, 1.0]
+        )
+        width = width * polygon_widths(tree.node_frame[seg], sides[tree.node_stem[seg]], across3)
+    n = np.clip(np.ceil(STEM_SAMPLES_PER_PX * length / max(px, 1e-12)), 1, MAX_ALONG).astype(np.int64)
+    m = np.ceil(STEM_SAMPLES_PER_PX * width.max(axis=0) / max(px, 1e-12))
+    m = np.clip(m, 1, MAX_ACROSS).astype(np.int64)
+    nm = n * m
+    which = np.repeat(np.arange(seg.size), nm)
+    k = np.arange(which.size) - np.repeat(np.cumsum(nm) - nm, nm)
+    along = (k // m[which] + 0.5) / n[which]
+    across = (k % m[which] + 0.5) / m[which] - 0.5
     cu, cw = _project(p0[which] + along[:, None] * d[which])
-    off = across[None, :] * width[which][None, :]
+    off = across[None, :] * width[:, which]
     u = cu - off * (aw / norm)[:, which]
     w = cw + off * (au / norm)[:, which]
-    seen = sin * (width * length)[None, :] / nm[None, :]
-    return u, w, seen[:, which]
+    seen = sin * width * length[None, :] / nm[None, :]
+    return u, w, seen[:, which], which
+
+
+def polygon_widths(frames: np.ndarray, sides: np.ndarray, across: np.ndarray) -> np.ndarray:
+    """(V, G) seen width, in diameters, of G regular prisms of `sides` (G,) sides whose ring
+    vertices lie at angles 2πj/sides from column 0 of `frames` (G, 3, 3) toward column 1 (as
+    mesh.bark draws them), measured along `across` (V, G, 3): a square seen on its face is
+    0.71 of its diagonal, so which way a far LOD's few sides face matters per view."""
+    out = np.ones(across.shape[:2])
+    for n in np.unique(sides):
+        g = np.flatnonzero(sides == n)
+        t = 2.0 * np.pi * np.arange(n) / n
+        radial = (
+            np.cos(t)[None, :, None] * frames[g][:, None, :, 0]
+            + np.sin(t)[None, :, None] * frames[g][:, None, :, 1]
+        )
+        proj = np.einsum("gjk,vgk->vgj", radial, across[:, g])
+        out[:, g] = 0.5 * (proj.max(axis=2) - proj.min(axis=2))
+    return out
 
 
 def stem_area(
@@ -149,7 +165,8 @@ def stem_area(
     sides, or round) per cell of `grid`."""
     if tree.n_nodes < 2:
         return np.zeros((len(AZIMUTHS), grid.shape[0] * grid.shape[1]))
-    return grid.bins(*_segments(tree, grid.px, radius_factor, sides))
+    u, w, seen, which = _segments(tree, grid.px, radius_factor, sides)
+    return _opaque(grid, u, w, seen, which)
 
 
 class Blades:
@@ -189,10 +206,8 @@ class Blades:
 
 def _opaque_blades(grid: Grid, u: np.ndarray, w: np.ndarray, seen: np.ndarray) -> np.ndarray:
     """(V, cells) effective area of blade samples at (u, w) (V, L, S), each carrying its
-    blade's `seen` (V, L). One blade's samples in one cell sum to the share c of the cell it
-    covers and enter as −log(1 − c) of the cell's area, so that Grid.cover's Boolean model
-    counts a blade filling a cell as covering c of it (a plain sum would count 1 − e^−c, a third
-    short for an opaque blade as big as a pixel); specks well under a pixel add as before."""
+    blade's `seen` (V, L): _opaque with one piece per blade, its runs found by sorting each
+    blade's S samples (a sort of all samples at once costs several times more)."""
     V, L, S = u.shape
     nu, nw = grid.shape
     a = grid.px * grid.px
@@ -208,6 +223,29 @@ def _opaque_blades(grid: Grid, u: np.ndarray, w: np.ndarray, seen: np.ndarray) -
         c = runs * seen[v][at // S] / a
         eff = -np.log1p(-np.minimum(c, 1.0 - OPAQUE_EPS)) * a
         out[v] = np.bincount(cell.reshape(-1)[at], weights=eff, minlength=nu * nw)
+    return out
+
+
+def _opaque(grid: Grid, u: np.ndarray, w: np.ndarray, seen: np.ndarray, piece: np.ndarray) -> np.ndarray:
+    """(V, cells) effective area of samples at (u, w) (V, P) carrying `seen` (V, P), each of
+    one opaque `piece` (P,) (a blade, a stem segment). One piece's samples in one cell sum to
+    the share c of the cell it covers and enter as −log(1 − c) of the cell's area, so that
+    Grid.cover's Boolean model counts a piece filling a cell as covering c of it (a plain sum
+    would count 1 − e^−c, a third short for a blade as big as a pixel or a stem a pixel wide);
+    specks well under a pixel add as before."""
+    V, P = u.shape
+    nu, nw = grid.shape
+    n = nu * nw
+    a = grid.px * grid.px
+    out = np.zeros((V, n))
+    for v in range(V):
+        iu = np.clip(np.floor((u[v] - grid.origin[v, 0]) / grid.px).astype(np.int64), 0, nu - 1)
+        iw = np.clip(np.floor((w[v] - grid.origin[v, 1]) / grid.px).astype(np.int64), 0, nw - 1)
+        key = piece.astype(np.int64) * n + iu * nw + iw
+        first, inv = np.unique(key, return_inverse=True)  # runs of one piece's samples in a cell
+        c = np.bincount(inv.reshape(-1), weights=seen[v], minlength=first.size) / a
+        eff = -np.log1p(-np.minimum(c, 1.0 - OPAQUE_EPS)) * a
+        out[v] = np.bincount(first % n, weights=eff, minlength=n)
     return out
 
 

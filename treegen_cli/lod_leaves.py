@@ -80,18 +80,18 @@ def prune_stems(tree: Tree, keep: np.ndarray) -> Tree:
     )
 
 
-def stratified_keys(points: np.ndarray, seed: int) -> np.ndarray:
+def stratified_keys(points: np.ndarray, seed: int, grid: int = GRID) -> np.ndarray:
     """(n,) keys in [0, 1) whose smallest k pick k of `points` (n, 3) spread like all of them,
     for every k (nested: fewer picks are a subset of more). A point's key is its place in its
-    GRID³ cell's seeded random order, (rank + phase) / count with a seeded phase per cell, so
+    `grid`³ cell's seeded random order, (rank + phase) / count with a seeded phase per cell, so
     every cell gives its share k/n of its points, within one."""
     n = points.shape[0]
     if n == 0:
         return np.zeros(0)
     rng = np.random.default_rng([int(seed), 0x57EA7])
     lo, hi = points.min(0), points.max(0)
-    cell = np.floor((points - lo) / np.maximum(hi - lo, 1e-12) * (GRID - 1e-9)).astype(np.int64)
-    cid = (cell[:, 0] * GRID + cell[:, 1]) * GRID + cell[:, 2]
+    cell = np.floor((points - lo) / np.maximum(hi - lo, 1e-12) * (grid - 1e-9)).astype(np.int64)
+    cid = (cell[:, 0] * grid + cell[:, 1]) * grid + cell[:, 2]
     order = np.lexsort((rng.random(n), cid))  # by cell, random within a cell
     sc = cid[order]
     start = np.flatnonzero(np.r_[True, sc[1:] != sc[:-1]])

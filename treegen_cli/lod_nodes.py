@@ -9,8 +9,9 @@ A node goes when the chord between its kept neighbours passes within `tol` metre
 original node it replaces (and their radii within `tol` of the interpolated ones), so the
 coarse branch stays within `tol` of the full one; every other node at most per pass, so a
 curve is never flattened by removing neighbours together. Trunks keep their nodes (their flare and
-bends carry the silhouette). Leaves and child stems on a dropped node move to the kept node
-below it, where the skin binds them; their positions do not change.
+bends carry the silhouette) unless `trunks` (a leafless tree's: its budget goes to its twigs).
+Leaves and child stems on a dropped node move to the kept node below it, where the skin binds
+them; their positions do not change.
 
     coarse = coarsen_nodes(tree, tol=0.5 * px)
 """
@@ -21,12 +22,13 @@ from dataclasses import replace
 
 import numpy as np
 
+from .lod_leaves import stratified_keys
 from .tree import Tree
 
 PASSES = 3  # halving passes, at most: a stem keeps at least 1/8 of its interior nodes' spans
 
 
-def _droppable(tree: Tree, keep: np.ndarray, tol: float) -> np.ndarray:
+def _droppable(tree: Tree, keep: np.ndarray, tol: float, trunks: bool = False) -> np.ndarray:
     """Nodes (N,) that one pass may drop: interior kept nodes of branches at odd places among
     their stem's kept nodes, where the chord between their kept neighbours passes within `tol`
     of every original node between those neighbours (radii likewise), so the error does not
@@ -37,7 +39,7 @@ def _droppable(tree: Tree, keep: np.ndarray, tol: float) -> np.ndarray:
     tail = np.r_[stem[1:] != stem[:-1], True]
     start = np.maximum.accumulate(np.where(head, np.arange(idx.size), 0))
     rank = np.arange(idx.size) - start
-    j = np.flatnonzero(~head & ~tail & (rank % 2 == 1) & (tree.stem_level[stem] > 0))
+    j = np.flatnonzero(~head & ~tail & (rank % 2 == 1) & ((tree.stem_level[stem] > 0) | trunks))
     a, c = idx[j - 1], idx[j + 1]
     span = c - a - 1  # original nodes strictly between the neighbours (>= 1)
     which = np.repeat(np.arange(j.size), span)
@@ -57,14 +59,14 @@ def _droppable(tree: Tree, keep: np.ndarray, tol: float) -> np.ndarray:
     return out
 
 
-def coarsen_nodes(tree: Tree, tol: float) -> Tree:
-    """`tree` with the branch nodes within `tol` metres of their kept neighbours' chord dropped
-    (see the module doc); the same tree when none is."""
+def coarsen_nodes(tree: Tree, tol: float, trunks: bool = False) -> Tree:
+    """`tree` with the branch nodes (and the trunks' too if `trunks`) within `tol` metres of
+    their kept neighbours' chord dropped (see the module doc); the same tree when none is."""
     if tol <= 0 or tree.n_nodes < 3:
         return tree
     keep = np.ones(tree.n_nodes, dtype=bool)
     for _ in range(PASSES):
-        drop = _droppable(tree, keep, tol)
+        drop = _droppable(tree, keep, tol, trunks)
         if not drop.any():
             break
         keep &= ~drop
@@ -107,3 +109,36 @@ def _frames(tree: Tree, keep: np.ndarray) -> np.ndarray:
     ok = c > -0.999  # a reversed segment (never on a smooth branch): leave the frame
     F[i[ok]] = R[ok] @ F[i[ok]]
     return F
+
+
+def point_tips(tree: Tree) -> Tree:
+    """`tree` with every branch ending in a point (its last node's radius 0): the mesh closes
+    a pointed tip on its apex instead of a last ring and a cap, so a one-segment twig costs a
+    third of its triangles (a cone) and a far leafless LOD keeps three times the twigs; the
+    area the cones lose is made up by thickening (lod_budget.cover_factors)."""
+    tip = tree.stem_node_start.astype(np.int64) + tree.stem_node_count - 1
+    tip = tip[(tree.stem_level > 0) & (tree.stem_node_count > 1)]
+    if not tip.size:
+        return tree
+    radius = tree.node_radius.copy()
+    radius[tip] = 0.0
+    return replace(tree, node_radius=radius)
+
+
+TWIGS_PER_CELL = 4  # twig_keys: stems per (azimuth, height) cell, about
+
+
+def twig_keys(tree: Tree) -> np.ndarray:
+    """(S,) keys whose smallest k pick k stems spread over the heights and the directions
+    (azimuths, base to tip) of all of them, nested (stratified_keys on a grid of about
+    TWIGS_PER_CELL stems per cell): each whorl keeps twigs on every side, so the crown covers
+    alike from every side (a 3-D grid of a cell per stem picks at random, and a whorl kept
+    on one side shows more from one view than another)."""
+    start = tree.stem_node_start.astype(np.int64)
+    last = start + tree.stem_node_count - 1
+    d = tree.node_pos[last] - tree.node_pos[start]
+    z = 0.5 * (tree.node_pos[start, 2] + tree.node_pos[last, 2])
+    az = np.mod(np.arctan2(d[:, 1], d[:, 0]), np.pi)  # a side view sees az and az + π alike
+    pts = np.stack([az, z, np.zeros(tree.n_stems)], axis=1)
+    grid = max(1, int(round(np.sqrt(tree.n_stems / TWIGS_PER_CELL))))
+    return stratified_keys(pts, tree.seed, grid)
