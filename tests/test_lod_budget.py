@@ -27,28 +27,31 @@ FRACTIONS = LodOptions().triangles  # (1, 0.5, 0.15, 0.05)
 RENDER_PX = 384  # longest image side: leaves still span a pixel or more at every switch
 COVERAGE_TOL = 0.05  # issue 13: covered area within ±5 % at every switch
 IOU_TARGET = 0.9  # issue 13: silhouette IoU at least this at every switch
-# Measured per species (worst switch, RENDER_PX, the view below; bench/lod_pop_bench.py --views 1
-# --max-px 384): (covered area off by at most, IoU at least), a regression guard a little
-# below what the LODs reach where the target is not met (None: the target itself). Cover is
-# within ±5 % for all but the larch (5.4 %); IoU ≥ 0.9 only for the fir and the willow: kept
-# leaves are fewer and larger, and their scatter differs from LOD0's at the 3-pixel scale (the
-# crown's fringe); shave grass, leafless, keeps part of its whorls' branches (as cones,
-# spread over every whorl's sides, thickened) at 50, 15 and 5 % of the triangles.
+# Measured per species (worst switch, RENDER_PX, the view below, 6 × 6 samples a pixel;
+# bench/lod_pop_bench.py --views 1 --max-px 384): (covered area off by at most, IoU at least),
+# a regression guard a little below what the LODs reach where the target is not met (None:
+# the target itself). Cover is within ±5 % for all but the larch (5.5 %). IoU ≥ 0.9 at every
+# switch for the fir and the willow; 0.887-0.892 for the aspen, tamarack, tupelo, larch and
+# sassafras; 0.76-0.88 for the rest: at the far switches each kept leaf spans several pixels
+# and the crown reads blotchy at the 3-pixel scale (which leaves are kept moves IoU less than
+# the picking seed's ±0.013; leaf-cluster cards reached 0.9 for the aspen only:
+# bench/lod_cards_bench.py). Shave grass, leafless, keeps part of its whorls' branches (as
+# cones, spread over every whorl's sides, thickened) at 50, 15 and 5 % of the triangles.
 MEASURED = {
     "balsam_fir": (None, None),
-    "black_tupelo": (None, 0.872),
+    "black_tupelo": (None, 0.875),
     "ca_black_oak": (None, 0.83),
-    "desert_bush": (None, 0.809),
-    "eastern_cottonwood": (None, 0.819),
-    "european_larch": (0.056, 0.771),
-    "fan_palm": (None, 0.76),
-    "lombardy_poplar": (None, 0.784),
-    "palm": (None, 0.757),
-    "quaking_aspen": (None, 0.874),
-    "rush": (None, 0.87),
+    "desert_bush": (None, 0.80),
+    "eastern_cottonwood": (None, 0.815),
+    "european_larch": (0.06, 0.875),
+    "fan_palm": (None, 0.745),
+    "lombardy_poplar": (None, 0.79),
+    "palm": (None, 0.775),
+    "quaking_aspen": (None, 0.875),
+    "rush": (None, 0.86),
     "sassafras": (None, 0.875),
-    "shave_grass": (None, 0.68),
-    "tamarack": (None, 0.85),
+    "shave_grass": (None, 0.69),
+    "tamarack": (None, 0.875),
     "weeping_willow": (None, None),
 }
 
