@@ -50,8 +50,11 @@ Measured 2026-11-26 after that, three `--pools-only --reps 5` runs (load 4-13; w
       load  4-6    22.77 s  26.38 s 1.16× p1.02 cpu1.03×  28.92 s 1.27× p1.12 cpu1.14×  0.96×
       load  5-9    20.05 s  22.49 s 1.12× p1.13 cpu1.10×  24.79 s 1.24× p1.34 cpu1.22×  1.07×
     same bytes from every path. What is left against the old pool is the client's import of
-    distributed and the scheduler (~0.8-1 CPU-s in the client). Not measured on a quiet box
-    (none today).
+    distributed and the scheduler (~0.8-1 CPU-s in the client).
+    quiet box (load 0.1), one `--pools-only --reps 5` run after the impostor and cover changes
+    of the same day (prototypes cost more than in the morning's 3.99 s): old pool 6.24 s, Dask
+    (forked) 6.43 s 1.03× (paired 1.09×, CPU 1.03×), fork server 7.22 s 1.16×, in process
+    8.67 s 1.39×; same bytes from every path.
 """
 
 from __future__ import annotations
