@@ -32,10 +32,10 @@ import numpy as np
 
 from .asset import Clip, Impostor, Lod, Material, Primitive, Skeleton, Texture
 from .errors import TreegenError
+from .impostor_atlas import render_views
 from .lod import LodOptions, screen_distance
 from .lod_decimate import decimate
 from .quat import mul as quat_mul, unit as unit_quat
-from .impostor_atlas import render_views
 
 
 @dataclass(frozen=True)

@@ -79,14 +79,15 @@ def _dilate(rgba: np.ndarray, grid: int, cell: int) -> np.ndarray:
     return out.view(np.uint8).reshape(rgba.shape)
 
 
-def _atlas_parts(prims: list[Primitive], materials: list[Material]) -> list:
+def _atlas_parts(prims: list[Primitive], materials: list[Material], decoded: dict | None = None) -> list:
     """What render_atlas draws, in generator space (Z up): each primitive with its material's
-    colour, cut-out and base texture (decoded once). Not drawable.from_asset: that would
-    turn everything Y up and back, decode the unused normal maps and build a rig."""
+    colour, cut-out and base texture (decoded once, into `decoded` when given, so several
+    calls share the images). Not drawable.from_asset: that would turn everything Y up and
+    back, decode the unused normal maps and build a rig."""
     from .drawable import Part, decode_image
 
     mats = {m.name: m for m in materials}
-    decoded: dict[int, np.ndarray] = {}
+    decoded = {} if decoded is None else decoded
     parts = []
     for p in prims:
         m = mats.get(p.material)
@@ -135,7 +136,8 @@ def render_views(
 
     prims = [_widest_bark(p, options.max_bark_triangles) for p in lod.primitives]
     thin = [_fewer_leaves(p, options.max_leaf_cards) for p in prims]
-    parts = _atlas_parts(thin, materials)
+    decoded: dict[int, np.ndarray] = {}  # the leaf atlas is decoded once for both part lists
+    parts = _atlas_parts(thin, materials, decoded)
     thinned = [t is not p for t, p in zip(thin, prims)]
     with AtlasRenderer(centre, radius, options.grid, options.cell) as r:
         if any(thinned):
@@ -145,7 +147,7 @@ def render_views(
                 r.draw(Drawable(parts=scaled, n_joints=1), cells)
                 return r.covered(cells)
 
-            r.draw(Drawable(parts=_atlas_parts(prims, materials), n_joints=1), cells)
+            r.draw(Drawable(parts=_atlas_parts(prims, materials, decoded), n_joints=1), cells)
             target = r.covered(cells)
             k = max(len(p.positions) / max(len(t.positions), 1) for p, t in zip(prims, thin))
             lo, hi = 0.0, math.log(2.0 * k)  # area factor 1 (never more cover) .. 2k
