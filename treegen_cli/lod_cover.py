@@ -204,6 +204,20 @@ class Blades:
         return _opaque_blades(grid, u, w, self.seen * f[None, :])
 
 
+def _cells(grid: Grid, u: np.ndarray, w: np.ndarray, v: int) -> np.ndarray:
+    """The flat cell index (u · nw + w, clipped to the grid) of view `v`'s samples at (u, w)."""
+    nu, nw = grid.shape
+    iu = np.clip(np.floor((u - grid.origin[v, 0]) / grid.px).astype(np.int64), 0, nu - 1)
+    iw = np.clip(np.floor((w - grid.origin[v, 1]) / grid.px).astype(np.int64), 0, nw - 1)
+    return iu * nw + iw
+
+
+def _effective(c: np.ndarray, a: float) -> np.ndarray:
+    """The area −log(1 − c)·a a piece covering the share c of a cell of area `a` enters as
+    (see _opaque)."""
+    return -np.log1p(-np.minimum(c, 1.0 - OPAQUE_EPS)) * a
+
+
 def _opaque_blades(grid: Grid, u: np.ndarray, w: np.ndarray, seen: np.ndarray) -> np.ndarray:
     """(V, cells) effective area of blade samples at (u, w) (V, L, S), each carrying its
     blade's `seen` (V, L): _opaque with one piece per blade, its runs found by sorting each
@@ -213,16 +227,13 @@ def _opaque_blades(grid: Grid, u: np.ndarray, w: np.ndarray, seen: np.ndarray) -
     a = grid.px * grid.px
     out = np.zeros((V, nu * nw))
     for v in range(V):
-        iu = np.clip(np.floor((u[v] - grid.origin[v, 0]) / grid.px).astype(np.int64), 0, nu - 1)
-        iw = np.clip(np.floor((w[v] - grid.origin[v, 1]) / grid.px).astype(np.int64), 0, nw - 1)
-        cell = np.sort(iu * nw + iw, axis=1)  # (L, S): runs of one blade's samples in a cell
+        cell = np.sort(_cells(grid, u[v], w[v], v), axis=1)  # (L, S): runs of one blade's samples in a cell
         first = np.ones((L, S), dtype=bool)
         first[:, 1:] = cell[:, 1:] != cell[:, :-1]
         at = np.flatnonzero(first)
         runs = np.diff(np.r_[at, L * S])
         c = runs * seen[v][at // S] / a
-        eff = -np.log1p(-np.minimum(c, 1.0 - OPAQUE_EPS)) * a
-        out[v] = np.bincount(cell.reshape(-1)[at], weights=eff, minlength=nu * nw)
+        out[v] = np.bincount(cell.reshape(-1)[at], weights=_effective(c, a), minlength=nu * nw)
     return out
 
 
@@ -239,13 +250,10 @@ def _opaque(grid: Grid, u: np.ndarray, w: np.ndarray, seen: np.ndarray, piece: n
     a = grid.px * grid.px
     out = np.zeros((V, n))
     for v in range(V):
-        iu = np.clip(np.floor((u[v] - grid.origin[v, 0]) / grid.px).astype(np.int64), 0, nu - 1)
-        iw = np.clip(np.floor((w[v] - grid.origin[v, 1]) / grid.px).astype(np.int64), 0, nw - 1)
-        key = piece.astype(np.int64) * n + iu * nw + iw
+        key = piece.astype(np.int64) * n + _cells(grid, u[v], w[v], v)
         first, inv = np.unique(key, return_inverse=True)  # runs of one piece's samples in a cell
         c = np.bincount(inv.reshape(-1), weights=seen[v], minlength=first.size) / a
-        eff = -np.log1p(-np.minimum(c, 1.0 - OPAQUE_EPS)) * a
-        out[v] = np.bincount(first % n, weights=eff, minlength=n)
+        out[v] = np.bincount(first % n, weights=_effective(c, a), minlength=n)
     return out
 
 
