@@ -142,13 +142,13 @@ def dask_client(scheduler: str | None = None, workers: int | None = None, fork: 
         # order; without this every worker prints its own KeyboardInterrupt traceback.
         previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
         try:
-            children = stack.enter_context(forked_workers(n)) if forked else None
+            send_address = stack.enter_context(forked_workers(n)) if forked else None
             cluster = _local_cluster(0 if forked else n)
         finally:
             signal.signal(signal.SIGINT, previous)
         stack.callback(cluster.close)
-        if children is not None:
-            children.send(cluster.scheduler_address)
+        if send_address is not None:
+            send_address(cluster.scheduler_address)
         client = Client(cluster, set_as_default=False)
         stack.callback(client.close)
         yield client, f"{n} local worker(s)"
@@ -169,22 +169,12 @@ def _local_cluster(n: int):
     )
 
 
-class _Forked:
-    """The forked worker processes and this end of their pipes."""
-
-    def __init__(self, processes, pipes):
-        self.processes, self.pipes = processes, pipes
-
-    def send(self, address: str) -> None:
-        for pipe in self.pipes:
-            pipe.send(address)
-
-
 @contextlib.contextmanager
 def forked_workers(n: int):
     """Fork `n` processes that each wait for the scheduler's address on a pipe and then run
     one single-threaded Dask worker until the scheduler closes it (or this process goes: the
-    pipe's end then closes and they exit). On exit, wait for them (then kill stragglers)."""
+    pipe's end then closes and they exit); yields `send(address)`, which tells them all. On
+    exit, wait for them (then kill stragglers)."""
     import multiprocessing
 
     ctx = multiprocessing.get_context("fork")
@@ -200,7 +190,12 @@ def forked_workers(n: int):
             processes.append(p)
         for r, _w in pipes:
             r.close()
-        yield _Forked(processes, mine)
+
+        def send(address: str) -> None:
+            for pipe in mine:
+                pipe.send(address)
+
+        yield send
     finally:
         for w in mine:
             w.close()
