@@ -307,7 +307,12 @@ def test_cli_info_lod_json():
 
 
 def _skinned(lod, rotations: np.ndarray) -> np.ndarray:
-    """Every vertex of the LOD under linear blend skinning for each frame: (K, V, 3)."""
+    """Every vertex of the LOD under linear blend skinning for each frame: (K, V, 3).
+
+    Σ_s w_s · M[k, j_s] · (p, 1) for all k at once, as one sparse (V, 4J) × dense (4J, 3K)
+    product: a per-vertex gather of the joints' matrices would be K × V × 16 floats."""
+    from scipy import sparse
+
     from treegen_cli.skeleton import pose_world
 
     world = pose_world(lod.skeleton, rotations)  # (K, J, 4, 4)
@@ -315,11 +320,13 @@ def _skinned(lod, rotations: np.ndarray) -> np.ndarray:
     pos = np.concatenate([np.asarray(p.positions, np.float64) for p in lod.primitives])
     jn = np.concatenate([np.asarray(p.joints, np.int64) for p in lod.primitives])
     w = np.concatenate([np.asarray(p.weights, np.float64) for p in lod.primitives])
-    out = np.zeros((rotations.shape[0],) + pos.shape)
-    for s in range(4):
-        m = skin[:, jn[:, s]]  # (K, V, 4, 4)
-        out += w[None, :, s, None] * (np.einsum("kvij,vj->kvi", m[..., :3, :3], pos) + m[..., :3, 3])
-    return out
+    (k, j), v = skin.shape[:2], len(pos)
+    hom = np.c_[pos, np.ones(v)]  # (V, 4)
+    cols = (jn[:, :, None] * 4 + np.arange(4)).ravel()  # row v: joint j_s's 4 columns, s = 0..3
+    vals = (w[:, :, None] * hom[:, None, :]).ravel()
+    q = sparse.csr_matrix((vals, (np.repeat(np.arange(v), 16), cols)), shape=(v, 4 * j))
+    m = skin[:, :, :3, :].transpose(1, 3, 0, 2).reshape(4 * j, 3 * k)  # rows (joint, column c)
+    return np.ascontiguousarray((q @ m).reshape(v, k, 3).transpose(1, 0, 2))
 
 
 def _camera_px(
@@ -331,11 +338,13 @@ def _camera_px(
     right = np.cross(fwd, [0.0, 0.0, 1.0])
     right /= np.linalg.norm(right)
     up = np.cross(right, fwd)
-    rel = points - eye
-    z = rel @ fwd
+    z = points @ fwd - eye @ fwd  # matrix-vector products: millions of points, few temporaries
     assert z.min() > 0
-    f = 0.5 * width / np.tan(np.radians(0.5 * fov_deg))
-    return f * np.stack([rel @ right, rel @ up], axis=-1) / z[..., None]
+    out = np.empty(points.shape[:-1] + (2,))
+    out[..., 0] = points @ right - eye @ right
+    out[..., 1] = points @ up - eye @ up
+    out *= (0.5 * width / np.tan(np.radians(0.5 * fov_deg)) / z)[..., None]
+    return out
 
 
 @pytest.mark.parametrize(
