@@ -43,6 +43,7 @@ from functools import cached_property
 import numpy as np
 
 from .asset import EXP_BITS, Asset, Clip, KeyPlan, Lod
+from .axes import quat_from_y_up, quat_to_y_up
 from .clip import kept_mask, play_keys
 from .lod import pixel_size
 from .lod_decimate import keys_within
@@ -67,34 +68,51 @@ LOWER_BITS = 16  # meshopt: the QUATERNION filter's bits on lower LODs' keys (th
 
 
 def quat_filter(q: np.ndarray, bits: np.ndarray) -> np.ndarray:
-    """Unit quaternions (K, J, 4) as meshopt's QUATERNION filter at `bits` (J,) gives them back:
-    the three smallest components times √2 rounded to bits − 1 bits (half away from zero), the
-    largest recovered as √(1 − Σ), all four then stored as normalized int16."""
-    top = np.argmax(np.abs(q), axis=-1)[..., None]
-    sign = np.where(np.take_along_axis(q, top, axis=-1) < 0, -1.0, 1.0)
-    scale = (2.0 ** (np.asarray(bits, np.float64) - 1) - 1)[:, None]
-    v = np.clip(q * sign * np.sqrt(2.0), -1.0, 1.0) * scale
-    small = np.trunc(v + np.where(v >= 0, 0.5, -0.5)) / scale / np.sqrt(2.0)
-    np.put_along_axis(small, top, 0.0, axis=-1)
-    w = np.sqrt(np.maximum(0.0, 1.0 - (small**2).sum(axis=-1, keepdims=True)))
-    np.put_along_axis(small, top, w, axis=-1)
-    return np.rint(small * 32767.0) / 32767.0
+    """Unit quaternions (K, J, 4) as a client reads them back from meshoptimizer's QUATERNION
+    filter at `bits` (J,), to the bit: the writer's source (Y up, float32), the encoder's
+    float32 rounding of the three smallest components times √2 to bits − 1 bits (half away
+    from zero), and its decoder's float32 arithmetic (w = √(2s² − Σ) unscaled, then all four
+    times 32767/√2/s rounded to even, as int16): a float64 model strays by one int16 step on
+    ~1 key in 1,000, and one step of a crown-carrying joint moves the crown by ~0.2 mm."""
+    f32 = np.float32
+    src = unit(quat_to_y_up(q)).astype(f32)
+    top = np.argmax(np.abs(src), axis=-1)[..., None]
+    sign = np.where(np.take_along_axis(src, top, axis=-1) < 0, f32(-1.0), f32(1.0))
+    s = (f32(2.0) ** (np.asarray(bits)[:, None] - 1) - f32(1.0)).astype(f32)
+    v = np.clip(src * np.sqrt(f32(2.0)) * sign, f32(-1.0), f32(1.0))
+    c = np.trunc(v * s + np.where(v >= 0, f32(0.5), f32(-0.5)))
+    np.put_along_axis(c, top, f32(0.0), axis=-1)
+    sq = np.take_along_axis(c * c, (top + np.arange(1, 4)) % 4, axis=-1)  # the stored order
+    ww = (s * s + s * s) - (sq[..., :1] + (sq[..., 1:2] + sq[..., 2:]))
+    np.put_along_axis(c, top, np.sqrt(np.maximum(ww, f32(0.0))), axis=-1)
+    out = np.rint(c * ((f32(32767.0) / np.sqrt(f32(2.0))) / s))
+    return quat_from_y_up(out.astype(np.float64) / 32767.0)
+
+
+def exp_filter(q: np.ndarray, bits: np.ndarray) -> np.ndarray:
+    """Unit quaternions (K, J, 4) as a client reads them back from meshoptimizer's EXPONENTIAL
+    filter (one exponent per vector) at `bits` (J,) of mantissa, to the bit: the writer's
+    float32 source (Y up) in steps of 2^(e + 1 − bits), e the largest component's binary
+    exponent (frexp's: 0 for [0.5, 1), so steps of 2^(1 − bits) but where a component is ±1),
+    rounded half away from zero."""
+    f32 = np.float32
+    src = unit(quat_to_y_up(q)).astype(f32)
+    e = np.frexp(src)[1].max(axis=-1, keepdims=True) - (np.asarray(bits)[:, None] - 1)
+    m = np.trunc(np.ldexp(src, -e) + np.where(src >= 0, f32(0.5), f32(-0.5)))
+    return quat_from_y_up(np.ldexp(m.astype(np.float64), e))
 
 
 def stored(rotations: np.ndarray, wide: np.ndarray, bits: np.ndarray | None = None) -> np.ndarray:
     """Rotations (K, J, 4) as a client reads them back: normalized int16 (c / 32767, as
     compress.snorm16 writes them), or meshopt's QUATERNION filter at `bits` per joint when
     given, except the `wide` joints' float32 (meshopt: its EXPONENTIAL filter at `bits`
-    of mantissa, steps of 2^(2 − bits) at most: a unit quaternion's shared exponent is ≤ 1)."""
+    of mantissa)."""
     if bits is None:
         out = np.rint(np.clip(rotations, -1.0, 1.0) * 32767.0) / 32767.0
-    else:
-        out = quat_filter(rotations, np.minimum(bits, 16))
-    wide_values = rotations[:, wide].astype(np.float32).astype(np.float64)
-    if bits is not None:
-        step = 2.0 ** (2.0 - bits[wide])
-        wide_values = np.rint(wide_values / step[:, None]) * step[:, None]
-    out[:, wide] = wide_values
+        out[:, wide] = rotations[:, wide].astype(np.float32).astype(np.float64)
+        return out
+    out = quat_filter(rotations, np.minimum(bits, 16))
+    out[:, wide] = exp_filter(rotations[:, wide], bits[wide])
     return out
 
 
