@@ -26,7 +26,8 @@ vertices), composed through the hierarchy. Two things spend that millimetre:
     meshopt keeps every key: its codec packs a dense, smooth 16-bit track into ~1.2 bytes a
     key, less than fewer keys with their own key times cost; its rounding gets the bound.
 
-The plan is checked as a client plays it (stored keys, slerp, normalised) against the dense
+The plan is checked as a client plays it (stored keys as the client decodes them, meshopt's
+filters to the bit: quat_filter, exp_filter; slerp, normalised) against the dense
 float clip on box corners (never below the hull's error), and the key bound shrinks until the
 check passes; `error` measures a plan on the hull corners (tests, bench).
 
