@@ -183,17 +183,28 @@ def aimed(
 
 
 def _widen(
-    check: _Check, rot: np.ndarray, wide: np.ndarray, share: float, bits: np.ndarray | None = None
+    check: _Check,
+    rot: np.ndarray,
+    wide: np.ndarray,
+    share: float,
+    bits: np.ndarray | None = None,
+    seen: dict | None = None,
 ) -> float:
     """Raise joints' precision (in place) until the rounding alone keeps every vertex within
     `share` metres: rounds, each raising, per joint too far off, its longest-reach ancestor
     not yet wide by one step (meshopt: `bits` through MESHOPT_LEVELS; quantize:
-    int16, then wide). Returns the rounding's error (metres)."""
+    int16, then wide). Returns the rounding's error (metres). `seen` keeps each wide set's
+    errors: quantize's next share starts from the set the last one ended with."""
     K, J = rot.shape[:2]
     every = np.ones((K, J), dtype=bool)
     anc = ancestors(np.asarray(check.skeleton.parent, dtype=np.int64))
     while True:
-        err = check.errors(aimed(check, rot, every, wide, bits)[1], every)
+        key = wide.tobytes() if bits is None else None
+        err = None if seen is None or key is None else seen.get(key)
+        if err is None:
+            err = check.errors(aimed(check, rot, every, wide, bits)[1], every)
+            if seen is not None and key is not None:
+                seen[key] = err
         bad = np.flatnonzero(err > share)
         chains = anc[bad]
         done = wide[chains] if bits is None else bits[chains] >= MESHOPT_LEVELS[-1]
@@ -212,16 +223,19 @@ def _widen(
         wide[pick] = bits[pick] > 16
 
 
-def _trim(check: _Check, rot: np.ndarray, kept: np.ndarray, wide: np.ndarray) -> None:
+def _trim(check: _Check, rot: np.ndarray, kept: np.ndarray, wide: np.ndarray, within: bool) -> None:
     """quantize: float32 joints back to int16 (in place) wherever the plan (its `kept` keys)
     stays within ANIMATION_ERROR: `_widen` widens whole chains, longest lever first, before
     any key is dropped, and aimed children let many of them round again. Each round rounds
     every wide joint not yet tried and puts back, per joint that then strays too far, its
     rounded ancestor with the longest reach, until a round stands; a joint put back stays
     wide. (meshopt's `_widen` already stops each joint at the fewest bits its own error
-    needs: stepping any back down breaks the bound.)"""
+    needs: stepping any back down breaks the bound.) `within`: the plan is known to keep
+    ANIMATION_ERROR (else its own error is the limit)."""
     anc = ancestors(check.parent)
-    limit = max(ANIMATION_ERROR, float(check.errors(aimed(check, rot, kept, wide)[1], kept).max()))
+    limit = ANIMATION_ERROR
+    if not within:
+        limit = max(limit, float(check.errors(aimed(check, rot, kept, wide)[1], kept).max()))
     cand = wide.copy()
     while cand.any():  # a few rounds
         err = check.errors(aimed(check, rot, kept, wide & ~cand)[1], kept)
@@ -233,19 +247,20 @@ def _trim(check: _Check, rot: np.ndarray, kept: np.ndarray, wide: np.ndarray) ->
         cand[chains[np.arange(len(chains)), lever.argmax(axis=1)][lever.max(axis=1) >= 0]] = False
 
 
-def _decimated(check: _Check, rot: np.ndarray, wide: np.ndarray, limit: float) -> np.ndarray:
+def _decimated(check: _Check, rot: np.ndarray, wide: np.ndarray, limit: float) -> tuple[np.ndarray, bool]:
     """Kept keys (K, J) whose playback of the stored keys stays within ANIMATION_ERROR: keys found
     within `limit` metres of the dense clip, the limit shrunk if slerp of rounded keys strays
-    further (met at once, as a rule); every key when no limit is left."""
+    further (met at once, as a rule); every key when no limit is left. And whether the keys
+    were checked within the bound (not so for the every-key fallback)."""
     for _ in range(4):
         if limit <= MARGIN:
             break
         kept = keys_within(check.model, rot, check.world, limit)
         error = float(check.errors(aimed(check, rot, kept, wide)[1], kept).max())
         if error <= ANIMATION_ERROR:
-            return _cheaper(kept, wide, rot, check)
+            return _cheaper(kept, wide, rot, check), True
         limit -= error - ANIMATION_ERROR + MARGIN
-    return np.ones(rot.shape[:2], dtype=bool)
+    return np.ones(rot.shape[:2], dtype=bool), False
 
 
 def _bytes(kept: np.ndarray, wide: np.ndarray) -> int:
@@ -273,11 +288,12 @@ def plan(lod: Lod, clip: Clip, meshopt: bool = False) -> KeyPlan:
         targets = aimed(check, rot, every, wide, bits)[0]
         return KeyPlan(replace(clip, rotations=targets, keys=[np.arange(K)] * J), wide, bits)
     best: tuple[int, np.ndarray, np.ndarray] | None = None
+    seen: dict = {}
     for share in QUANT_SHARES:
-        quant = _widen(check, rot, wide, share)
-        kept = _decimated(check, rot, wide, ANIMATION_ERROR - quant - MARGIN)
+        quant = _widen(check, rot, wide, share, seen=seen)
+        kept, within = _decimated(check, rot, wide, ANIMATION_ERROR - quant - MARGIN)
         narrow = wide.copy()
-        _trim(check, rot, kept, narrow)
+        _trim(check, rot, kept, narrow, within)
         cost = _bytes(kept, narrow)
         if best is None or cost < best[0]:
             best = (cost, kept, narrow)
