@@ -22,6 +22,12 @@ def quat_to_y_up(q: np.ndarray) -> np.ndarray:
     return np.concatenate([to_y_up(q[..., :3]), q[..., 3:]], axis=-1)
 
 
+def quat_from_y_up(q: np.ndarray) -> np.ndarray:
+    """The inverse of quat_to_y_up: vector part (x, y, z) → (x, −z, y)."""
+    q = np.asarray(q, dtype=np.float64)
+    return np.stack([q[..., 0], -q[..., 2], q[..., 1], q[..., 3]], axis=-1)
+
+
 def matrix_to_y_up(m: np.ndarray) -> np.ndarray:
     """4×4 matrices (..., 4, 4): C·M·Cᵀ."""
     c = np.eye(4)

@@ -39,6 +39,8 @@ def kept_mask(clip: Clip) -> np.ndarray:
 def play_keys(rotations: np.ndarray, kept: np.ndarray, interpolation: str = "LINEAR") -> np.ndarray:
     """Local rotations (K, J, 4) an engine plays from the kept keys `kept` (bool (K, J), rows 0
     and K−1 all True): LINEAR slerps between a joint's neighbouring kept keys, STEP holds."""
+    if interpolation == "LINEAR" and kept.all():  # every key: slerp(q, q, 0) is unit(q), to the bit
+        return unit(rotations)
     K = rotations.shape[0]
     k = np.arange(K)[:, None]
     prev = np.maximum.accumulate(np.where(kept, k, -1), axis=0)

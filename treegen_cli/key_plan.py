@@ -26,7 +26,8 @@ vertices), composed through the hierarchy. Two things spend that millimetre:
     meshopt keeps every key: its codec packs a dense, smooth 16-bit track into ~1.2 bytes a
     key, less than fewer keys with their own key times cost; its rounding gets the bound.
 
-The plan is checked as a client plays it (stored keys, slerp, normalised) against the dense
+The plan is checked as a client plays it (stored keys as the client decodes them, meshopt's
+filters to the bit: quat_filter, exp_filter; slerp, normalised) against the dense
 float clip on box corners (never below the hull's error), and the key bound shrinks until the
 check passes; `error` measures a plan on the hull corners (tests, bench).
 
@@ -43,6 +44,7 @@ from functools import cached_property
 import numpy as np
 
 from .asset import EXP_BITS, Asset, Clip, KeyPlan, Lod
+from .axes import quat_from_y_up, quat_to_y_up
 from .clip import kept_mask, play_keys
 from .lod import pixel_size
 from .lod_decimate import keys_within
@@ -67,34 +69,51 @@ LOWER_BITS = 16  # meshopt: the QUATERNION filter's bits on lower LODs' keys (th
 
 
 def quat_filter(q: np.ndarray, bits: np.ndarray) -> np.ndarray:
-    """Unit quaternions (K, J, 4) as meshopt's QUATERNION filter at `bits` (J,) gives them back:
-    the three smallest components times √2 rounded to bits − 1 bits (half away from zero), the
-    largest recovered as √(1 − Σ), all four then stored as normalized int16."""
-    top = np.argmax(np.abs(q), axis=-1)[..., None]
-    sign = np.where(np.take_along_axis(q, top, axis=-1) < 0, -1.0, 1.0)
-    scale = (2.0 ** (np.asarray(bits, np.float64) - 1) - 1)[:, None]
-    v = np.clip(q * sign * np.sqrt(2.0), -1.0, 1.0) * scale
-    small = np.trunc(v + np.where(v >= 0, 0.5, -0.5)) / scale / np.sqrt(2.0)
-    np.put_along_axis(small, top, 0.0, axis=-1)
-    w = np.sqrt(np.maximum(0.0, 1.0 - (small**2).sum(axis=-1, keepdims=True)))
-    np.put_along_axis(small, top, w, axis=-1)
-    return np.rint(small * 32767.0) / 32767.0
+    """Unit quaternions (K, J, 4) as a client reads them back from meshoptimizer's QUATERNION
+    filter at `bits` (J,), to the bit: the writer's source (Y up, float32), the encoder's
+    float32 rounding of the three smallest components times √2 to bits − 1 bits (half away
+    from zero), and its decoder's float32 arithmetic (w = √(2s² − Σ) unscaled, then all four
+    times 32767/√2/s rounded to even, as int16): a float64 model strays by one int16 step on
+    ~1 key in 1,000, and one step of a crown-carrying joint moves the crown by ~0.2 mm."""
+    f32 = np.float32
+    src = unit(quat_to_y_up(q)).astype(f32)
+    top = np.argmax(np.abs(src), axis=-1)[..., None]
+    sign = np.where(np.take_along_axis(src, top, axis=-1) < 0, f32(-1.0), f32(1.0))
+    s = (f32(2.0) ** (np.asarray(bits)[:, None] - 1) - f32(1.0)).astype(f32)
+    v = np.clip(src * np.sqrt(f32(2.0)) * sign, f32(-1.0), f32(1.0))
+    c = np.trunc(v * s + np.where(v >= 0, f32(0.5), f32(-0.5)))
+    np.put_along_axis(c, top, f32(0.0), axis=-1)
+    sq = np.take_along_axis(c * c, (top + np.arange(1, 4)) % 4, axis=-1)  # the stored order
+    ww = (s * s + s * s) - (sq[..., :1] + (sq[..., 1:2] + sq[..., 2:]))
+    np.put_along_axis(c, top, np.sqrt(np.maximum(ww, f32(0.0))), axis=-1)
+    out = np.rint(c * ((f32(32767.0) / np.sqrt(f32(2.0))) / s))
+    return quat_from_y_up(out.astype(np.float64) / 32767.0)
+
+
+def exp_filter(q: np.ndarray, bits: np.ndarray) -> np.ndarray:
+    """Unit quaternions (K, J, 4) as a client reads them back from meshoptimizer's EXPONENTIAL
+    filter (one exponent per vector) at `bits` (J,) of mantissa, to the bit: the writer's
+    float32 source (Y up) in steps of 2^(e + 1 − bits), e the largest component's binary
+    exponent (frexp's: 0 for [0.5, 1), so steps of 2^(1 − bits) but where a component is ±1),
+    rounded half away from zero."""
+    f32 = np.float32
+    src = unit(quat_to_y_up(q)).astype(f32)
+    e = np.frexp(src)[1].max(axis=-1, keepdims=True) - (np.asarray(bits)[:, None] - 1)
+    m = np.trunc(np.ldexp(src, -e) + np.where(src >= 0, f32(0.5), f32(-0.5)))
+    return quat_from_y_up(np.ldexp(m.astype(np.float64), e))
 
 
 def stored(rotations: np.ndarray, wide: np.ndarray, bits: np.ndarray | None = None) -> np.ndarray:
     """Rotations (K, J, 4) as a client reads them back: normalized int16 (c / 32767, as
     compress.snorm16 writes them), or meshopt's QUATERNION filter at `bits` per joint when
     given, except the `wide` joints' float32 (meshopt: its EXPONENTIAL filter at `bits`
-    of mantissa, steps of 2^(2 − bits) at most: a unit quaternion's shared exponent is ≤ 1)."""
+    of mantissa)."""
     if bits is None:
         out = np.rint(np.clip(rotations, -1.0, 1.0) * 32767.0) / 32767.0
-    else:
-        out = quat_filter(rotations, np.minimum(bits, 16))
-    wide_values = rotations[:, wide].astype(np.float32).astype(np.float64)
-    if bits is not None:
-        step = 2.0 ** (2.0 - bits[wide])
-        wide_values = np.rint(wide_values / step[:, None]) * step[:, None]
-    out[:, wide] = wide_values
+        out[:, wide] = rotations[:, wide].astype(np.float32).astype(np.float64)
+        return out
+    out = quat_filter(rotations, np.minimum(bits, 16))
+    out[:, wide] = exp_filter(rotations[:, wide], bits[wide])
     return out
 
 
@@ -121,7 +140,8 @@ class _Check:
         """Per joint (J,), the farthest any of its hull corners strays from the dense pose
         over the clip when `values` (K, J, 4) are played from the `kept` keys (K, J)."""
         x = probe_world(pose_world(self.skeleton, play_keys(values, kept, "LINEAR")), self.probes)
-        err = np.linalg.norm(x - self.dense, axis=2).max(axis=0)
+        d = x - self.dense
+        err = np.sqrt(np.add.reduce(d * d, axis=2).max(axis=0))  # = norm(d, axis=2).max(axis=0)
         out = np.zeros(len(self.skeleton.names))
         np.maximum.at(out, self.probes.joint, err)
         return out
@@ -163,17 +183,28 @@ def aimed(
 
 
 def _widen(
-    check: _Check, rot: np.ndarray, wide: np.ndarray, share: float, bits: np.ndarray | None = None
+    check: _Check,
+    rot: np.ndarray,
+    wide: np.ndarray,
+    share: float,
+    bits: np.ndarray | None = None,
+    seen: dict | None = None,
 ) -> float:
     """Raise joints' precision (in place) until the rounding alone keeps every vertex within
     `share` metres: rounds, each raising, per joint too far off, its longest-reach ancestor
     not yet wide by one step (meshopt: `bits` through MESHOPT_LEVELS; quantize:
-    int16, then wide). Returns the rounding's error (metres)."""
+    int16, then wide). Returns the rounding's error (metres). `seen` keeps each wide set's
+    errors: quantize's next share starts from the set the last one ended with."""
     K, J = rot.shape[:2]
     every = np.ones((K, J), dtype=bool)
     anc = ancestors(np.asarray(check.skeleton.parent, dtype=np.int64))
     while True:
-        err = check.errors(aimed(check, rot, every, wide, bits)[1], every)
+        key = wide.tobytes() if bits is None else None
+        err = None if seen is None or key is None else seen.get(key)
+        if err is None:
+            err = check.errors(aimed(check, rot, every, wide, bits)[1], every)
+            if seen is not None and key is not None:
+                seen[key] = err
         bad = np.flatnonzero(err > share)
         chains = anc[bad]
         done = wide[chains] if bits is None else bits[chains] >= MESHOPT_LEVELS[-1]
@@ -192,16 +223,19 @@ def _widen(
         wide[pick] = bits[pick] > 16
 
 
-def _trim(check: _Check, rot: np.ndarray, kept: np.ndarray, wide: np.ndarray) -> None:
+def _trim(check: _Check, rot: np.ndarray, kept: np.ndarray, wide: np.ndarray, within: bool) -> None:
     """quantize: float32 joints back to int16 (in place) wherever the plan (its `kept` keys)
     stays within ANIMATION_ERROR: `_widen` widens whole chains, longest lever first, before
     any key is dropped, and aimed children let many of them round again. Each round rounds
     every wide joint not yet tried and puts back, per joint that then strays too far, its
     rounded ancestor with the longest reach, until a round stands; a joint put back stays
     wide. (meshopt's `_widen` already stops each joint at the fewest bits its own error
-    needs: stepping any back down breaks the bound.)"""
+    needs: stepping any back down breaks the bound.) `within`: the plan is known to keep
+    ANIMATION_ERROR (else its own error is the limit)."""
     anc = ancestors(check.parent)
-    limit = max(ANIMATION_ERROR, float(check.errors(aimed(check, rot, kept, wide)[1], kept).max()))
+    limit = ANIMATION_ERROR
+    if not within:
+        limit = max(limit, float(check.errors(aimed(check, rot, kept, wide)[1], kept).max()))
     cand = wide.copy()
     while cand.any():  # a few rounds
         err = check.errors(aimed(check, rot, kept, wide & ~cand)[1], kept)
@@ -213,19 +247,20 @@ def _trim(check: _Check, rot: np.ndarray, kept: np.ndarray, wide: np.ndarray) ->
         cand[chains[np.arange(len(chains)), lever.argmax(axis=1)][lever.max(axis=1) >= 0]] = False
 
 
-def _decimated(check: _Check, rot: np.ndarray, wide: np.ndarray, limit: float) -> np.ndarray:
+def _decimated(check: _Check, rot: np.ndarray, wide: np.ndarray, limit: float) -> tuple[np.ndarray, bool]:
     """Kept keys (K, J) whose playback of the stored keys stays within ANIMATION_ERROR: keys found
     within `limit` metres of the dense clip, the limit shrunk if slerp of rounded keys strays
-    further (met at once, as a rule); every key when no limit is left."""
+    further (met at once, as a rule); every key when no limit is left. And whether the keys
+    were checked within the bound (not so for the every-key fallback)."""
     for _ in range(4):
         if limit <= MARGIN:
             break
         kept = keys_within(check.model, rot, check.world, limit)
         error = float(check.errors(aimed(check, rot, kept, wide)[1], kept).max())
         if error <= ANIMATION_ERROR:
-            return _cheaper(kept, wide, rot, check)
+            return _cheaper(kept, wide, rot, check), True
         limit -= error - ANIMATION_ERROR + MARGIN
-    return np.ones(rot.shape[:2], dtype=bool)
+    return np.ones(rot.shape[:2], dtype=bool), False
 
 
 def _bytes(kept: np.ndarray, wide: np.ndarray) -> int:
@@ -253,11 +288,12 @@ def plan(lod: Lod, clip: Clip, meshopt: bool = False) -> KeyPlan:
         targets = aimed(check, rot, every, wide, bits)[0]
         return KeyPlan(replace(clip, rotations=targets, keys=[np.arange(K)] * J), wide, bits)
     best: tuple[int, np.ndarray, np.ndarray] | None = None
+    seen: dict = {}
     for share in QUANT_SHARES:
-        quant = _widen(check, rot, wide, share)
-        kept = _decimated(check, rot, wide, ANIMATION_ERROR - quant - MARGIN)
+        quant = _widen(check, rot, wide, share, seen=seen)
+        kept, within = _decimated(check, rot, wide, ANIMATION_ERROR - quant - MARGIN)
         narrow = wide.copy()
-        _trim(check, rot, kept, narrow)
+        _trim(check, rot, kept, narrow, within)
         cost = _bytes(kept, narrow)
         if best is None or cost < best[0]:
             best = (cost, kept, narrow)
