@@ -73,7 +73,19 @@ switch IoU / cover, before → after:
     weeping_willow 0.960/+0.8 → 0.965/+1.2
 IoU ≥ 0.9 at every switch: fir, willow, aspen, tamarack (was fir, willow). The larch and the
 rush fall by less than the picking seed's ±0.013. Cost: a nearest-kept-leaf query per far
-LOD (aspen 0.02 s CPU per LOD, willow 0.4-0.8 s).
+LOD (aspen 0.02 s CPU per LOD, willow 0.4-0.8 s). Four views (`--views 4 --max-px 384`,
+texture 256), worst switch, before → after: aspen 0.881/−1.9 → 0.891/−1.5, oak 0.842/+2.4 →
+0.852/+2.0, palm 0.778/+4.6 → 0.811/+6.4 (LOD2→3, a view the test does not draw), tamarack
+0.888/+2.2 → 0.902/+2.5. Also tried: three Lloyd steps instead of one (+0.003, three times the
+queries).
+
+Cover left over: the render shows the far LODs 2-5 % fuller than lod_cover predicts (oak
+switch 2: estimated 1.007, rendered 1.025; palm switch 3: 1.003 / 1.053; larch switch 2:
+0.996 / 1.053). About a point of the oak's is the leaf atlas's padding bleeding into the coarse
+mips sub-pixel blades sample (atlas mean alpha 0.88 × a card's; rendered with the finest mip
+forced the oak reads 1.015, the larch 1.048); the larch's needles (4.8 per node, 4.2 × 0.85 cm,
+at 8 cm pixels) overlap more than the estimator's Boolean model counts, even in cells of half
+a pixel (5.5 % → 5.3 %).
 """
 
 from __future__ import annotations
