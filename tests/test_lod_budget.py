@@ -31,27 +31,29 @@ IOU_TARGET = 0.9  # issue 13: silhouette IoU at least this at every switch
 # bench/lod_pop_bench.py --views 1 --max-px 384): (covered area off by at most, IoU at least),
 # a regression guard a little below what the LODs reach where the target is not met (None:
 # the target itself). Cover is within ±5 % for all but the larch (5.5 %). IoU ≥ 0.9 at every
-# switch for the fir and the willow; 0.887-0.892 for the aspen, tamarack, tupelo, larch and
-# sassafras; 0.76-0.88 for the rest: at the far switches each kept leaf spans several pixels
-# and the crown reads blotchy at the 3-pixel scale (which leaves are kept moves IoU less than
-# the picking seed's ±0.013; leaf-cluster cards reached 0.9 for the aspen only:
+# switch for the fir, the willow, the aspen and the tamarack; 0.88-0.90 for the tupelo,
+# larch and sassafras; 0.70-0.87 for the rest: at the far switches each kept leaf spans
+# several pixels and the crown reads blotchy at the 3-pixel scale (the XOR of two LODs is
+# speckle all over the crown, not its edge or trunk; kept leaves gathered to the middle of
+# the leaves they stand for raised IoU 0.01-0.03; which leaves are kept moves it by the
+# picking seed's ±0.013; leaf-cluster cards reached 0.9 for the aspen only:
 # bench/lod_cards_bench.py). Shave grass, leafless, keeps part of its whorls' branches (as
 # cones, spread over every whorl's sides, thickened) at 50, 15 and 5 % of the triangles.
 MEASURED = {
     "balsam_fir": (None, None),
-    "black_tupelo": (None, 0.875),
-    "ca_black_oak": (None, 0.83),
+    "black_tupelo": (None, 0.885),
+    "ca_black_oak": (None, 0.84),
     "desert_bush": (None, 0.80),
-    "eastern_cottonwood": (None, 0.815),
+    "eastern_cottonwood": (None, 0.83),
     "european_larch": (0.06, 0.875),
-    "fan_palm": (None, 0.745),
-    "lombardy_poplar": (None, 0.79),
-    "palm": (None, 0.775),
-    "quaking_aspen": (None, 0.875),
+    "fan_palm": (None, 0.78),
+    "lombardy_poplar": (None, 0.795),
+    "palm": (None, 0.80),
+    "quaking_aspen": (None, None),
     "rush": (None, 0.86),
-    "sassafras": (None, 0.875),
+    "sassafras": (None, 0.885),
     "shave_grass": (None, 0.69),
-    "tamarack": (None, 0.875),
+    "tamarack": (None, None),
     "weeping_willow": (None, None),
 }
 
@@ -126,6 +128,30 @@ def test_stratified_pick_spreads_like_the_full_set():
     full = np.bincount(octant(pts), minlength=8) / len(pts)
     kept = np.bincount(octant(pts[pick]), minlength=8) / n
     assert np.abs(kept - full).max() < 0.01
+
+
+def test_gathered_leaves_sit_among_the_leaves_they_stand_for():
+    """A thinned LOD's kept leaves, moved to the middle of the leaves nearest them, are
+    nearer the full crown's leaves than where they grew (a Lloyd step: the area-weighted
+    squared distance from each leaf to its nearest kept one falls); frames and sizes kept."""
+    from scipy.spatial import cKDTree
+
+    from treegen_cli.lod_leaves import blade_middles
+
+    tree = grown("quaking_aspen")
+    n = tree.n_leaves // 8
+    pick = stratified_pick(tree.leaf_pos, n, tree.seed)
+    thin = thin_leaves(tree, n, 1.0)
+    assert np.array_equal(thin.leaf_frame, tree.leaf_frame[pick])
+    assert np.array_equal(thin.leaf_size, tree.leaf_size[pick])
+    mids = blade_middles(tree)
+
+    def spread(kept):
+        return float(np.sum(tree.leaf_area * cKDTree(kept).query(mids)[0] ** 2))
+
+    before, after = spread(mids[pick]), spread(blade_middles(thin))
+    assert after < 0.8 * before, (before, after)
+    assert np.array_equal(thin_leaves(tree, tree.n_leaves, 1.0).leaf_pos, tree.leaf_pos)
 
 
 def test_pruned_stems_keep_their_leaves_in_place():

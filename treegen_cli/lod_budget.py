@@ -13,7 +13,8 @@ Each LOD is cut from LOD0's tree (lod_leaves.py), in this order:
      nodes are coarsened too and its branches end in points (cones: a twig of one segment
      costs a third of its triangles, lod_nodes.point_tips);
   4. leaves: as many stratified leaves as the rest of the budget holds (nested: each LOD's
-     leaves are a subset of the LOD before's), their blades scaled so the LOD covers on screen,
+     leaves are picked from the LOD before's; each moves to the middle of the leaves it
+     stands for, lod_leaves.gather_leaves), their blades scaled so the LOD covers on screen,
      at its switch distance, what LOD0 covers (`cover_factors`, lod_cover.py): each region of a
      few pixels keeps LOD0's area (dropped twigs' bark and leaves included) within REGION_CLIP
      of the crown's growth, one factor then matches the whole. A leafless tree thickens its

@@ -9,7 +9,8 @@ fifth of its cover. Here a LOD is cut from LOD0's own tree instead:
     to a joint that exists in the LOD's rig);
   * `thin_leaves`: a spatially stratified subset of the leaves — every cell of a grid over the
     crown keeps its share, so the kept leaves fill the crown volume as the full set did — each
-    kept leaf scaled so the LOD's projected leaf area matches LOD0's (`area_factor`).
+    kept leaf moved to the middle of the leaves it stands for (`gather_leaves`) and scaled so
+    the LOD's projected leaf area matches LOD0's (`area_factor`).
 
     lod = thin_leaves(prune_stems(tree, keep), n_keep=len // 4, area_factor=...)
 """
@@ -130,7 +131,37 @@ def thin_leaves(tree: Tree, n_keep: int, area_factor, seed: int = 0) -> Tree:
         leaf_frame=tree.leaf_frame[pick],
         leaf_size=tree.leaf_size[pick],
     )
+    if pick.size < tree.n_leaves:
+        kept = gather_leaves(tree, kept, pick)
     return grow_leaves(kept, area_factor)
+
+
+def blade_middles(tree: Tree) -> np.ndarray:
+    """(L, 3) middle of each blade (half its length out along the frame's column 1)."""
+    return tree.leaf_pos + (0.5 * tree.leaf_size[:, 0])[:, None] * tree.leaf_frame[:, :, 1]
+
+
+def gather_leaves(full: Tree, kept: Tree, pick: np.ndarray) -> Tree:
+    """`kept` (`full`'s leaves `pick`) with each blade moved (frame and size unchanged) so
+    that its middle sits at the area-weighted middle of the blades it stands for: itself and
+    the dropped ones nearest to it. Grown in place, a kept leaf puts their area where it
+    happened to be, off to one side of them, and a far LOD's crown reads blotchy at a few
+    pixels (the XOR of two LODs at their switch is speckle all over the crown, not at its
+    edge or trunk); gathered, its IoU rises 0.01-0.03 (bench/lod_pop_bench.py)."""
+    from scipy.spatial import cKDTree
+
+    a, b = blade_middles(full), blade_middles(kept)
+    dropped = np.ones(full.n_leaves, dtype=bool)
+    dropped[pick] = False
+    near = np.empty(full.n_leaves, dtype=np.int64)
+    near[pick] = np.arange(pick.size)
+    near[dropped] = cKDTree(b).query(a[dropped])[1]
+    w = full.leaf_area
+    n = kept.n_leaves
+    total = np.bincount(near, weights=w, minlength=n)
+    mid = np.stack([np.bincount(near, weights=w * a[:, i], minlength=n) for i in range(3)], axis=1)
+    mid = np.where(total[:, None] > 0, mid / np.maximum(total, 1e-30)[:, None], b)
+    return replace(kept, leaf_pos=kept.leaf_pos + (mid - b))
 
 
 def grow_leaves(tree: Tree, area_factor) -> Tree:
