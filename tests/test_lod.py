@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from lbs import skin_frames
 from synthetic import bark, chain_skeleton, leaves, sway_clip
 from treegen_cli.errors import TreegenError
 from treegen_cli.clip import play_keys as playback
@@ -307,26 +308,13 @@ def test_cli_info_lod_json():
 
 
 def _skinned(lod, rotations: np.ndarray) -> np.ndarray:
-    """Every vertex of the LOD under linear blend skinning for each frame: (K, V, 3).
-
-    Σ_s w_s · M[k, j_s] · (p, 1) for all k at once, as one sparse (V, 4J) × dense (4J, 3K)
-    product: a per-vertex gather of the joints' matrices would be K × V × 16 floats."""
-    from scipy import sparse
-
+    """Every vertex of the LOD under linear blend skinning for each frame: (K, V, 3)."""
     from treegen_cli.skeleton import pose_world
 
     world = pose_world(lod.skeleton, rotations)  # (K, J, 4, 4)
     skin = world @ np.linalg.inv(np.asarray(lod.skeleton.bind_world))  # (K, J, 4, 4)
-    pos = np.concatenate([np.asarray(p.positions, np.float64) for p in lod.primitives])
-    jn = np.concatenate([np.asarray(p.joints, np.int64) for p in lod.primitives])
-    w = np.concatenate([np.asarray(p.weights, np.float64) for p in lod.primitives])
-    (k, j), v = skin.shape[:2], len(pos)
-    hom = np.c_[pos, np.ones(v)]  # (V, 4)
-    cols = (jn[:, :, None] * 4 + np.arange(4)).ravel()  # row v: joint j_s's 4 columns, s = 0..3
-    vals = (w[:, :, None] * hom[:, None, :]).ravel()
-    q = sparse.csr_matrix((vals, (np.repeat(np.arange(v), 16), cols)), shape=(v, 4 * j))
-    m = skin[:, :, :3, :].transpose(1, 3, 0, 2).reshape(4 * j, 3 * k)  # rows (joint, column c)
-    return np.ascontiguousarray((q @ m).reshape(v, k, 3).transpose(1, 0, 2))
+    cat = lambda key: np.concatenate([np.asarray(getattr(p, key)) for p in lod.primitives])  # noqa: E731
+    return skin_frames(skin, cat("positions"), cat("joints"), cat("weights"))
 
 
 def _camera_px(

@@ -15,6 +15,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from lbs import skin_frames
+
 from treegen_cli.exchange.gltf import write_gltf
 from treegen_cli.exchange.gltf_container import read_accessor, read_gltf
 from treegen_cli.params import load_params
@@ -122,12 +124,7 @@ class Scene:
 
     def skin(self, world: np.ndarray, pos, joints, weights) -> np.ndarray:
         """(K, V, 3) skinned positions: Σ w · (world · inverse bind) · v."""
-        m = world @ self.ibm[None]  # (K, J, 4, 4)
-        v = np.c_[pos, np.ones(len(pos))]
-        out = np.zeros((world.shape[0], len(pos), 3))
-        for k in range(joints.shape[1]):
-            out += weights[None, :, k, None] * np.einsum("kvab,vb->kva", m[:, joints[:, k]], v)[..., :3]
-        return out
+        return skin_frames(world @ self.ibm[None], pos, joints, weights)
 
 
 @pytest.fixture(scope="module")
