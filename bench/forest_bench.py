@@ -74,7 +74,7 @@ from pathlib import Path
 from treegen_cli import executor
 from treegen_cli.exchange import export, export_forest
 from treegen_cli.forest import build_prototypes, build_scene, load_layout
-from treegen_cli.forest.build import build_prototype, expected_size, make_options
+from treegen_cli.forest.build import build_prototype, make_options
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -85,15 +85,11 @@ def _peak_mb() -> tuple[float, float]:
     return own, kids
 
 
-def old_pool(keys, params, options, workers: int, largest_first: bool = False) -> list:
-    """The pre-Dask prototype pool (a concurrent.futures process pool), as a reference: in
-    layout order, as it was, or (`largest_first`) in the order the Dask path now submits."""
-    order = range(len(keys))
-    if largest_first:
-        order = sorted(order, key=lambda i: -expected_size(params[keys[i][0]]))
+def old_pool(keys, params, options, workers: int) -> list:
+    """The pre-Dask prototype pool (a concurrent.futures process pool), as a reference."""
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        futures = {i: pool.submit(build_prototype, params[keys[i][0]], keys[i][1], options) for i in order}
-        return [futures[i].result() for i in range(len(keys))]
+        futures = [pool.submit(build_prototype, params[p], s, options) for p, s in keys]
+        return [f.result() for f in futures]
 
 
 def sizes(layout_path: str, workers: int | None, tmp: Path) -> None:
@@ -122,7 +118,7 @@ def sizes(layout_path: str, workers: int | None, tmp: Path) -> None:
             )
 
 
-METHODS = ("old pool", "old pool lf", "dask", "dask fs", "in process")
+METHODS = ("old pool", "dask", "dask fs", "in process")
 
 
 def one_build(layout_path: str, method: str, workers: int) -> None:
@@ -137,8 +133,8 @@ def one_build(layout_path: str, method: str, workers: int) -> None:
     t0 = time.perf_counter()
     if method == "dask fs":  # the embedded cluster's other start: workers from the fork server
         executor.can_fork = lambda: False
-    if method.startswith("old pool"):
-        built = old_pool(keys, layout.params, options, workers, largest_first=method.endswith("lf"))
+    if method == "old pool":
+        built = old_pool(keys, layout.params, options, workers)
     else:
         built = build_prototypes(
             keys, options, 1 if method == "in process" else workers, False, layout.params

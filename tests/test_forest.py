@@ -576,17 +576,6 @@ with dask_client(None, 2, fork=True) as (client, where):
     assert json.loads(proc.stdout.strip().splitlines()[-1]) == [[1, 1], 3]
 
 
-def test_largest_prototypes_are_expected_largest():
-    """The Dask path starts prototypes largest first by the generator's own estimate
-    (forest.build.expected_size); on the 1,000-tree example's species it ranks them as their
-    builds measure (bench/forest_bench.py: sassafras about 2 s, palm about 0.6 s)."""
-    from treegen_cli.forest.build import expected_size
-
-    layout = load_layout(Path(__file__).resolve().parents[1] / "examples" / "forest_1000.json")
-    rank = sorted(layout.params, key=lambda p: -expected_size(layout.params[p]))
-    assert rank[0].stem == "sassafras" and rank[-1].stem == "palm"
-
-
 @pytest.fixture(scope="module")
 def dask_scheduler():
     """A real `dask scheduler` and one `dask worker` (this checkout's treegen_cli)."""

@@ -57,7 +57,6 @@ QUIET = {
 # the last one done, as the old process pool's workers pulled theirs from one queue: Dask's
 # default saturation (1.1) rounds up to two tasks a worker, so near the end a worker could
 # sit idle while a task waited behind a long one on the other until work stealing moved it.
-# (The forest submits its few prototypes one per free thread itself: forest.build._on_dask.)
 ONE_AT_A_TIME = {"distributed.scheduler.worker-saturation": 1.0}
 
 

@@ -161,7 +161,7 @@ def build_prototypes(
                 (i, _in_file(p, build_prototype, params[p], s, options)) for i, (p, s) in enumerate(keys)
             )
         else:
-            results = _on_dask(client, keys, params, options, 1 if remote else workers)
+            results = _on_dask(client, keys, params, options)
         for i, asset in results:
             out[i] = asset
             if bar:
@@ -198,48 +198,18 @@ def _cluster(scheduler: str | None, workers: int, report: dict | None, warm=None
         yield client
 
 
-def expected_size(params) -> int:
-    """Stems + leaves the generator expects of a species (its own estimate, from the
-    parameters alone): what a prototype's build time grows with."""
-    from ..generate import estimate_counts
-
-    return sum(estimate_counts(params))
-
-
-def _on_dask(client, keys, params, options, threads: int):
+def _on_dask(client, keys, params, options):
     """Yield (index, prototype) as the cluster finishes them; a worker's TreegenError comes
-    back naming its species file.
-
-    Largest first (expected_size), one task per worker thread (at least `threads`, more if
-    the cluster has more), the next sent as one finishes: like the old process pool, a
-    free worker takes the largest prototype left, and the last to start are the smallest,
-    so no worker idles long at the end while another finishes a big one (in layout order
-    the 1,000-tree example's two largest came last). Sent all at once, Dask would place
-    these few tasks on workers up front and move them only by work stealing."""
-    from collections import deque
-
+    back naming its species file."""
     from distributed import as_completed
 
     run = f"{os.getpid():x}{time.time_ns() & 0xFFFFFF:x}"
-    size = {p: expected_size(params[p]) for p, _s in keys}
-    waiting = deque(sorted(range(len(keys)), key=lambda i: -size[keys[i][0]]))
-    running = as_completed(loop=client.loop)
-    index = {}
-
-    def send() -> None:  # up to one task per thread: `threads`, or the cluster's if more
-        free = max(threads, sum(client.nthreads().values())) - len(index) if waiting else 0
-        for _ in range(min(free, len(waiting))):
-            i = waiting.popleft()
-            p, s = keys[i]
-            key = f"treegen-forest-{p.stem}-{s}-{run}"
-            fut = client.submit(build_prototype, params[p], s, options, key=key, priority=size[p])
-            index[fut] = i
-            running.add(fut)
-
-    send()
-    for fut in running:
-        i = index.pop(fut)
-        send()  # before the result comes over: the worker starts its next one meanwhile
+    futures = {
+        client.submit(build_prototype, params[p], s, options, key=f"treegen-forest-{p.stem}-{s}-{run}"): i
+        for i, (p, s) in enumerate(keys)
+    }
+    for fut in as_completed(list(futures), loop=client.loop):
+        i = futures.pop(fut)
         yield i, _in_file(keys[i][0], fut.result)
         fut.release()
 
