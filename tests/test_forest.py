@@ -551,31 +551,6 @@ print(json.dumps([os.getpid(), first, second, len(kids)]))
     assert kids == 0  # no worker left behind (the fork server's helpers stay, as multiprocessing's do)
 
 
-def test_embedded_cluster_gives_each_worker_one_task_at_a_time():
-    """Single-threaded workers of the embedded cluster hold one task each of a batch; the rest
-    wait on the scheduler for whichever worker finishes first (executor.ONE_AT_A_TIME), so
-    none can sit idle while a task waits behind a long one on another worker."""
-    import subprocess
-    import sys
-
-    code = """
-import json, time
-from treegen_cli.executor import dask_client
-with dask_client(None, 2, fork=True) as (client, where):
-    client.wait_for_workers(2, timeout=60)
-    futures = client.map(time.sleep, [3] * 5, pure=False)
-    while sum(len(v) for v in client.processing().values()) < 2:
-        time.sleep(0.05)
-    held = sorted(len(v) for v in client.processing().values())
-    queued = client.run_on_scheduler(lambda dask_scheduler: len(dask_scheduler.queued))
-    print(json.dumps([held, queued]))
-    client.cancel(futures)
-"""
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=DASK_ENV)
-    assert proc.returncode == 0, proc.stderr
-    assert json.loads(proc.stdout.strip().splitlines()[-1]) == [[1, 1], 3]
-
-
 @pytest.fixture(scope="module")
 def dask_scheduler():
     """A real `dask scheduler` and one `dask worker` (this checkout's treegen_cli)."""

@@ -52,14 +52,6 @@ QUIET = {
 }
 
 
-# Each single-threaded worker of the embedded cluster holds one task at a time of a large
-# batch of like tasks (Dask queues those on the scheduler) and gets the next when it reports
-# the last one done, as the old process pool's workers pulled theirs from one queue: Dask's
-# default saturation (1.1) rounds up to two tasks a worker, so near the end a worker could
-# sit idle while a task waited behind a long one on the other until work stealing moved it.
-ONE_AT_A_TIME = {"distributed.scheduler.worker-saturation": 1.0}
-
-
 # How the embedded cluster's worker processes start. Spawning (Dask's default) runs a fresh
 # interpreter per worker that imports distributed, numpy and then treegen again, and stopping
 # it waits ~1 s; a fork server (exec'd once, single-threaded, so no lock is inherited) imports
@@ -154,7 +146,6 @@ def dask_client(
     config: dict = {
         f"distributed.nanny.pre-spawn-environ.{TRIM}": None,
         **QUIET,
-        **ONE_AT_A_TIME,
         **STARTUP,
     }
     if forked:  # no nanny restarts them: should all die, their tasks fail instead of waiting
