@@ -72,12 +72,16 @@ Where the Dask path's remaining time went (2026-11-26, load 3-9; rusage and /pro
     worker-saturation 1.0 (it only queues large task groups; the forest's tasks are placed on
     workers as submitted); LP_NUM_THREADS for llvmpipe (no CPU change resolvable); results
     through shared memory (would save at most ~0.025 CPU-s per 44 MB against Dask's comms).
-    `--pools-only --reps 3`, before (main, load 3.5-7.8): Dask 26.29 s vs old pool 22.90 s, 1.15×
-    (paired 1.23×, CPU 1.14×); after (load 4.6-5.2): old pool 13.12 s, Dask 12.66 s 0.97× (paired
-    0.98×, CPU 0.99×), fork server 1.07×, in process 0.91× (two workers gain nothing on a box
-    this loaded); same bytes from every path. Runs at this load spread by ±10 %: the two A/B runs
-    above, old pool vs main's Dask vs this one, gave main 1.03× / 0.94× paired and this 1.10× /
-    0.88×, so what the figures show is "no slower within the noise", not a measured gain.
+    `--pools-only --reps 3` (wall median, paired, CPU of the process tree):
+                          old pool   dask (forked)                dask fs        in process
+      before (main)  load 3.5-7.8  22.90 s  26.29 s 1.15× p1.23 cpu1.14×  1.23× cpu1.19×  1.03×
+      after          load 4.6-5.2  13.12 s  12.66 s 0.97× p0.98 cpu0.99×  1.07× cpu1.07×  0.91×
+      after, again   load 4.7-6.4  12.11 s  13.77 s 1.14× p1.11 cpu1.19×  1.06× cpu1.20×  0.90×
+    same bytes from every path; one process is as fast as two workers on a box this loaded.
+    Runs at this load spread by ±10 % (the two `after` rows; the two A/B runs above gave main's
+    Dask 1.03× / 0.94× paired and this one 1.10× / 0.88×): the Dask path is not shown slower than
+    the old pool, nor faster; the textures drawn once save ~0.27 CPU-s by count, below what
+    these runs resolve. A quiet box (load < 1) is needed to settle the last few per cent.
 """
 
 from __future__ import annotations
