@@ -55,6 +55,33 @@ Measured 2026-11-26 after that, three `--pools-only --reps 5` runs (load 4-13; w
     of the same day (prototypes cost more than in the morning's 3.99 s): old pool 6.24 s, Dask
     (forked) 6.43 s 1.03× (paired 1.09×, CPU 1.03×), fork server 7.22 s 1.16×, in process
     8.67 s 1.39×; same bytes from every path.
+Where the Dask path's remaining time went (2026-11-26, load 3-9; rusage and /proc per-thread
+    CPU of single runs, py-spy): the client imports dask + distributed, 0.25-0.3 CPU-s (0.35-0.5 s
+    wall, before the fork, so on the critical path); LocalCluster 0.03-0.06 s, Client 0.05-0.12 s,
+    workers registered ~0.1 s later: the first prototype starts ~0.6 s after build_prototypes is
+    called (old pool: 0.05 s). Over a run the client's event-loop thread (scheduler, client,
+    results) takes 0.34-0.37 CPU-s and its deserialising thread 0.07; each worker's event loop
+    0.23; an idle cluster costs 0.012 CPU-s a second in all. The client in total: 1.6-1.9 CPU-s,
+    the old pool's 1.0-1.1. Results are not where it goes: the 44 MB sassafras prototype comes
+    back through Dask's comms for 0.075 CPU-s of the process tree (relayed by the scheduler or
+    gathered directly alike), through the old pool's pipe for 0.17. Each species' textures cost
+    0.08-0.11 CPU-s, drawn by every worker building that species (the old pool: 7 draws for 4
+    species); the client now draws those of species with more than one prototype before it forks
+    (executor.dask_client(warm=)), 4 draws in all. Tried and dropped: largest prototype first,
+    one task per free worker (two 4-round A/B runs against main's Dask disagreed in sign); Dask's
+    worker-saturation 1.0 (it only queues large task groups; the forest's tasks are placed on
+    workers as submitted); LP_NUM_THREADS for llvmpipe (no CPU change resolvable); results
+    through shared memory (would save at most ~0.025 CPU-s per 44 MB against Dask's comms).
+    `--pools-only --reps 3` (wall median, paired, CPU of the process tree):
+                          old pool   dask (forked)                dask fs        in process
+      before (main)  load 3.5-7.8  22.90 s  26.29 s 1.15× p1.23 cpu1.14×  1.23× cpu1.19×  1.03×
+      after          load 4.6-5.2  13.12 s  12.66 s 0.97× p0.98 cpu0.99×  1.07× cpu1.07×  0.91×
+      after, again   load 4.7-6.4  12.11 s  13.77 s 1.14× p1.11 cpu1.19×  1.06× cpu1.20×  0.90×
+    same bytes from every path; one process is as fast as two workers on a box this loaded.
+    Runs at this load spread by ±10 % (the two `after` rows; the two A/B runs above gave main's
+    Dask 1.03× / 0.94× paired and this one 1.10× / 0.88×): the Dask path is not shown slower than
+    the old pool, nor faster; the textures drawn once save ~0.27 CPU-s by count, below what
+    these runs resolve. A quiet box (load < 1) is needed to settle the last few per cent.
 """
 
 from __future__ import annotations

@@ -514,8 +514,9 @@ def test_dask_prototypes_equal_the_in_process_build_byte_for_byte(scene, tmp_pat
 
 def test_embedded_cluster_forks_workers_only_from_a_threadless_client():
     """A client with one thread and no OpenGL (the forest command's) forks its workers
-    (executor.dask_client(fork=True): their parent is the client); with another thread
-    running they come from the fork server instead. Both run tasks, and leave no process."""
+    (executor.dask_client(fork=True): their parent is the client), after running `warm`,
+    whose result they inherit; with another thread running they come from the fork server
+    instead and `warm` is not run. Both run tasks, and leave no process."""
     import subprocess
     import sys
 
@@ -523,13 +524,18 @@ def test_embedded_cluster_forks_workers_only_from_a_threadless_client():
 import json, os, threading, time
 import psutil
 from treegen_cli.executor import can_fork, dask_client
+warmed = []
+def seen():
+    return len(warmed)
 def run():
     safe = can_fork()
-    with dask_client(None, 2, fork=True) as (client, where):
+    with dask_client(None, 2, fork=True, warm=lambda: warmed.append(1)) as (client, where):
         client.wait_for_workers(2, timeout=60)
         parents = sorted(set(client.run(os.getppid).values()))
-        return safe, parents, client.submit(pow, 2, 10).result(), where
+        inherited = sorted(set(client.run(seen).values()))
+        return safe, parents, inherited, len(warmed), client.submit(pow, 2, 10).result(), where
 first = run()
+warmed.clear()
 threading.Thread(target=time.sleep, args=(600,), daemon=True).start()
 second = run()
 helpers = ('multiprocessing.forkserver', 'multiprocessing.resource_tracker')
@@ -539,8 +545,9 @@ print(json.dumps([os.getpid(), first, second, len(kids)]))
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=DASK_ENV)
     assert proc.returncode == 0, proc.stderr
     pid, first, second, kids = json.loads(proc.stdout.strip().splitlines()[-1])
-    assert first == [True, [pid], 1024, "2 local worker(s)"]
-    assert second[0] is False and pid not in second[1] and second[2:] == [1024, "2 local worker(s)"]
+    assert first == [True, [pid], [1], 1, 1024, "2 local worker(s)"]
+    assert second[0] is False and pid not in second[1]
+    assert second[2:] == [[0], 0, 1024, "2 local worker(s)"]  # no warm, nothing inherited
     assert kids == 0  # no worker left behind (the fork server's helpers stay, as multiprocessing's do)
 
 

@@ -20,6 +20,7 @@ import os
 import signal
 import sys
 import threading
+from collections.abc import Callable
 
 from .errors import TreegenError
 
@@ -98,7 +99,12 @@ def can_fork() -> bool:
 
 
 @contextlib.contextmanager
-def dask_client(scheduler: str | None = None, workers: int | None = None, fork: bool = False):
+def dask_client(
+    scheduler: str | None = None,
+    workers: int | None = None,
+    fork: bool = False,
+    warm: Callable[[], object] | None = None,
+):
     """Yield (client, description); the cluster is closed on exit, even on Ctrl-C.
 
     The embedded cluster's workers start from a fork server (STARTUP): a fork of this process
@@ -106,7 +112,9 @@ def dask_client(scheduler: str | None = None, workers: int | None = None, fork: 
     while can_fork(), they are forked from this process instead, before the scheduler's loop
     starts: they inherit everything imported here and are ready at once, where the fork
     server is a fresh interpreter importing it all again (~1 s of CPU). Such workers have no
-    nanny (not restarted if they die: their tasks go to the others)."""
+    nanny (not restarted if they die: their tasks go to the others). `warm`, called just
+    before they are forked (and only then), does work each of them would otherwise repeat
+    (the forest: species textures); they inherit its result."""
     address = scheduler_address(scheduler)
     n = workers or default_workers()
     forked = fork and not address and can_fork()
@@ -115,7 +123,9 @@ def dask_client(scheduler: str | None = None, workers: int | None = None, fork: 
     import dask
     from distributed import Client
 
-    if forked and not can_fork():  # the imports started a thread after all
+    if forked and warm is not None:
+        warm()
+    if forked and not can_fork():  # the imports (or warm) started a thread after all
         forked = False
         start_fork_server()
     if address:
@@ -133,7 +143,11 @@ def dask_client(scheduler: str | None = None, workers: int | None = None, fork: 
         finally:
             client.close()
         return
-    config: dict = {f"distributed.nanny.pre-spawn-environ.{TRIM}": None, **QUIET, **STARTUP}
+    config: dict = {
+        f"distributed.nanny.pre-spawn-environ.{TRIM}": None,
+        **QUIET,
+        **STARTUP,
+    }
     if forked:  # no nanny restarts them: should all die, their tasks fail instead of waiting
         config["distributed.scheduler.no-workers-timeout"] = "60s"
     with dask.config.set(config), contextlib.ExitStack() as stack:

@@ -148,6 +148,16 @@ def _generated_pngs(params: Params, size: int) -> tuple[bytes, bytes, bytes]:
     return pngs["leaf"], pngs["bark"], pngs["bark_normal"]
 
 
+def draw_textures(params: Params, options: MaterialOptions = MATERIAL_DEFAULTS) -> None:
+    """Draw now, into this process's cache, the generated textures build_materials would draw
+    for `params`: processes forked afterwards find them there instead of each drawing its own
+    (the forest's workers). Nothing to draw with --no-textures or an artist's images."""
+    if options.textures and (
+        options.bark_texture is None or (options.leaf_texture is None and has_leaves(params))
+    ):
+        _generated_pngs(params, options.texture_size)
+
+
 def has_leaves(params: Params) -> bool:
     """Whether the generator can grow leaves for these params (its own rule in generate/grow.py)."""
     return params.levels >= 1 and params.leaves != 0

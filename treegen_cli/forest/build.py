@@ -11,6 +11,7 @@ plus a seeded jitter of `phase_jitter` × the loop, wrapped to the loop.
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 import os
 import sys
@@ -145,7 +146,8 @@ def build_prototypes(
     with contextlib.ExitStack() as stack:
         client = None
         if remote or workers > 1:  # before the bar: its thread would stop workers forking
-            client = stack.enter_context(_cluster(scheduler, workers, report))
+            warm = functools.partial(_draw_shared_textures, keys, params, options)
+            client = stack.enter_context(_cluster(scheduler, workers, report, warm))
         elif report is not None:
             report["cluster"] = "this process"
         bar = None
@@ -167,14 +169,30 @@ def build_prototypes(
     return out  # type: ignore[return-value]
 
 
+def _draw_shared_textures(keys, params: dict, options) -> None:
+    """Draw here the textures of every species with more than one prototype, before the
+    workers are forked: each would otherwise draw them again for the first of its prototypes
+    of that species (measured: ~0.09 s of CPU a species, 3 of 7 draws saved on the 1,000-tree
+    example); a species built once draws its own on its worker."""
+    from collections import Counter
+
+    from ..materials import draw_textures
+
+    count = Counter(path for path, _seed in keys)
+    for path, n in count.items():
+        if n > 1:
+            _in_file(path, draw_textures, params[path], options.materials)
+
+
 @contextlib.contextmanager
-def _cluster(scheduler: str | None, workers: int, report: dict | None):
+def _cluster(scheduler: str | None, workers: int, report: dict | None, warm=None):
     """The Dask client the prototypes are built on. The embedded cluster's workers are forks
     of this process (executor.dask_client(fork=True)): it has not rendered, and no thread of
-    ours runs yet; otherwise they come from the fork server."""
+    ours runs yet; `warm` runs just before they are forked. Otherwise they come from the fork
+    server."""
     from ..executor import dask_client
 
-    with dask_client(scheduler, workers, fork=True) as (client, where):
+    with dask_client(scheduler, workers, fork=True, warm=warm) as (client, where):
         if report is not None:
             report["cluster"] = where
         yield client
