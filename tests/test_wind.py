@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from lbs import skin_frames
+
 from treegen_cli.asset import Skeleton
 from treegen_cli.errors import TreegenError
 from treegen_cli.params import Params
@@ -594,14 +596,9 @@ def paper_trees():
 
 def _leaf_motion(tree, rig, clip, every: int = 13) -> np.ndarray:
     """(K, L', 3) positions of every `every`-th leaf base, carried by its joint."""
-    world = pose_world(rig.skeleton, clip.rotations)
-    j = rig.leaf_joint[::every].astype(int)
-    local = np.einsum(
-        "lab,lb->la",
-        np.linalg.inv(rig.skeleton.bind_world[j]),
-        np.c_[tree.leaf_pos[::every], np.ones(len(j))],
-    )
-    return np.einsum("klab,lb->kla", world[:, j], local)[..., :3]
+    skinning = pose_world(rig.skeleton, clip.rotations) @ np.linalg.inv(rig.skeleton.bind_world)
+    j = rig.leaf_joint[::every].astype(int)[:, None]  # one influence, weight 1
+    return skin_frames(skinning, tree.leaf_pos[::every], j, np.ones(j.shape))
 
 
 @pytest.mark.parametrize("species", PAPER)
