@@ -12,9 +12,10 @@ Each LOD is cut from LOD0's tree (lod_leaves.py), in this order:
      a leafless one spreads its kept branches over the crown (`keep_stems`), its trunks'
      nodes are coarsened too and its branches end in points (cones: a twig of one segment
      costs a third of its triangles, lod_nodes.point_tips);
-  4. leaves: as many stratified leaves as the rest of the budget holds (nested: each LOD's
-     leaves are picked from the LOD before's; each moves to the middle of the leaves it
-     stands for, lod_leaves.gather_leaves), their blades scaled so the LOD covers on screen,
+  4. leaves: as many stratified leaves of LOD0's as the rest of the budget holds (nested: a
+     leaf a LOD keeps, the LODs before it keep too; each moves to the middle of LOD0's
+     leaves it stands for, lod_leaves.gather_leaves, so it sits a little elsewhere in each
+     LOD), their blades scaled so the LOD covers on screen,
      at its switch distance, what LOD0 covers (`cover_factors`, lod_cover.py): each region of a
      few pixels keeps LOD0's area (dropped twigs' bark and leaves included) within REGION_CLIP
      of the crown's growth, one factor then matches the whole. A leafless tree thickens its
@@ -176,9 +177,7 @@ def _seen(tree: Tree, leaves: bool) -> tuple[np.ndarray, np.ndarray]:
     """(points, area seen from the side, mean over directions): blade middles or stem
     segment middles."""
     if leaves:
-        F = tree.leaf_frame
-        mid = tree.leaf_pos + (0.5 * tree.leaf_size[:, 0])[:, None] * F[:, :, 1]
-        return mid, tree.leaf_area * (1.0 - 0.5 * np.abs(F[:, 2, 2]))
+        return tree.leaf_middle, tree.leaf_area * (1.0 - 0.5 * np.abs(tree.leaf_frame[:, 2, 2]))
     seg = tree.segments
     d = tree.node_pos[seg + 1] - tree.node_pos[seg]
     length = np.linalg.norm(d, axis=1)

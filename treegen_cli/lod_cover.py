@@ -186,7 +186,7 @@ class Blades:
         ia, iw = np.divmod(np.arange(na * nw), nw)
         self.s = (ia + 0.5) / na - 0.5  # along the blade, from its middle
         self.t = (iw + 0.5) / nw - 0.5  # across it
-        mid = tree.leaf_pos + (0.5 * self.length)[:, None] * F[:, :, 1]
+        mid = tree.leaf_middle
         view, _ = _axes()
         self.mu, self.mw = _project(mid)
         self.lu, self.lw = _project(F[:, :, 1])

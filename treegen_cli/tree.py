@@ -79,6 +79,12 @@ class Tree:
 
         return self.leaf_size[:, 0] * self.leaf_size[:, 1] * fill_factor(self.params.leaf_shape)
 
+    @property
+    def leaf_middle(self) -> np.ndarray:
+        """(L, 3) middle of each blade, half its length out along the frame's column 1: where
+        its area and its load sit."""
+        return self.leaf_pos + (0.5 * self.leaf_size[:, 0])[:, None] * self.leaf_frame[:, :, 1]
+
 
 def tree_height(tree: Tree) -> float:
     """Top of the tree (m): the highest node or leaf."""

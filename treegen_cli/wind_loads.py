@@ -254,7 +254,7 @@ def joint_loads(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS) -> JointL
     # leaves: blade centroid, area, fresh mass; rigidly on rig.leaf_joint
     leaf_area = np.asarray(tree.leaf_area, dtype=np.float64)
     leaf_drag = options.drag_coefficient * leaf_area  # C_d · A
-    leaf_mid = tree.leaf_pos + 0.5 * tree.leaf_size[:, :1] * tree.leaf_frame[:, :, 1]
+    leaf_mid = tree.leaf_middle
     leaf_mass = options.leaf_areal_density * leaf_area
     leaf_joint = np.asarray(rig.leaf_joint, dtype=np.int64)
 
