@@ -378,6 +378,38 @@ def test_crossed_cards_do_not_shade_each_other_in_a_wedge():
             assert min(left, right) > 0.8 * max(left, right), (sun, left, right)
 
 
+@needs_gl
+def test_the_impostor_has_the_coarsest_lods_hue():
+    """The preview's sun and sky on the aspen's coarsest LOD and its impostor, two cameras (a
+    card face-on and 45° off, bench/impostor_colour_bench.py's): over the pixels both cover, the impostor's blue/green and red/green match
+    within 7 % (one grey LEAF_SHADE left the cards yellower: blue/green −15 %)."""
+    from treegen_cli.drawable import from_asset
+    from treegen_cli.render import Renderer
+    from treegen_cli.render_view import frame_points
+
+    asset = _asset("quaking_aspen")
+    k = len(asset.lods) - 1
+    scenes = [from_asset(asset, k - 1), from_asset(asset, k)]
+    pts = np.concatenate([p.positions for p in scenes[0].parts])
+    sums, n = np.zeros((2, 3)), 0
+    for az in (-90.0, -45.0):
+        cam = frame_points(pts, az, 8.0)
+        imgs, masks = [], []
+        for scene in scenes:
+            with Renderer(scene, 96, 96) as r:
+                img = r.render(cam, sun_azimuth_deg=az - 50.0)
+                bg = r.render(cam, sun_azimuth_deg=az - 50.0, draw_tree=False)
+            imgs.append(_srgb_to_linear(img))
+            masks.append(np.abs(img.astype(int) - bg.astype(int)).sum(-1) > 30)
+        both = masks[0] & masks[1]
+        sums += [im[both].sum(0) for im in imgs]
+        n += int(both.sum())
+    assert n > 1000
+    geo, imp = sums / n
+    hue = (imp / imp[1]) / (geo / geo[1])
+    assert np.all(np.abs(hue - 1) < 0.07), (geo, imp, hue)
+
+
 # ------------------------------------------------------------------------ the files
 
 

@@ -28,9 +28,15 @@ from .render_gl import GL_SRGB8_ALPHA8, gl_context
 
 # A card faces the light as one surface; a crown's leaves face every way and shade each other.
 # Leaves' albedo is scaled by this so the cards, lit by an engine, match the coarsest LOD's
-# brightness at the switch (measured with the preview renderer: the aspen's cards came out
-# 2.1× brighter than its LOD3 without it, 0.9-1.1× with it).
-LEAF_SHADE = 0.4
+# colour at the switch (the aspen's cards came out 2.1× brighter than its LOD3 without it).
+# Per channel: the crown's self-shadowing dims the warm sun more than the blue sky, so one grey
+# 0.4 left the cards yellower (blue/green 0.85-0.91× LOD3's on aspen, fir, oak and willow);
+# these balance the hue over those four (bench/impostor_colour_bench.py: 0.95-1.06×), their
+# green keeps the mean brightness. Brightness still differs per species (oak 0.85×, aspen 1.10×,
+# mostly the bark inside the crown, CROWN_SHADE): a constant cannot match all.
+LEAF_SHADE = np.array([0.37, 0.40, 0.50])
+# Bark inside the crown is shaded by its leaves (the aspen's white limbs showed as specks).
+CROWN_SHADE = 0.4
 
 # Both programs share the view: instance → cell → orthographic projection into the cell.
 _VIEW = """
@@ -93,7 +99,7 @@ uniform float opacity;
 uniform vec3 base_color;
 uniform vec3 crown_centre;
 uniform vec3 crown_radius;
-uniform float crown_shade;     // LEAF_SHADE
+uniform float crown_shade;     // CROWN_SHADE
 in vec3 v_normal;
 in vec2 v_uv;
 in vec3 v_rel;
@@ -202,7 +208,7 @@ def leaf_shading(
     tint = leaf_tint(leaf_ids(p.indices, len(p.positions)))
     ao = _occlusion(rel, crown_centre, crown_radius)
     color = np.asarray(p.color, np.float64)
-    return (tint * (LEAF_SHADE * ao)[:, None] * color).astype(np.float32)
+    return (tint * ao[:, None] * LEAF_SHADE * color).astype(np.float32)
 
 
 def _texture(ctx, image: np.ndarray, wrap):
@@ -321,7 +327,7 @@ class AtlasRenderer:
         bark, leaf = self.bark, self.leaf
         _set(bark, "crown_centre", tuple(float(x) for x in crown_centre))
         _set(bark, "crown_radius", tuple(float(x) for x in crown_radius))
-        _set(bark, "crown_shade", float(LEAF_SHADE))
+        _set(bark, "crown_shade", float(CROWN_SHADE))
         for p in scene.parts:
             if not len(p.indices) or (p.double_sided and p.opacity <= 0):
                 continue

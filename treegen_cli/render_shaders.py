@@ -173,9 +173,10 @@ void main() {
     float toward = max(dot(normalize(v_pos - eye), sun_dir), 0.0);
     float through = leaf ? max(-ndl, 0.0) * (0.3 + 0.9 * toward * toward * toward) : 0.0;
     vec3 trans = albedo * vec3(1.15, 1.2, 0.5) * through;
-    // inner crown gets less sky: a cheap ambient occlusion from the depth in the crown
+    // inner crown gets less sky: a cheap ambient occlusion from the depth in the crown; not on
+    // impostor cards, whose atlas has it baked (a card through the crown's centre got it twice)
     float r = length((v_pos - crown_center) / crown_radius);
-    float ao = mix(0.45, 1.0, smoothstep(0.1, 1.0, r));
+    float ao = receive_shadows ? mix(0.45, 1.0, smoothstep(0.1, 1.0, r)) : 1.0;
     vec3 hemi = mix(ground_color * 0.6, sky_zenith * 0.9 + 0.1, 0.5 + 0.5 * n.y);
     vec3 c = albedo * (sun_color * max(ndl, 0.0) * vis + hemi * ao) + sun_color * vis * trans;
     f_color = vec4(tonemap(c), 1.0);

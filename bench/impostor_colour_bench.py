@@ -1,0 +1,90 @@
+"""The impostor's colour against the coarsest geometric LOD: mean linear RGB of the crown's
+pixels, both rendered by the preview renderer at one fixed camera.
+
+    python bench/impostor_colour_bench.py [--species quaking_aspen,...] [--size 192]
+
+Each species is built as `treegen make` builds it (default options, no wind). One camera per
+view (azimuths −90° and −45°: a card face-on and the crossed cards at an angle, 8° up, framed
+on the coarsest LOD) renders both LODs with the preview's sun (50° left of the camera); crown
+pixels are those both LODs cover (differ from the background), so edges and framing cannot
+bias the mean. Ratio: impostor / coarsest LOD, per channel, over the views' pixels.
+
+Measured 2026-11-26 (impostor / LOD3, R G B), before (LEAF_SHADE 0.4 grey, the preview's crown
+occlusion also on the cards) → after (LEAF_SHADE 0.37/0.40/0.50, no crown occlusion on cards):
+    quaking_aspen   1.130 1.042 0.888  →  1.102 1.104 1.089
+    balsam_fir      1.059 1.037 0.883  →  1.038 1.094 1.121
+    ca_black_oak    0.817 0.804 0.643  →  0.808 0.852 0.779
+    weeping_willow  1.026 0.910 0.798  →  0.999 0.954 0.985
+Hue (blue/green) 0.85/0.85/0.80/0.88 → 0.99/1.02/0.91/1.03. Brightness differs per species
+(green 0.85-1.10×) and no constant removes it: the bark inside the crown (CROWN_SHADE 0.4 → 1.0
+moves the oak to 0.97× but the aspen to 1.15×).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from treegen_cli import api
+from treegen_cli.drawable import from_asset
+from treegen_cli.params import load_params
+from treegen_cli.pipeline import Timings, build_asset
+from treegen_cli.render import Renderer
+from treegen_cli.render_view import frame_points
+
+ROOT = Path(__file__).resolve().parent.parent
+VIEWS = (-90.0, -45.0)
+
+
+def linear(img: np.ndarray) -> np.ndarray:
+    """sRGB uint8 → linear float."""
+    c = img.astype(np.float64) / 255.0
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def crown_means(asset, size: int = 192, views=VIEWS) -> tuple[np.ndarray, np.ndarray]:
+    """(coarsest LOD, impostor) mean linear RGB over the pixels both cover, all views."""
+    k = len(asset.lods) - 1
+    scenes = [from_asset(asset, k - 1), from_asset(asset, k)]
+    pts = np.concatenate([p.positions for p in scenes[0].parts])
+    sums, n = np.zeros((2, 3)), 0
+    for az in views:
+        cam = frame_points(pts, az, 8.0)
+        imgs, masks = [], []
+        for scene in scenes:
+            with Renderer(scene, size, size) as r:
+                img = r.render(cam, sun_azimuth_deg=az - 50.0)
+                bg = r.render(cam, sun_azimuth_deg=az - 50.0, draw_tree=False)
+            imgs.append(linear(img))
+            masks.append(np.abs(img.astype(int) - bg.astype(int)).sum(-1) > 30)
+        both = masks[0] & masks[1]
+        for i in range(2):
+            sums[i] += imgs[i][both].sum(0)
+        n += int(both.sum())
+    return sums[0] / max(n, 1), sums[1] / max(n, 1)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--species", default="quaking_aspen,balsam_fir,ca_black_oak,weeping_willow")
+    ap.add_argument("--size", type=int, default=192)
+    args = ap.parse_args()
+    job = api.resolve({"no_wind": True})
+    print(f"{'species':<20}{'LOD3 linear RGB':<24}{'impostor linear RGB':<24}impostor / LOD3 (R G B)")
+    for name in args.species.split(","):
+        asset, _ = build_asset(
+            load_params(ROOT / "treegen_cli" / "species" / f"{name}.txt"), 0, job.options, Timings()
+        )
+        geo, imp = crown_means(asset, args.size)
+        ratio = imp / np.maximum(geo, 1e-9)
+        fmt = lambda v: " ".join(f"{x:.4f}" for x in v)  # noqa: E731
+        print(f"{name:<20}{fmt(geo):<24}{fmt(imp):<24}{' '.join(f'{x:.3f}' for x in ratio)}")
+
+
+if __name__ == "__main__":
+    t0 = time.process_time()
+    main()
+    print(f"({time.process_time() - t0:.0f} CPU-s)")
