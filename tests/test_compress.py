@@ -484,13 +484,15 @@ def test_exponential_filter_model_matches_meshoptimizer(bits):
     assert np.array_equal(got, want)
 
 
+@pytest.mark.parametrize("simd", [True, False])
 @pytest.mark.parametrize("bits", [12, 13, 14, 15, 16])
-def test_quaternion_filter_model_matches_meshoptimizer(bits):
+def test_quaternion_filter_model_matches_meshoptimizer(bits, simd):
     """key_plan.quat_filter (what the 1 mm check plays) gives, to the bit, what meshoptimizer's
-    own encoder and decoder give back for the QUATERNION filter at `bits` from the writer's
-    source (Y up, float32): its float32 arithmetic included (a float64 model missed by one
+    own encoder and each of its decoders (the SIMD build and the scalar one a client without
+    WebAssembly SIMD runs) give back for the QUATERNION filter at `bits` from the writer's
+    source (Y up, float32): their float32 arithmetic included (a float64 model missed by one
     int16 step on ~1 key in 1,000, enough to take a file past 1 mm), near-rest rotations
-    (wind's) as well as any."""
+    (wind's) as well as any; and the two decoders do differ on some keys."""
     from treegen_cli import key_plan
     from treegen_cli.axes import quat_to_y_up
     from treegen_cli.exchange import compress
@@ -507,9 +509,13 @@ def test_quaternion_filter_model_matches_meshoptimizer(bits):
     try:
         (encoded,) = compress.encode([(view, memoryview(data).cast("B"))])
         ext = {"mode": "ATTRIBUTES", "filter": "QUATERNION", "byteStride": 8, "count": n}
-        (decoded,) = compress.decode([(ext, encoded)], "test")
+        (decoded,) = compress.decode([(ext, encoded)], "test", simd=simd)
     except Exception as exc:  # no node or tools: the clients' tests skip alike
         pytest.skip(str(exc))
     got = np.frombuffer(decoded, dtype="<i2").reshape(n, 4)
-    want = np.rint(quat_to_y_up(key_plan.quat_filter(q[:, None], np.array([bits]))[:, 0]) * 32767)
-    assert np.array_equal(got, want)
+
+    def model(simd: bool) -> np.ndarray:
+        return np.rint(quat_to_y_up(key_plan.quat_filter(q[:, None], np.array([bits]), simd)[:, 0]) * 32767)
+
+    assert np.array_equal(got, model(simd))
+    assert not np.array_equal(model(True), model(False))
