@@ -65,13 +65,11 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
 
-from treegen_cli import api, key_plan
-from treegen_cli.asset import KeyPlan
+from treegen_cli import api
 from treegen_cli.exchange import export
 from treegen_cli.exchange.gltf_container import read_gltf
-from treegen_cli.exchange.read_clip import played_rotations
+from treegen_cli.exchange.read_clip import played_error
 from treegen_cli.params import load_params
 from treegen_cli.pipeline import Timings
 
@@ -117,18 +115,6 @@ def animation_bytes(path: Path) -> int:
         for i in used
     )
     return len(text) + data
-
-
-def played_error(lod, path: Path) -> float:
-    """Metres: how far LOD0's skinned vertices (hull corners) stray from the float clip on any
-    frame when played from `path`'s bytes (ours or gltfpack's: tracks it dropped play the
-    node's rotation), by key_plan's measure."""
-    dense = lod.clips[0]
-    K, J = len(dense.times), len(lod.skeleton.names)
-    rot = played_rotations(path, lod.skeleton.names, dense.name, dense.times)
-    return key_plan.error(
-        lod, dense, KeyPlan(replace(dense, rotations=rot, keys=[np.arange(K)] * J), np.ones(J, bool))
-    )
 
 
 def row(name: str, set_name: str, options: dict, tmp: Path) -> dict:
