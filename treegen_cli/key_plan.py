@@ -221,23 +221,22 @@ def _widen(
     wide: np.ndarray,
     share: float,
     bits: np.ndarray | None = None,
-    seen: dict | None = None,
-) -> float:
+    last: tuple[bytes, np.ndarray] | None = None,
+) -> tuple[float, tuple[bytes, np.ndarray]]:
     """Raise joints' precision (in place) until the rounding alone keeps every vertex within
     `share` metres: rounds, each raising, per joint too far off, its longest-reach ancestor
     not yet wide by one step (meshopt: `bits` through MESHOPT_LEVELS; quantize:
-    int16, then wide). Returns the rounding's error (metres). `seen` keeps each wide set's
-    errors: quantize's next share starts from the set the last one ended with."""
+    int16, then wide). Returns the rounding's error (metres) and `last`: the final precision
+    (bytes) with its per-joint errors, which quantize's next share starts from (the only
+    measurement a later call can reuse: within a call each round's precision is new)."""
     K, J = rot.shape[:2]
     every = np.ones((K, J), dtype=bool)
     anc = ancestors(np.asarray(check.skeleton.parent, dtype=np.int64))
     while True:
-        key = wide.tobytes() if bits is None else None
-        err = None if seen is None or key is None else seen.get(key)
-        if err is None:
-            err = worst(check, *aimed(check, rot, every, wide, bits), every, wide, bits)
-            if seen is not None and key is not None:
-                seen[key] = err
+        key = wide.tobytes() + (b"" if bits is None else bits.tobytes())
+        if last is None or last[0] != key:
+            last = (key, worst(check, *aimed(check, rot, every, wide, bits), every, wide, bits))
+        err = last[1]
         bad = np.flatnonzero(err > share)
         chains = anc[bad]
         done = wide[chains] if bits is None else bits[chains] >= MESHOPT_LEVELS[-1]
@@ -245,13 +244,13 @@ def _widen(
         lever = np.where(done, -1.0, lever)
         pick = np.unique(chains[np.arange(len(bad)), lever.argmax(axis=1)][lever.max(axis=1) >= 0])
         if not pick.size:
-            return float(err.max())
+            return float(err.max()), last
         if bits is None:
             wide[pick] = True
             continue
         pick = pick[bits[pick] < MESHOPT_LEVELS[-1]]
         if not pick.size:
-            return float(err.max())
+            return float(err.max()), last
         bits[pick] = [MESHOPT_LEVELS[MESHOPT_LEVELS.index(b) + 1] for b in bits[pick]]
         wide[pick] = bits[pick] > 16
 
@@ -321,9 +320,9 @@ def plan(lod: Lod, clip: Clip, meshopt: bool = False) -> KeyPlan:
         targets = aimed(check, rot, every, wide, bits)[0]
         return KeyPlan(replace(clip, rotations=targets, keys=[np.arange(K)] * J), wide, bits)
     best: tuple[int, np.ndarray, np.ndarray] | None = None
-    seen: dict = {}
+    last = None
     for share in QUANT_SHARES:
-        quant = _widen(check, rot, wide, share, seen=seen)
+        quant, last = _widen(check, rot, wide, share, last=last)
         kept, within = _decimated(check, rot, wide, ANIMATION_ERROR - quant - MARGIN)
         narrow = wide.copy()
         _trim(check, rot, kept, narrow, within)
