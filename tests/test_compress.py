@@ -21,7 +21,7 @@ from conftest import run_treegen, species_path
 from treegen_cli import api
 from treegen_cli.exchange import GltfOptions, export, export_parts
 from treegen_cli.exchange.gltf_container import read_accessor, read_gltf
-from treegen_cli.exchange.read_gltf import _accessor
+from treegen_cli.exchange.read_gltf import read_strided
 from treegen_cli.exchange.validate import summary, validate_gltf
 from treegen_cli.params import load_params
 from treegen_cli.pipeline import Timings
@@ -47,6 +47,15 @@ def files(tmp_path_factory):
         out[c] = d / f"{c}.glb"
         export(asset, out[c], _job(c).options.gltf)
     return out
+
+
+@pytest.fixture(scope="module")
+def plans(files):
+    """{meshopt: key_plan.plan} of the aspen's LOD0 clip, for quantize (False) and meshopt."""
+    from treegen_cli import key_plan
+
+    lod = files["asset"].lods[0]
+    return {meshopt: key_plan.plan(lod, lod.clips[0], meshopt) for meshopt in (False, True)}
 
 
 def _mesh_node(gltf: dict, lod: int) -> dict:
@@ -109,28 +118,28 @@ def test_quantized_geometry_decodes_within_tolerance(files):
         for p0, p1 in zip(prims0, prims1):
             a0, a1 = p0["attributes"], p1["attributes"]
             pos = read_accessor(*none, a0["POSITION"]).astype(np.float64)
-            q = _accessor(*quant, a1["POSITION"]).astype(np.float64)
+            q = read_strided(*quant, a1["POSITION"]).astype(np.float64)
             assert quant[0]["accessors"][a1["POSITION"]]["componentType"] == 5123  # uint16
             err = np.linalg.norm(q @ d[:3, :3].T + d[:3, 3] - pos, axis=1).max()
             assert err <= np.sqrt(3) * step / 2 * 1.001
             if lod == 0:
                 assert err <= 1 * MM
             n0 = read_accessor(*none, a0["NORMAL"]).astype(np.float64)
-            n1 = _accessor(*quant, a1["NORMAL"])
+            n1 = read_strided(*quant, a1["NORMAL"])
             n1 /= np.linalg.norm(n1, axis=1, keepdims=True)
             assert np.degrees(np.arccos(np.clip((n0 * n1).sum(1), -1, 1))).max() < 1.0
             if "TANGENT" in a0:
                 t0 = read_accessor(*none, a0["TANGENT"])
-                t1 = _accessor(*quant, a1["TANGENT"])
+                t1 = read_strided(*quant, a1["TANGENT"])
                 assert np.array_equal(np.sign(t0[:, 3]), t1[:, 3])
             material = quant[0]["materials"][p1["material"]]
             ref = material["pbrMetallicRoughness"].get("baseColorTexture", {})
             tt = ref.get("extensions", {}).get("KHR_texture_transform", {})
             scale, offset = np.array(tt.get("scale", [1, 1])), np.array(tt.get("offset", [0, 0]))
             uv0 = read_accessor(*none, a0["TEXCOORD_0"]).astype(np.float64)
-            uv1 = _accessor(*quant, a1["TEXCOORD_0"]) * scale + offset
+            uv1 = read_strided(*quant, a1["TEXCOORD_0"]) * scale + offset
             assert np.abs(uv1 - uv0).max() <= scale.max() / 65535 / 2 * 1.001
-            w = _accessor(*quant, a1["WEIGHTS_0"])
+            w = read_strided(*quant, a1["WEIGHTS_0"])
             assert quant[0]["accessors"][a1["WEIGHTS_0"]]["componentType"] == 5121
             assert np.allclose(w.sum(1), 1.0, atol=1e-6)
     bark = next(m for m in quant[0]["materials"] if m["name"] == "bark")
@@ -171,7 +180,7 @@ def test_quantized_rotations_are_the_planned_keys_within_one_step(files):
             assert np.array_equal(t0[at], t1)
             kind = quant[0]["accessors"][s1["output"]]["componentType"]
             kinds.add((k, kind))
-            r1 = _accessor(*quant, s1["output"])
+            r1 = read_strided(*quant, s1["output"])
             aim = want[np.searchsorted(np.asarray(clip.times, np.float32), t1), joint_of[node]]
             aim *= np.where((aim * r1).sum(axis=1) < 0, -1.0, 1.0)[:, None]  # sign-continuous
             assert np.abs(r1 - aim).max() <= (0.5 / 32767 + 1e-7 if kind == 5122 else 1e-7)
@@ -182,7 +191,7 @@ def test_quantized_rotations_are_the_planned_keys_within_one_step(files):
     assert left_out > 0
 
 
-def test_compressed_lod0_animation_within_one_millimetre(files, monkeypatch):
+def test_compressed_lod0_animation_within_one_millimetre(files, plans, monkeypatch):
     """key_plan's measure (every skinned vertex's hull corner on every frame, played from the
     stored keys) keeps LOD0 within 1 mm of the dense float clip in both settings, while every
     key rounded to 16 bits on its own would not (the 19 m aspen's trunk carries its crown):
@@ -204,9 +213,8 @@ def test_compressed_lod0_animation_within_one_millimetre(files, monkeypatch):
     targets, _ = key_plan.aimed(check, rot, np.ones(rot.shape[:2], bool), np.zeros(J, bool))
     aimed = key_plan.KeyPlan(replace(dense, rotations=targets, keys=every), np.zeros(J, bool))
     assert key_plan.error(lod, dense, aimed) < 0.75 * key_plan.error(lod, dense, naive)
-    for meshopt in (False, True):
-        kp = key_plan.plan(lod, dense, meshopt)
-        assert key_plan.error(lod, dense, kp) <= 1 * MM
+    for meshopt, kp in plans.items():
+        assert key_plan.error(lod, dense, kp) <= 1 * MM  # meshopt: either decoder
         assert kp.wide.sum() < J
         kept = sum(len(k) for k in kp.clip.keys)
         assert kept == J * len(dense.times) if meshopt else kept <= J * len(dense.times)
@@ -216,25 +224,20 @@ def test_compressed_lod0_animation_within_one_millimetre(files, monkeypatch):
     assert key_plan.error(lod, dense, kp) <= 1 * MM
 
 
-def test_written_files_play_lod0_within_one_millimetre(files):
+def test_written_files_play_lod0_within_one_millimetre(files, plans):
     """Read back from the files' bytes (exchange.read_clip: the stored keys as a client slerps
-    them), LOD0's clip keeps every skinned vertex within 1 mm of the dense float clip in the
-    quantize and meshopt files, as their plans measured (the writer stores what was planned);
-    the float file plays it to float32 precision. size_bench measures gltfpack's files so."""
+    them; meshopt through both of meshoptimizer's decoders, SIMD and scalar), LOD0's clip
+    keeps every skinned vertex within 1 mm of the dense float clip in the quantize and meshopt
+    files, as their plans measured (the writer stores what was planned); the float file plays
+    it to float32 precision. size_bench measures gltfpack's files so."""
     from treegen_cli import key_plan
-    from treegen_cli.exchange.read_clip import played_rotations
+    from treegen_cli.exchange.read_clip import played_error
 
     lod = files["asset"].lods[0]
-    dense = lod.clips[0]
-    K, J = len(dense.times), len(lod.skeleton.names)
-    for compress in ("none", "quantize", "meshopt"):
-        rot = played_rotations(files[compress], lod.skeleton.names, dense.name, dense.times)
-        played = key_plan.KeyPlan(replace(dense, rotations=rot, keys=[np.arange(K)] * J), np.ones(J, bool))
-        err = key_plan.error(lod, dense, played)
-        if compress == "none":
-            assert err < 0.01 * MM
-            continue
-        planned = key_plan.error(lod, dense, key_plan.plan(lod, dense, compress == "meshopt"))
+    assert played_error(lod, files["none"]) < 0.01 * MM
+    for compress in ("quantize", "meshopt"):
+        err = played_error(lod, files[compress])
+        planned = key_plan.error(lod, lod.clips[0], plans[compress == "meshopt"])
         assert err <= 1 * MM
         assert abs(err - planned) < 0.01 * MM
 
@@ -484,13 +487,15 @@ def test_exponential_filter_model_matches_meshoptimizer(bits):
     assert np.array_equal(got, want)
 
 
+@pytest.mark.parametrize("simd", [True, False])
 @pytest.mark.parametrize("bits", [12, 13, 14, 15, 16])
-def test_quaternion_filter_model_matches_meshoptimizer(bits):
+def test_quaternion_filter_model_matches_meshoptimizer(bits, simd):
     """key_plan.quat_filter (what the 1 mm check plays) gives, to the bit, what meshoptimizer's
-    own encoder and decoder give back for the QUATERNION filter at `bits` from the writer's
-    source (Y up, float32): its float32 arithmetic included (a float64 model missed by one
+    own encoder and each of its decoders (the SIMD build and the scalar one a client without
+    WebAssembly SIMD runs) give back for the QUATERNION filter at `bits` from the writer's
+    source (Y up, float32): their float32 arithmetic included (a float64 model missed by one
     int16 step on ~1 key in 1,000, enough to take a file past 1 mm), near-rest rotations
-    (wind's) as well as any."""
+    (wind's) as well as any; and the two decoders do differ on some keys."""
     from treegen_cli import key_plan
     from treegen_cli.axes import quat_to_y_up
     from treegen_cli.exchange import compress
@@ -507,9 +512,13 @@ def test_quaternion_filter_model_matches_meshoptimizer(bits):
     try:
         (encoded,) = compress.encode([(view, memoryview(data).cast("B"))])
         ext = {"mode": "ATTRIBUTES", "filter": "QUATERNION", "byteStride": 8, "count": n}
-        (decoded,) = compress.decode([(ext, encoded)], "test")
+        (decoded,) = compress.decode([(ext, encoded)], "test", simd=simd)
     except Exception as exc:  # no node or tools: the clients' tests skip alike
         pytest.skip(str(exc))
     got = np.frombuffer(decoded, dtype="<i2").reshape(n, 4)
-    want = np.rint(quat_to_y_up(key_plan.quat_filter(q[:, None], np.array([bits]))[:, 0]) * 32767)
-    assert np.array_equal(got, want)
+
+    def model(simd: bool) -> np.ndarray:
+        return np.rint(quat_to_y_up(key_plan.quat_filter(q[:, None], np.array([bits]), simd)[:, 0]) * 32767)
+
+    assert np.array_equal(got, model(simd))
+    assert not np.array_equal(model(True), model(False))

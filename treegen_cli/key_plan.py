@@ -29,7 +29,10 @@ vertices), composed through the hierarchy. Two things spend that millimetre:
 The plan is checked as a client plays it (stored keys as the client decodes them, meshopt's
 filters to the bit: quat_filter, exp_filter; slerp, normalised) against the dense
 float clip on box corners (never below the hull's error), and the key bound shrinks until the
-check passes; `error` measures a plan on the hull corners (tests, bench).
+check passes; `error` measures a plan on the hull corners (tests, bench). meshoptimizer has
+two QUATERNION decoders (SIMD, and the scalar one of clients without WebAssembly SIMD) that
+round ~1 key in 600 one int16 step apart: a meshopt plan is checked against the worse of the
+two (`worst`), so the millimetre holds in either client.
 
 A lower LOD's clip keeps the keys lod_decimate scheduled, but `still` leaves out the tracks
 that schedule holds constant where the joint's rest rotation keeps every vertex within
@@ -68,13 +71,16 @@ STILL_PIXELS = 0.25
 LOWER_BITS = 16  # meshopt: the QUATERNION filter's bits on lower LODs' keys (the default)
 
 
-def quat_filter(q: np.ndarray, bits: np.ndarray) -> np.ndarray:
+def quat_filter(q: np.ndarray, bits: np.ndarray, simd: bool = True) -> np.ndarray:
     """Unit quaternions (K, J, 4) as a client reads them back from meshoptimizer's QUATERNION
     filter at `bits` (J,), to the bit: the writer's source (Y up, float32), the encoder's
     float32 rounding of the three smallest components times √2 to bits − 1 bits (half away
-    from zero), and its decoder's float32 arithmetic (w = √(2s² − Σ) unscaled, then all four
-    times 32767/√2/s rounded to even, as int16): a float64 model strays by one int16 step on
-    ~1 key in 1,000, and one step of a crown-carrying joint moves the crown by ~0.2 mm."""
+    from zero), and one of its two decoders' float32 arithmetic (w = √(2s² − Σ) unscaled, then
+    all four times 32767/√2/s, as int16). `simd`: the SIMD decoder (SSE/NEON, WebAssembly
+    SIMD: Σ = x² + (y² + z²), rounded half to even); else the scalar one (WebAssembly without
+    SIMD, native builds without SSE/NEON: 2s² − x² − y² − z² left to right, rounded half away
+    from zero). The two differ by one int16 step on ~1 key in 600, a float64 model on ~1 in
+    1,000, and one step of a crown-carrying joint moves the crown by ~0.2 mm."""
     f32 = np.float32
     src = unit(quat_to_y_up(q)).astype(f32)
     top = np.argmax(np.abs(src), axis=-1)[..., None]
@@ -84,9 +90,11 @@ def quat_filter(q: np.ndarray, bits: np.ndarray) -> np.ndarray:
     c = np.trunc(v * s + np.where(v >= 0, f32(0.5), f32(-0.5)))
     np.put_along_axis(c, top, f32(0.0), axis=-1)
     sq = np.take_along_axis(c * c, (top + np.arange(1, 4)) % 4, axis=-1)  # the stored order
-    ww = (s * s + s * s) - (sq[..., :1] + (sq[..., 1:2] + sq[..., 2:]))
+    x2, y2, z2 = sq[..., :1], sq[..., 1:2], sq[..., 2:]
+    ww = (s * s + s * s) - (x2 + (y2 + z2)) if simd else (s * s * f32(2.0) - x2) - y2 - z2
     np.put_along_axis(c, top, np.sqrt(np.maximum(ww, f32(0.0))), axis=-1)
-    out = np.rint(c * ((f32(32767.0) / np.sqrt(f32(2.0))) / s))
+    v = c * ((f32(32767.0) / np.sqrt(f32(2.0))) / s)
+    out = np.rint(v) if simd else np.trunc(v + np.where(c >= 0, f32(0.5), f32(-0.5)))
     return quat_from_y_up(out.astype(np.float64) / 32767.0)
 
 
@@ -103,16 +111,18 @@ def exp_filter(q: np.ndarray, bits: np.ndarray) -> np.ndarray:
     return quat_from_y_up(np.ldexp(m.astype(np.float64), e))
 
 
-def stored(rotations: np.ndarray, wide: np.ndarray, bits: np.ndarray | None = None) -> np.ndarray:
+def stored(
+    rotations: np.ndarray, wide: np.ndarray, bits: np.ndarray | None = None, simd: bool = True
+) -> np.ndarray:
     """Rotations (K, J, 4) as a client reads them back: normalized int16 (c / 32767, as
     compress.snorm16 writes them), or meshopt's QUATERNION filter at `bits` per joint when
-    given, except the `wide` joints' float32 (meshopt: its EXPONENTIAL filter at `bits`
-    of mantissa)."""
+    given (its SIMD or scalar decoder: `simd`), except the `wide` joints' float32 (meshopt:
+    its EXPONENTIAL filter at `bits` of mantissa, the same in both decoders)."""
     if bits is None:
         out = np.rint(np.clip(rotations, -1.0, 1.0) * 32767.0) / 32767.0
         out[:, wide] = rotations[:, wide].astype(np.float32).astype(np.float64)
         return out
-    out = quat_filter(rotations, np.minimum(bits, 16))
+    out = quat_filter(rotations, np.minimum(bits, 16), simd)
     out[:, wide] = exp_filter(rotations[:, wide], bits[wide])
     return out
 
@@ -182,29 +192,51 @@ def aimed(
     return targets, values
 
 
+def decodes(bits: np.ndarray | None) -> tuple[bool, ...]:
+    """The decoders a plan must hold for (`stored`'s `simd`): meshopt's QUATERNION filter has
+    two that round some keys apart (SIMD, scalar), quantize's int16 one."""
+    return (True,) if bits is None else (True, False)
+
+
+def worst(
+    check: _Check,
+    targets: np.ndarray,
+    values: np.ndarray,
+    kept: np.ndarray,
+    wide: np.ndarray,
+    bits: np.ndarray | None = None,
+) -> np.ndarray:
+    """Per joint (J,), `check.errors` of keys `targets` played from `kept` under the worse of
+    the decoders (`decodes`): `values` are the SIMD decode (aimed's), the scalar one is
+    decoded again."""
+    err = check.errors(values, kept)
+    for simd in decodes(bits)[1:]:
+        err = np.maximum(err, check.errors(stored(targets, wide, bits, simd), kept))
+    return err
+
+
 def _widen(
     check: _Check,
     rot: np.ndarray,
     wide: np.ndarray,
     share: float,
     bits: np.ndarray | None = None,
-    seen: dict | None = None,
-) -> float:
+    last: tuple[bytes, np.ndarray] | None = None,
+) -> tuple[float, tuple[bytes, np.ndarray]]:
     """Raise joints' precision (in place) until the rounding alone keeps every vertex within
     `share` metres: rounds, each raising, per joint too far off, its longest-reach ancestor
     not yet wide by one step (meshopt: `bits` through MESHOPT_LEVELS; quantize:
-    int16, then wide). Returns the rounding's error (metres). `seen` keeps each wide set's
-    errors: quantize's next share starts from the set the last one ended with."""
+    int16, then wide). Returns the rounding's error (metres) and `last`: the final precision
+    (bytes) with its per-joint errors, which quantize's next share starts from (the only
+    measurement a later call can reuse: within a call each round's precision is new)."""
     K, J = rot.shape[:2]
     every = np.ones((K, J), dtype=bool)
     anc = ancestors(np.asarray(check.skeleton.parent, dtype=np.int64))
     while True:
-        key = wide.tobytes() if bits is None else None
-        err = None if seen is None or key is None else seen.get(key)
-        if err is None:
-            err = check.errors(aimed(check, rot, every, wide, bits)[1], every)
-            if seen is not None and key is not None:
-                seen[key] = err
+        key = wide.tobytes() + (b"" if bits is None else bits.tobytes())
+        if last is None or last[0] != key:
+            last = (key, worst(check, *aimed(check, rot, every, wide, bits), every, wide, bits))
+        err = last[1]
         bad = np.flatnonzero(err > share)
         chains = anc[bad]
         done = wide[chains] if bits is None else bits[chains] >= MESHOPT_LEVELS[-1]
@@ -212,13 +244,13 @@ def _widen(
         lever = np.where(done, -1.0, lever)
         pick = np.unique(chains[np.arange(len(bad)), lever.argmax(axis=1)][lever.max(axis=1) >= 0])
         if not pick.size:
-            return float(err.max())
+            return float(err.max()), last
         if bits is None:
             wide[pick] = True
             continue
         pick = pick[bits[pick] < MESHOPT_LEVELS[-1]]
         if not pick.size:
-            return float(err.max())
+            return float(err.max()), last
         bits[pick] = [MESHOPT_LEVELS[MESHOPT_LEVELS.index(b) + 1] for b in bits[pick]]
         wide[pick] = bits[pick] > 16
 
@@ -288,9 +320,9 @@ def plan(lod: Lod, clip: Clip, meshopt: bool = False) -> KeyPlan:
         targets = aimed(check, rot, every, wide, bits)[0]
         return KeyPlan(replace(clip, rotations=targets, keys=[np.arange(K)] * J), wide, bits)
     best: tuple[int, np.ndarray, np.ndarray] | None = None
-    seen: dict = {}
+    last = None
     for share in QUANT_SHARES:
-        quant = _widen(check, rot, wide, share, seen=seen)
+        quant, last = _widen(check, rot, wide, share, last=last)
         kept, within = _decimated(check, rot, wide, ANIMATION_ERROR - quant - MARGIN)
         narrow = wide.copy()
         _trim(check, rot, kept, narrow, within)
@@ -319,15 +351,18 @@ def _cheaper(kept: np.ndarray, wide: np.ndarray, rot: np.ndarray, check: _Check)
     return trial if check.errors(aimed(check, rot, trial, wide)[1], trial).max() <= ANIMATION_ERROR else kept
 
 
-def error(lod: Lod, dense: Clip, kp: KeyPlan) -> float:
+def error(lod: Lod, dense: Clip, kp: KeyPlan, simd: bool | None = None) -> float:
     """Metres: the farthest any skinned vertex of `lod` strays from the dense float clip's
-    pose on any frame when played from plan `kp`'s keys (hull corners: the true maximum)."""
+    pose on any frame when played from plan `kp`'s keys (hull corners: the true maximum),
+    decoded by meshopt's SIMD or scalar decoder (`simd`), by default the worse of them."""
     rot = unit(np.asarray(dense.rotations, dtype=np.float64))
     kept = np.zeros(rot.shape[:2], dtype=bool)
     for j, k in enumerate(kp.clip.keys):  # per joint (hundreds)
         kept[k, j] = True
-    values = stored(unit(np.asarray(kp.clip.rotations, dtype=np.float64)), kp.wide, kp.bits)
-    return float(_Check(lod, rot, exact=True).errors(values, kept).max())
+    targets = unit(np.asarray(kp.clip.rotations, dtype=np.float64))
+    check = _Check(lod, rot, exact=True)
+    ways = decodes(kp.bits) if simd is None else (simd,)
+    return max(float(check.errors(stored(targets, kp.wide, kp.bits, s), kept).max()) for s in ways)
 
 
 def still(lod: Lod, clip: Clip, meshopt: bool = False) -> KeyPlan:
@@ -343,9 +378,9 @@ def still(lod: Lod, clip: Clip, meshopt: bool = False) -> KeyPlan:
     kept = kept_mask(clip)
     check = _Check(lod, play_keys(rot, kept, "LINEAR"), exact=True)
     bits = np.full(J, LOWER_BITS) if meshopt else None
-    values = stored(rot, np.zeros(J, dtype=bool), bits)
+    ways = [stored(rot, np.zeros(J, dtype=bool), bits, simd) for simd in decodes(bits)]
     first = np.argmax(kept, axis=0)
-    constant = np.array([not np.any(values[kept[:, j], j] != values[first[j], j]) for j in range(J)])
+    constant = np.array([not any(np.any(v[kept[:, j], j] != v[first[j], j]) for v in ways) for j in range(J)])
     animated = np.asarray(clip.animated, dtype=bool)
     candidates = np.flatnonzero(animated & constant)
     rest = unit(np.asarray(lod.skeleton.rest_rotation, dtype=np.float32).astype(np.float64))
@@ -354,10 +389,14 @@ def still(lod: Lod, clip: Clip, meshopt: bool = False) -> KeyPlan:
     bound = STILL_PIXELS * pixel_size(lod.distance)
 
     def fits(n: int) -> bool:
-        trial, every = values.copy(), kept.copy()
-        trial[:, order[:n]] = rest[order[:n]]
+        every = kept.copy()
         every[:, order[:n]] = True
-        return bool(check.errors(trial, every).max() <= bound)
+        for values in ways:  # every decoder's
+            trial = values.copy()
+            trial[:, order[:n]] = rest[order[:n]]
+            if check.errors(trial, every).max() > bound:
+                return False
+        return True
 
     lo, hi = 0, len(order)  # the longest prefix of `order` that fits (fits(0): rounding only)
     while lo < hi:

@@ -215,12 +215,13 @@ def _tools(who: str = "--compress meshopt", script: str = ENCODER) -> str:
     return str(tools)
 
 
-def decode(views: list[tuple[dict, bytes]], who: str) -> list[bytes]:
+def decode(views: list[tuple[dict, bytes]], who: str, simd: bool = True) -> list[bytes]:
     """Decode EXT_meshopt_compression views with meshoptimizer's own decoder, in one node
     process (tools/meshopt_decode.mjs): each (the extension object, its encoded bytes) →
     byteStride × count bytes, filters undone into the stored integers (int8 normals, int16
     quaternions), as a client without the extension would have read the fallback. `who`
-    names the reading file in messages."""
+    names the reading file in messages; `simd`: False runs the decoder's scalar build (a
+    client without WebAssembly SIMD), whose QUATERNION filter rounds differently."""
     jobs = [
         {
             "mode": ext["mode"],
@@ -231,7 +232,7 @@ def decode(views: list[tuple[dict, bytes]], who: str) -> list[bytes]:
         }
         for ext, data in views
     ]
-    head = json.dumps({"jobs": jobs}).encode()
+    head = json.dumps({"jobs": jobs, **({} if simd else {"simd": False})}).encode()
     tools = _tools(who, DECODER)
     proc = subprocess.run(
         [_node(who, "decoder"), os.path.join(tools, DECODER)],

@@ -68,19 +68,20 @@ def read_drawable(path: Path, lod: int = 0) -> Drawable:
     try:
         gltf, blob = read_gltf(path)
         if MESHOPT in gltf.get("extensionsUsed", []):
-            gltf, blob = _unpack_meshopt(gltf, blob, path)
-        return _gltf_scene(gltf, blob, _accessor, lod, path)
+            gltf, blob = unpack_meshopt(gltf, blob, path)
+        return _gltf_scene(gltf, blob, read_strided, lod, path)
     except TreegenError:
         raise
     except (OSError, ValueError, KeyError, IndexError, TypeError, struct.error) as e:
         raise TreegenError(f"{path}: not a readable glTF file ({type(e).__name__}: {e})") from None
 
 
-def _unpack_meshopt(gltf: dict, blob: bytes, path: Path) -> tuple[dict, bytes]:
+def unpack_meshopt(gltf: dict, blob: bytes, path: Path, simd: bool = True) -> tuple[dict, bytes]:
     """EXT_meshopt_compression → the plain layout: every compressed view decoded by
-    meshoptimizer (compress.decode) and appended to buffer 0, so the readers below see
-    ordinary views (quantized integers, as KHR_mesh_quantization stores them). Views must
-    live in buffer 0 or a fallback buffer (what gltfpack and treegen write)."""
+    meshoptimizer (compress.decode; `simd`: its SIMD build, else the scalar one) and appended
+    to buffer 0, so the readers below see ordinary views (quantized integers, as
+    KHR_mesh_quantization stores them). Views must live in buffer 0 or a fallback buffer
+    (what gltfpack and treegen write)."""
     views = gltf.get("bufferViews", [])
     packed = [i for i, v in enumerate(views) if MESHOPT in v.get("extensions", {})]
     exts = [views[i]["extensions"][MESHOPT] for i in packed]
@@ -93,7 +94,7 @@ def _unpack_meshopt(gltf: dict, blob: bytes, path: Path) -> tuple[dict, bytes]:
     encoded = [blob[e.get("byteOffset", 0) : e.get("byteOffset", 0) + e["byteLength"]] for e in exts]
     parts, size = [blob], len(blob)
     views = [dict(v) for v in views]
-    for i, data in zip(packed, decode(list(zip(exts, encoded)), str(path))):
+    for i, data in zip(packed, decode(list(zip(exts, encoded)), str(path), simd)):
         pad = -size % 4
         parts.append(b"\0" * pad)
         views[i] = {
@@ -194,7 +195,7 @@ def _gltf_scene(gltf, blob, read_accessor, lod, path) -> Drawable:
         scale=np.array([n.get("scale", [1, 1, 1]) for n in rest], float).reshape(J, 3),
         root_world=root_world,
         inverse_bind=ibm,
-        channels=_gltf_channels(gltf, blob, read_accessor, slot) if skin is not None else [],
+        channels=gltf_channels(gltf, blob, read_accessor, slot) if skin is not None else [],
     )
     if any("matrix" in n for n in rest):
         raise TreegenError(f"{path}: joint nodes with 'matrix' transforms are not supported")
@@ -265,14 +266,14 @@ def _texcoords(
     key = f"TEXCOORD_{n}"
     if key not in attributes:
         return None
-    uv = _accessor(gltf, blob, attributes[key]).astype(np.float32)
+    uv = read_strided(gltf, blob, attributes[key]).astype(np.float32)
     if transform:  # KHR_texture_transform offset and scale (what --compress writes)
         uv = uv * np.float32(transform.get("scale", [1, 1])) + np.float32(transform.get("offset", [0, 0]))
     uv[:, 1] = 1.0 - uv[:, 1]
     return uv
 
 
-def _accessor(gltf: dict, blob: bytes, index: int) -> np.ndarray:
+def read_strided(gltf: dict, blob: bytes, index: int) -> np.ndarray:
     """read_accessor, plus interleaved views (byteStride) as other exporters write them."""
     acc = gltf["accessors"][index]
     view = gltf["bufferViews"][acc["bufferView"]]
@@ -313,9 +314,12 @@ def _surface(gltf: dict, blob: bytes, attributes: dict, mat: dict, images: _Imag
     return out
 
 
-def _gltf_channels(gltf, blob, read_accessor, slot: dict[int, int]) -> list[Channel]:
-    """Channels of the first animation that moves any of this skin's joints."""
+def gltf_channels(gltf, blob, read_accessor, slot: dict[int, int], name: str | None = None) -> list[Channel]:
+    """Channels of the first animation that moves any of this skin's joints (`slot`: node →
+    joint), or of the animation called `name`."""
     for anim in gltf.get("animations", []):
+        if name is not None and anim.get("name") != name:
+            continue
         out = []
         for ch in anim["channels"]:  # one per animated joint (hundreds)
             node, path = ch["target"].get("node"), ch["target"]["path"]
