@@ -459,11 +459,11 @@ def test_default_options_leave_the_writer_alone():
 
 @pytest.mark.parametrize("bits", [18, 20])
 def test_exponential_filter_model_matches_meshoptimizer(bits):
-    """key_plan.exp_filter (the wide joints' keys under meshopt) gives, to the bit, what
+    """key_codec.exp_filter (the wide joints' keys under meshopt) gives, to the bit, what
     meshoptimizer's EXPONENTIAL filter (one exponent per vector) gives back from the writer's
     float32 source: steps of 2^(1 − bits) for a unit quaternion, 2^(2 − bits) only where a
     component is ±1 (a model at the coarser step everywhere took a file past 1 mm)."""
-    from treegen_cli import key_plan
+    from treegen_cli import key_codec
     from treegen_cli.axes import quat_to_y_up
     from treegen_cli.exchange import compress
     from treegen_cli.quat import unit
@@ -483,20 +483,20 @@ def test_exponential_filter_model_matches_meshoptimizer(bits):
     except Exception as exc:  # no node or tools: the clients' tests skip alike
         pytest.skip(str(exc))
     got = np.frombuffer(decoded, dtype="<f4").reshape(n, 4)
-    want = quat_to_y_up(key_plan.exp_filter(q[:, None], np.array([bits]))[:, 0])
+    want = quat_to_y_up(key_codec.exp_filter(q[:, None], np.array([bits]))[:, 0])
     assert np.array_equal(got, want)
 
 
 @pytest.mark.parametrize("simd", [True, False])
 @pytest.mark.parametrize("bits", [12, 13, 14, 15, 16])
 def test_quaternion_filter_model_matches_meshoptimizer(bits, simd):
-    """key_plan.quat_filter (what the 1 mm check plays) gives, to the bit, what meshoptimizer's
+    """key_codec.quat_filter (what the 1 mm check plays) gives, to the bit, what meshoptimizer's
     own encoder and each of its decoders (the SIMD build and the scalar one a client without
     WebAssembly SIMD runs) give back for the QUATERNION filter at `bits` from the writer's
     source (Y up, float32): their float32 arithmetic included (a float64 model missed by one
     int16 step on ~1 key in 1,000, enough to take a file past 1 mm), near-rest rotations
     (wind's) as well as any; and the two decoders do differ on some keys."""
-    from treegen_cli import key_plan
+    from treegen_cli import key_codec
     from treegen_cli.axes import quat_to_y_up
     from treegen_cli.exchange import compress
     from treegen_cli.quat import unit
@@ -518,7 +518,7 @@ def test_quaternion_filter_model_matches_meshoptimizer(bits, simd):
     got = np.frombuffer(decoded, dtype="<i2").reshape(n, 4)
 
     def model(simd: bool) -> np.ndarray:
-        return np.rint(quat_to_y_up(key_plan.quat_filter(q[:, None], np.array([bits]), simd)[:, 0]) * 32767)
+        return np.rint(quat_to_y_up(key_codec.quat_filter(q[:, None], np.array([bits]), simd)[:, 0]) * 32767)
 
     assert np.array_equal(got, model(simd))
     assert not np.array_equal(model(True), model(False))

@@ -105,7 +105,7 @@ class Clip:
 
 # meshopt's EXPONENTIAL filter: bits of mantissa kept for a KeyPlan's float32 (`wide`) joints
 # (steps of 2^(1 − bits) on a unit quaternion, 2^(2 − bits) where a component is ±1); the
-# writer encodes with it, key_plan.exp_filter models it to the bit
+# writer encodes with it, key_codec.exp_filter models it to the bit
 EXP_BITS = 20
 
 
