@@ -82,6 +82,18 @@ Where the Dask path's remaining time went (2026-11-26, load 3-9; rusage and /pro
     Dask 1.03× / 0.94× paired and this one 1.10× / 0.88×): the Dask path is not shown slower than
     the old pool, nor faster; the textures drawn once save ~0.27 CPU-s by count, below what
     these runs resolve. A quiet box (load < 1) is needed to settle the last few per cent.
+
+    Nearly quiet box (no helpers; load 1.3-2.5 left over from them), `--pools-only --reps 5`,
+    main against the same code with the client-side texture warm-up switched off, run in turn:
+                          old pool   dask (forked)                dask fs
+      warm-up (main)      6.02 s   7.33 s 1.22× p1.17 cpu1.05×    1.20× cpu1.14×  (first run)
+      no warm-up          6.10 s   6.64 s 1.09× p1.07 cpu1.08×    1.25× cpu1.20×
+      warm-up (main)      6.20 s   6.89 s 1.11× p1.11 cpu1.04×    1.20× cpu1.17×
+      no warm-up          5.94 s   6.74 s 1.13× p1.10 cpu1.09×    1.20× cpu1.14×
+    in process 1.36-1.48×; same bytes from every path. The warm-up makes no difference these
+    runs resolve (it stays: 3 texture draws fewer). The forked Dask path is ~1.1× the old pool
+    (0.6-0.7 s a run): the client's distributed import and scheduler start before the first
+    prototype, as measured above. Not "no slower than before" yet.
 """
 
 from __future__ import annotations
