@@ -152,10 +152,16 @@ def draw_textures(params: Params, options: MaterialOptions = MATERIAL_DEFAULTS) 
     """Draw now, into this process's cache, the generated textures build_materials would draw
     for `params`: processes forked afterwards find them there instead of each drawing its own
     (the forest's workers). Nothing to draw with --no-textures or an artist's images."""
-    if options.textures and (
-        options.bark_texture is None or (options.leaf_texture is None and has_leaves(params))
-    ):
+    if _draws_textures(params, options):
         _generated_pngs(params, options.texture_size)
+
+
+def _draws_textures(params: Params, options: MaterialOptions) -> bool:
+    """Whether build_materials draws generated textures: textures on, and the bark or a leafy
+    tree's leaves without an artist's image."""
+    return options.textures and (
+        options.bark_texture is None or (options.leaf_texture is None and has_leaves(params))
+    )
 
 
 def has_leaves(params: Params) -> bool:
@@ -192,7 +198,7 @@ def build_materials(params: Params, options: MaterialOptions = MATERIAL_DEFAULTS
                 roughness=BARK_ROUGHNESS,
                 base_texture=Texture("bark", bark_png, wrap="REPEAT"),
             )
-        if bark_png is None or (leaf_png is None and leafy):
+        if _draws_textures(params, options):
             atlas, albedo, normal = _generated_pngs(params, options.texture_size)
             if bark_png is None:
                 bark = Material(
