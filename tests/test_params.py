@@ -545,3 +545,11 @@ def test_level_params_contract_unchanged():
     # The reader fills every LevelParams field from the key table and nothing else.
     assert {s.field for s in LEVEL_KEYS} == {f.name for f in dataclasses.fields(LevelParams)}
     assert {s.field for s in TOP_KEYS} == {f.name for f in dataclasses.fields(Params)} - {"name", "level"}
+
+
+def test_a_name_holding_an_equals_sign_survives_the_writer():
+    """Found by the fuzz test above: `Name==  fir` names the species '=  fir', which the writer
+    wrote as `Name =  fir` and the reader then took for 'fir'."""
+    for text in ("Name==   fir\nLevels 2\n", "Name = a=b\nLevels 2\n"):
+        p = parse_params_text(text)
+        assert "=" in p.name and parse_params_text(format_params_text(p)) == p

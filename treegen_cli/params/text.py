@@ -81,7 +81,9 @@ def format_params_text(params: Params, header: str | None = None) -> str:
     """Write Params in the text format; `parse_params_text` of the result gives them back."""
     d = params_dict(params)
     lines = [f"# {ln}" if ln else "#" for ln in (header or "").splitlines()]
-    lines.append(f"Name {d.pop('Name')}")
+    name = d.pop("Name")
+    # a line holding "=" is read as `Key = value` (split at its first "="): so is such a name
+    lines.append(f"Name = {name}" if "=" in name else f"Name {name}")
     width = max(len(k) for k in d)
     current = None
     for key, value in d.items():
