@@ -523,19 +523,19 @@ def _only_treegen_errors(data: bytes):
     assert parse_params_text(format_params_text(p)) == p
 
 
-@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=300, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 @given(mutated(BASE_TEXTS))
 def test_mutated_text_files_raise_only_treegen_error(data):
     _only_treegen_errors(data)
 
 
-@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=150, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 @given(mutated(BASE_XML))
 def test_mutated_xml_files_raise_only_treegen_error(data):
     _only_treegen_errors(data)
 
 
-@settings(max_examples=100, deadline=None)
+@settings(max_examples=100, deadline=None, derandomize=True)
 @given(st.binary(max_size=200))
 def test_random_bytes_raise_only_treegen_error(data):
     _only_treegen_errors(data)
