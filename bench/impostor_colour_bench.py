@@ -15,7 +15,9 @@ occlusion also on the cards) → after (LEAF_SHADE 0.37/0.40/0.50, no crown occl
     balsam_fir      1.059 1.037 0.883  →  1.038 1.094 1.121
     ca_black_oak    0.817 0.804 0.643  →  0.808 0.852 0.779
     weeping_willow  1.026 0.910 0.798  →  0.999 0.954 0.985
-Hue (blue/green) 0.85/0.85/0.80/0.88 → 0.99/1.02/0.91/1.03. Brightness differs per species
+Hue (blue/green) 0.85/0.85/0.80/0.88 → 0.99/1.02/0.91/1.03. With triangle cards in the
+coarse LODs (lod_budget.py) the aspen's LOD3 read bluer (0.96; the test's 130 m LOD2 0.92),
+LEAF_SHADE blue 0.50 → 0.515: 0.98/1.05/0.93/1.03. Brightness differs per species
 (green 0.85-1.10×) and no constant removes it: the bark inside the crown (CROWN_SHADE 0.4 → 1.0
 moves the oak to 0.97× but the aspen to 1.15×).
 """

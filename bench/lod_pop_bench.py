@@ -79,6 +79,27 @@ texture 256), worst switch, before → after: aspen 0.881/−1.9 → 0.891/−1.
 0.888/+2.2 → 0.902/+2.5. Also tried: three Lloyd steps instead of one (+0.003, three times the
 queries).
 
+Triangle cards (26 Nov 2026, evening): a LOD needs twice as many leaves to score like the one
+before it (LOD budgets 0.3 / 0.1 instead of 0.15 / 0.05, over budget as a check: oak 0.853 →
+0.906, poplar 0.809 → 0.879, cottonwood 0.841 → 0.889), so from LOD2 on a blade at most 3 px
+long at the switch is one triangle (the card's base edge and its tip's middle, UVs in the
+same atlas cell; grown alike in length and width by what it cuts off, 58 % of an elliptic
+blade kept, and moved so the part drawn is centred where the blade was). Tried first: half
+the card along its diagonal (the halves seeded): poplar switch 1 0.936 → 0.872 with every
+leaf kept, the lopsided half-blades do not stand in for blades at 3 px; triangle cards in
+LOD1 too: it then holds every leaf and all the thinning falls on switch 2 (oak 0.884, larch
+LOD1 covering 5 % short). The test's view, 384 px, worst switch IoU / cover, before → after:
+    balsam_fir 0.953/+0.9 → 0.963/+2.0   black_tupelo 0.896/+1.2 → 0.927/+2.2
+    ca_black_oak 0.853/+1.7 → 0.892/+2.2   desert_bush 0.818/−3.5 → 0.822/−2.6
+    eastern_cottonwood 0.841/−0.3 → 0.886/+1.2 (switch 1, cards)   european_larch
+    0.884/+5.5 → 0.880/+2.5   fan_palm 0.793/−2.9 (fronds too big: cards)   lombardy_poplar
+    0.809/+2.1 → 0.860/+2.1   palm 0.813/+4.3 → 0.813/+4.3   quaking_aspen 0.900/−1.5 →
+    0.929/+1.0   rush 0.871/+0.9 → 0.874/+1.0   sassafras 0.895/+0.8 → 0.927/+1.3
+    shave_grass 0.703/−1.7 (leafless)   tamarack 0.904/+2.3 → 0.927/+4.0
+    weeping_willow 0.965/+1.2 → 0.964/+2.9
+IoU ≥ 0.9 at every switch: fir, tupelo, aspen, sassafras, tamarack, willow (was fir, willow,
+aspen, tamarack); cover within ±5 % for all 15 in this view (the larch was at +5.5 %).
+
 Cover left over: the render shows the far LODs 2-5 % fuller than lod_cover predicts (oak
 switch 2: estimated 1.007, rendered 1.025; palm switch 3: 1.003 / 1.053; larch switch 2:
 0.996 / 1.053). About a point of the oak's is the leaf atlas's padding bleeding into the coarse

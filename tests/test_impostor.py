@@ -396,7 +396,7 @@ def test_the_impostor_has_the_coarsest_lods_hue():
         cam = frame_points(pts, az, 8.0)
         imgs, masks = [], []
         for scene in scenes:
-            with Renderer(scene, 96, 96) as r:
+            with Renderer(scene, 192, 192) as r:  # the bench's size: crown, not edge, pixels
                 img = r.render(cam, sun_azimuth_deg=az - 50.0)
                 bg = r.render(cam, sun_azimuth_deg=az - 50.0, draw_tree=False)
             imgs.append(_srgb_to_linear(img))

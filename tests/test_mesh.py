@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 from synthetic_tree import species_tree, synthetic_tree, trunk_only
 from test_rig import compose
 from treegen_cli.errors import TreegenError
-from treegen_cli.leafshapes import OUTLINES, fill_factor
+from treegen_cli.leafshapes import OUTLINES, TRIANGLE_CARD, fill_factor, triangle_share
 from treegen_cli.mesh import CARD, MeshOptions, bark_offsets, build_mesh, merge_influences
 from treegen_cli.rig import RigOptions, build_rig
 
@@ -317,6 +317,43 @@ def test_leaf_uvs_fill_their_seeded_atlas_cell(geometry):
     np.testing.assert_allclose(uv, want, atol=1e-6)
     counts = np.bincount(variant, minlength=4)
     assert counts.min() > 0.2 * tree.n_leaves
+
+
+def test_triangle_cards_draw_the_cards_base_and_tip():
+    """A far LOD's triangle cards: per leaf one triangle, the card's two base corners and its
+    tip's middle (positions, and UVs at the same points of the leaf's atlas cell), half the
+    card's area, facing as the card does."""
+    tree = species_tree("quaking_aspen", seed=1)
+    cells = atlas_cells(4)
+    rig, card = mesh(tree, budget=32, leaf_cells=cells)
+    _, tri = mesh(tree, budget=32, leaf_cells=cells, leaf_geometry="triangle")
+    card, tri = card["leaves"], tri["leaves"]
+    check_prim(tri, len(rig.joint_node))
+    L = tree.n_leaves
+    assert len(tri.positions) == 3 * L and len(tri.indices) == 3 * L
+    quad, three = card.positions.reshape(L, 4, 3), tri.positions.reshape(L, 3, 3)
+    np.testing.assert_allclose(three[:, :2], quad[:, :2], atol=1e-6)  # the base corners
+    np.testing.assert_allclose(three[:, 2], quad[:, 2:].mean(axis=1), atol=1e-6)  # the tip's middle
+    uq, ut = card.uvs.reshape(L, 4, 2), tri.uvs.reshape(L, 3, 2)
+    np.testing.assert_allclose(ut[:, :2], uq[:, :2], atol=1e-6)
+    np.testing.assert_allclose(ut[:, 2], uq[:, 2:].mean(axis=1), atol=1e-6)
+    np.testing.assert_array_equal(tri.joints[::3, 0], rig.leaf_joint)
+    area = 0.5 * np.linalg.norm(triangle_normals(tri), axis=1)
+    np.testing.assert_allclose(
+        area, TRIANGLE_CARD.area * tree.leaf_size[:, 0] * tree.leaf_size[:, 1], rtol=1e-4
+    )
+    assert np.all(np.einsum("ij,ij->i", triangle_normals(tri), tree.leaf_frame[:, :, 2]) > 0)  # front up
+
+
+@pytest.mark.parametrize("shape", sorted(OUTLINES))
+def test_triangle_share_is_the_blade_inside_the_triangle_card(shape):
+    """triangle_share: the blade's area inside TRIANGLE_CARD over its whole area, and the
+    cut part's centroid below the blade's; the full card (shape 4) keeps exactly half, its
+    cut part's centroid a third of the way up against the card's half."""
+    share, dy = triangle_share(shape)
+    assert 0.45 < share < 0.9 and dy < 0
+    if shape == 4:
+        assert share == pytest.approx(0.5, abs=1e-3) and dy == pytest.approx(1 / 3 - 1 / 2, abs=2e-3)
 
 
 def test_leaf_variants_are_seeded_by_the_tree():

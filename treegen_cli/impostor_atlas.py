@@ -20,18 +20,28 @@ import numpy as np
 from .asset import Lod, Material, Primitive
 
 
+def _corners(prim: Primitive) -> int:
+    """Vertices per leaf of a leaf primitive of cards (4: two triangles a leaf) or triangle
+    cards (3: one); 0 for anything else (bark, outlines)."""
+    V, T = len(prim.positions), len(prim.indices) // 3
+    if prim.material == "bark" or not T:
+        return 0
+    return 4 if V == 2 * T else 3 if V == 3 * T else 0
+
+
 def _fewer_leaves(prim: Primitive, cap: int) -> Primitive:
-    """Every k-th leaf card of a 4-vertex-card primitive of more than `cap` cards, at its own
+    """Every k-th leaf card (or triangle card) of a primitive of more than `cap`, at its own
     size (render_views enlarges them until they cover what all the cards did); `prim` itself
     when there is nothing to thin."""
-    V, T = len(prim.positions), len(prim.indices) // 3
-    n = V // 4
-    if V != 4 * n or T != 2 * n or n <= cap:
+    P = _corners(prim)
+    n = len(prim.positions) // P if P else 0
+    if not P or n <= cap:
         return prim
     keep = np.arange(0, n, math.ceil(n / cap))
-    verts = (4 * keep[:, None] + np.arange(4)).ravel()
-    first = np.asarray(prim.indices[:6], np.int64)  # the cards' shared index pattern
-    idx = (first[None, :] + 4 * np.arange(len(keep))[:, None]).ravel().astype(np.uint32)
+    verts = (P * keep[:, None] + np.arange(P)).ravel()
+    per = 3 * (P - 2)  # indices a leaf
+    first = np.asarray(prim.indices[:per], np.int64)  # the cards' shared index pattern
+    idx = (first[None, :] + P * np.arange(len(keep))[:, None]).ravel().astype(np.uint32)
     return replace(
         prim,
         positions=np.asarray(prim.positions, np.float32)[verts],
@@ -43,9 +53,9 @@ def _fewer_leaves(prim: Primitive, cap: int) -> Primitive:
     )
 
 
-def _enlarged(part, area: float):
-    """A drawable part of 4-vertex cards with each card scaled about its centre to `area`×."""
-    quads = np.asarray(part.positions, np.float64).reshape(-1, 4, 3)
+def _enlarged(part, area: float, corners: int):
+    """A drawable part of `corners`-vertex leaves with each scaled about its centre to `area`×."""
+    quads = np.asarray(part.positions, np.float64).reshape(-1, corners, 3)
     mid = quads.mean(1, keepdims=True)
     pos = (mid + (quads - mid) * math.sqrt(area)).reshape(-1, 3).astype(np.float32)
     return replace(part, positions=pos)
@@ -138,12 +148,12 @@ def render_views(
     thin = [_fewer_leaves(p, options.max_leaf_cards) for p in prims]
     decoded: dict[int, np.ndarray] = {}  # the leaf atlas is decoded once for both part lists
     parts = _atlas_parts(thin, materials, decoded)
-    thinned = [t is not p for t, p in zip(thin, prims)]
+    thinned = [_corners(p) if t is not p else 0 for t, p in zip(thin, prims)]
     with AtlasRenderer(centre, radius, options.grid, options.cell) as r:
         if any(thinned):
 
             def cover(area: float) -> int:
-                scaled = [_enlarged(q, area) if t else q for q, t in zip(parts, thinned)]
+                scaled = [_enlarged(q, area, t) if t else q for q, t in zip(parts, thinned)]
                 r.draw(Drawable(parts=scaled, n_joints=1), cells)
                 return r.covered(cells)
 
@@ -155,7 +165,7 @@ def render_views(
                 mid = 0.5 * (lo + hi)
                 lo, hi = (mid, hi) if cover(math.exp(mid)) < target else (lo, mid)
             area = math.exp(0.5 * (lo + hi))
-            parts = [_enlarged(q, area) if t else q for q, t in zip(parts, thinned)]
+            parts = [_enlarged(q, area, t) if t else q for q, t in zip(parts, thinned)]
         r.draw(Drawable(parts=parts, n_joints=1))
         albedo, normal = r.read()
     return _dilate(albedo, options.grid, options.cell), normal

@@ -23,6 +23,7 @@ equal to the drawn area for shape geometry, and card area × fill_factor for car
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -150,6 +151,42 @@ OUTLINES: dict[int, LeafOutline] = {
     6: _palm(),
     7: _star(),
 }
+
+
+# A triangle card for far LODs whose blades are a few pixels long: the card's base edge and
+# its tip's middle, one triangle a leaf instead of two, so a LOD's budget holds twice the
+# leaves. It cuts the blade's upper sides off (the rest, `triangle_share`, is drawn larger);
+# symmetric about the midrib, so what shows keeps the blade's footprint. UVs stay in the
+# card's atlas cell.
+TRIANGLE_CARD = LeafOutline(
+    "triangle card",
+    np.array([[-0.5, 0.0, 0.0], [0.5, 0.0, 0.0], [0.0, 1.0, 0.0]]),
+    np.tile([0.0, 0.0, 1.0], (3, 1)),
+    np.array([[0.0, 0.0], [1.0, 0.0], [0.5, 1.0]]),
+    np.array([[0, 1, 2]], dtype=np.int32),
+    0.5,
+)
+
+
+def in_triangle_card(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Whether card points (x across −½..½, y base 0 to tip 1) lie in TRIANGLE_CARD."""
+    return (y >= 0.0) & (np.abs(x) <= 0.5 * (1.0 - y))
+
+
+@functools.lru_cache(maxsize=None)
+def triangle_share(leaf_shape: int, n: int = 256) -> tuple[float, float]:
+    """(share of the blade's area inside TRIANGLE_CARD, height of that part's centroid
+    minus the blade's, in lengths): measured on an n × n grid of the outline."""
+    o = outline(leaf_shape)
+    x, y = np.meshgrid((np.arange(n) + 0.5) / n - 0.5, (np.arange(n) + 0.5) / n)
+    p = o.points[:, :2] if o.name != "palm" else np.column_stack([o.uvs[:, 0] - 0.5, o.uvs[:, 1]])
+    blade = np.zeros(x.shape, dtype=bool)
+    for t in o.triangles:
+        a, b, c = p[t]
+        d = [(q[0] - r[0]) * (y - r[1]) - (q[1] - r[1]) * (x - r[0]) for r, q in ((a, b), (b, c), (c, a))]
+        blade |= (d[0] >= 0) & (d[1] >= 0) & (d[2] >= 0)  # counter-clockwise triangles
+    cut = blade & in_triangle_card(x, y)
+    return float(cut.sum() / max(blade.sum(), 1)), float(y[cut].mean() - y[blade].mean())
 
 
 def outline(leaf_shape: int) -> LeafOutline:

@@ -47,9 +47,11 @@ def _rings_sides(tree, options) -> tuple[np.ndarray, np.ndarray]:
 
 
 def leaf_outline(tree, options):
-    """The outline mesh.build_mesh stamps on every leaf (a card, or the LeafShape)."""
-    from .leafshapes import OUTLINES, outline
+    """The outline mesh.build_mesh stamps on every leaf (a card, a triangle card, or the LeafShape)."""
+    from .leafshapes import OUTLINES, TRIANGLE_CARD, outline
 
+    if options.leaf_geometry == "triangle":
+        return TRIANGLE_CARD
     return OUTLINES[4] if options.leaf_geometry == "card" else outline(tree.params.leaf_shape)
 
 

@@ -12,7 +12,9 @@ Each LOD is cut from LOD0's tree (lod_leaves.py), in this order:
      a leafless one spreads its kept branches over the crown (`keep_stems`), its trunks'
      nodes are coarsened too and its branches end in points (cones: a twig of one segment
      costs a third of its triangles, lod_nodes.point_tips);
-  4. leaves: as many stratified leaves of LOD0's as the rest of the budget holds (nested: a
+  4. leaves: as many stratified leaves of LOD0's as the rest of the budget holds — from the
+     second LOD on, blades a few pixels long are drawn as triangle cards, one triangle each
+     instead of a card's two, so twice as many stay (`TRIANGLE_CARD_PX`) — (nested: a
      leaf a LOD keeps, the LODs before it keep too; each moves to the middle of LOD0's
      leaves it stands for, lod_leaves.gather_leaves, so it sits a little elsewhere in each
      LOD), their blades scaled so the LOD covers on screen,
@@ -33,6 +35,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .limits import bark_triangles
+from .leafshapes import triangle_share
 from .lod_cover import Blades, Grid, solve_factor, stem_area, tree_area
 from .lod_nodes import coarsen_nodes, point_tips, twig_keys
 from .lod_leaves import LENGTH_SHARE, grow_leaves, prune_stems, stem_closure, thin_leaves
@@ -47,6 +50,12 @@ STEM_WORTH = 1.0  # a leafy tree keeps stems showing at least this × a leaf's a
 FILL_PASSES = 3  # keep_stems: passes filling what forks cut with their parent left free
 MIN_RADIUS_PX = 0.5  # stems thinner than this many pixels are kept only if worth_keeping;
 # a lobed trunk whose lobes are shallower than this is drawn round
+TRIANGLE_CARD_PX = 3.0  # a LOD from TRIANGLE_CARDS_FROM on whose switch shows LOD0's median
+# blade at most this many pixels long draws its leaf cards as triangle cards
+# (leafshapes.TRIANGLE_CARD, one triangle a leaf): the outline is not legible, the cover is,
+# and twice the leaves fit the budget
+TRIANGLE_CARDS_FROM = 2  # LOD index: LOD1 keeps cards, so leaves thin about evenly LOD by LOD
+# (LOD1 in triangle cards held every leaf, and all the thinning fell on the next switch)
 
 
 @dataclass(frozen=True, eq=False)
@@ -103,9 +112,11 @@ def plan_lod(
     mesh: MeshOptions,
     px: float,
     mesh0: MeshOptions | None = None,
+    triangle_cards: bool = False,
 ) -> LodPlan:
     """LOD `tree` within `budget` triangles for `mesh` (see the module doc). `bark0`, `leaf0`:
-    LOD0's bark and leaf triangles; `px`: metres a pixel spans at the LOD's switch distance."""
+    LOD0's bark and leaf triangles; `px`: metres a pixel spans at the LOD's switch distance;
+    `triangle_cards`: blades under TRIANGLE_CARD_PX may be drawn as triangle cards."""
     min_radius = MIN_RADIUS_PX * px
     total0 = bark0 + leaf0
     full, p = tree, tree.params  # LOD0 as drawn (lobes included): the cover to keep
@@ -130,11 +141,21 @@ def plan_lod(
     keep = keep_stems(coarse, per_stem, budget * share, worth)
     pruned = prune_stems(coarse, keep)
     L = tree.n_leaves
-    per_leaf = leaf0 / L if L else 0.0
+    triangle = (
+        triangle_cards
+        and bool(L)
+        and mesh.leaf_geometry == "card"
+        and float(np.median(tree.leaf_size[:, 0])) <= TRIANGLE_CARD_PX * px
+    )
+    if triangle:
+        mesh = replace(mesh, leaf_geometry="triangle")
+    per_leaf = (1.0 if triangle else leaf0 / L) if L else 0.0
     n_keep = int(min(L, max(1, math.floor((budget - per_stem[keep].sum()) / per_leaf)))) if L else 0
     thin = thin_leaves(pruned, n_keep, 1.0)
+    if triangle:
+        thin = triangle_blades(thin)
     sides = (stem_sides(full, mesh0 or mesh), stem_sides(thin, mesh))
-    leaf, radius = cover_factors(full, thin, px, sides)
+    leaf, radius = cover_factors(full, thin, px, sides, triangle)
     mesh_thin = mesh
     if radius != 1.0:  # thicker stems draw the same rings; sides cut to the bark table's
         thin = thicken(thin, radius)
@@ -145,18 +166,31 @@ def plan_lod(
     )
 
 
-def cover_factors(full: Tree, thin: Tree, px: float, sides=(None, None)) -> tuple[np.ndarray | float, float]:
+def triangle_blades(tree: Tree) -> Tree:
+    """`tree`'s blades sized and placed for triangle cards: grown alike in length and width
+    by what the triangle cuts off (leafshapes.triangle_share), and moved so the part drawn
+    is centred where the blade was."""
+    share, dy = triangle_share(int(tree.params.leaf_shape))
+    grown = grow_leaves(tree, 1.0 / share, length_share=0.5)
+    pos = grown.leaf_pos - (dy * grown.leaf_size[:, 0])[:, None] * grown.leaf_frame[:, :, 1]
+    return replace(grown, leaf_pos=pos)
+
+
+def cover_factors(
+    full: Tree, thin: Tree, px: float, sides=(None, None), triangle: bool = False
+) -> tuple[np.ndarray | float, float]:
     """(leaf area factors (L,), stem radius factor) so that `thin` (pruned and thinned from
     `full`) covers on screen what `full` covers, at `px` metres per pixel (lod_cover): each
     kept leaf grows by what its region (cells of REGION_PX pixels) lost in leaves and stems,
-    times one factor solved so the whole covers as `full` does. A leafless tree thickens its
-    kept branches instead."""
+    times one factor solved so the whole covers as `full` does (`triangle`: `thin`'s blades
+    are drawn as triangle cards). A leafless tree thickens its kept branches instead."""
     grid = Grid.around(full, px)
     target = grid.cover(tree_area(full, grid, sides[0]))
     if thin.n_leaves and full.n_leaves:
-        local = regional_factors(full, thin, REGION_PX * px)
+        drawn = triangle_share(int(thin.params.leaf_shape))[0] if triangle else 1.0
+        local = regional_factors(full, thin, REGION_PX * px, drawn)
         stems = stem_area(thin, grid, sides=sides[1])
-        blades = Blades(thin, grid.px, LENGTH_SHARE, float(np.median(local)))
+        blades = Blades(thin, grid.px, LENGTH_SHARE, float(np.median(local)), triangle)
         f = solve_factor(lambda f: grid.cover(stems + blades.area(grid, f * local)), target, 0.25, 4.0)
         return f * local, 1.0
     r = solve_factor(
@@ -187,11 +221,13 @@ def _seen(tree: Tree, leaves: bool) -> tuple[np.ndarray, np.ndarray]:
     )
 
 
-def regional_factors(full: Tree, thin: Tree, cell: float) -> np.ndarray:
+def regional_factors(full: Tree, thin: Tree, cell: float, drawn: float = 1.0) -> np.ndarray:
     """Per kept leaf (L,), the area factor that gives its cell (of `cell` metres) the area
     `full` showed there (leaves and stems) less the kept stems', relative to the whole crown's
-    (clipped to [1/REGION_CLIP, REGION_CLIP] of it): where the dropped twigs were, leaves grow more."""
-    pts = [_seen(full, True), _seen(full, False), _seen(thin, False), _seen(thin, True)]
+    (clipped to [1/REGION_CLIP, REGION_CLIP] of it): where the dropped twigs were, leaves grow
+    more. `drawn`: the share of a kept blade's area its leaf draws (triangle cards draw part)."""
+    mid, seen = _seen(thin, True)
+    pts = [_seen(full, True), _seen(full, False), _seen(thin, False), (mid, drawn * seen)]
     lo = np.min([p.min(0) for p, _ in pts if len(p)], axis=0)
     keys = np.concatenate([np.floor((p - lo) / cell).astype(np.int64) for p, _ in pts])
     _, flat = np.unique(keys, axis=0, return_inverse=True)  # occupied cells only
@@ -250,5 +286,6 @@ def lod_tree(tree: Tree, k: int, lod0, previous, rig_options, mesh_options, opti
         mesh,
         px,
         mesh_options,
+        k >= TRIANGLE_CARDS_FROM,
     )
     return plan.tree, rig, plan.mesh or mesh

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .leafshapes import fill_factor
+from .leafshapes import fill_factor, in_triangle_card, triangle_share
 from .tree import Tree
 
 AZIMUTHS = (0.0, 90.0)  # side views, degrees about Z (orthographic: 180° mirrors 0°)
@@ -173,8 +173,11 @@ class Blades:
     """A tree's leaf blades projected once into the side views, to be binned into a Grid at
     any growth factor (one for all or one per blade) without projecting them again."""
 
-    def __init__(self, tree: Tree, px: float, length_share: float, reach: float = 1.0):
-        """`px`: the grid's cell (Grid.px); `reach`: a typical growth factor to sample for."""
+    def __init__(
+        self, tree: Tree, px: float, length_share: float, reach: float = 1.0, triangle: bool = False
+    ):
+        """`px`: the grid's cell (Grid.px); `reach`: a typical growth factor to sample for;
+        `triangle`: the blades are drawn as triangle cards (mesh/leaves.py)."""
         F = tree.leaf_frame
         self.length, self.width, self.share = tree.leaf_size[:, 0], tree.leaf_size[:, 1], length_share
         # sample spacing for blades grown by `reach` (a typical factor)
@@ -192,7 +195,13 @@ class Blades:
         self.lu, self.lw = _project(F[:, :, 1])
         self.wu, self.ww = _project(F[:, :, 0])
         self.fill = fill_factor(tree.params.leaf_shape)
-        self.seen = np.abs(view @ F[:, :, 2].T) * (self.length * self.width * self.fill / self.s.size)
+        drawn = self.fill
+        if triangle:  # the samples inside the triangle card carry the blade's share in it
+            inside = in_triangle_card(self.t, self.s + 0.5)
+            if inside.any():
+                self.s, self.t = self.s[inside], self.t[inside]
+            drawn = self.fill * triangle_share(int(tree.params.leaf_shape))[0]
+        self.seen = np.abs(view @ F[:, :, 2].T) * (self.length * self.width * drawn / self.s.size)
 
     def area(self, grid: Grid, factor) -> np.ndarray:
         """(V, cells) area of the blades grown by `factor` in area about their middles."""

@@ -160,13 +160,13 @@ def gather_leaves(full: Tree, kept: Tree, pick: np.ndarray) -> Tree:
     return replace(kept, leaf_pos=kept.leaf_pos + (mid - b))
 
 
-def grow_leaves(tree: Tree, area_factor) -> Tree:
+def grow_leaves(tree: Tree, area_factor, length_share: float = LENGTH_SHARE) -> Tree:
     """`tree` with each blade scaled by `area_factor` (scalar or (L,)) in area about its
-    middle: length × area_factor^LENGTH_SHARE, width × the rest."""
+    middle: length × area_factor^length_share, width × the rest."""
     f = np.maximum(np.broadcast_to(np.asarray(area_factor, dtype=np.float64), (tree.n_leaves,)), 0.0)
     if not tree.n_leaves or np.all(f == 1.0):
         return tree
-    grow = np.stack([f**LENGTH_SHARE, f ** (1.0 - LENGTH_SHARE)], axis=1)  # (length, width)
+    grow = np.stack([f**length_share, f ** (1.0 - length_share)], axis=1)  # (length, width)
     size, frame = tree.leaf_size, tree.leaf_frame
     # grown about the blade's middle, not its base: the leaf stays where it was
     pos = tree.leaf_pos - (0.5 * (grow[:, 0] - 1.0) * size[:, 0])[:, None] * frame[:, :, 1]

@@ -5,6 +5,9 @@ for an alpha-tested texture that carries the LeafShape outline — half the vert
 8-point ellipse on the willow's 630k leaves. `leaf_geometry="shape"` stamps the outline itself
 as geometry instead. Either way `Tree.leaf_area` stays the physical blade area (length × width
 × fill_factor): a card draws length × width, the texture's alpha cuts it back to the blade.
+`"triangle"` (far LODs only, lod_budget.py) draws leafshapes.TRIANGLE_CARD, one triangle a
+leaf: a blade a few pixels long shows its cover, not its outline, and the LOD holds twice the
+leaves for its triangles.
 
 UVs (origin bottom-left): each leaf draws one cell of the leaf atlas (`MeshOptions.leaf_cells`,
 the layout the materials stage made the texture with), chosen by a generator seeded from the
@@ -18,7 +21,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from ..asset import Primitive
-from ..leafshapes import OUTLINES, outline
+from ..leafshapes import OUTLINES, TRIANGLE_CARD, outline
 from ..texture_leaf import card_uvs
 from .options import FULL_CARD_CELL
 
@@ -61,10 +64,11 @@ def _leaf_uvs(tree, o, cells) -> np.ndarray:
 
 
 def stamp_leaves(tree, rig, geometry: str = "card", cells: tuple = FULL_CARD_CELL) -> Primitive:
-    """Stamp a card (or the LeafShape outline) on every leaf frame (float32 broadcasts)."""
+    """Stamp a card, a triangle card or the LeafShape outline on every leaf frame (float32
+    broadcasts)."""
     o = outline(tree.params.leaf_shape)  # validates the code even for cards
-    if geometry == "card":
-        o = CARD
+    if geometry != "shape":
+        o = CARD if geometry == "card" else TRIANGLE_CARD
     L, P = tree.n_leaves, len(o.points)
     F = tree.leaf_frame.astype(np.float32)
     size = tree.leaf_size.astype(np.float32)

@@ -30,7 +30,7 @@ class MeshOptions:
     point_ratio: float = 0.02  # ... and so do tips thinner than this × the stem's base radius
     leaves: bool = True  # emit the "leaves" primitive
     leaf_geometry: str = "card"  # "card": a textured quad per leaf; "shape": the LeafShape
-    # outline as geometry (see leafshapes.py)
+    # outline as geometry (see leafshapes.py); "triangle": a triangle card (far LODs)
     leaf_cells: tuple[tuple[float, float, float, float], ...] = FULL_CARD_CELL
     # leaf atlas layout: per variant its card rectangle
     # (u0, v0, u1, v1) in glTF UVs (top-left origin), as
@@ -38,7 +38,8 @@ class MeshOptions:
 
 
 MESH_DEFAULTS = MeshOptions()
-LEAF_GEOMETRIES = ("card", "shape")
+LEAF_GEOMETRIES = ("card", "shape")  # what a user may ask for (--leaf-geometry)
+LOD_LEAF_GEOMETRIES = (*LEAF_GEOMETRIES, "triangle")  # and what a far LOD may draw (lod_budget.py)
 
 
 def per_level(values: tuple, level: np.ndarray) -> np.ndarray:
@@ -70,7 +71,7 @@ def check_options(options: MeshOptions) -> None:
         raise TreegenError(f"--sides {options.sides}: every level needs at least 3 sides")
     if min(options.rings_per_segment) < 1:
         raise TreegenError(f"rings per segment {options.rings_per_segment}: must be >= 1")
-    if options.leaf_geometry not in LEAF_GEOMETRIES:
+    if options.leaf_geometry not in LOD_LEAF_GEOMETRIES:
         raise TreegenError(
             f"--leaf-geometry '{options.leaf_geometry}': expected one of {', '.join(LEAF_GEOMETRIES)}"
         )
