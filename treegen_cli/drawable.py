@@ -39,7 +39,15 @@ class Part:
     opacity: float = 1.0  # base colour alpha factor (multiplies texture alpha)
     wrap: tuple[str, str] = ("REPEAT", "REPEAT")  # texture's (u, v): REPEAT CLAMP MIRROR
     normal_wrap: tuple[str, str] = ("REPEAT", "REPEAT")  # normal map's (u, v)
-    receives_shadows: bool = True  # False: impostor cards (cast shadows, receive none)
+    impostor: bool = False  # cards cut from a view atlas (asset.IMPOSTOR_MATERIAL)
+
+    @property
+    def receives_shadows(self) -> bool:
+        """Impostor cards cast the sun's shadow but take none, as engines set up billboard/
+        impostor LODs (Unity's receiveShadows off, Godot's shadows-not-received flag, three.js's
+        default): their shading is in the atlas, and two crossed cards would otherwise shade
+        each other's far half as a solid wedge."""
+        return not self.impostor
 
     @property
     def one_sided(self) -> bool:
@@ -91,12 +99,9 @@ class Drawable:
         return self.skinning(t)
 
 
-def takes_shadows(material: str | None) -> bool:
-    """Whether a part with this material takes the sun's shadow map: not the impostor's
-    cards, as engines set up billboard/impostor LODs (Unity's receiveShadows off, Godot's
-    shadows-not-received flag, three.js's default). Their shading is in the atlas; two
-    crossed cards would otherwise shade each other's far half as a solid wedge."""
-    return material != IMPOSTOR_MATERIAL
+def is_impostor(material: str | None) -> bool:
+    """Whether a part with this material is the impostor's cards (Part.impostor)."""
+    return material == IMPOSTOR_MATERIAL
 
 
 def z_up_to_y_up() -> np.ndarray:
@@ -193,7 +198,7 @@ def from_asset(asset, lod: int = 0, label: str = "") -> Drawable:
                 opacity=float(m.base_color[3]) if m and len(m.base_color) > 3 else 1.0,
                 wrap=_wrap(base),
                 normal_wrap=_wrap(normal),
-                receives_shadows=takes_shadows(p.material),
+                impostor=is_impostor(p.material),
             )
         )
     sk = L.skeleton

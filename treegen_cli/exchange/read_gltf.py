@@ -31,7 +31,7 @@ from ..drawable import (
     PoseRig,
     check_lod,
     decode_image,
-    takes_shadows,
+    is_impostor,
     vertex_normals,
 )
 from ..errors import TreegenError
@@ -174,7 +174,7 @@ def _gltf_scene(gltf, blob, read_accessor, lod, path) -> Drawable:
                 color=tuple(color[:3]),
                 double_sided=bool(mat.get("doubleSided", False)),
                 opacity=float(color[3]) if len(color) > 3 else 1.0,
-                receives_shadows=takes_shadows(mat.get("name")),
+                impostor=is_impostor(mat.get("name")),
                 **looks,
             )
         )

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..drawable import Drawable, Part, check_lod, decode_image, takes_shadows, vertex_normals, z_up_to_y_up
+from ..drawable import Drawable, Part, check_lod, decode_image, is_impostor, vertex_normals, z_up_to_y_up
 from ..errors import TreegenError
 
 
@@ -79,7 +79,7 @@ def read_drawable(path: Path, lod: int = 0) -> Drawable:
         color, double = (0.6, 0.6, 0.6), bool(mesh.GetDoubleSidedAttr().Get())
         looks: dict = {}
         material = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()[0]
-        shadowed = takes_shadows(material.GetPrim().GetName() if material else None)
+        impostor = is_impostor(material.GetPrim().GetName() if material else None)
         if material:
             shader = material.ComputeSurfaceSource()[0]
             inp = shader.GetInput("diffuseColor") if shader else None
@@ -113,7 +113,7 @@ def read_drawable(path: Path, lod: int = 0) -> Drawable:
                 color=color,
                 double_sided=double,
                 uvs=uvs,
-                receives_shadows=shadowed,
+                impostor=impostor,
                 **looks,
             )
         )
