@@ -17,7 +17,14 @@ occlusion also on the cards) → after (LEAF_SHADE 0.37/0.40/0.50, no crown occl
     weeping_willow  1.026 0.910 0.798  →  0.999 0.954 0.985
 Hue (blue/green) 0.85/0.85/0.80/0.88 → 0.99/1.02/0.91/1.03. With triangle cards in the
 coarse LODs (lod_budget.py) the aspen's LOD3 read bluer (0.96; the test's 130 m LOD2 0.92),
-LEAF_SHADE blue 0.50 → 0.515: 0.98/1.05/0.93/1.03. Brightness differs per species
+LEAF_SHADE blue 0.50 → 0.515: 0.98/1.05/0.93/1.03. Then, on review, measured at the size the
+impostor takes over (`--size 96`: the tree 96 px tall, ImpostorOptions.switch_px) rather than
+192 px: the coarse LOD reads bluer there (sky between sub-pixel blades), 0.92/0.99/0.87/0.98
+with blue 0.515; with 0.56 (and the preview's hash and tint per triangle card, not per pair):
+    --size 96:  aspen 1.183 1.182 1.148  fir 1.036 1.115 1.170  oak 0.845 0.904 0.824
+                willow 1.050 0.999 1.031    hue 0.97/1.05/0.91/1.03
+    --size 192: hue 1.01/1.12/0.96/1.08 (the fir's cards bluer than its LOD3 when both are
+                drawn twice the size they are used at). Brightness differs per species
 (green 0.85-1.10×) and no constant removes it: the bark inside the crown (CROWN_SHADE 0.4 → 1.0
 moves the oak to 0.97× but the aspen to 1.15×).
 """

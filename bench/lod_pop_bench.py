@@ -99,6 +99,13 @@ LOD1 covering 5 % short). The test's view, 384 px, worst switch IoU / cover, bef
     weeping_willow 0.965/+1.2 → 0.964/+2.9
 IoU ≥ 0.9 at every switch: fir, tupelo, aspen, sassafras, tamarack, willow (was fir, willow,
 aspen, tamarack); cover within ±5 % for all 15 in this view (the larch was at +5.5 %).
+After review: the renderer hashed the cut-out and tinted leaves per pair of triangles (two
+neighbouring triangle cards shared one hash, their coverage correlated), now per leaf; stems
+are worth keeping against a triangle card's area per triangle; triangle cards only over the
+generated atlas. Worst switch IoU / cover then: fir 0.953/+4.1 tupelo 0.934/+1.5 oak
+0.895/+2.3 desert 0.822/−2.7 cottonwood 0.889/+1.1 larch 0.882/+2.5 fan palm 0.793/−2.9
+poplar 0.880/+1.9 palm 0.813/+4.3 aspen 0.937/+0.9 rush 0.874/+0.9 sassafras 0.928/+1.3
+shave grass 0.703/−1.7 tamarack 0.926/+4.0 willow 0.964/+2.8.
 
 Cover left over: the render shows the far LODs 2-5 % fuller than lod_cover predicts (oak
 switch 2: estimated 1.007, rendered 1.025; palm switch 3: 1.003 / 1.053; larch switch 2:

@@ -381,8 +381,10 @@ def test_crossed_cards_do_not_shade_each_other_in_a_wedge():
 @needs_gl
 def test_the_impostor_has_the_coarsest_lods_hue():
     """The preview's sun and sky on the aspen's coarsest LOD and its impostor, two cameras (a
-    card face-on and 45° off, bench/impostor_colour_bench.py's): over the pixels both cover, the impostor's blue/green and red/green match
-    within 7 % (one grey LEAF_SHADE left the cards yellower: blue/green −15 %)."""
+    card face-on and 45° off, bench/impostor_colour_bench.py's), the tree 96 px tall as when
+    the impostor takes over (ImpostorOptions.switch_px): over the pixels both cover, the
+    impostor's blue/green and red/green match within 7 % (one grey LEAF_SHADE left the cards
+    yellower: blue/green −15 %)."""
     from treegen_cli.drawable import from_asset
     from treegen_cli.render import Renderer
     from treegen_cli.render_view import frame_points
@@ -396,7 +398,7 @@ def test_the_impostor_has_the_coarsest_lods_hue():
         cam = frame_points(pts, az, 8.0)
         imgs, masks = [], []
         for scene in scenes:
-            with Renderer(scene, 192, 192) as r:  # the bench's size: crown, not edge, pixels
+            with Renderer(scene, 96, 96) as r:
                 img = r.render(cam, sun_azimuth_deg=az - 50.0)
                 bg = r.render(cam, sun_azimuth_deg=az - 50.0, draw_tree=False)
             imgs.append(_srgb_to_linear(img))

@@ -32,7 +32,8 @@ IOU_TARGET = 0.9  # issue 13: silhouette IoU at least this at every switch
 # a regression guard a little below what the LODs reach where the target is not met (None:
 # the target itself). Cover is within ±5 % for every species in this view. IoU ≥ 0.9 at
 # every switch for the fir, the tupelo, the aspen, the sassafras, the tamarack and the
-# willow; 0.88-0.89 for the oak, the cottonwood and the larch; 0.79-0.87 for the rest: at the
+# willow; 0.88-0.90 for the oak, the cottonwood, the larch and the poplar; 0.70-0.87 for the
+# rest: at the
 # far switches each kept leaf stands for several and the crown reads blotchy at the 3-pixel
 # scale (the XOR of two LODs is speckle all over the crown, not its edge or trunk). What moved
 # it: gathering kept leaves to the middle of the leaves they stand for (median +0.008) and
@@ -49,7 +50,7 @@ MEASURED = {
     "eastern_cottonwood": (None, 0.875),
     "european_larch": (None, 0.87),
     "fan_palm": (None, 0.78),
-    "lombardy_poplar": (None, 0.85),
+    "lombardy_poplar": (None, 0.87),
     "palm": (None, 0.80),
     "quaking_aspen": (None, None),
     "rush": (None, 0.86),
@@ -126,6 +127,40 @@ def test_triangle_card_blades_carry_the_blade_share_inside_the_triangle():
     share, _ = triangle_share(int(tree.params.leaf_shape))
     total = lambda b: b.seen.sum(axis=1) * b.s.size  # noqa: E731  (per view)
     np.testing.assert_allclose(total(tri), share * total(card), rtol=1e-9)
+
+
+def test_triangle_blades_draw_the_blades_area_where_the_blade_was():
+    """Sized and placed for triangle cards, a blade's drawn part (triangle_share of it, whose
+    centre lies dy lengths from the card's middle) has the blade's area and sits where the
+    blade did, in the blade's proportions."""
+    from treegen_cli.leafshapes import triangle_share
+    from treegen_cli.lod_budget import triangle_blades
+
+    tree = grown("quaking_aspen")  # elliptic blades: their centre is the card's middle
+    share, dy = triangle_share(int(tree.params.leaf_shape))
+    t = triangle_blades(tree)
+    np.testing.assert_allclose(share * t.leaf_area, tree.leaf_area, rtol=1e-9)
+    np.testing.assert_allclose(
+        t.leaf_size[:, 0] / t.leaf_size[:, 1], tree.leaf_size[:, 0] / tree.leaf_size[:, 1]
+    )
+    drawn = t.leaf_middle + (dy * t.leaf_size[:, 0])[:, None] * t.leaf_frame[:, :, 1]
+    np.testing.assert_allclose(drawn, tree.leaf_middle, atol=1e-9)
+
+
+def test_untextured_or_artist_leaves_keep_cards_in_every_lod(tmp_path):
+    """Triangle cards only over the generated atlas, whose alpha is the outline
+    triangle_share measures: untextured leaves (opaque cards) and an artist's image keep
+    cards in every LOD, so their LODs cover alike."""
+    from PIL import Image
+
+    png = tmp_path / "leaf.png"
+    Image.new("RGBA", (32, 32), (40, 120, 30, 255)).save(png)
+    for options in (dict(no_textures=True), dict(leaf_texture=str(png))):
+        asset = _asset("quaking_aspen", **options)
+        for lod in asset.lods:
+            if lod.impostor is None:
+                leaves = [p for p in lod.primitives if p.name == "leaves"][0]
+                assert len(leaves.positions) == 2 * (len(leaves.indices) // 3), options
 
 
 def test_triangles_never_rise_whatever_the_options():

@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 from synthetic_tree import species_tree, synthetic_tree, trunk_only
 from test_rig import compose
 from treegen_cli.errors import TreegenError
-from treegen_cli.leafshapes import OUTLINES, TRIANGLE_CARD, fill_factor, triangle_share
+from treegen_cli.leafshapes import OUTLINES, TRIANGLE_CARD, fill_factor, in_triangle_card, triangle_share
 from treegen_cli.mesh import CARD, MeshOptions, bark_offsets, build_mesh, merge_influences
 from treegen_cli.rig import RigOptions, build_rig
 
@@ -352,6 +352,12 @@ def test_triangle_share_is_the_blade_inside_the_triangle_card(shape):
     cut part's centroid a third of the way up against the card's half."""
     share, dy = triangle_share(shape)
     assert 0.45 < share < 0.9 and dy < 0
+    # the same share of the generated atlas's alpha (what a triangle card draws)
+    from treegen_cli.texture_leaf import _coverage
+
+    alpha, _inside = _coverage(shape, 200, 200)  # tip at row 0
+    x, y = np.meshgrid((np.arange(200) + 0.5) / 200 - 0.5, 1.0 - (np.arange(200) + 0.5) / 200)
+    assert alpha[in_triangle_card(x, y)].sum() / alpha.sum() == pytest.approx(share, abs=0.01)
     if shape == 4:
         assert share == pytest.approx(0.5, abs=1e-3) and dy == pytest.approx(1 / 3 - 1 / 2, abs=2e-3)
 

@@ -22,7 +22,8 @@ from .asset import Lod, Material, Primitive
 
 def _corners(prim: Primitive) -> int:
     """Vertices per leaf of a leaf primitive of cards (4: two triangles a leaf) or triangle
-    cards (3: one); 0 for anything else (bark, outlines)."""
+    cards (3: one), told by vertices per triangle (LeafShape outlines with those counts, the
+    diamond and the triangle, are thinned alike); 0 for anything else (bark, other outlines)."""
     V, T = len(prim.positions), len(prim.indices) // 3
     if prim.material == "bark" or not T:
         return 0

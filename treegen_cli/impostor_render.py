@@ -31,10 +31,10 @@ from .render_gl import GL_SRGB8_ALPHA8, gl_context
 # colour at the switch (the aspen's cards came out 2.1× brighter than its LOD3 without it).
 # Per channel: the crown's self-shadowing dims the warm sun more than the blue sky, so one grey
 # 0.4 left the cards yellower (blue/green 0.85-0.91× LOD3's on aspen, fir, oak and willow);
-# these balance the hue over those four (bench/impostor_colour_bench.py: 0.93-1.05×, blue up
-# 3 % for coarse LODs in triangle cards, which shade bluer), green keeps the mean brightness. Brightness still differs per species (oak 0.85×, aspen 1.10×,
+# these balance the hue over those four at the switch size (impostor_colour_bench --size 96:
+# 0.91-1.05×; fitted there since coarse LODs in triangle cards), green the mean brightness. Brightness still differs per species (oak 0.85×, aspen 1.10×,
 # mostly the bark inside the crown, CROWN_SHADE): a constant cannot match all.
-LEAF_SHADE = np.array([0.37, 0.40, 0.515])
+LEAF_SHADE = np.array([0.37, 0.40, 0.56])
 # Bark inside the crown is shaded by its leaves (the aspen's white limbs showed as specks).
 CROWN_SHADE = 0.4
 

@@ -12,10 +12,11 @@ Each LOD is cut from LOD0's tree (lod_leaves.py), in this order:
      a leafless one spreads its kept branches over the crown (`keep_stems`), its trunks'
      nodes are coarsened too and its branches end in points (cones: a twig of one segment
      costs a third of its triangles, lod_nodes.point_tips);
-  4. leaves: as many stratified leaves of LOD0's as the rest of the budget holds — from the
-     second LOD on, blades a few pixels long are drawn as triangle cards, one triangle each
+  4. leaves: as many stratified leaves of LOD0's as the rest of the budget holds — from
+     LOD2 on, blades a few pixels long are drawn as triangle cards, one triangle each
      instead of a card's two, so twice as many stay (`TRIANGLE_CARD_PX`) — (nested: a
-     leaf a LOD keeps, the LODs before it keep too; each moves to the middle of LOD0's
+     leaf a LOD keeps, the LODs before it keep too, as long as no LOD keeps more leaves
+     than the one before, which `--lod-triangles` could ask for; each moves to the middle of LOD0's
      leaves it stands for, lod_leaves.gather_leaves, so it sits a little elsewhere in each
      LOD), their blades scaled so the LOD covers on screen,
      at its switch distance, what LOD0 covers (`cover_factors`, lod_cover.py): each region of a
@@ -40,6 +41,7 @@ from .lod_cover import Blades, Grid, solve_factor, stem_area, tree_area
 from .lod_nodes import coarsen_nodes, point_tips, twig_keys
 from .lod_leaves import LENGTH_SHARE, grow_leaves, prune_stems, stem_closure, thin_leaves
 from .mesh import MeshOptions, stem_sides
+from .mesh.options import FULL_CARD_CELL
 from .tree import Tree
 
 
@@ -53,7 +55,8 @@ MIN_RADIUS_PX = 0.5  # stems thinner than this many pixels are kept only if wort
 TRIANGLE_CARD_PX = 3.0  # a LOD from TRIANGLE_CARDS_FROM on whose switch shows LOD0's median
 # blade at most this many pixels long draws its leaf cards as triangle cards
 # (leafshapes.TRIANGLE_CARD, one triangle a leaf): the outline is not legible, the cover is,
-# and twice the leaves fit the budget
+# and twice the leaves fit the budget. Only over the generated atlas, whose alpha is the
+# LeafShape outline triangle_share measures (not an artist's image, nor untextured cards)
 TRIANGLE_CARDS_FROM = 2  # LOD index: LOD1 keeps cards, so leaves thin about evenly LOD by LOD
 # (LOD1 in triangle cards held every leaf, and all the thinning fell on the next switch)
 
@@ -135,21 +138,22 @@ def plan_lod(
         coarse = point_tips(coarse)
     per_stem = bark_triangles(coarse, mesh)
     share = bark0 / total0 if total0 else 1.0
-    worth = None
-    if leaf0:  # stems a pixel wide carry the crown (and its joints); thinner ones must show
-        worth = (coarse.stem_radius >= min_radius) | worth_keeping(coarse, per_stem, leaf0 / tree.n_leaves)
-    keep = keep_stems(coarse, per_stem, budget * share, worth)
-    pruned = prune_stems(coarse, keep)
     L = tree.n_leaves
     triangle = (
         triangle_cards
         and bool(L)
         and mesh.leaf_geometry == "card"
+        and mesh.leaf_cells != FULL_CARD_CELL  # the generated atlas: its alpha is the outline
         and float(np.median(tree.leaf_size[:, 0])) <= TRIANGLE_CARD_PX * px
     )
     if triangle:
         mesh = replace(mesh, leaf_geometry="triangle")
-    per_leaf = (1.0 if triangle else leaf0 / L) if L else 0.0
+    per_leaf = (1.0 if triangle else leaf0 / L) if L else 0.0  # triangles a kept leaf costs
+    worth = None
+    if leaf0:  # stems a pixel wide carry the crown (and its joints); thinner ones must show
+        worth = (coarse.stem_radius >= min_radius) | worth_keeping(coarse, per_stem, per_leaf)
+    keep = keep_stems(coarse, per_stem, budget * share, worth)
+    pruned = prune_stems(coarse, keep)
     n_keep = int(min(L, max(1, math.floor((budget - per_stem[keep].sum()) / per_leaf)))) if L else 0
     thin = thin_leaves(pruned, n_keep, 1.0)
     if triangle:

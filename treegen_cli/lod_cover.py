@@ -197,9 +197,8 @@ class Blades:
         self.fill = fill_factor(tree.params.leaf_shape)
         drawn = self.fill
         if triangle:  # the samples inside the triangle card carry the blade's share in it
-            inside = in_triangle_card(self.t, self.s + 0.5)
-            if inside.any():
-                self.s, self.t = self.s[inside], self.t[inside]
+            inside = in_triangle_card(self.t, self.s + 0.5)  # never empty: the middle is in
+            self.s, self.t = self.s[inside], self.t[inside]
             drawn = self.fill * triangle_share(int(tree.params.leaf_shape))[0]
         self.seen = np.abs(view @ F[:, :, 2].T) * (self.length * self.width * drawn / self.s.size)
 

@@ -164,6 +164,10 @@ class Renderer:
         cut = p.alpha_cutoff if g.tex is not None and p.alpha_cutoff is not None else -1.0
         self._set(prog, "alpha_cutoff", float(cut))
         self._set(prog, "opacity", p.opacity)
+        # a far LOD's triangle cards (3 vertices, 1 triangle a leaf) hash and tint per
+        # triangle; cards (and outlines, as before) per pair of triangles
+        triangle_cards = len(p.positions) == len(p.indices) and len(p.indices) > 0
+        self._set(prog, "leaf_tris", 1 if triangle_cards else 2)
 
     def render(
         self,

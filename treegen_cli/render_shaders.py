@@ -77,6 +77,7 @@ uniform float alpha_cutoff;    // < 0: opaque
 uniform float opacity;
 uniform float mip_bias;
 uniform float hash_from;       // mip level where the cut-out starts turning into a hashed test
+uniform int leaf_tris;         // triangles a leaf: 2 (card), 1 (triangle card): one hash a leaf
 
 vec2 wrap_uv(vec2 uv, ivec2 mode) {
     vec2 m = 1.0 - abs(mod(uv, 2.0) - 1.0);
@@ -101,7 +102,7 @@ bool cut_away(float alpha, vec2 uv) {
     vec2 dx = dFdx(uv) * size, dy = dFdy(uv) * size;
     float lod = 0.5 * log2(max(max(dot(dx, dx), dot(dy, dy)), 1e-12));
     uvec2 q = uvec2(gl_FragCoord.xy);
-    uint x = q.x * 73856093u ^ q.y * 19349663u ^ uint(gl_PrimitiveID >> 1) * 83492791u;
+    uint x = q.x * 73856093u ^ q.y * 19349663u ^ (uint(gl_PrimitiveID) / uint(max(leaf_tris, 1))) * 83492791u;
     x ^= x >> 16; x *= 0x7feb352du; x ^= x >> 15; x *= 0x846ca68bu; x ^= x >> 16;
     float h = (float(x) + 0.5) / 4294967296.0;
     return alpha < mix(alpha_cutoff, h, smoothstep(hash_from, hash_from + 2.0, lod));
@@ -161,8 +162,8 @@ void main() {
     }
     if (!gl_FrontFacing) n = -n;                       // light the face we look at
     vec3 albedo = base_color * texel.rgb;
-    if (leaf) {                                        // per-leaf tint (2 triangles a card)
-        float h = hash(uint(gl_PrimitiveID) >> 1u);
+    if (leaf) {                                        // per-leaf tint
+        float h = hash(uint(gl_PrimitiveID) / uint(max(leaf_tris, 1)));
         float k = has_tex ? 0.5 : 1.0;                 // textures bring their own variation
         albedo *= 1.0 + k * (vec3(0.3 * h, 0.4 * h, 0.2 * h) - vec3(0.15, 0.2, 0.2));
     }
