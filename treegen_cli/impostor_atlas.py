@@ -18,16 +18,12 @@ from dataclasses import replace
 import numpy as np
 
 from .asset import Lod, Material, Primitive
+from .leafshapes import card_corners
 
 
 def _corners(prim: Primitive) -> int:
-    """Vertices per leaf of a leaf primitive of cards (4: two triangles a leaf) or triangle
-    cards (3: one), told by vertices per triangle (LeafShape outlines with those counts, the
-    diamond and the triangle, are thinned alike); 0 for anything else (bark, other outlines)."""
-    V, T = len(prim.positions), len(prim.indices) // 3
-    if prim.material == "bark" or not T:
-        return 0
-    return 4 if V == 2 * T else 3 if V == 3 * T else 0
+    """Vertices a leaf of a leaf primitive (leafshapes.card_corners); 0 for bark."""
+    return 0 if prim.material == "bark" else card_corners(len(prim.positions), len(prim.indices))
 
 
 def _fewer_leaves(prim: Primitive, cap: int) -> Primitive:

@@ -32,8 +32,8 @@ from .render_gl import GL_SRGB8_ALPHA8, gl_context
 # Per channel: the crown's self-shadowing dims the warm sun more than the blue sky, so one grey
 # 0.4 left the cards yellower (blue/green 0.85-0.91× LOD3's on aspen, fir, oak and willow);
 # these balance the hue over those four at the switch size (impostor_colour_bench --size 96:
-# 0.91-1.05×; fitted there since coarse LODs in triangle cards), green the mean brightness. Brightness still differs per species (oak 0.85×, aspen 1.10×,
-# mostly the bark inside the crown, CROWN_SHADE): a constant cannot match all.
+# 0.91-1.05×), green the mean brightness. Brightness still differs per species (oak 0.90×,
+# aspen 1.18×, mostly the bark inside the crown, CROWN_SHADE): a constant cannot match all.
 LEAF_SHADE = np.array([0.37, 0.40, 0.56])
 # Bark inside the crown is shaded by its leaves (the aspen's white limbs showed as specks).
 CROWN_SHADE = 0.4

@@ -168,6 +168,14 @@ TRIANGLE_CARD = LeafOutline(
 )
 
 
+def card_corners(n_vertices: int, n_indices: int) -> int:
+    """Vertices a leaf of a primitive stamped as cards (4: two triangles a leaf) or triangle
+    cards (3: one), told by vertices per triangle; 0 when it is neither (the LeafShape
+    outlines with those counts, the diamond and the triangle, read as cards alike)."""
+    T = n_indices // 3
+    return 4 if T and n_vertices == 2 * T else 3 if T and n_vertices == 3 * T else 0
+
+
 def in_triangle_card(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Whether card points (x across −½..½, y base 0 to tip 1) lie in TRIANGLE_CARD."""
     return (y >= 0.0) & (np.abs(x) <= 0.5 * (1.0 - y))

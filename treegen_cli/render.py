@@ -29,6 +29,7 @@ import numpy as np
 
 from .drawable import Drawable, Part
 from .errors import TreegenError
+from .leafshapes import card_corners
 from .render_gl import GL_SRGB8_ALPHA8, gl_context, mip_chain
 from .render_shaders import DEPTH_FS, GROUND_FS, GROUND_VS, SKY_FS, SKY_VS, TREE_FS, TREE_VS
 from .render_view import Camera, direction, look_at, orthographic
@@ -164,10 +165,9 @@ class Renderer:
         cut = p.alpha_cutoff if g.tex is not None and p.alpha_cutoff is not None else -1.0
         self._set(prog, "alpha_cutoff", float(cut))
         self._set(prog, "opacity", p.opacity)
-        # a far LOD's triangle cards (3 vertices, 1 triangle a leaf) hash and tint per
-        # triangle; cards (and outlines, as before) per pair of triangles
-        triangle_cards = len(p.positions) == len(p.indices) and len(p.indices) > 0
-        self._set(prog, "leaf_tris", 1 if triangle_cards else 2)
+        # a far LOD's triangle cards hash and tint per triangle; cards (and outlines, as
+        # before) per pair of triangles
+        self._set(prog, "leaf_tris", 1 if card_corners(len(p.positions), len(p.indices)) == 3 else 2)
 
     def render(
         self,
