@@ -551,6 +551,38 @@ print(json.dumps([os.getpid(), first, second, len(kids)]))
     assert kids == 0  # no worker left behind (the fork server's helpers stay, as multiprocessing's do)
 
 
+def test_embedded_cluster_gives_a_worker_its_next_task_only_when_it_is_free():
+    """A worker of the embedded cluster holds one task at a time (executor.QUIET's
+    worker-saturation): the one running a long task is given no other, so at the end no worker
+    idles while another still has work queued behind a long one. Dask's default (1.1 × 1
+    thread → 2 slots) queued the third task behind the first on its worker here. Dask queues
+    a group of more than twice the threads sent in one go (client.map, as the forest's)."""
+    import subprocess
+    import sys
+
+    code = """
+import json, time
+from treegen_cli.executor import dask_client, worker_name
+def job(seconds):
+    start = time.monotonic()
+    time.sleep(seconds)
+    return worker_name(), start
+with dask_client(None, 2, fork=True) as (client, where):
+    client.wait_for_workers(2, timeout=60)
+    seconds = (3.0,) + (0.05,) * 5
+    futures = client.map(job, seconds, key=[f"treegen-test-{k}" for k in range(len(seconds))])
+    print(json.dumps([f.result() for f in futures]))
+"""
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=DASK_ENV)
+    assert proc.returncode == 0, proc.stderr
+    ran = json.loads(proc.stdout.strip().splitlines()[-1])
+    workers = [w for w, _start in ran]
+    assert workers[0] not in workers[1:], ran  # the long task's worker ran nothing else
+    assert len(set(workers[1:])) == 1, ran
+    starts = [start for _w, start in ran[1:]]
+    assert starts == sorted(starts), ran  # none held back behind the long one, then run last
+
+
 @pytest.fixture(scope="module")
 def dask_scheduler():
     """A real `dask scheduler` and one `dask worker` (this checkout's treegen_cli)."""

@@ -204,10 +204,16 @@ def _on_dask(client, keys, params, options):
     from distributed import as_completed
 
     run = f"{os.getpid():x}{time.time_ns() & 0xFFFFFF:x}"
-    futures = {
-        client.submit(build_prototype, params[p], s, options, key=f"treegen-forest-{p.stem}-{s}-{run}"): i
-        for i, (p, s) in enumerate(keys)
-    }
+    # one map, not a submit each: the scheduler sees the group whole and queues it (a worker
+    # takes its next prototype when free); tasks submitted one by one are placed as they come
+    mapped = client.map(
+        build_prototype,
+        [params[p] for p, _s in keys],
+        [s for _p, s in keys],
+        options=options,
+        key=[f"treegen-forest-{p.stem}-{s}-{run}" for p, s in keys],
+    )
+    futures = {fut: i for i, fut in enumerate(mapped)}
     for fut in as_completed(list(futures), loop=client.loop):
         i = futures.pop(fut)
         yield i, _in_file(keys[i][0], fut.result)
