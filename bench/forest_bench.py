@@ -94,6 +94,24 @@ Where the Dask path's remaining time went (2026-11-26, load 3-9; rusage and /pro
     runs resolve (it stays: 3 texture draws fewer). The forked Dask path is ~1.1× the old pool
     (0.6-0.7 s a run): the client's distributed import and scheduler start before the first
     prototype, as measured above. Not "no slower than before" yet.
+2026-11-26, late: per-task timelines (a timed build_prototype in each worker) showed two more
+    costs. (1) Placement: Dask's worker-saturation 1.1 gives a single-threaded worker two tasks,
+    so one worker ran four prototypes (5.4 s) while the other idled its last 2.4 s; now 1.0,
+    the prototypes sent in one client.map. (2) Results: a 44 MB prototype reached the client
+    0.16-0.32 s after its task ended (Dask's comms, the worker's loop contending with its next
+    build for the GIL); pickled to a shared temporary folder it takes 0.04-0.1 s
+    (forest.build.build_prototype_to; 0.027 s to pickle, 0.012 s to load). `--pools-only`:
+                          old pool   dask (forked)                dask fs    in process
+      before (load ~0.3)  5.36 s   6.55 s 1.22× p1.25 cpu1.06×    1.19×      1.35×   (reps 3)
+      (1)    (load ~0.6)  5.40 s   6.03 s 1.12× p1.11 cpu1.05×    1.22×      1.42×   (reps 4)
+      (1)+(2) (load 1.3)  5.73 s   6.09 s 1.06× p1.09 cpu1.03×    1.41×      1.46×   (reps 5)
+    What is left is before the first prototype: the client imports dask and distributed
+    (0.21 s), draws the shared textures (0.23 s), starts the scheduler and the workers register
+    (0.18 s), all on one core while the other idles; the old pool's first task starts 0.015 s
+    after the call. Largest prototype first (priority from generate's expected counts) was
+    tried: 5.88 vs 5.80 s (medians of 4), the two sassafras built side by side take 2.4-2.7 s
+    each against 2.0-2.2 s beside smaller ones. Dask's own multiprocessing scheduler (no
+    cluster) was tried: 5.89 s, its client loads each result before sending the next task.
 """
 
 from __future__ import annotations

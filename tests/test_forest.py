@@ -74,11 +74,33 @@ def write_layout(folder: Path, data: dict, name: str = "layout.json") -> Path:
     return p
 
 
+HANDOFF: dict[str, list[str]] = {}  # what the `scene` fixture's temporary folder held
+
+
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
+    """Built on an embedded 2-worker cluster, its temporary files in a folder of its own
+    (Dask keeps its scratch space there too)."""
+    import tempfile
+
     folder = tmp_path_factory.mktemp("forest")
     layout = load_layout(write_layout(folder, layout_dict()))
-    return layout, build_scene(layout, all_lods=False, workers=2, progress=False)
+    temp = tmp_path_factory.mktemp("temp")
+    made = []
+
+    class Recorded(tempfile.TemporaryDirectory):
+        def __init__(self, *a, **k):
+            super().__init__(*a, **k)
+            made.append(self.name)
+
+    saved = tempfile.tempdir, tempfile.TemporaryDirectory
+    tempfile.tempdir, tempfile.TemporaryDirectory = str(temp), Recorded
+    try:
+        built = build_scene(layout, all_lods=False, workers=2, progress=False)
+    finally:
+        tempfile.tempdir, tempfile.TemporaryDirectory = saved
+    HANDOFF.update(made=made, left=sorted(str(p) for p in temp.rglob("treegen-forest-*")))
+    return layout, built
 
 
 # ----------------------------------------------------------------------------- schema + CLI
@@ -499,10 +521,13 @@ def test_oversized_forest_is_refused_naming_the_flag(tmp_path):
 
 def test_dask_prototypes_equal_the_in_process_build_byte_for_byte(scene, tmp_path):
     """The `scene` fixture built its prototypes on an embedded 2-worker Dask cluster; built
-    in this process instead, every writer gives the same bytes."""
+    in this process instead, every writer gives the same bytes. The handoff folder is gone."""
     layout, on_dask = scene
     here = build_scene(layout, all_lods=False, workers=1, progress=False)
     assert (on_dask.cluster, here.cluster) == ("2 local worker(s)", "this process")
+    # the prototypes came back through a temporary folder (build_prototype_to), left empty
+    assert [Path(d).name.startswith("treegen-forest-") for d in HANDOFF["made"]] == [True]
+    assert HANDOFF["left"] == []
     (tmp_path / "dask").mkdir()
     (tmp_path / "here").mkdir()
     for suffix in (".glb", ".usda"):  # (.usda: texture files are named after the stem)
