@@ -31,31 +31,33 @@ IOU_TARGET = 0.9  # issue 13: silhouette IoU at least this at every switch
 # bench/lod_pop_bench.py --views 1 --max-px 384): (covered area off by at most, IoU at least),
 # a regression guard a little below what the LODs reach where the target is not met (None:
 # the target itself). Cover is within ±5 % for every species in this view. IoU ≥ 0.9 at
-# every switch for the fir, the tupelo, the aspen, the sassafras, the tamarack and the
-# willow; 0.88-0.90 for the oak, the cottonwood, the larch and the poplar; 0.70-0.87 for the
-# rest: at the
+# every switch for the fir, the tupelo, the aspen, the rush, the sassafras, the tamarack and
+# the willow; 0.88-0.90 for the oak, the cottonwood, the larch and the poplar; 0.71-0.86 for
+# the rest: at the
 # far switches each kept leaf stands for several and the crown reads blotchy at the 3-pixel
 # scale (the XOR of two LODs is speckle all over the crown, not its edge or trunk). What moved
 # it: gathering kept leaves to the middle of the leaves they stand for (median +0.008) and
 # triangle cards from LOD2 on (twice the leaves for the triangles: +0.03 to +0.05 where
-# blades are a few pixels; the palms' fronds are too big for them); which leaves are kept
+# blades are a few pixels; the palms' fronds are too big for them), far LODs' few-sided
+# stems drawn as wide as LOD0's (mesh.girth: rush 0.874 -> 0.926, desert bush +0.031, fan
+# palm +0.021, larch +0.016); which leaves are kept
 # moves it by the picking seed's ±0.013; leaf-cluster cards reached 0.9 for the aspen only
 # (bench/lod_cards_bench.py). Shave grass, leafless, keeps part of its whorls' branches (as
 # cones, spread over every whorl's sides, thickened) at 50, 15 and 5 % of the triangles.
 MEASURED = {
     "balsam_fir": (None, None),
     "black_tupelo": (None, None),
-    "ca_black_oak": (None, 0.88),
-    "desert_bush": (None, 0.81),
-    "eastern_cottonwood": (None, 0.875),
-    "european_larch": (None, 0.87),
-    "fan_palm": (None, 0.78),
+    "ca_black_oak": (None, 0.89),
+    "desert_bush": (None, 0.84),
+    "eastern_cottonwood": (None, 0.88),
+    "european_larch": (None, 0.89),
+    "fan_palm": (None, 0.80),
     "lombardy_poplar": (None, 0.87),
     "palm": (None, 0.80),
     "quaking_aspen": (None, None),
-    "rush": (None, 0.86),
+    "rush": (None, None),
     "sassafras": (None, None),
-    "shave_grass": (None, 0.69),
+    "shave_grass": (None, 0.70),
     "tamarack": (None, None),
     "weeping_willow": (None, None),
 }

@@ -2,7 +2,8 @@
 triangles (`--lod-triangles`, default 1, 0.5, 0.15, 0.05), and never more than LOD k−1.
 
 Each LOD is cut from LOD0's tree (lod_leaves.py), in this order:
-  1. sides: the LOD table's sides per level, never more than LOD0's (`--sides 5,3` caps them);
+  1. sides: the LOD table's sides per level, never more than LOD0's (`--sides 5,3` caps them),
+     each stem widened to LOD0's mean width (mesh.girth, which lod_cover counts too);
   2. nodes: branch nodes within NODE_TOL_PX pixels of the chord between their neighbours are
      dropped (lod_nodes.py): a far twig needs fewer rings, so more twigs fit the budget;
   3. bark: stems kept thickest first (their ancestors always) while their bark, counted from the
@@ -40,7 +41,7 @@ from .leafshapes import triangle_share
 from .lod_cover import Blades, Grid, solve_factor, stem_area, tree_area
 from .lod_nodes import coarsen_nodes, point_tips, twig_keys
 from .lod_leaves import LENGTH_SHARE, grow_leaves, prune_stems, stem_closure, thin_leaves
-from .mesh import MeshOptions, stem_sides
+from .mesh import MeshOptions, girth, stem_sides
 from .mesh.options import FULL_CARD_CELL
 from .tree import Tree
 
@@ -159,7 +160,7 @@ def plan_lod(
     if triangle:
         thin = triangle_blades(thin)
     sides = (stem_sides(full, mesh0 or mesh), stem_sides(thin, mesh))
-    leaf, radius = cover_factors(full, thin, px, sides, triangle)
+    leaf, radius = cover_factors(full, thin, px, sides, triangle, girth(thin, mesh))
     mesh_thin = mesh
     if radius != 1.0:  # thicker stems draw the same rings; sides cut to the bark table's
         thin = thicken(thin, radius)
@@ -181,24 +182,28 @@ def triangle_blades(tree: Tree) -> Tree:
 
 
 def cover_factors(
-    full: Tree, thin: Tree, px: float, sides=(None, None), triangle: bool = False
+    full: Tree, thin: Tree, px: float, sides=(None, None), triangle: bool = False, widen=None
 ) -> tuple[np.ndarray | float, float]:
     """(leaf area factors (L,), stem radius factor) so that `thin` (pruned and thinned from
     `full`) covers on screen what `full` covers, at `px` metres per pixel (lod_cover): each
     kept leaf grows by what its region (cells of REGION_PX pixels) lost in leaves and stems,
     times one factor solved so the whole covers as `full` does (`triangle`: `thin`'s blades
-    are drawn as triangle cards). A leafless tree thickens its kept branches instead."""
+    are drawn as triangle cards; `widen`: `thin`'s mesh.girth). A leafless tree thickens its
+    kept branches instead."""
     grid = Grid.around(full, px)
     target = grid.cover(tree_area(full, grid, sides[0]))
     if thin.n_leaves and full.n_leaves:
         drawn = triangle_share(int(thin.params.leaf_shape))[0] if triangle else 1.0
         local = regional_factors(full, thin, REGION_PX * px, drawn)
-        stems = stem_area(thin, grid, sides=sides[1])
+        stems = stem_area(thin, grid, sides=sides[1], girth=widen)
         blades = Blades(thin, grid.px, LENGTH_SHARE, float(np.median(local)), triangle)
         f = solve_factor(lambda f: grid.cover(stems + blades.area(grid, f * local)), target, 0.25, 4.0)
         return f * local, 1.0
     r = solve_factor(
-        lambda r: grid.cover(stem_area(thicken(thin, r), grid, sides=sides[1])), target, 0.5, 32.0
+        lambda r: grid.cover(stem_area(thicken(thin, r), grid, sides=sides[1], girth=widen)),
+        target,
+        0.5,
+        32.0,
     )
     return 1.0, r
 
@@ -272,7 +277,9 @@ def lod_tree(tree: Tree, k: int, lod0, previous, rig_options, mesh_options, opti
     """(Tree, RigOptions, MeshOptions) of LOD `k` > 0, cut from LOD0's `tree` within its
     triangle budget (`lod0`, `previous`: the LODs built so far, first and last)."""
     table = options.sides[min(k, len(options.sides) - 1)]
-    mesh = replace(mesh_options, sides=capped_sides(table, mesh_options.sides))
+    mesh = replace(
+        mesh_options, sides=capped_sides(table, mesh_options.sides), match_sides=mesh_options.sides
+    )
     frac = options.joint_fraction[min(k, len(options.joint_fraction) - 1)]
     rig = (
         replace(rig_options, max_joints=max(1, int(round(rig_options.max_joints * frac))))

@@ -98,10 +98,10 @@ class Grid:
         return float(np.sum(-np.expm1(-area / a))) * a / area.shape[0]
 
 
-def _segments(tree: Tree, px: float, radius_factor: float, sides: np.ndarray | None = None):
+def _segments(tree: Tree, px: float, radius_factor, sides: np.ndarray | None = None):
     """Stem segments (between consecutive nodes of a stem) sampled along and across; a stem
     drawn with `sides` (S,) sides is as wide, in each view, as its polygon turned as the mesh
-    turns it (polygon_widths), or round."""
+    turns it (polygon_widths), or round. `radius_factor`: one, or one per segment."""
     seg = tree.segments
     p0, p1 = tree.node_pos[seg], tree.node_pos[seg + 1]
     d = p1 - p0
@@ -159,12 +159,19 @@ def polygon_widths(frames: np.ndarray, sides: np.ndarray, across: np.ndarray) ->
 
 
 def stem_area(
-    tree: Tree, grid: Grid, radius_factor: float = 1.0, sides: np.ndarray | None = None
+    tree: Tree,
+    grid: Grid,
+    radius_factor: float = 1.0,
+    sides: np.ndarray | None = None,
+    girth: np.ndarray | None = None,
 ) -> np.ndarray:
-    """(V, cells) area of `tree`'s stems (radii × `radius_factor`, drawn with `sides` (S,)
-    sides, or round) per cell of `grid`."""
+    """(V, cells) area of `tree`'s stems (radii × `radius_factor`, × `girth` (S,) per stem as
+    the mesh widens a LOD's (mesh.girth), drawn with `sides` (S,) sides, or round) per cell of
+    `grid`."""
     if tree.n_nodes < 2:
         return np.zeros((len(AZIMUTHS), grid.shape[0] * grid.shape[1]))
+    if girth is not None:
+        radius_factor = radius_factor * girth[tree.node_stem[tree.segments]]
     u, w, seen, which = _segments(tree, grid.px, radius_factor, sides)
     return _opaque(grid, u, w, seen, which)
 

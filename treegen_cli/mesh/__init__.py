@@ -21,6 +21,7 @@ from .options import (
     MESH_DEFAULTS,
     MeshOptions,
     check_options,
+    girth,
     pointed_tips,
     stem_sides,
 )
@@ -36,6 +37,7 @@ __all__ = [
     "build_mesh",
     "leaf_variants",
     "merge_influences",
+    "girth",
     "pointed_tips",
     "stem_sides",
 ]

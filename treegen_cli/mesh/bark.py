@@ -25,7 +25,7 @@ from scipy.spatial.transform import Rotation
 
 from ..asset import Primitive
 from ..shapes import flare_factor, taper_radius
-from .options import MeshOptions, per_level, pointed_tips, stem_sides
+from .options import MeshOptions, girth, per_level, pointed_tips, stem_sides
 
 BARK_MAX_TILES = 64.0  # most texture tiles along one stem (see UVs above)
 
@@ -164,6 +164,7 @@ def bark_tubes(tree, rig, options: MeshOptions) -> Primitive:
     lobed = p.lobes > 0 and p.lobe_depth != 0
     sides = stem_sides(tree, options)
     sd = sides[rs]
+    radius = radius * girth(tree, options)[rs]  # a LOD's few sides as wide as LOD0's many
     nv = sd + 1  # seam column duplicated for UVs
     v0 = np.cumsum(nv) - nv
     Vr = int(nv.sum())

@@ -1,4 +1,4 @@
-"""MeshOptions, and the per-stem choices they make: sides and pointed tips.
+"""MeshOptions, and the per-stem choices they make: sides, girth and pointed tips.
 
 Kept apart from the builders because the size estimate (limits.py) must count exactly what
 bark.py will emit, from the same rules, before any vertex exists.
@@ -6,7 +6,7 @@ bark.py will emit, from the same rules, before any vertex exists.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -35,6 +35,8 @@ class MeshOptions:
     # leaf atlas layout: per variant its card rectangle
     # (u0, v0, u1, v1) in glTF UVs (top-left origin), as
     # textures.LeafAtlas.rects; materials.Materials gives it
+    match_sides: tuple[int, ...] = ()  # a LOD's: LOD0's sides table; each stem is drawn as
+    # wide, on average over the ways it turns, as with those sides (girth)
 
 
 MESH_DEFAULTS = MeshOptions()
@@ -57,6 +59,23 @@ def stem_sides(tree, options: MeshOptions) -> np.ndarray:
     if p.lobes > 0 and p.lobe_depth != 0:
         sides = np.where(level == 0, np.maximum(sides, 4 * p.lobes), sides)
     return np.where(tree.stem_radius < options.thin_radius, np.minimum(sides, options.thin_sides), sides)
+
+
+def girth(tree, options: MeshOptions) -> np.ndarray:
+    """Radius factor per stem (S,) that draws it, with its sides, as wide on average as with
+    options.match_sides (LOD0's): a regular n-gon through the circle is on average
+    n·sin(π/n)/π of its diameter wide (a square 0.90, a triangle 0.83, 16 sides 0.994), so a far
+    LOD's few-sided trunk would otherwise thin out when it takes over. 1 without match_sides."""
+    sides = stem_sides(tree, options)
+    if not options.match_sides:
+        return np.ones(sides.shape)
+    sides0 = stem_sides(tree, replace(options, sides=options.match_sides))
+    return _mean_width(sides0) / _mean_width(sides)
+
+
+def _mean_width(n: np.ndarray) -> np.ndarray:
+    """Mean seen width, in diameters, of a regular n-gon through the circle: perimeter / π."""
+    return n * np.sin(np.pi / n) / np.pi
 
 
 def pointed_tips(tree, options: MeshOptions) -> np.ndarray:
