@@ -478,6 +478,28 @@ def test_dry_run_prints_the_table_and_an_estimate_and_writes_nothing(workspace):
     assert not out.exists()  # (--json: test_dry_run_plans_what_the_run_builds_…)
 
 
+def test_estimate_counts_the_planning_it_measured_and_the_budget_a_job_grows_to(tmp_path):
+    """The dry run's seconds are the planning's own (measured, CPU) plus what the build adds
+    (clip, impostor, bytes); without a plan (the run's ETA) a triangle budget caps the tree
+    the model grows, as the build does (the mobile fir was estimated 22× too long)."""
+    from treegen_cli.batch import estimate, load_catalogue, plan_jobs
+
+    species = Path(__file__).resolve().parents[1] / "species"
+    entries = [
+        {"species": str(species / "balsam_fir.txt"), "seeds": [1]},
+        {"species": str(species / "balsam_fir.txt"), "seeds": [1], "triangles": 20000, "name": "b.{ext}"},
+    ]
+    (tmp_path / "c.json").write_text(json.dumps({"defaults": {"formats": ["glb"]}, "entries": entries}))
+    cat = load_catalogue(tmp_path / "c.json")
+    plan = plan_jobs(cat, tmp_path / "out")
+    full, budget = (estimate(cat, plan)[j.output] for j in plan.build)
+    assert full[2] == budget[2] == "model" and budget[1] < 0.2 * full[1] and budget[0] < 0.2 * full[0]
+    shape = [{"vertices": 1000, "triangles": 600, "joints": 10}]
+    shapes = {j.task: shape for j in plan.build}
+    measured = estimate(cat, plan, shapes, {j.task: 5.0 for j in plan.build})
+    assert all(5.0 < measured[j.output][1] < 6.0 and measured[j.output][2] == "plan" for j in plan.build)
+
+
 def test_dry_run_plans_what_the_run_builds_with_budgets_and_profiles(workspace):
     """--dry-run applies --profile, --triangles and --joints as the build does: per job the
     LOD count, triangles, joints and switch distances it prints are the manifest's after the

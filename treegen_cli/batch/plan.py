@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import os
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -38,11 +39,14 @@ def plan_jobs(cat: Catalogue, out_dir: str | os.PathLike, force: bool = False) -
     return Plan(build=build, skip=skip, previous=previous)
 
 
-def plan_trees(cat: Catalogue, jobs: list[Job]) -> dict[str, list[dict] | str]:
+def plan_trees(
+    cat: Catalogue, jobs: list[Job], seconds: dict[str, float] | None = None
+) -> dict[str, list[dict] | str]:
     """Per task of `jobs`: what its build will have per LOD (pipeline.plan_asset: triangles,
     vertices, joints, switch distance; budgets, profiles and joint limits applied as the build
     applies them), or the one-line error the build would fail with. Grown here, one tree at a
-    time, without wind, textures or the impostor atlas."""
+    time, without wind, textures or the impostor atlas; `seconds`, if given, gets each task's
+    CPU seconds of that (the build repeats them: estimate() counts them)."""
     from ..pipeline import plan_asset
 
     out: dict[str, list[dict] | str] = {}
@@ -50,10 +54,13 @@ def plan_trees(cat: Catalogue, jobs: list[Job]) -> dict[str, list[dict] | str]:
         if job.task in out:
             continue
         r = cat.resolved[job.task]
+        t0 = time.process_time()
         try:
             out[job.task] = plan_asset(cat.params[job.species], r.seed, r.options)
         except TreegenError as e:
             out[job.task] = str(e)
+        if seconds is not None:
+            seconds[job.task] = time.process_time() - t0
     return out
 
 
@@ -61,15 +68,23 @@ def plan_trees(cat: Catalogue, jobs: list[Job]) -> dict[str, list[dict] | str]:
 # triangle (indices), and the share of that --compress keeps (README: ~60 %, ~a fifth)
 _VERTEX_BYTES, _TRIANGLE_BYTES = 48, 8
 _COMPRESSED = {"none": 1.0, "quantize": 0.6, "meshopt": 0.2}
+# CPU seconds of a build beyond what plan_asset does (fitted on 7 builds, bench/estimate_bench.py):
+# per joint and frame of every LOD's clip (wind), the impostor, per MB written; and, with no
+# plan, per vertex of every LOD (growing, rigging, meshing, planning the LODs)
+_S_JOINT_FRAME, _S_IMPOSTOR, _S_MB, _S_VERTEX = 3.1e-6, 0.18, 0.014, 3.0e-6
 
 
 def estimate(
-    cat: Catalogue, plan: Plan, shapes: dict[str, list[dict] | str] | None = None
+    cat: Catalogue,
+    plan: Plan,
+    shapes: dict[str, list[dict] | str] | None = None,
+    seconds: dict[str, float] | None = None,
 ) -> dict[str, tuple[float, float, str]]:
     """Per output path: (bytes, seconds, how). Measured when an earlier run built the same
-    species, format and options (any seed); otherwise a model of the clip length and either
-    the planned LODs (`shapes`, plan_trees: "plan") or the leaf and stem counts the species
-    predicts (generate.estimate_counts: "model")."""
+    species, format and options (any seed); otherwise the planned LODs (`shapes` and the
+    planning's own `seconds`, plan_trees: "plan") or the leaf and stem counts the species
+    predicts (generate.estimate_counts: "model"), plus a model of the clip, the impostor and
+    the bytes written."""
     from ..generate import estimate_counts
 
     measured: dict[tuple, list] = {}
@@ -90,17 +105,24 @@ def estimate(
         shape = shapes.get(job.task) if shapes is not None else None
         if isinstance(shape, list):
             lods = len(shape)
-            verts = sum(row["vertices"] for row in shape)
+            joints = sum(row["joints"] for row in shape)
             size = _COMPRESSED[r.values["compress"]] * sum(
                 row["vertices"] * _VERTEX_BYTES + row["triangles"] * _TRIANGLE_BYTES for row in shape
             ) + shape[0]["joints"] * frames * 16 * min(lods, 2)
+            grow = (seconds or {}).get(job.task, _S_VERTEX * sum(row["vertices"] for row in shape))
             how = "plan"
         else:
             stems, leaves = estimate_counts(cat.params[job.species])
             lods = 1 if r.options.lod is None else r.options.lod.count
-            verts = (leaves * 4 + stems * 60) * (1.0 if lods == 1 else 1.9)
+            verts = leaves * 4 + stems * 60
+            if r.options.budget.triangles:  # LOD0 grown to the budget (~1.45 vertices a triangle)
+                verts = min(verts, 1.45 * r.options.budget.triangles)
+            verts *= 1.0 if lods == 1 else 1.9
+            joints = r.options.rig.max_joints * (1.0 if lods == 1 else 1.9)
             size = verts * 27 + r.options.rig.max_joints * frames * 16 * min(lods, 2)
+            grow = _S_VERTEX * verts
             how = "model"
-        secs = 0.03 + verts * 0.9e-6 + (lods > 1) * 0.1 + frames * 5e-4
+        impostor = lods > 1 and r.options.impostor is not None
+        secs = grow + _S_JOINT_FRAME * joints * frames + _S_IMPOSTOR * impostor + _S_MB * size / 1e6
         out[job.output] = (size, secs, how)
     return out

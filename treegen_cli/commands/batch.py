@@ -75,7 +75,8 @@ def batch(catalogue, out_dir, workers, scheduler, force, dry_run, schema, as_jso
 def _dry_run(cat, plan, workers, scheduler, as_json) -> None:
     """The job table with each tree's plan (LODs, triangles and joints per LOD, as the build
     will make them) and a size/time estimate; exit 1 when a job would fail, as the run would."""
-    shapes = plan_trees(cat, plan.build)
+    spent: dict[str, float] = {}
+    shapes = plan_trees(cat, plan.build, spent)
     for j in plan.skip:  # up to date: what the manifest recorded when it was built
         row = plan.previous[j.output]
         shapes.setdefault(
@@ -85,7 +86,7 @@ def _dry_run(cat, plan, workers, scheduler, as_json) -> None:
                 for t, n, d in zip(row["triangles"], row["joints"], row["lod_distances_m"])
             ],
         )
-    est = estimate(cat, plan, shapes)
+    est = estimate(cat, plan, shapes, spent)
     failing = [j for j in plan.build if isinstance(shapes[j.task], str)]
     todo = {j.output for j in plan.build}
     per_task: dict[str, float] = {}
