@@ -110,6 +110,31 @@ def test_budget_keeps_leaf_area_and_refines_small_trees():
     assert float(palm.leaf_area.sum()) == pytest.approx(float(grown("fan_palm").leaf_area.sum()), rel=0.02)
 
 
+def test_budget_keeps_the_willows_whips_and_each_species_leaves():
+    """At 20,000 triangles the weeping willow keeps its hanging whips (a third stem level,
+    coarser curves) rather than two levels dropped, which left an upright bush; and no species'
+    budget gives its leaves less than half their share of the species' own triangles (the
+    bark/leaf split is held both ways: a 4-level sassafras with 624 leaves is not a choice)."""
+    from treegen_cli.budget import BudgetOptions, plan_budget
+    from treegen_cli.mesh import MESH_DEFAULTS
+    from treegen_cli.params import load_params
+
+    _, willow = budget_build("weeping_willow", BUDGET)
+    assert int(willow.stem_level.max()) == 2  # levels 0-2: trunk, limbs, whips
+    for name in ("weeping_willow", "sassafras", "ca_black_oak", "quaking_aspen"):
+        plan = plan_budget(load_params(species_path(name)), 0, MESH_DEFAULTS, BudgetOptions(triangles=BUDGET))
+        full = grown(name)
+        own = full.n_leaves * 2 / (full.n_leaves * 2 + _bark(name))  # cards: 2 triangles
+        assert plan.leaves / plan.triangles >= 0.5 * own, (name, plan.describe())
+
+
+def _bark(name: str) -> int:
+    from treegen_cli.limits import estimate_triangles
+    from treegen_cli.mesh import MESH_DEFAULTS
+
+    return estimate_triangles(grown(name), MESH_DEFAULTS)[0]
+
+
 def test_refusal_names_the_minimum_and_the_minimum_builds(tmp_path):
     out = tmp_path / "a.glb"
     r = run_treegen("make", species_path("quaking_aspen"), "-o", out, "--triangles", "300")

@@ -10,15 +10,17 @@ and the leaf count is linear in LeafQuality (the generator error-diffuses count 
 the whole level), so each candidate costs a sum over the stems, not a mesh.
 
     plan = plan_budget(params, seed, MESH_DEFAULTS, BudgetOptions(triangles=20_000))
-    # Result (weeping willow, 1.67 M triangles): plan.params has 3 stem levels and leaves
-    # ×1/60 of LeafQuality; plan.mesh thinner stems; plan.triangles ≈ 20,000 exactly as built.
+    # Result (weeping willow, 1.67 M triangles): plan.params has 3 stem levels (its hanging
+    # whips kept, CurveRes ×¼) and ×1/118 of LeafQuality; plan.mesh thinner stems;
+    # plan.triangles ≈ 20,000 exactly as built.
 
 Choice: among candidates (levels dropped, a scale on every level's sides, rings per segment)
 the bark takes about the species' own bark share of the budget (clamped to `bark_share`) and
-the leaves the rest, restructuring (levels dropped, CurveRes coarsened) counting against a
-candidate; candidates whose total cannot land in [(1 − tolerance)·N, N] are skipped, so a
-budget is never exceeded. A budget below every candidate is refused naming the smallest one
-the species reaches; a budget above the finest candidate builds that one.
+the leaves the rest, each held to its share both ways (log of the ratio), restructuring
+(levels dropped, CurveRes coarsened) counting against a candidate; candidates whose total
+cannot land in [(1 − tolerance)·N, N] are skipped, so a budget is never exceeded. A budget
+below every candidate is refused naming the smallest one the species reaches; a budget above
+the finest candidate builds that one.
 """
 
 from __future__ import annotations
@@ -67,7 +69,7 @@ class BudgetOptions:
     min_levels: int = 2
     curve_scales: tuple[float, ...] = (1.0, 0.5, 0.25)
     bark_share: tuple[float, float] = (0.2, 0.8)
-    drop_cost: float = 0.7  # a dropped level weighs as much as a bark share off by ×2
+    drop_cost: float = 1.0  # a dropped level weighs as much as a share off by ×e
     curve_cost: float = 0.2  # per halving of CurveRes
 
     def __post_init__(self) -> None:
@@ -246,11 +248,16 @@ def plan_budget(
             f"leaves); use --triangles {minimum} or more"
         )
     fits = [c for c in found if (1.0 - options.tolerance) * T <= c.total <= T]
-    if fits:  # the bark's share, least restructuring
+    if fits:  # the bark's share and the leaves' (both ways off), least restructuring
         target_bark = aim if leaves0 == 0 else share * aim
-        best = min(
-            fits, key=lambda c: (abs(math.log(max(c.bark, 1) / target_bark)) + c.cost, abs(c.total - aim))
-        )
+        target_leaf = max((1.0 - share) * aim, 1.0) if leaves0 else None
+
+        def off(c: _Candidate) -> float:
+            leaf = c.total - c.bark
+            bark_off = abs(math.log(max(c.bark, 1) / target_bark))
+            return bark_off + (abs(math.log(max(leaf, 1) / target_leaf)) if target_leaf else 0.0)
+
+        best = min(fits, key=lambda c: (off(c) + c.cost, abs(c.total - aim)))
     else:  # the nearest below T (the largest when T is above all)
         best = min(found, key=lambda c: (c.total > T, abs(c.total - aim), c.cost))
     return _realise(params, trees, best, tri_per_leaf, generate_options, minimum, maximum, options, T)
