@@ -116,17 +116,38 @@ def test_preview_of_written_glb_and_usd_matches_in_process_render(written, tmp_p
 
 
 @needs_egl
-def test_gif_loops_and_moves(tmp_path, capsys):
+def test_gif_loops_seamlessly_at_the_clips_speed_and_moves(tmp_path, capsys):
     from PIL import Image, ImageSequence
 
-    gif = tmp_path / "wind.gif"
-    code, out, err = run(["preview", SMALL, "--animate", gif, "--size", "96", "--fps", "2"], capsys)
-    assert code == 0, err
-    frames = [np.asarray(f.convert("RGB")) for f in ImageSequence.Iterator(Image.open(gif))]
-    assert len(frames) == round(10.0 * 2) + 1  # default 10 s loop, both ends
-    assert all(f.shape == (96, 96, 3) for f in frames)
-    assert np.array_equal(frames[0], frames[-1])  # the loop closes
-    assert all(not np.array_equal(a, b) for a, b in zip(frames, frames[1:]))  # the tree moves
+    # 3 fps over the default 10 s loop: 333.3 ms a frame, not a whole number of GIF 10 ms units
+    gifs = [tmp_path / "a.gif", tmp_path / "b.gif"]
+    for gif in gifs:
+        code, out, err = run(["preview", SMALL, "--animate", gif, "--size", "64", "--fps", "3"], capsys)
+        assert code == 0, err
+    assert gifs[0].read_bytes() == gifs[1].read_bytes()  # deterministic
+    frames, delays = [], []
+    with Image.open(gifs[0]) as im:
+        for f in ImageSequence.Iterator(im):  # one image object, seeked: read each frame now
+            frames.append(np.asarray(f.convert("RGB")))
+            delays.append(f.info["duration"])
+    # the clip's 31 keys less the closing one, which repeats the first pose
+    assert len(frames) == round(10.0 * 3)
+    assert all(f.shape == (64, 64, 3) for f in frames)
+    assert abs(sum(delays) - 10_000) <= 10  # plays as long as the clip
+    assert set(delays) == {330, 340}  # the 10 ms rounding spread over the frames
+    # every step moves the tree, the wrap from the last frame to the first too: no pose held
+    assert all(not np.array_equal(a, b) for a, b in zip(frames, frames[1:] + frames[:1]))
+
+
+def test_gif_delays_sum_to_the_loop():
+    from treegen_cli.exchange.image import gif_delays
+
+    d = gif_delays(150, 10.0)  # 15 fps
+    assert d[:3] == [70, 60, 70] and sum(d) == 10_000
+    for n, duration in ((7, 1.3), (600, 10.0), (1, 4.0), (29, 9.97)):
+        d = gif_delays(n, duration)
+        assert len(d) == n and all(x % 10 == 0 and x > 0 for x in d)
+        assert abs(sum(d) - 1000 * duration) <= 5
 
 
 def _impostor_scenes(path: Path):

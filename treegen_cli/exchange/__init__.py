@@ -240,7 +240,8 @@ def save_still(pixels: np.ndarray, path: str | os.PathLike, colors: int = 0) -> 
     return path
 
 
-def save_loop(frames: list[np.ndarray], path: str | os.PathLike, fps: float) -> Path:
+def save_loop(frames: list[np.ndarray], path: str | os.PathLike, duration: float) -> Path:
+    """`frames` evenly spread over `duration` seconds, the closing pose left out."""
     path = check_suffix(path, LOOPS, "animation")
-    _write(lambda tmp: image.write_loop(frames, tmp, fps), path)
+    _write(lambda tmp: image.write_loop(frames, tmp, duration), path)
     return path
