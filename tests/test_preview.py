@@ -82,6 +82,37 @@ def test_still_has_tree_pixels_with_bark_and_leaf_colours(tmp_path, capsys):
     assert leafy.sum() > 30 and barky.sum() > 30
 
 
+def _tree_mask(scene, options) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels where the tree itself (not its shadow) is drawn, as the command frames it, and
+    the picture without the tree."""
+    rest = dataclasses.replace(scene, skinning=None)
+    t0 = np.zeros(1)
+    with Renderer(scene, options.width, options.height) as r:
+        args = (camera_for(rest, options, t0), rest.pose(t0)[0], *sun_angles(options))
+        tree, background = r.render(*args), r.render(*args, draw_tree=False)
+    return np.abs(tree.astype(int) - background.astype(int)).sum(-1) > 24, background
+
+
+@needs_egl
+@pytest.mark.parametrize("elevation", [8.0, 60.0])
+def test_framing_fits_the_width_and_the_height_of_any_aspect(elevation):
+    # the fan palm's crown is as wide as the tree is tall: a portrait view must fit its width
+    # (fitted to the height alone it ran off both sides), a landscape one its height
+    scene = load_scene(SMALL)
+    for width, height in ((60, 180), (180, 60)):
+        options = PreviewOptions(width=width, height=height, elevation=elevation)
+        mask, background = _tree_mask(scene, options)
+        ys, xs = np.nonzero(mask)
+        assert not (mask[:, 0].any() or mask[:, -1].any() or mask[0].any() or mask[-1].any())
+        # the fit is tight on the binding side: the 8 % margin, not a tree shrunk to a dot
+        fill = max((np.ptp(xs) + 1) / width, (np.ptp(ys) + 1) / height)
+        assert fill > 0.85, (width, height, fill)
+        # the view reaches far below the tree's foot: ground there (olive, green over blue),
+        # not sky showing through a near plane that cut the ground off
+        g_, b_ = (background[-1, :, c].astype(int) for c in (1, 2))
+        assert (g_ > b_).all()
+
+
 @needs_egl
 def test_preview_of_written_glb_and_usd_matches_in_process_render(written, tmp_path, capsys):
     # the species itself too: grown in-process at LOD 0 it skips the LOD chain (preview.py),

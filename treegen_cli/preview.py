@@ -137,9 +137,15 @@ def opaque_points(part: Part, budget: int = 50_000):
 
 
 def camera_for(scene: Drawable, options: PreviewOptions, times: np.ndarray):
-    """One camera that fits the tree at every one of `times` (up to 12 sampled)."""
+    """One camera that fits the tree, in the image's width and height, at every one of `times`
+    (up to 12 sampled)."""
     sample = times if len(times) <= 12 else times[np.linspace(0, len(times) - 1, 12).astype(int)]
-    return frame_points(framing_points(scene, sample), options.azimuth, options.elevation)
+    return frame_points(
+        framing_points(scene, sample),
+        options.azimuth,
+        options.elevation,
+        aspect=options.width / options.height,
+    )
 
 
 def sun_angles(options: PreviewOptions) -> tuple[float, float]:
