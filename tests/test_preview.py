@@ -302,6 +302,57 @@ def test_bad_input_is_one_line_exit_2(argv, needle, written, capsys):
     assert "Traceback" not in err
 
 
+@pytest.fixture(scope="module")
+def forest_files(tmp_path_factory):
+    """Two instances of one small palm written by `treegen forest` as GLB and USDA."""
+    d = tmp_path_factory.mktemp("forest")
+    layout = {
+        "wind": {"duration": 1.0, "fps": 8, "seed": 3},
+        "defaults": {"max_joints": 12, "lod_distances": [0, 25]},
+        "instances": [
+            {"species": str(ROOT / "species" / "palm.txt"), "position": [0, 0], "seed": 1},
+            {
+                "species": str(ROOT / "species" / "palm.txt"),
+                "position": [6, 3],
+                "seed": 1,
+                "rotation_deg": 90,
+            },
+        ],
+    }
+    (d / "layout.json").write_text(json.dumps(layout))
+    for name in ("f.glb", "f.usda"):
+        with pytest.raises(SystemExit) as e:
+            main(
+                [
+                    "forest",
+                    str(d / "layout.json"),
+                    "-o",
+                    str(d / name),
+                    "--workers",
+                    "1",
+                    "--no-impostor",
+                    "-q",
+                ]
+            )
+        assert e.value.code == 0
+    return d
+
+
+@pytest.mark.parametrize("name", ["f.glb", "f.usda"])
+def test_preview_of_a_forest_is_refused_in_one_line(forest_files, name, tmp_path, capsys):
+    # the GLB drew its first tree alone (exit 0), the USD said it had no UsdSkel SkelRoot
+    png, gif = tmp_path / "f.png", tmp_path / "f.gif"
+    code, out, err = run(["preview", forest_files / name, "-o", png, "--animate", gif], capsys)
+    assert code == 2
+    assert err.count("\n") == 1 and err.startswith("treegen: error:") and "Traceback" not in err
+    assert f"{name}: a forest (2 instances); preview draws single trees" in err
+    assert "treegen make" in err
+    assert not png.exists() and not gif.exists()
+    # other readers of a forest GLB still get its first tree (test_forest relies on it)
+    if name == "f.glb":
+        assert scene_from_gltf(forest_files / name).parts
+
+
 def test_lod_out_of_range_raises_treegen_error(written):
     with pytest.raises(TreegenError, match="only LOD 0|LODs 0"):
         scene_from_gltf(written / "palm.glb", lod=50)

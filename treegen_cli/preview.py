@@ -57,7 +57,7 @@ def load_scene(path: str | os.PathLike, options: PreviewOptions = DEFAULTS) -> D
     exchange) as a Drawable."""
     path = exchange.check_input(resolve_input(path))
     if not exchange.is_species(path):
-        return exchange.read_drawable(path, options.lod)
+        return exchange.read_drawable(path, options.lod, refuse_forest=True)
     params = load_params(path)
     # LOD 0 alone needs no LOD chain: skip building (and cutting leaves for) the others
     make = replace(MakeOptions(), lod=None) if options.lod == 0 else MakeOptions()
