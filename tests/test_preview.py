@@ -82,6 +82,37 @@ def test_still_has_tree_pixels_with_bark_and_leaf_colours(tmp_path, capsys):
     assert leafy.sum() > 30 and barky.sum() > 30
 
 
+def _tree_mask(scene, options) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels where the tree itself (not its shadow) is drawn, as the command frames it, and
+    the picture without the tree."""
+    rest = dataclasses.replace(scene, skinning=None)
+    t0 = np.zeros(1)
+    with Renderer(scene, options.width, options.height) as r:
+        args = (camera_for(rest, options, t0), rest.pose(t0)[0], *sun_angles(options))
+        tree, background = r.render(*args), r.render(*args, draw_tree=False)
+    return np.abs(tree.astype(int) - background.astype(int)).sum(-1) > 24, background
+
+
+@needs_egl
+@pytest.mark.parametrize("elevation", [8.0, 60.0])
+def test_framing_fits_the_width_and_the_height_of_any_aspect(elevation):
+    # the fan palm's crown is as wide as the tree is tall: a portrait view must fit its width
+    # (fitted to the height alone it ran off both sides), a landscape one its height
+    scene = load_scene(SMALL)
+    for width, height in ((60, 180), (180, 60)):
+        options = PreviewOptions(width=width, height=height, elevation=elevation)
+        mask, background = _tree_mask(scene, options)
+        ys, xs = np.nonzero(mask)
+        assert not (mask[:, 0].any() or mask[:, -1].any() or mask[0].any() or mask[-1].any())
+        # the fit is tight on the binding side: the 8 % margin, not a tree shrunk to a dot
+        fill = max((np.ptp(xs) + 1) / width, (np.ptp(ys) + 1) / height)
+        assert fill > 0.85, (width, height, fill)
+        # the view reaches far below the tree's foot: ground there (olive, green over blue),
+        # not sky showing through a near plane that cut the ground off
+        g_, b_ = (background[-1, :, c].astype(int) for c in (1, 2))
+        assert (g_ > b_).all()
+
+
 @needs_egl
 def test_preview_of_written_glb_and_usd_matches_in_process_render(written, tmp_path, capsys):
     # the species itself too: grown in-process at LOD 0 it skips the LOD chain (preview.py),
@@ -116,17 +147,38 @@ def test_preview_of_written_glb_and_usd_matches_in_process_render(written, tmp_p
 
 
 @needs_egl
-def test_gif_loops_and_moves(tmp_path, capsys):
+def test_gif_loops_seamlessly_at_the_clips_speed_and_moves(tmp_path, capsys):
     from PIL import Image, ImageSequence
 
-    gif = tmp_path / "wind.gif"
-    code, out, err = run(["preview", SMALL, "--animate", gif, "--size", "96", "--fps", "2"], capsys)
-    assert code == 0, err
-    frames = [np.asarray(f.convert("RGB")) for f in ImageSequence.Iterator(Image.open(gif))]
-    assert len(frames) == round(10.0 * 2) + 1  # default 10 s loop, both ends
-    assert all(f.shape == (96, 96, 3) for f in frames)
-    assert np.array_equal(frames[0], frames[-1])  # the loop closes
-    assert all(not np.array_equal(a, b) for a, b in zip(frames, frames[1:]))  # the tree moves
+    # 3 fps over the default 10 s loop: 333.3 ms a frame, not a whole number of GIF 10 ms units
+    gifs = [tmp_path / "a.gif", tmp_path / "b.gif"]
+    for gif in gifs:
+        code, out, err = run(["preview", SMALL, "--animate", gif, "--size", "64", "--fps", "3"], capsys)
+        assert code == 0, err
+    assert gifs[0].read_bytes() == gifs[1].read_bytes()  # deterministic
+    frames, delays = [], []
+    with Image.open(gifs[0]) as im:
+        for f in ImageSequence.Iterator(im):  # one image object, seeked: read each frame now
+            frames.append(np.asarray(f.convert("RGB")))
+            delays.append(f.info["duration"])
+    # the clip's 31 keys less the closing one, which repeats the first pose
+    assert len(frames) == round(10.0 * 3)
+    assert all(f.shape == (64, 64, 3) for f in frames)
+    assert abs(sum(delays) - 10_000) <= 10  # plays as long as the clip
+    assert set(delays) == {330, 340}  # the 10 ms rounding spread over the frames
+    # every step moves the tree, the wrap from the last frame to the first too: no pose held
+    assert all(not np.array_equal(a, b) for a, b in zip(frames, frames[1:] + frames[:1]))
+
+
+def test_gif_delays_sum_to_the_loop():
+    from treegen_cli.exchange.image import gif_delays
+
+    d = gif_delays(150, 10.0)  # 15 fps
+    assert d[:3] == [70, 60, 70] and sum(d) == 10_000
+    for n, duration in ((7, 1.3), (600, 10.0), (1, 4.0), (29, 9.97)):
+        d = gif_delays(n, duration)
+        assert len(d) == n and all(x % 10 == 0 and x > 0 for x in d)
+        assert abs(sum(d) - 1000 * duration) <= 5
 
 
 def _impostor_scenes(path: Path):
@@ -248,6 +300,57 @@ def test_bad_input_is_one_line_exit_2(argv, needle, written, capsys):
     assert code == 2
     assert err.count("\n") == 1 and err.startswith("treegen: error:") and needle in err
     assert "Traceback" not in err
+
+
+@pytest.fixture(scope="module")
+def forest_files(tmp_path_factory):
+    """Two instances of one small palm written by `treegen forest` as GLB and USDA."""
+    d = tmp_path_factory.mktemp("forest")
+    layout = {
+        "wind": {"duration": 1.0, "fps": 8, "seed": 3},
+        "defaults": {"max_joints": 12, "lod_distances": [0, 25]},
+        "instances": [
+            {"species": str(ROOT / "species" / "palm.txt"), "position": [0, 0], "seed": 1},
+            {
+                "species": str(ROOT / "species" / "palm.txt"),
+                "position": [6, 3],
+                "seed": 1,
+                "rotation_deg": 90,
+            },
+        ],
+    }
+    (d / "layout.json").write_text(json.dumps(layout))
+    for name in ("f.glb", "f.usda"):
+        with pytest.raises(SystemExit) as e:
+            main(
+                [
+                    "forest",
+                    str(d / "layout.json"),
+                    "-o",
+                    str(d / name),
+                    "--workers",
+                    "1",
+                    "--no-impostor",
+                    "-q",
+                ]
+            )
+        assert e.value.code == 0
+    return d
+
+
+@pytest.mark.parametrize("name", ["f.glb", "f.usda"])
+def test_preview_of_a_forest_is_refused_in_one_line(forest_files, name, tmp_path, capsys):
+    # the GLB drew its first tree alone (exit 0), the USD said it had no UsdSkel SkelRoot
+    png, gif = tmp_path / "f.png", tmp_path / "f.gif"
+    code, out, err = run(["preview", forest_files / name, "-o", png, "--animate", gif], capsys)
+    assert code == 2
+    assert err.count("\n") == 1 and err.startswith("treegen: error:") and "Traceback" not in err
+    assert f"{name}: a forest (2 instances); preview draws single trees" in err
+    assert "treegen make" in err
+    assert not png.exists() and not gif.exists()
+    # other readers of a forest GLB still get its first tree (test_forest relies on it)
+    if name == "f.glb":
+        assert scene_from_gltf(forest_files / name).parts
 
 
 def test_lod_out_of_range_raises_treegen_error(written):

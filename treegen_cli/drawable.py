@@ -254,6 +254,16 @@ def check_lod(lod: int, n: int, what) -> None:
         raise TreegenError(f"{what}: --lod {lod} is out of range; this asset has {have}")
 
 
+def forest_error(path, instances: int) -> TreegenError:
+    """The one line for a forest file handed to a single-tree reader: drawing its first tree (or
+    failing to find a tree outside its instances) would say nothing true about the file."""
+    return TreegenError(
+        f"{path}: a forest ({instances} instance{'s' * (instances != 1)}); preview draws single "
+        f"trees: preview one of "
+        f"its species (treegen preview SPECIES) or a tree from treegen make SPECIES -o tree.glb"
+    )
+
+
 def vertex_normals(pos: np.ndarray, idx: np.ndarray) -> np.ndarray:
     """Area-weighted vertex normals, for meshes that come without any."""
     tri = np.asarray(idx, np.int64).reshape(-1, 3)

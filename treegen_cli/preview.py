@@ -57,7 +57,7 @@ def load_scene(path: str | os.PathLike, options: PreviewOptions = DEFAULTS) -> D
     exchange) as a Drawable."""
     path = exchange.check_input(resolve_input(path))
     if not exchange.is_species(path):
-        return exchange.read_drawable(path, options.lod)
+        return exchange.read_drawable(path, options.lod, refuse_forest=True)
     params = load_params(path)
     # LOD 0 alone needs no LOD chain: skip building (and cutting leaves for) the others
     make = replace(MakeOptions(), lod=None) if options.lod == 0 else MakeOptions()
@@ -137,9 +137,15 @@ def opaque_points(part: Part, budget: int = 50_000):
 
 
 def camera_for(scene: Drawable, options: PreviewOptions, times: np.ndarray):
-    """One camera that fits the tree at every one of `times` (up to 12 sampled)."""
+    """One camera that fits the tree, in the image's width and height, at every one of `times`
+    (up to 12 sampled)."""
     sample = times if len(times) <= 12 else times[np.linspace(0, len(times) - 1, 12).astype(int)]
-    return frame_points(framing_points(scene, sample), options.azimuth, options.elevation)
+    return frame_points(
+        framing_points(scene, sample),
+        options.azimuth,
+        options.elevation,
+        aspect=options.width / options.height,
+    )
 
 
 def sun_angles(options: PreviewOptions) -> tuple[float, float]:
@@ -166,11 +172,12 @@ def render_still(scene: Drawable, options: PreviewOptions = DEFAULTS, renderer=N
 
 
 def render_loop(scene: Drawable, options: PreviewOptions = DEFAULTS, renderer=None) -> list[np.ndarray]:
-    """Frames over the whole wind loop, first and last at t = 0 and t = duration (equal poses
-    for a looping clip); one fixed camera that fits every frame."""
+    """Frames over the whole wind loop at t = 0, 1/fps, … up to but not including t = duration:
+    the clip's closing key repeats its first pose, and a GIF wraps back to frame 0, so drawing
+    it too would hold that pose twice at the seam. One fixed camera fits every frame."""
     if scene.duration <= 0 or scene.skinning is None:
         raise TreegenError(f"{scene.label}: has no wind animation to render (made with --no-wind?)")
-    times = loop_times(scene.duration, options.fps)
+    times = loop_times(scene.duration, options.fps)[:-1]
     camera = camera_for(scene, options, times)
     frames = []
     with _renderer(scene, options, renderer) as r:
@@ -205,8 +212,8 @@ def _size(text: str) -> tuple[int, int]:
 @click.option(
     "--animate",
     type=click.Path(path_type=Path),
-    help="Animated GIF of the whole wind loop (first frame = last frame), skinned on "
-    "the GPU from the file's joints and keys, like an engine.",
+    help="Animated GIF of the whole wind loop, seamless (the closing pose is not drawn twice) "
+    "and as long as the clip, skinned on the GPU from the file's joints and keys, like an engine.",
 )
 @click.option(
     "--azimuth",
@@ -238,7 +245,7 @@ def _size(text: str) -> tuple[int, int]:
     type=float,
     default=DEFAULTS.fps,
     show_default=True,
-    help="GIF frames per second of the wind loop (frames = duration × fps + 1).",
+    help="GIF frames per second of the wind loop (frames = duration × fps).",
 )
 @click.option(
     "--png-colors",
@@ -286,7 +293,7 @@ def preview_command(
             summary["image"] = str(output)
         if animate is not None:
             frames = render_loop(scene, options, renderer)
-            exchange.save_loop(frames, animate, fps)
+            exchange.save_loop(frames, animate, scene.duration)
             lines.append(
                 f"wrote {animate}  ({width}×{height}, {len(frames)} frames over "
                 f"{scene.duration:.2f} s, LOD {lod})"

@@ -80,15 +80,19 @@ def frame_points(
     elevation_deg: float,
     margin: float = 0.08,
     fov_deg: float = FOV_DEG,
+    aspect: float = 1.0,
 ) -> Camera:
-    """A camera looking from (azimuth, elevation) that fits every point inside the view with
-    `margin` (fraction of the half-height) to spare, centred on the points' screen extent."""
+    """A camera looking from (azimuth, elevation) that fits every point inside a view `aspect`
+    (width / height) wide with `margin` (fraction of each half-extent) to spare, centred on the
+    points' screen extent. `fov_deg` is vertical, so the view's half-width is aspect times its
+    half-height: fitting both to the height alone cropped a tall tree's crown in a portrait view."""
     pts = np.asarray(points, dtype=np.float64)
     lo, hi = pts.min(0), pts.max(0)
     target = 0.5 * (lo + hi)
     radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-3)
     back = direction(azimuth_deg, elevation_deg)
-    tan_half = np.tan(np.radians(fov_deg) / 2) * (1.0 - margin)
+    tan_half = np.tan(np.radians(fov_deg) / 2) * (1.0 - margin)  # vertical
+    tan_wide = tan_half * aspect  # horizontal
     dist = 3.0 * radius
     for _ in range(4):  # fit distance, re-centre on the projected extent, fit again
         view = look_at(target + back * dist, target)
@@ -98,10 +102,24 @@ def frame_points(
         cx, cy = 0.5 * (x.min() + x.max()), 0.5 * (y.min() + y.max())
         right, up = view[0, :3], view[1, :3]
         target = target + dist * (cx * right + cy * up)
-        # distance at which every point's |x|,|y| tangent from the new centre fits tan_half
+        # distance at which every point's x and y tangents from the new centre fit the view
         rel = pts - target
         along = rel @ back  # towards the camera
-        lateral = np.maximum(np.abs(rel @ right), np.abs(rel @ up))
-        dist = float(np.max(along + lateral / tan_half))
-    near = max(dist - radius * 1.5, dist * 0.02)
-    return Camera(eye=target + back * dist, target=target, near=near, far=dist + radius * 60)
+        lateral = np.maximum(np.abs(rel @ right) / tan_wide, np.abs(rel @ up) / tan_half)
+        dist = float(np.max(along + lateral))
+    eye = target + back * dist
+    near = min(max(dist - radius * 1.5, dist * 0.02), ground_depth(eye, back, up, lo[1], fov_deg))
+    return Camera(eye=eye, target=target, near=near, far=dist + radius * 60)
+
+
+def ground_depth(eye: np.ndarray, back: np.ndarray, up: np.ndarray, ground_y: float, fov_deg: float) -> float:
+    """Nine tenths of the view depth at which the image's bottom edge meets the ground plane
+    (inf if it looks above it). A view framed to the width (a portrait image) reaches well
+    below the tree's foot, and a near plane set by the tree alone cut the ground there, leaving
+    a band of sky along the bottom. The camera has no roll, so the whole edge meets the ground
+    at one depth."""
+    down = np.tan(np.radians(fov_deg) / 2) * up[1] + back[1]  # −y of the ray at depth 1
+    height = float(eye[1] - ground_y)
+    if down <= 1e-9 or height <= 0:
+        return float("inf")
+    return 0.9 * height / float(down)

@@ -49,10 +49,10 @@ def _static(asset: Asset, path: Path) -> None:
     write_static(asset, path)
 
 
-def _read_usd(path: Path, lod: int):
+def _read_usd(path: Path, lod: int, refuse_forest: bool = False):
     from .read_usd import read_drawable  # lazy: pxr (see _usd)
 
-    return read_drawable(path, lod)
+    return read_drawable(path, lod)  # refuses a forest either way: no tree outside its instances
 
 
 WRITERS: dict[str, Callable[[Asset, Path], None]] = {
@@ -71,7 +71,7 @@ FOREST_WRITERS: dict[str, Callable[[Forest, Path], None]] = {
     ".usdc": _forest_usd,
     ".usdz": _forest_usd,
 }
-READERS: dict[str, Callable[[Path, int], object]] = {
+READERS: dict[str, Callable[[Path, int, bool], object]] = {
     ".glb": read_gltf.read_drawable,
     ".gltf": read_gltf.read_drawable,
     ".usd": _read_usd,
@@ -226,12 +226,14 @@ def is_species(path: Path) -> bool:
     return path.suffix.lower() in SPECIES
 
 
-def read_drawable(path: str | os.PathLike, lod: int = 0):
-    """A written tree (glTF or UsdSkel) as a drawable.Drawable posed by the file's own skin."""
+def read_drawable(path: str | os.PathLike, lod: int = 0, refuse_forest: bool = False):
+    """A written tree (glTF or UsdSkel) as a drawable.Drawable posed by the file's own skin.
+    A forest (`treegen forest`) reads as its first tree, or with `refuse_forest` raises the one
+    line saying it is a forest (USD forests always do: their trees are all instances)."""
     path = check_suffix(path, READERS, "input")
     if not path.is_file():
         raise TreegenError(f"{path}: no such file")
-    return READERS[path.suffix.lower()](path, lod)
+    return READERS[path.suffix.lower()](path, lod, refuse_forest)
 
 
 def save_still(pixels: np.ndarray, path: str | os.PathLike, colors: int = 0) -> Path:
@@ -240,7 +242,8 @@ def save_still(pixels: np.ndarray, path: str | os.PathLike, colors: int = 0) -> 
     return path
 
 
-def save_loop(frames: list[np.ndarray], path: str | os.PathLike, fps: float) -> Path:
+def save_loop(frames: list[np.ndarray], path: str | os.PathLike, duration: float) -> Path:
+    """`frames` evenly spread over `duration` seconds, the closing pose left out."""
     path = check_suffix(path, LOOPS, "animation")
-    _write(lambda tmp: image.write_loop(frames, tmp, fps), path)
+    _write(lambda tmp: image.write_loop(frames, tmp, duration), path)
     return path

@@ -31,6 +31,7 @@ from ..drawable import (
     PoseRig,
     check_lod,
     decode_image,
+    forest_error,
     is_impostor,
     vertex_normals,
 )
@@ -63,10 +64,15 @@ def _node_world(gltf: dict) -> tuple[np.ndarray, np.ndarray]:
     return parent, forward(parent, local)
 
 
-def read_drawable(path: Path, lod: int = 0) -> Drawable:
-    """A .glb/.gltf (ours, or any triangle glTF with at most one skin per LOD node)."""
+def read_drawable(path: Path, lod: int = 0, refuse_forest: bool = False) -> Drawable:
+    """A .glb/.gltf (ours, or any triangle glTF with at most one skin per LOD node): the first
+    mesh root of the scene, so a forest reads as its first tree, or with `refuse_forest` raises
+    the one line saying it is a forest."""
     try:
         gltf, blob = read_gltf(path)
+        trees = forest_instances(gltf)
+        if refuse_forest and trees:
+            raise forest_error(path, trees)
         if MESHOPT in gltf.get("extensionsUsed", []):
             gltf, blob = unpack_meshopt(gltf, blob, path)
         return _gltf_scene(gltf, blob, read_strided, lod, path)
@@ -74,6 +80,19 @@ def read_drawable(path: Path, lod: int = 0) -> Drawable:
         raise
     except (OSError, ValueError, KeyError, IndexError, TypeError, struct.error) as e:
         raise TreegenError(f"{path}: not a readable glTF file ({type(e).__name__}: {e})") from None
+
+
+def forest_instances(gltf: dict) -> int:
+    """Trees in a forest file, or 0 for a single tree: the count forest_gltf.py records in the
+    asset's extras, else the scene's skinned mesh roots when there are several (one per
+    instance; a tree's own LODs hang off its root by MSFT_lod, not as roots)."""
+    extras = gltf.get("asset", {}).get("extras", {})
+    if isinstance(extras, dict) and "forest" in extras:
+        return int(extras.get("instances", 0))
+    nodes = gltf.get("nodes", [])
+    scene = gltf.get("scenes", [{}])[gltf.get("scene", 0)] if gltf.get("scenes") else {}
+    skinned = [i for i in scene.get("nodes", []) if "mesh" in nodes[i] and "skin" in nodes[i]]
+    return len(skinned) if len(skinned) > 1 else 0
 
 
 def unpack_meshopt(gltf: dict, blob: bytes, path: Path, simd: bool = True) -> tuple[dict, bytes]:

@@ -17,12 +17,23 @@ from pathlib import Path
 
 import numpy as np
 
-from ..drawable import Drawable, Part, check_lod, decode_image, is_impostor, vertex_normals, z_up_to_y_up
+from ..drawable import (
+    Drawable,
+    Part,
+    check_lod,
+    decode_image,
+    forest_error,
+    is_impostor,
+    vertex_normals,
+    z_up_to_y_up,
+)
 from ..errors import TreegenError
 
 
 def read_drawable(path: Path, lod: int = 0) -> Drawable:
-    """A UsdSkel file: LOD k is the k-th SkelRoot; skinning from UsdSkel's own query."""
+    """A UsdSkel file: LOD k is the k-th SkelRoot; skinning from UsdSkel's own query. A forest's
+    trees are instanceable prims (forest_usd.py) that traversal does not enter, so a forest has
+    no SkelRoot to read: it is named as a forest."""
     try:
         from pxr import Usd, UsdGeom, UsdShade, UsdSkel
     except ImportError as e:
@@ -37,6 +48,9 @@ def read_drawable(path: Path, lod: int = 0) -> Drawable:
     to_world = z_up_to_y_up() if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z else np.eye(4)
     skel_roots = [p for p in stage.Traverse() if p.IsA(UsdSkel.Root)]
     if not skel_roots:
+        trees = _instanced_trees(stage)
+        if trees:
+            raise forest_error(path, trees)
         raise TreegenError(f"{path}: no UsdSkel SkelRoot (treegen preview reads skinned trees)")
     check_lod(lod, len(skel_roots), path)
     root = skel_roots[lod]
@@ -142,6 +156,23 @@ USD_WRAP = {
     "black": "CLAMP",
     "useMetadata": "REPEAT",
 }
+
+
+def _instanced_trees(stage) -> int:
+    """How many instance prims hold a SkelRoot (a tree) in their prototype; each of the few
+    prototypes is searched once."""
+    from pxr import Usd, UsdSkel
+
+    has_skel: dict = {}
+    n = 0
+    for prim in stage.Traverse():  # instances are leaves of this traversal
+        if prim.IsInstance():
+            proto = prim.GetPrototype()
+            key = proto.GetPath()
+            if key not in has_skel:
+                has_skel[key] = any(p.IsA(UsdSkel.Root) for p in Usd.PrimRange(proto))
+            n += has_skel[key]
+    return n
 
 
 def _source(inp):
