@@ -160,10 +160,12 @@ def treegen(*args):
 
 
 def test_cli_static_format_implies_no_wind(tmp_path):
-    """No clip or LOD work for a file that cannot hold them, and the summary says so."""
+    """No clip or LOD work for a file that cannot hold them, and the summary says so (and
+    counts no joints or keys, which the file does not have)."""
     proc = treegen("make", PALM, "-o", tmp_path / "palm.obj")
     assert proc.returncode == 0, proc.stderr
     assert "static format: no wind or LODs" in proc.stdout
+    assert "joints" not in proc.stdout and "keys" not in proc.stdout  # none are in the file
     assert sorted(p.name for p in tmp_path.iterdir()) == [
         "palm.mtl",
         "palm.obj",

@@ -42,13 +42,15 @@ def make(species, output, as_json, **options):
         click.echo(json.dumps(s, indent=2))
         return
     click.echo(f"wrote {', '.join(s['files'])}  ({s['bytes'] / 1e6:.2f} MB)")
-    if job.static:
-        click.echo("  static format: no wind or LODs")
-    click.echo(
+    counts = (
         f"  {s['stems']:,} stems, {s['leaves']:,} leaves; {s['vertices']:,} vertices, "
-        f"{s['triangles']:,} triangles; {s['joints']} joints; "
-        f"{s['joint_keys']:,} keys ({s['keys']} frames)"
+        f"{s['triangles']:,} triangles"
     )
+    if job.static:  # no skin: its joints and keys are not in the file
+        click.echo("  static format: no wind or LODs")
+        click.echo(counts)
+    else:
+        click.echo(f"{counts}; {s['joints']} joints; {s['joint_keys']:,} keys ({s['keys']} frames)")
     if len(s["lods"]) > 1:
         click.echo(
             "  LODs: "
