@@ -425,6 +425,8 @@ def test_gltf_forest_validator_clean(scene, tmp_path):
             pytest.skip(str(e))
         assert report["issues"]["numErrors"] == 0 and report["issues"]["numWarnings"] == 0, summary(report)
         gltf, _ = read_gltf(path)
+        names = [m["name"] for m in gltf["materials"]]  # each species has a "bark", a "leaf"…
+        assert len(set(names)) == len(names) and all("_s" in n for n in names), names
         if all_lods:
             lod_ids = [
                 gltf["nodes"][r]["extensions"]["MSFT_lod"]["ids"]

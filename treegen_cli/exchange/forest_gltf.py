@@ -64,10 +64,14 @@ class _Shared:
         self._tracks: dict = {}
         self.samplers: list[dict] = []
 
-    def material(self, m) -> int:
+    def material(self, m, owner: str) -> int:
+        """The shared material `m`, named after its first prototype (`owner`, e.g.
+        "black_tupelo_s7"): every species has a "bark", "leaf" and "impostor", and engines
+        that key materials by name (Blender's .001 copies) would mix them up."""
         if m not in self._mat:
             self._mat[m] = len(self.materials)
-            self.materials.append(material_dict(m, self.textures, self.uv_boxes.get(m)))
+            d = material_dict(m, self.textures, self.uv_boxes.get(m))
+            self.materials.append({**d, "name": f"{owner}_{d['name']}"})
         return self._mat[m]
 
     def quant(self, p: int, k: int) -> Quantization | None:
@@ -92,13 +96,13 @@ class _Shared:
             mats = {m.name: m for m in asset.materials}
             J = len(lod.skeleton.names)
             quant = self.quant(p, k)
+            owner = f"{asset.name}_s{asset.extras.get('seed', p)}"
             prims = [
-                primitive_dict(self.buf, q, J, self.material(mats[q.material]), quant) for q in lod.primitives
+                primitive_dict(self.buf, q, J, self.material(mats[q.material], owner), quant)
+                for q in lod.primitives
             ]
             self._mesh[(p, k)] = len(self.meshes)
-            self.meshes.append(
-                {"name": f"{asset.name}_s{asset.extras.get('seed', p)}_LOD{k}", "primitives": prims}
-            )
+            self.meshes.append({"name": f"{owner}_LOD{k}", "primitives": prims})
         return self._mesh[(p, k)]
 
     def ibm(self, p: int, k: int) -> int:
