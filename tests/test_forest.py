@@ -857,6 +857,50 @@ def test_compressed_walk_forest_is_validator_clean_and_plays_in_three(walk, tmp_
     assert sizes[0] > 1.4 * sizes[1] > 1.4 * 2 * sizes[2], sizes
 
 
+def test_a_profile_budgets_every_prototype(tmp_path):
+    """`defaults.profile` (and `--profile`, which wins) budgets the prototypes as `treegen
+    make --profile` does: LOD0 within the row's triangles, the row's texture size; the
+    layout keeps its joints and wind. `defaults.triangles` wins over the profile's; a bad
+    profile names its JSON path and the allowed names, nothing written."""
+    from treegen_cli.forest.options import make_options
+
+    rush = str(SPECIES / "rush.txt")  # 68,339 triangles as the species is
+    data = layout_dict(scatter=[], instances=[{"species": rush, "position": [0, 0], "seed": 1}])
+    data["defaults"] = {**FAST, "profile": "mobile"}
+    mobile = make_options(load_layout(write_layout(tmp_path, data)))
+    assert mobile.budget.triangles == 20_000 and mobile.materials.texture_size == 256
+    assert mobile.rig.max_joints == FAST["max_joints"] and mobile.lod.distances == tuple(
+        FAST["lod_distances"]
+    )
+    data["defaults"]["triangles"] = 9000
+    assert make_options(load_layout(write_layout(tmp_path, data))).budget.triangles == 9000
+    data["defaults"].update(profile="web", triangles=None)  # --profile wins over the layout's
+    del data["defaults"]["triangles"]
+    write_layout(tmp_path, data)
+    out = tmp_path / "f.glb"
+    args = ["forest", str(tmp_path / "layout.json"), "-o", str(out), "--profile", "mobile", "--workers", "1"]
+    proc = CliRunner().invoke(cli, args)
+    assert proc.exit_code == 0, proc.output
+    gltf, _ = read_gltf(out)
+    lod0 = next(m for m in gltf["meshes"] if m["name"].endswith("_LOD0"))
+    tris = sum(gltf["accessors"][p["indices"]]["count"] // 3 for p in lod0["primitives"])
+    assert 18_000 <= tris <= 20_000  # the mobile row's 20,000, within the budget's 10 %
+    data["defaults"]["profile"] = "phone"
+    write_layout(tmp_path, data)
+    import subprocess
+    import sys
+
+    main = "import sys; from treegen_cli.cli import main; main(sys.argv[1:])"
+    bad = subprocess.run(
+        [sys.executable, "-c", main, "forest", str(tmp_path / "layout.json"), "-o", str(tmp_path / "g.glb")],
+        capture_output=True,
+        text=True,
+    )
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1, bad.stderr
+    assert 'defaults.profile: "phone"; expected one of mobile, web, desktop, hero' in bad.stderr
+    assert not (tmp_path / "g.glb").exists()
+
+
 def test_forest_compress_refused_for_usd(tmp_path):
     import subprocess
     import sys

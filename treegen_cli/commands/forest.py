@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from .. import api
+from ..options import PROFILE_NAMES
 from ..errors import TreegenError
 from ..progress import current_reporter
 from . import flags
@@ -66,9 +67,27 @@ from . import flags
     help="End each tree's LODs with its impostor (crossed cards cut from a view "
     "atlas), as `treegen make` does.",
 )
+@click.option(
+    "--profile",
+    type=click.Choice(list(PROFILE_NAMES)),
+    default=None,
+    help="Budget the prototypes as `treegen make --profile` does (LOD0 triangles, texture "
+    "and impostor sizes, LOD triangle fractions) [default: the layout's defaults.profile].",
+)
 @flags.json_flag("Print the summary as JSON.")
 def forest(
-    layout, output, schema, all_lods, error_px, workers, scheduler, max_trees, compress, impostor, as_json
+    layout,
+    output,
+    schema,
+    all_lods,
+    error_px,
+    workers,
+    scheduler,
+    max_trees,
+    compress,
+    impostor,
+    profile,
+    as_json,
 ):
     """Build the forest described by LAYOUT (JSON; see --schema): each distinct (species, seed)
     tree is built once and instanced; every instance carries all its LODs (--camera-lod: the
@@ -92,6 +111,7 @@ def forest(
         scheduler=scheduler,
         compress=compress,
         impostor=impostor,
+        profile=profile,
     )
     if as_json:
         click.echo(json.dumps(s, indent=2))

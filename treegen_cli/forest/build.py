@@ -26,17 +26,14 @@ from rich.progress import Progress
 
 from ..asset import Asset, Forest, Instance, Lod, lod_bounds
 from ..errors import TreegenError, in_file as _in_file
-from ..exchange import FOREST_WRITERS, GltfOptions, check_compress, check_suffix, export_forest
-from ..impostor import IMPOSTOR_DEFAULTS
+from ..exchange import FOREST_WRITERS, check_compress, check_suffix, export_forest
 from ..limits import MAX_TREES
-from ..lod import LOD_DEFAULTS, pixel_size
 from ..lod_report import leaf_updates as lod_leaf_updates
 from ..params import load_params
-from ..pipeline import MakeOptions, build_asset
+from ..pipeline import build_asset
 from ..prepare import prepare_forest
-from ..rig import RigOptions
-from ..wind import WindOptions
 from .layout import Layout, WindSpec, load_layout
+from .options import gltf_options, make_options
 
 
 def select_lod(distance: np.ndarray, lod_distances, scale: np.ndarray | float = 1.0) -> np.ndarray:
@@ -60,51 +57,6 @@ def time_offsets(positions: np.ndarray, wind: WindSpec, seed: int = 0) -> np.nda
         else rng.random(len(positions)) * wind.duration
     )
     return np.mod(travel + jitter, wind.duration)
-
-
-def make_options(layout: Layout, error_px: float | None = None, impostor: bool = True):
-    """MakeOptions for every prototype: the layout's joint budget, the shared-field wind, and
-    LOD schedules for the layout's camera (fov, width; else the make defaults) and error bound;
-    with `impostor`, each prototype's impostor as its last LOD, as `treegen make` builds it."""
-
-    w = layout.wind
-    wind = (
-        WindOptions(
-            speed=w.speed,
-            direction_deg=w.direction_deg,
-            gust=w.gust,
-            turbulence=w.turbulence,
-            duration=w.duration,
-            fps=w.fps,
-            field_seed=w.seed,
-        )
-        if w.enabled
-        else None
-    )
-    cam = layout.camera
-    lod = replace(
-        LOD_DEFAULTS,
-        fov_deg=cam.fov_deg if cam else LOD_DEFAULTS.fov_deg,
-        width=cam.width_px if cam else LOD_DEFAULTS.width,
-        error_px=layout.defaults.error_px if error_px is None else error_px,
-        distances=layout.defaults.lod_distances or LOD_DEFAULTS.distances,
-    )
-    return MakeOptions(
-        rig=RigOptions(max_joints=layout.defaults.max_joints),
-        wind=wind,
-        lod=lod,
-        impostor=IMPOSTOR_DEFAULTS if impostor else None,
-    )
-
-
-def gltf_options(layout: Layout, compress: str = "none", error_px: float | None = None) -> GltfOptions:
-    """--compress for the forest's glTF: meshopt's position grids coarsen with each LOD's
-    distance on the prototypes' screen (the layout's camera, else make's defaults)."""
-    lod = make_options(layout, error_px).lod
-    return GltfOptions(
-        compress=compress,
-        pixel_size=pixel_size(1.0, lod) if compress == "meshopt" and lod is not None else 0.0,
-    )
 
 
 def build_prototype(params, seed: int, options) -> Asset:
@@ -382,16 +334,19 @@ def run_forest(
     scheduler: str | None = None,
     compress: str = "none",
     impostor: bool = True,
+    profile: str | None = None,
 ) -> dict:
     """The whole command: validate (nothing written on error), build, write, summarise.
     `compress`: glTF's --compress (quantize, meshopt; a USD output refuses it); `impostor`:
-    end each prototype's LODs with its impostor."""
+    end each prototype's LODs with its impostor; `profile`: instead of the layout's."""
     t0 = time.perf_counter()
     output = check_suffix(output, FOREST_WRITERS, flag="-o")
     check_compress(output, compress)
     if error_px is not None and not (math.isfinite(error_px) and 0 <= error_px <= 100):
         raise TreegenError(f"--error-px {error_px}: allowed range 0..100 pixels")
     layout = load_layout(layout_path, max_trees)
+    if profile is not None:
+        layout = replace(layout, defaults=replace(layout.defaults, profile=profile))
     scene = build_scene(layout, all_lods, error_px, workers, progress, scheduler, impostor)
     t1 = time.perf_counter()
     written = export_forest(scene, output, gltf_options(layout, compress, error_px))

@@ -57,6 +57,8 @@ class Defaults:
     lod_distances: tuple[float, ...] | None = LOD_DEFAULTS.distances
     error_px: float = LOD_DEFAULTS.error_px
     phase_variants: int = 4
+    profile: str | None = None  # forest/options.py: the prototypes' budgets and sizes
+    triangles: int | None = None
 
 
 # the schema's objects whose "default"s the dataclasses define
@@ -160,6 +162,10 @@ def check_schema(value, schema: dict, root: dict, path: str = "") -> None:
             raise TreegenError(f"{where}: {show_value(value)} is out of range; allowed {left}, {right}")
     if kind == "string" and len(value) < schema.get("minLength", 0):
         raise TreegenError(f"{where}: must not be empty")
+    if "enum" in schema and value not in schema["enum"]:
+        raise TreegenError(
+            f"{where}: {show_value(value)}; expected one of {', '.join(map(str, schema['enum']))}"
+        )
     if kind == "array":
         n_min, n_max = schema.get("minItems"), schema.get("maxItems")
         if (n_min is not None and len(value) < n_min) or (n_max is not None and len(value) > n_max):
