@@ -21,18 +21,19 @@ collapses to one key every track it finds nearly still and rounds rotations to 1
 its files stray 11-188 mm from the float clip (even `-ac -ar 16 -af 0`: 53 mm on the mobile
 oak), which is where a ratio above 1 comes from.
 
-Measured 2026-11-26 (2-core box under load; MB; the last line counts bytes, not the rounded
+Measured 2026-11-26 (2-core box under load; MB; the aspen and willow mobile rows re-measured
+after budgets held the leaves' share too (budget.py); the last line counts bytes, not the rounded
 ratios):
 
     species        set        none  quant     gp  q/gp meshopt gp -cc  m/gp  err q/m/gp/gp-cc mm  anim kB q/gp  tracks
     quaking_aspen  default   13.87   8.92   9.17 0.973    3.71   3.90 0.952  0.69/0.87/19.6/25.0   632.2/863.5  256/231
-    quaking_aspen  mobile     2.83   1.86   1.92 0.969    0.94   0.98 0.961  0.61/0.85/11.0/15.2    55.3/110.9   53/51
+    quaking_aspen  mobile     3.19   2.10   2.18 0.968    1.04   1.09 0.956  0.73/0.84/10.9/13.0    68.8/136.0   64/54
     quaking_aspen  web        7.37   4.69   4.81 0.975    1.91   2.04 0.938  0.84/0.89/18.2/18.3   187.8/300.8  103/99
     black_tupelo   default   32.98  21.03  21.30 0.987    6.80   7.32 0.929  0.80/0.86/187/188     544.5/805.1  210/186
     black_tupelo   mobile     2.68   1.78   1.84 0.972    0.97   0.99 0.986  0.74/0.83/142/146     63.4/111.1   60/51
     black_tupelo   web        7.46   4.44   4.54 0.979    2.07   2.09 0.995  0.86/0.86/167/177    232.5/320.6  128/100
     weeping_willow default  259.28 165.84 166.00 0.999   40.81  47.68 0.856  0.94/0.90/43.7/46.1  331.0/483.6  222/115
-    weeping_willow mobile     3.00   2.09   2.11 0.989    1.13   1.17 0.966  0.86/0.87/97.7/99.9    45.4/66.1    50/26
+    weeping_willow mobile     2.86   1.95   1.97 0.991    1.07   1.09 0.980  0.67/0.79/73.1/73.8    48.1/63.2    50/26
     weeping_willow web        7.84   5.17   5.24 0.986    2.11   2.21 0.954  0.86/0.87/92.0/90.8   117.3/186.5   80/52
     ca_black_oak   default   40.42  25.31  25.19 1.005    7.92   8.48 0.934  0.97/0.92/68.7/68.7  288.9/157.5  238/41
     ca_black_oak   mobile     2.52   1.65   1.62 1.017    0.83   0.83 0.998  0.97/0.93/91.2/89.9    42.5/12.5    64/4
