@@ -4,7 +4,9 @@ key as the user typed it and its allowed range, with nothing written.
 Covered: a directory where a file goes (species, layout, catalogue, -o, --animate), an output
 name without a known extension, `Levels` too deep for the stem limit (blamed on Levels, not on
 the count), implausibly tall or wide trees (`--max-size`), and option ranges worded with the
-CLI flag or catalogue JSON path instead of internal field names (`--wind-speed`, not 'speed')."""
+CLI flag or catalogue JSON path instead of internal field names (`--wind-speed`, not 'speed').
+Errors click's parser finds (bad value type or choice, unknown option or command, missing or
+extra argument) are one line too, not click's usage block."""
 
 from __future__ import annotations
 
@@ -97,6 +99,24 @@ CASES = [
         ["batch", "catalogue_tex.json", "-o", "out", "--dry-run"],
         ["entries[0].texture_size 100: must be a power of two in [64, 2048]"],
     ),
+    # click's own parse errors: one line (no usage block), the flag as typed, click's choices
+    (["make", "rush", "-o", "x.glb", "--seed", "abc"], ["make: --seed 'abc': not a valid integer"]),
+    (["make", "rush", "-o", "x.glb", "--fov", "wide"], ["make: --fov 'wide': not a valid float"]),
+    (
+        ["make", "rush", "-o", "x.glb", "--profile", "phone"],
+        ["make: --profile 'phone': not one of 'mobile', 'web', 'desktop', 'hero'"],
+    ),
+    (["make", "rush", "-o", "x.glb", "--schedule", "fast"], ["--schedule 'fast'", "'bounded-step'"]),
+    (
+        ["make", "rush", "-o", "x.glb", "--windspeed", "3"],
+        ["make: unknown option --windspeed (did you mean --wind-speed"],
+    ),
+    (["make", "rush"], ["make: missing option -o/--output", "usage: treegen make [OPTIONS] SPECIES"]),
+    (["make", "-o", "x.glb"], ["make: missing argument SPECIES"]),
+    (["make", "rush", "extra", "-o", "x.glb"], ["make: unexpected extra argument 'extra'"]),
+    (["species", "extra"], ["species: unexpected extra argument 'extra'", "treegen species [OPTIONS]"]),
+    (["info", "rush", "--seed"], ["--seed: requires an argument"]),
+    (["mkae", "rush"], ["unknown command 'mkae' (did you mean make?)", "commands: batch, forest"]),
 ]
 
 
@@ -122,6 +142,15 @@ def test_input_gap_is_one_line_exit_2_naming_what_was_typed(folder, args, needle
     for needle in needles:
         assert needle in lines[0], lines[0]
     assert sorted(p.name for p in folder.rglob("*")) == before  # nothing written
+
+
+def test_help_keeps_the_usage_block():
+    """Only errors are one line: --help still prints click's usage and options, exit 0."""
+    proc = subprocess.run(
+        [sys.executable, "-m", "treegen_cli", "make", "--help"], capture_output=True, text=True, env=ENV
+    )
+    assert proc.returncode == 0 and proc.stdout.startswith("Usage: treegen make [OPTIONS] SPECIES")
+    assert "--wind-speed" in proc.stdout and proc.stderr == ""
 
 
 def test_internal_field_names_never_reach_the_user(folder):
