@@ -90,6 +90,12 @@ CASES = [
     (["make", "rush", "-o", "x.glb", "--fov", "200"], ["--fov 200: ", "(0, 180) degrees"]),
     (["make", "rush", "-o", "x.glb", "--max-joints", "70000"], ["--max-joints 70000", "1..65535"]),
     (["make", "rush", "-o", "x.glb", "--seed", "-1"], ["--seed -1: allowed range 0.."]),
+    # --joints is --max-joints by a shorter name: the message names the one typed
+    (["make", "rush", "-o", "x.glb", "--joints", "-5"], ["--joints -5: the joint budget must be at least 1"]),
+    (
+        ["make", "rush", "-o", "x.glb", "--joints", "70000"],
+        ["--joints 70000: the joint budget must be in 1..65535"],
+    ),
     (["make", "rush", "-o", "x.glb", "--joint-levels", "12"], ["--joint-levels '12'", "0..9"]),
     (["make", "rush", "-o", "x.glb", "--max-stems", "0"], ["--max-stems 0: the limit must be at least 1"]),
     (["info", "rush", "--seed", "-1"], ["--seed -1: allowed range 0.."]),

@@ -215,7 +215,9 @@ def resolve(
     unknown = sorted(set(options) - set(DEFAULTS))
     if unknown:
         raise TreegenError(f"unknown make option '{unknown[0]}'; allowed: {', '.join(DEFAULTS)}")
+    typed = _typed_as_joints(label) if options.get("joints") is not None else label
     options = _joints_alias(options, label)
+    label = typed  # the joint budget's messages name the spelling the user gave
     options = apply_profile(options, label) if options.get("profile") is not None else options
     v = {k: _scalar(k, options.get(k, d), label) for k, d in DEFAULTS.items()}
     v["joint_levels"] = _number_list("joint_levels", v["joint_levels"], int, label)
@@ -335,6 +337,11 @@ def resolve(
         k: list(x) if isinstance(x, tuple) else str(x) if isinstance(x, Path) else x for k, x in v.items()
     }
     return Resolved(seed=v["seed"], options=make_options, values=values)
+
+
+def _typed_as_joints(label: Callable[[str], str]) -> Callable[[str], str]:
+    """`label` naming the joint budget `joints` (`--joints`), as the user gave it."""
+    return lambda key: label("joints" if key == "max_joints" else key)
 
 
 def _joints_alias(options: dict, label: Callable[[str], str]) -> dict:
