@@ -90,6 +90,12 @@ CASES = [
     (["make", "rush", "-o", "x.glb", "--fov", "200"], ["--fov 200: ", "(0, 180) degrees"]),
     (["make", "rush", "-o", "x.glb", "--max-joints", "70000"], ["--max-joints 70000", "1..65535"]),
     (["make", "rush", "-o", "x.glb", "--seed", "-1"], ["--seed -1: allowed range 0.."]),
+    # a malformed list's example is one of that option
+    (
+        ["make", "rush", "-o", "x.glb", "--sides", "16,x"],
+        ["--sides '16,x'", "whole numbers, e.g. 16,8,6,4,3"],
+    ),
+    (["make", "rush", "-o", "x.glb", "--joint-levels", "0,y"], ["--joint-levels '0,y'", "e.g. 0,1,2"]),
     # --joints is --max-joints by a shorter name: the message names the one typed
     (["make", "rush", "-o", "x.glb", "--joints", "-5"], ["--joints -5: the joint budget must be at least 1"]),
     (

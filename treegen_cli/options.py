@@ -110,6 +110,14 @@ CHOICES = {
     "compress": COMPRESS,
 }
 LISTS = ("joint_levels", "sides", "lod_screen", "lod_distances", "lod_triangles")
+# list option → (what its values are, an example) for messages about a malformed list
+LIST_EXAMPLES = {
+    "joint_levels": ("whole numbers", "0,1,2"),
+    "sides": ("whole numbers", "16,8,6,4,3"),
+    "lod_screen": ("fractions", "0.5,0.25,0.1"),
+    "lod_distances": ("metres", "0,10,30,130"),
+    "lod_triangles": ("fractions", "0.5,0.15,0.05"),
+}
 # stage option fields (WindOptions, LodOptions) → the make option a user typed for them
 STAGE_FIELDS = {
     "speed": "wind_speed",
@@ -143,12 +151,7 @@ def _number_list(key: str, value, kind: type, label: Callable[[str], str]) -> tu
         try:
             values = tuple(kind(v) for v in value.split(",") if v.strip() != "")
         except ValueError:
-            example = "0,10,30,130" if kind is float else "0,1,2"
-            what = "metres" if kind is float else "whole numbers"
-            if key == "lod_triangles":
-                example, what = "0.5,0.15,0.05", "fractions"
-            if key == "lod_screen":
-                example, what = "0.5,0.25,0.1", "fractions"
+            what, example = LIST_EXAMPLES[key]
             raise TreegenError(
                 f"{label(key)} '{value}': expected comma-separated {what}, e.g. {example}"
             ) from None
@@ -158,11 +161,8 @@ def _number_list(key: str, value, kind: type, label: Callable[[str], str]) -> tu
     ):
         values = tuple(kind(v) for v in value)
     else:
-        raise TreegenError(
-            f"{label(key)} {value!r}: expected a list of "
-            f"{'numbers' if kind is float else 'whole numbers'} or text like "
-            f"{'0,10,30' if kind is float else '0,1,2'}"
-        )
+        what, example = LIST_EXAMPLES[key]
+        raise TreegenError(f"{label(key)} {value!r}: expected a list of {what} or text like {example}")
     if not values and kind is int:
         raise TreegenError(f"{label(key)} '{_text(value)}': give at least one value")
     return values
