@@ -47,6 +47,9 @@ INPUTS = {
     "catalogue_fov.json": json.dumps({"entries": [{"species": "rush", "fov": 100, "schedule": "paper"}]}),
     "catalogue_tex.json": json.dumps({"entries": [{"species": "rush", "texture_size": 100}]}),
     "catalogue_size.json": json.dumps({"entries": [{"species": "scale1300.txt"}]}),
+    "catalogue_levels.json": json.dumps(
+        {"defaults": {"joint_levels": [2]}, "entries": [{"species": "rush"}, {"species": "fan_palm"}]}
+    ),
     "forest.json": json.dumps(
         {
             "camera": {"position": [0, -20, 2], "target": [0, 0, 2]},
@@ -96,6 +99,15 @@ CASES = [
         ["--sides '16,x'", "whole numbers, e.g. 16,8,6,4,3"],
     ),
     (["make", "rush", "-o", "x.glb", "--joint-levels", "0,y"], ["--joint-levels '0,y'", "e.g. 0,1,2"]),
+    # --joint-levels naming no stem level the species has (fan_palm: Levels 2, stems 0..1)
+    (
+        ["make", "fan_palm", "-o", "x.glb", "--joint-levels", "7"],
+        ["fan_palm: --joint-levels '7': the species has stem levels 0..1 (Levels 2)", "root joint"],
+    ),
+    (
+        ["batch", "catalogue_levels.json", "-o", "out", "--dry-run"],
+        ["entries[1] (fan_palm): defaults.joint_levels '2'", "stem levels 0..1 (Levels 2)"],
+    ),
     # --joints is --max-joints by a shorter name: the message names the one typed
     (["make", "rush", "-o", "x.glb", "--joints", "-5"], ["--joints -5: the joint budget must be at least 1"]),
     (
@@ -184,6 +196,21 @@ def test_internal_field_names_never_reach_the_user(folder):
         with pytest.raises(TreegenError) as e:
             api.resolve(options, label=lambda k: f"entries[3].{k}")
         assert str(e.value).startswith(f"entries[3].{flag[2:].replace('-', '_')} ")
+
+
+def test_joint_levels_need_one_level_the_species_has():
+    """Levels a species lacks are ignored while one it has remains (a catalogue's shared list
+    serves species of different depths); a list of none of them leaves the root joint alone."""
+    from treegen_cli.errors import TreegenError
+    from treegen_cli.rig import RigOptions, check_joint_levels
+
+    for ok in (None, (0,), (1, 7), (0, 1, 2)):
+        check_joint_levels(2, RigOptions(joint_levels=ok))
+    for bad in ((2,), (7,), (2, 3)):
+        with pytest.raises(
+            TreegenError, match=r"--joint-levels '[\d,]+': the species has stem levels 0\.\.1"
+        ):
+            check_joint_levels(2, RigOptions(joint_levels=bad))
 
 
 def test_max_size_overrides_the_bound(folder):
