@@ -139,7 +139,7 @@ CASES = [
     (["make", "-o", "x.glb"], ["make: missing argument SPECIES"]),
     (["make", "rush", "extra", "-o", "x.glb"], ["make: unexpected extra argument 'extra'"]),
     (["species", "extra"], ["species: unexpected extra argument 'extra'", "treegen species [OPTIONS]"]),
-    (["info", "rush", "--seed"], ["--seed: requires an argument"]),
+    (["info", "rush", "--seed"], ["info: --seed: requires an argument"]),
     (["mkae", "rush"], ["unknown command 'mkae' (did you mean make?)", "commands: batch, forest"]),
 ]
 

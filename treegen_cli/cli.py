@@ -43,7 +43,9 @@ def main(argv: list[str] | None = None) -> None:
         e.show()
         sys.exit(e.exit_code)
     except click.UsageError as e:  # click's parse errors: one line too, not usage + hint + error
-        click.echo(f"treegen: error: {usage_line(e)}", err=True)
+        args = sys.argv[1:] if argv is None else argv
+        command = args[0] if args and args[0] in cli.commands else None
+        click.echo(f"treegen: error: {usage_line(e, command)}", err=True)
         sys.exit(2)
     except click.exceptions.Abort:
         click.echo("treegen: aborted", err=True)

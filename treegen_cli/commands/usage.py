@@ -17,10 +17,11 @@ _VALUE_IS = re.compile(r"^(?P<value>'[^']*'|\"[^\"]*\") is (?P<rule>.+?)\.?$", r
 _OPTION = re.compile(r"^Option '[^']*' (?P<rule>.+?)\.?$", re.S)
 
 
-def usage_line(e: click.UsageError) -> str:
-    """The one-line message for a click usage error, prefixed with the subcommand (`make: …`)."""
+def usage_line(e: click.UsageError, command: str | None = None) -> str:
+    """The one-line message for a click usage error, prefixed with the subcommand (`make: …`);
+    `command` names it when click gives no context (an option missing its value)."""
     ctx = e.ctx
-    where = ""
+    where = f"{command}: " if command and ctx is None else ""
     if ctx is not None and ctx.parent is not None:
         where = ctx.command_path.partition(" ")[2] + ": "
     return where + " ".join(_message(e, ctx).split())
