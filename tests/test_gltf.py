@@ -360,6 +360,16 @@ def test_missing_folder(tmp_path):
         export(synthetic_asset(), tmp_path / "nope" / "tree.glb")
 
 
+@pytest.mark.skipif(not os.path.isdir("/proc"), reason="needs Linux's /proc")
+def test_existing_folder_that_refuses_files_is_not_called_missing():
+    """/proc exists but refuses new files (ENOENT, even for root): say it is not writable."""
+    with pytest.raises(TreegenError) as e:
+        export(synthetic_asset(), "/proc/tree.glb")
+    msg = str(e.value)
+    assert msg.startswith("/proc/tree.glb: cannot write into folder '/proc' (not writable")
+    assert "does not exist" not in msg
+
+
 def test_atomic_write_leaves_no_temp_files(tmp_path, monkeypatch):
     export(synthetic_asset(), tmp_path / "t.gltf")
     export(synthetic_asset(), tmp_path / "t.glb")

@@ -4,7 +4,9 @@ key as the user typed it and its allowed range, with nothing written.
 Covered: a directory where a file goes (species, layout, catalogue, -o, --animate), an output
 name without a known extension, `Levels` too deep for the stem limit (blamed on Levels, not on
 the count), implausibly tall or wide trees (`--max-size`), and option ranges worded with the
-CLI flag or catalogue JSON path instead of internal field names (`--wind-speed`, not 'speed')."""
+CLI flag or catalogue JSON path instead of internal field names (`--wind-speed`, not 'speed').
+Errors click's parser finds (bad value type or choice, unknown option or command, missing or
+extra argument) are one line too, not click's usage block."""
 
 from __future__ import annotations
 
@@ -45,6 +47,9 @@ INPUTS = {
     "catalogue_fov.json": json.dumps({"entries": [{"species": "rush", "fov": 100, "schedule": "paper"}]}),
     "catalogue_tex.json": json.dumps({"entries": [{"species": "rush", "texture_size": 100}]}),
     "catalogue_size.json": json.dumps({"entries": [{"species": "scale1300.txt"}]}),
+    "catalogue_levels.json": json.dumps(
+        {"defaults": {"joint_levels": [2]}, "entries": [{"species": "rush"}, {"species": "fan_palm"}]}
+    ),
     "forest.json": json.dumps(
         {
             "camera": {"position": [0, -20, 2], "target": [0, 0, 2]},
@@ -88,6 +93,27 @@ CASES = [
     (["make", "rush", "-o", "x.glb", "--fov", "200"], ["--fov 200: ", "(0, 180) degrees"]),
     (["make", "rush", "-o", "x.glb", "--max-joints", "70000"], ["--max-joints 70000", "1..65535"]),
     (["make", "rush", "-o", "x.glb", "--seed", "-1"], ["--seed -1: allowed range 0.."]),
+    # a malformed list's example is one of that option
+    (
+        ["make", "rush", "-o", "x.glb", "--sides", "16,x"],
+        ["--sides '16,x'", "whole numbers, e.g. 16,8,6,4,3"],
+    ),
+    (["make", "rush", "-o", "x.glb", "--joint-levels", "0,y"], ["--joint-levels '0,y'", "e.g. 0,1,2"]),
+    # --joint-levels naming no stem level the species has (fan_palm: Levels 2, stems 0..1)
+    (
+        ["make", "fan_palm", "-o", "x.glb", "--joint-levels", "7"],
+        ["fan_palm: --joint-levels '7': the species has stem levels 0..1 (Levels 2)", "root joint"],
+    ),
+    (
+        ["batch", "catalogue_levels.json", "-o", "out", "--dry-run"],
+        ["entries[1] (fan_palm): defaults.joint_levels '2'", "stem levels 0..1 (Levels 2)"],
+    ),
+    # --joints is --max-joints by a shorter name: the message names the one typed
+    (["make", "rush", "-o", "x.glb", "--joints", "-5"], ["--joints -5: the joint budget must be at least 1"]),
+    (
+        ["make", "rush", "-o", "x.glb", "--joints", "70000"],
+        ["--joints 70000: the joint budget must be in 1..65535"],
+    ),
     (["make", "rush", "-o", "x.glb", "--joint-levels", "12"], ["--joint-levels '12'", "0..9"]),
     (["make", "rush", "-o", "x.glb", "--max-stems", "0"], ["--max-stems 0: the limit must be at least 1"]),
     (["info", "rush", "--seed", "-1"], ["--seed -1: allowed range 0.."]),
@@ -97,6 +123,24 @@ CASES = [
         ["batch", "catalogue_tex.json", "-o", "out", "--dry-run"],
         ["entries[0].texture_size 100: must be a power of two in [64, 2048]"],
     ),
+    # click's own parse errors: one line (no usage block), the flag as typed, click's choices
+    (["make", "rush", "-o", "x.glb", "--seed", "abc"], ["make: --seed 'abc': not a valid integer"]),
+    (["make", "rush", "-o", "x.glb", "--fov", "wide"], ["make: --fov 'wide': not a valid float"]),
+    (
+        ["make", "rush", "-o", "x.glb", "--profile", "phone"],
+        ["make: --profile 'phone': not one of 'mobile', 'web', 'desktop', 'hero'"],
+    ),
+    (["make", "rush", "-o", "x.glb", "--schedule", "fast"], ["--schedule 'fast'", "'bounded-step'"]),
+    (
+        ["make", "rush", "-o", "x.glb", "--windspeed", "3"],
+        ["make: unknown option --windspeed (did you mean --wind-speed"],
+    ),
+    (["make", "rush"], ["make: missing option -o/--output", "usage: treegen make [OPTIONS] SPECIES"]),
+    (["make", "-o", "x.glb"], ["make: missing argument SPECIES"]),
+    (["make", "rush", "extra", "-o", "x.glb"], ["make: unexpected extra argument 'extra'"]),
+    (["species", "extra"], ["species: unexpected extra argument 'extra'", "treegen species [OPTIONS]"]),
+    (["info", "rush", "--seed"], ["info: --seed: requires an argument"]),
+    (["mkae", "rush"], ["unknown command 'mkae' (did you mean make?)", "commands: batch, forest"]),
 ]
 
 
@@ -124,6 +168,15 @@ def test_input_gap_is_one_line_exit_2_naming_what_was_typed(folder, args, needle
     assert sorted(p.name for p in folder.rglob("*")) == before  # nothing written
 
 
+def test_help_keeps_the_usage_block():
+    """Only errors are one line: --help still prints click's usage and options, exit 0."""
+    proc = subprocess.run(
+        [sys.executable, "-m", "treegen_cli", "make", "--help"], capture_output=True, text=True, env=ENV
+    )
+    assert proc.returncode == 0 and proc.stdout.startswith("Usage: treegen make [OPTIONS] SPECIES")
+    assert "--wind-speed" in proc.stdout and proc.stderr == ""
+
+
 def test_internal_field_names_never_reach_the_user(folder):
     """Stage fields (speed, direction_deg, fov_deg, distances) are worded as flags."""
     from treegen_cli import api
@@ -143,6 +196,21 @@ def test_internal_field_names_never_reach_the_user(folder):
         with pytest.raises(TreegenError) as e:
             api.resolve(options, label=lambda k: f"entries[3].{k}")
         assert str(e.value).startswith(f"entries[3].{flag[2:].replace('-', '_')} ")
+
+
+def test_joint_levels_need_one_level_the_species_has():
+    """Levels a species lacks are ignored while one it has remains (a catalogue's shared list
+    serves species of different depths); a list of none of them leaves the root joint alone."""
+    from treegen_cli.errors import TreegenError
+    from treegen_cli.rig import RigOptions, check_joint_levels
+
+    for ok in (None, (0,), (1, 7), (0, 1, 2)):
+        check_joint_levels(2, RigOptions(joint_levels=ok))
+    for bad in ((2,), (7,), (2, 3)):
+        with pytest.raises(
+            TreegenError, match=r"--joint-levels '[\d,]+': the species has stem levels 0\.\.1"
+        ):
+            check_joint_levels(2, RigOptions(joint_levels=bad))
 
 
 def test_max_size_overrides_the_bound(folder):

@@ -163,10 +163,13 @@ def test_bad_custom_textures_name_the_flag_and_the_file(aspen, tmp_path):
     Image.new("RGB", (8, 8)).save(jpeg, format="JPEG")
     cut = tmp_path / "cut.png"
     cut.write_bytes(write_png(tmp_path / "big.png", (256, 256), "RGB").read_bytes()[:200])
+    fake = tmp_path / "fake.png"  # the PNG signature, then no IHDR: PIL cannot identify it
+    fake.write_bytes(b"\x89PNG\r\n\x1a\n" + b"\x00\x00\x00\x0dABCD" + b"A" * 100)
     cases = [
         (tmp_path / "missing.png", "no such file"),
         (jpeg, "not a PNG image"),
-        (cut, "unreadable PNG"),
+        (cut, "not a readable PNG image"),
+        (fake, "not a readable PNG image"),
         (tmp_path, "is a directory"),
     ]
     for flag, field in (("--leaf-texture", "leaf_texture"), ("--bark-texture", "bark_texture")):
@@ -175,6 +178,7 @@ def test_bad_custom_textures_name_the_flag_and_the_file(aspen, tmp_path):
                 build_materials(aspen, MaterialOptions(**{field: path}))
             msg = str(info.value)
             assert msg.startswith(f"{flag} {path}: ") and why in msg and "\n" not in msg
+            assert " at 0x" not in msg and "BytesIO" not in msg  # no Python object reprs
         with pytest.raises(TreegenError, match=f"{flag} .*cannot be combined with --no-textures"):
             build_materials(aspen, MaterialOptions(textures=False, **{field: good}))
 

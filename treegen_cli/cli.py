@@ -1,5 +1,6 @@
 """The `treegen` command line: the root group, its commands (one module each in commands/),
-and the entry point, which turns every user error into one line on stderr and exit 2.
+and the entry point, which turns every user error (click's parse errors too) into one line on
+stderr and exit 2.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from .commands.info import info
 from .commands.make import make
 from .commands.preview import preview
 from .commands.species import species
+from .commands.usage import usage_line
 from .errors import TreegenError
 from .progress import add_output_options
 
@@ -36,6 +38,14 @@ def main(argv: list[str] | None = None) -> None:
         cli.main(args=argv, prog_name="treegen", standalone_mode=False)
     except TreegenError as e:
         click.echo(f"treegen: error: {e}", err=True)
+        sys.exit(2)
+    except click.exceptions.NoArgsIsHelpError as e:  # bare `treegen`: the help, as click prints it
+        e.show()
+        sys.exit(e.exit_code)
+    except click.UsageError as e:  # click's parse errors: one line too, not usage + hint + error
+        args = sys.argv[1:] if argv is None else argv
+        command = args[0] if args and args[0] in cli.commands else None
+        click.echo(f"treegen: error: {usage_line(e, command)}", err=True)
         sys.exit(2)
     except click.exceptions.Abort:
         click.echo("treegen: aborted", err=True)

@@ -29,6 +29,7 @@ are built once per process per species and size (an LRU cache).
 from __future__ import annotations
 
 import io
+import re
 import zlib
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -108,6 +109,10 @@ def check_options(options: MaterialOptions) -> None:
                 raise TreegenError(f"{flag} {path}: cannot be combined with --no-textures")
 
 
+# a Python object's repr ("<_io.BytesIO object at 0x7f…>"): its address changes every run
+_OBJECT_REPR = re.compile(r"\s*<[^<>]* at 0x[0-9a-fA-F]+>")
+
+
 def read_png(path: Path, flag: str) -> bytes:
     """An artist's image as PNG bytes, checked to decode fully; else a one-line TreegenError
     naming the flag and the file (glTF and USD embed PNG, so no other format is taken)."""
@@ -128,9 +133,13 @@ def read_png(path: Path, flag: str) -> bytes:
         with Image.open(io.BytesIO(data)) as img:
             img.load()  # decodes every row: truncation shows here
             w, h = img.size
+    except Image.UnidentifiedImageError:  # PIL's text is "cannot identify image file <BytesIO at 0x…>"
+        raise TreegenError(
+            f"{where}: not a readable PNG image (PNG signature, but no image PIL can decode after it)"
+        ) from None
     except Exception as exc:  # PIL raises many types for broken files
-        msg = " ".join(str(exc).split())[:120] or type(exc).__name__
-        raise TreegenError(f"{where}: unreadable PNG ({msg})") from None
+        msg = " ".join(_OBJECT_REPR.sub("", str(exc)).split())[:120] or type(exc).__name__
+        raise TreegenError(f"{where}: not a readable PNG image ({msg})") from None
     if w < 1 or h < 1:
         raise TreegenError(f"{where}: empty image")
     return data

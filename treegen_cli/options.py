@@ -110,6 +110,14 @@ CHOICES = {
     "compress": COMPRESS,
 }
 LISTS = ("joint_levels", "sides", "lod_screen", "lod_distances", "lod_triangles")
+# list option → (what its values are, an example) for messages about a malformed list
+LIST_EXAMPLES = {
+    "joint_levels": ("whole numbers", "0,1,2"),
+    "sides": ("whole numbers", "16,8,6,4,3"),
+    "lod_screen": ("fractions", "0.5,0.25,0.1"),
+    "lod_distances": ("metres", "0,10,30,130"),
+    "lod_triangles": ("fractions", "0.5,0.15,0.05"),
+}
 # stage option fields (WindOptions, LodOptions) → the make option a user typed for them
 STAGE_FIELDS = {
     "speed": "wind_speed",
@@ -143,12 +151,7 @@ def _number_list(key: str, value, kind: type, label: Callable[[str], str]) -> tu
         try:
             values = tuple(kind(v) for v in value.split(",") if v.strip() != "")
         except ValueError:
-            example = "0,10,30,130" if kind is float else "0,1,2"
-            what = "metres" if kind is float else "whole numbers"
-            if key == "lod_triangles":
-                example, what = "0.5,0.15,0.05", "fractions"
-            if key == "lod_screen":
-                example, what = "0.5,0.25,0.1", "fractions"
+            what, example = LIST_EXAMPLES[key]
             raise TreegenError(
                 f"{label(key)} '{value}': expected comma-separated {what}, e.g. {example}"
             ) from None
@@ -158,11 +161,8 @@ def _number_list(key: str, value, kind: type, label: Callable[[str], str]) -> tu
     ):
         values = tuple(kind(v) for v in value)
     else:
-        raise TreegenError(
-            f"{label(key)} {value!r}: expected a list of "
-            f"{'numbers' if kind is float else 'whole numbers'} or text like "
-            f"{'0,10,30' if kind is float else '0,1,2'}"
-        )
+        what, example = LIST_EXAMPLES[key]
+        raise TreegenError(f"{label(key)} {value!r}: expected a list of {what} or text like {example}")
     if not values and kind is int:
         raise TreegenError(f"{label(key)} '{_text(value)}': give at least one value")
     return values
@@ -215,7 +215,9 @@ def resolve(
     unknown = sorted(set(options) - set(DEFAULTS))
     if unknown:
         raise TreegenError(f"unknown make option '{unknown[0]}'; allowed: {', '.join(DEFAULTS)}")
+    typed = _typed_as_joints(label) if options.get("joints") is not None else label
     options = _joints_alias(options, label)
+    label = typed  # the joint budget's messages name the spelling the user gave
     options = apply_profile(options, label) if options.get("profile") is not None else options
     v = {k: _scalar(k, options.get(k, d), label) for k, d in DEFAULTS.items()}
     v["joint_levels"] = _number_list("joint_levels", v["joint_levels"], int, label)
@@ -335,6 +337,11 @@ def resolve(
         k: list(x) if isinstance(x, tuple) else str(x) if isinstance(x, Path) else x for k, x in v.items()
     }
     return Resolved(seed=v["seed"], options=make_options, values=values)
+
+
+def _typed_as_joints(label: Callable[[str], str]) -> Callable[[str], str]:
+    """`label` naming the joint budget `joints` (`--joints`), as the user gave it."""
+    return lambda key: label("joints" if key == "max_joints" else key)
 
 
 def _joints_alias(options: dict, label: Callable[[str], str]) -> dict:

@@ -25,7 +25,7 @@ from .materials import MATERIAL_DEFAULTS, MaterialOptions, build_materials
 from .mesh import MESH_DEFAULTS, MeshOptions, build_mesh
 from .params import Params
 from .prepare import prepare
-from .rig import RIG_DEFAULTS, RigOptions, build_rig
+from .rig import RIG_DEFAULTS, RigOptions, build_rig, check_joint_levels
 from .tree import Tree, tree_height
 from .wind import DEFAULTS as WIND_DEFAULTS, WindOptions, bake_wind
 
@@ -132,6 +132,7 @@ def build_asset(
     """Grow, rig, mesh and animate `params` with `seed`; returns the asset and its tree.
     `tree`: the tree `generate(params, seed, options.generate)` already grew, to reuse."""
     timings = timings if timings is not None else Timings()
+    check_joint_levels(params.levels, options.rig)
     # Materials first: they fix the leaf atlas layout the mesh maps leaves into, and a bad
     # --leaf-texture fails before anything is grown; the textures are drawn meanwhile.
     mats = timings.run("materials", build_materials, params, options.materials)

@@ -119,6 +119,19 @@ def joint_names(tree, joint_node: np.ndarray, joint_stem: np.ndarray) -> list[st
     ]  # ≤ 256
 
 
+def check_joint_levels(levels: int, options: RigOptions, flag: str = "--joint-levels") -> None:
+    """Before growing: `joint_levels` must name at least one stem level the species has
+    (0..Levels-1), else the skeleton is the root joint alone and nothing sways. Levels it lacks
+    are ignored otherwise, so one list can serve species of different depths (a catalogue)."""
+    given = options.joint_levels
+    if given is None or any(0 <= n < levels for n in given):
+        return
+    raise TreegenError(
+        f"{flag} '{','.join(map(str, given))}': the species has stem levels 0..{levels - 1} "
+        f"(Levels {levels}); name at least one, else only the root joint is left and nothing sways"
+    )
+
+
 def build_rig(tree, options: RigOptions = RIG_DEFAULTS) -> Rig:
     """Joints on stem nodes under `options.max_joints`, with node and leaf skin bindings."""
     if not 1 <= options.max_joints <= MAX_JOINTS:

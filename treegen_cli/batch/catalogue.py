@@ -17,6 +17,7 @@ from ..build_id import build_id
 from ..errors import TreegenError
 from ..forest.schema import check_schema, read_json_file
 from ..generate import check_trunk
+from ..rig import check_joint_levels
 
 SCHEMA_NAME = "catalogue.schema.json"
 DEFAULT_NAME = "{species}_{seed}.{ext}"
@@ -257,6 +258,10 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
                 check_trunk(loaded[sp][0], base_job.options.generate)
             except TreegenError as e:
                 raise TreegenError(f"{where}.species: {e}") from None
+            try:  # a joint_levels list this species has none of: refused now too
+                check_joint_levels(loaded[sp][0].levels, base_job.options.rig, label("joint_levels"))
+            except TreegenError as e:
+                raise TreegenError(f"{where} ({entry['species']}): {e}") from None
             values = {
                 k: v
                 for k, v in base_job.values.items()

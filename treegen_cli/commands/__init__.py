@@ -8,6 +8,7 @@
     species.py  treegen species  → species_list.py
     flags.py    the make options as click options, each defined once (types and defaults from
                 options.DEFAULTS)
+    usage.py    click's own parse errors worded as one line (the entry point prints them)
 
 The root group and the entry point are in ../cli.py. Commands import the API, not the stages
 (tests/test_architecture.py checks).

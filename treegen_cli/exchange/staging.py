@@ -75,9 +75,15 @@ def staged(path: str | os.PathLike) -> Iterator[Path]:
             tempfile.mkdtemp(prefix=f".{path.name}.{os.getpid()}@{_HOST}.", suffix=".tmp", dir=folder)
         )
     except FileNotFoundError:
+        if folder.is_dir():  # e.g. /proc: there, but creating a file in it fails with ENOENT
+            raise TreegenError(
+                f"{path}: cannot write into folder '{folder}' (not writable: it refuses new files)"
+            ) from None
         raise TreegenError(f"{path}: output folder '{folder}' does not exist") from None
     except OSError as e:
-        raise TreegenError(f"{path}: cannot write into folder '{folder}' ({e.strerror})") from None
+        raise TreegenError(
+            f"{path}: cannot write into folder '{folder}' (not writable: {e.strerror})"
+        ) from None
     try:
         yield tmpdir / path.name
         produced = sorted(os.listdir(tmpdir), key=lambda n: (n == path.name, n))
