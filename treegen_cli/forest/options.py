@@ -75,7 +75,7 @@ def make_options(layout: Layout, error_px: float | None = None, impostor: bool =
         options,
         budget=made.budget,
         materials=made.materials,
-        lod=replace(lod, triangles=made.lod.triangles),
+        lod=lod if made.lod is None else replace(lod, triangles=made.lod.triangles),
         impostor=made.impostor if impostor else None,
     )
 
