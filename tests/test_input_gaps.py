@@ -123,6 +123,17 @@ CASES = [
         ["batch", "catalogue_tex.json", "-o", "out", "--dry-run"],
         ["entries[0].texture_size 100: must be a power of two in [64, 2048]"],
     ),
+    # options the rest of the request makes void are refused, not silently ignored
+    (
+        ["make", "rush", "-o", "x.glb", "--no-wind", "--wind-speed", "8"],
+        ["--wind-speed: has no effect, --no-wind"],
+    ),
+    (["make", "rush", "-o", "x.glb", "--no-lod", "--lod-files"], ["--lod-files: has no effect, --no-lod"]),
+    (
+        ["make", "rush", "-o", "x.obj", "--wind-speed", "9"],
+        ["--wind-speed: has no effect, a .obj file", "static"],
+    ),
+    (["make", "rush", "-o", "x.ply", "--lod-files"], ["--lod-files: has no effect, a .ply file"]),
     # click's own parse errors: one line (no usage block), the flag as typed, click's choices
     (["make", "rush", "-o", "x.glb", "--seed", "abc"], ["make: --seed 'abc': not a valid integer"]),
     (["make", "rush", "-o", "x.glb", "--fov", "wide"], ["make: --fov 'wide': not a valid float"]),

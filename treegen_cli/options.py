@@ -204,6 +204,34 @@ def _power_of_two(flag: str, n: int, bounds: tuple[int, int], rule: str) -> None
         raise TreegenError(f"{flag} {n}: " + rule.format(lo=lo, hi=hi))
 
 
+# options that shape only the clip, only the LODs: given with --no-wind / --no-lod or for a
+# static format they would be silently ignored
+WIND_ONLY = ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "stiffness")
+LOD_ONLY = ("lod_screen", "lod_distances", "lod_triangles", "lod_files", "schedule")
+
+
+def _check_no_effect(options: dict, label: Callable[[str], str], output) -> None:
+    """Refuse an option the user gave that the rest of the request makes void (before a
+    profile fills its own: those are defaults, not requests; nor a catalogue's `defaults`,
+    which serve every entry, one with no wind too)."""
+    static = output is not None and Path(output).suffix.lower() in STATIC
+    given = [
+        k
+        for k in (*WIND_ONLY, *LOD_ONLY)
+        if options.get(k) not in (None, False) and not label(k).startswith("defaults.")
+    ]
+    for k in given:
+        if static:
+            why = f"a {Path(output).suffix.lower()} file holds no wind or LODs (static format)"
+        elif k in WIND_ONLY and options.get("no_wind"):
+            why = f"{label('no_wind')} builds no clip"
+        elif k in LOD_ONLY and options.get("no_lod"):
+            why = f"{label('no_lod')} builds one LOD"
+        else:
+            continue
+        raise TreegenError(f"{label(k)}: has no effect, {why}; leave it out")
+
+
 def resolve(
     options: dict, label: Callable[[str], str] = cli_name, output: str | os.PathLike | None = None
 ) -> Resolved:
@@ -218,6 +246,7 @@ def resolve(
     typed = _typed_as_joints(label) if options.get("joints") is not None else label
     options = _joints_alias(options, label)
     label = typed  # the joint budget's messages name the spelling the user gave
+    _check_no_effect(options, label, output)
     options = apply_profile(options, label) if options.get("profile") is not None else options
     v = {k: _scalar(k, options.get(k, d), label) for k, d in DEFAULTS.items()}
     v["joint_levels"] = _number_list("joint_levels", v["joint_levels"], int, label)
