@@ -245,3 +245,28 @@ def test_every_bundled_species_fits_the_default_bound():
     assert len(SPECIES) >= 15
     for name in SPECIES:
         check_size(grown(name), DEFAULTS.max_size)  # raises TreegenError if not
+
+
+def test_one_seed_range_everywhere(tmp_path):
+    """make, a catalogue and a forest layout take the same seeds, 0..2^63-1 (they differed:
+    a catalogue refused 2^32 that make took, a layout took 2^64 that nothing could use)."""
+    from treegen_cli.api import resolve
+    from treegen_cli.batch import load_catalogue
+    from treegen_cli.errors import TreegenError
+    from treegen_cli.forest import load_layout
+
+    top = 2**63 - 1
+    assert resolve({"seed": top}).seed == top
+    species = str(species_dir() / "rush.txt")
+    for seed, ok in ((top, True), (top + 1, False)):
+        cat = tmp_path / "c.json"
+        cat.write_text(json.dumps({"entries": [{"species": species, "seeds": [seed]}]}))
+        lay = tmp_path / "l.json"
+        lay.write_text(json.dumps({"instances": [{"species": species, "position": [0, 0], "seed": seed}]}))
+        calls = (lambda: resolve({"seed": seed}), lambda: load_catalogue(cat), lambda: load_layout(lay))
+        for call in calls:
+            if ok:
+                call()
+                continue
+            with pytest.raises(TreegenError, match=f"{seed}.*(0..|\\[0, ){top}"):
+                call()

@@ -204,6 +204,7 @@ def _power_of_two(flag: str, n: int, bounds: tuple[int, int], rule: str) -> None
         raise TreegenError(f"{flag} {n}: " + rule.format(lo=lo, hi=hi))
 
 
+MAX_SEED = 2**63 - 1  # every seed (make, batch, forest layouts): numpy's int64
 # options that shape only the clip, only the LODs: given with --no-wind / --no-lod or for a
 # static format they would be silently ignored
 WIND_ONLY = ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "stiffness")
@@ -275,8 +276,8 @@ def resolve(
                 f"{label('sides')} '{_text(options.get('sides'))}': each value must be in [3, 64]"
             )
         mesh = replace(mesh, sides=v["sides"])
-    if not 0 <= v["seed"] < 2**63:
-        raise TreegenError(f"{label('seed')} {v['seed']}: allowed range 0..{2**63 - 1}")
+    if not 0 <= v["seed"] <= MAX_SEED:
+        raise TreegenError(f"{label('seed')} {v['seed']}: allowed range 0..{MAX_SEED}")
     for key in ("max_stems", "max_leaves", "max_vertices", "max_keys"):
         if v[key] < 1:
             raise TreegenError(f"{label(key)} {v[key]}: the limit must be at least 1")

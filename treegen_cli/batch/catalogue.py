@@ -14,6 +14,7 @@ from importlib import resources
 from pathlib import Path, PurePosixPath
 
 from ..build_id import build_id
+from ..options import MAX_SEED
 from ..errors import TreegenError
 from ..forest.schema import check_schema, read_json_file
 from ..generate import check_trunk
@@ -102,8 +103,8 @@ def parse_seeds(value, where: str, max_jobs: int = MAX_JOBS) -> list[int]:
             f'"1-40", got {type(value).__name__}'
         )
     for v in values:
-        if not 0 <= v <= 2**32 - 1:
-            raise TreegenError(f"{where}: seed {v} is out of range; allowed [0, 4294967295]")
+        if not 0 <= v <= MAX_SEED:
+            raise TreegenError(f"{where}: seed {v} is out of range; allowed [0, {MAX_SEED}]")
     seen = set()
     dupes = [v for v in values if v in seen or seen.add(v)]
     if dupes:

@@ -136,6 +136,11 @@ def _join(path: str, key) -> str:
     return f"{path}.{key}" if path else str(key)
 
 
+def _num(x) -> str:
+    """A bound as written: integers whole (a seed's 9223372036854775807), others short."""
+    return str(x) if isinstance(x, int) else f"{x:g}"
+
+
 def check_schema(value, schema: dict, root: dict, path: str = "") -> None:
     """Raise TreegenError '<json path>: <reason>' at the first place `value` breaks `schema`."""
     if "$ref" in schema:
@@ -157,8 +162,8 @@ def check_schema(value, schema: dict, root: dict, path: str = "") -> None:
             or (xlo is not None and value <= xlo)
             or (xhi is not None and value >= xhi)
         ):
-            left = f"[{lo:g}" if lo is not None else (f"({xlo:g}" if xlo is not None else "(-inf")
-            right = f"{hi:g}]" if hi is not None else (f"{xhi:g})" if xhi is not None else "inf)")
+            left = f"[{_num(lo)}" if lo is not None else (f"({_num(xlo)}" if xlo is not None else "(-inf")
+            right = f"{_num(hi)}]" if hi is not None else (f"{_num(xhi)})" if xhi is not None else "inf)")
             raise TreegenError(f"{where}: {show_value(value)} is out of range; allowed {left}, {right}")
     if kind == "string" and len(value) < schema.get("minLength", 0):
         raise TreegenError(f"{where}: must not be empty")
