@@ -125,6 +125,10 @@ BAD = [
     ({"camera": {"position": [0, 0, 0]}}, "camera.target: required"),
     ({"camera": {**CAMERA, "fov_deg": 180}}, "camera.fov_deg: 180 is out of range"),
     ({"camera": {**CAMERA, "position": [0, 0]}}, "camera.position: expected 3 items, got 2"),
+    (
+        {"scatter": [{"species": [], "polygon": [[0, 0], [1, 0], [0, 1]], "count": 1}]},
+        "expected at least 1 item, got 0",
+    ),
     ({"camera": {**CAMERA, "position": [0, 0, "x"]}}, "camera.position[2]: expected a number"),
     ({"camera": {**CAMERA, "target": CAMERA["position"]}}, "camera.target: must differ"),
     ({"wind": {"speed": -1}}, "wind.speed: -1 is out of range"),
@@ -164,7 +168,7 @@ BAD = [
     ),
     (
         {"scatter": [{"species": [{"file": PALM}], "rectangle": {"min": [0, 0], "max": [0, 5]}, "count": 1}]},
-        "scatter[0].rectangle.max: must exceed min",
+        "scatter[0].rectangle.max: must exceed min in x and y, got min [0, 0], max [0, 5]",
     ),
     (
         {"scatter": [{"species": [{"file": PALM}], "polygon": [[0, 0], [1, 1], [2, 2]], "count": 1}]},

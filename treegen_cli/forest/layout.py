@@ -154,7 +154,10 @@ def _scatter_placements(
     if "rectangle" in sc:
         lo, hi = np.array(sc["rectangle"]["min"], float), np.array(sc["rectangle"]["max"], float)
         if np.any(hi <= lo):
-            raise TreegenError(f"{where}.rectangle.max: must exceed min in x and y, got {sc['rectangle']}")
+            raise TreegenError(
+                f"{where}.rectangle.max: must exceed min in x and y, got min "
+                f"[{', '.join(f'{x:g}' for x in lo)}], max [{', '.join(f'{x:g}' for x in hi)}]"
+            )
         region, is_poly = np.array([lo, [hi[0], lo[1]], hi, [lo[0], hi[1]]]), False
         area = float(np.prod(hi - lo))
     else:

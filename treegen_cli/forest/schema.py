@@ -174,8 +174,14 @@ def check_schema(value, schema: dict, root: dict, path: str = "") -> None:
     if kind == "array":
         n_min, n_max = schema.get("minItems"), schema.get("maxItems")
         if (n_min is not None and len(value) < n_min) or (n_max is not None and len(value) > n_max):
-            want = f"{n_min}" if n_min == n_max else f"{n_min or 0}..{n_max if n_max is not None else 'any'}"
-            raise TreegenError(f"{where}: expected {want} items, got {len(value)}")
+            if n_min == n_max:
+                want = f"{n_min}"
+            elif n_max is None:
+                want = f"at least {n_min}"
+            else:
+                want = f"{n_min or 0}..{n_max}"
+            noun = "item" if want == "1" or want == "at least 1" else "items"
+            raise TreegenError(f"{where}: expected {want} {noun}, got {len(value)}")
         if "items" in schema:
             for i, item in enumerate(value):
                 check_schema(item, schema["items"], root, _join(path, i))
