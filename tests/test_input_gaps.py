@@ -134,6 +134,8 @@ CASES = [
         ["--wind-speed: has no effect, a .obj file", "static"],
     ),
     (["make", "rush", "-o", "x.ply", "--lod-files"], ["--lod-files: has no effect, a .ply file"]),
+    (["make", "rush", "-o", "x.glb", "--no-wind", "--wind-speed", "0"], ["--wind-speed: has no effect"]),
+    (["make", "rush", "-o", "x.obj", "--impostor-size", "256"], ["--impostor-size: has no effect, a .obj"]),
     # click's own parse errors: one line (no usage block), the flag as typed, click's choices
     (["make", "rush", "-o", "x.glb", "--seed", "abc"], ["make: --seed 'abc': not a valid integer"]),
     (["make", "rush", "-o", "x.glb", "--fov", "wide"], ["make: --fov 'wide': not a valid float"]),
@@ -270,3 +272,33 @@ def test_one_seed_range_everywhere(tmp_path):
                 continue
             with pytest.raises(TreegenError, match=f"{seed}.*(0..|\\[0, ){top}"):
                 call()
+
+
+def test_a_catalogue_may_combine_what_make_refuses_together(tmp_path):
+    """A catalogue's grid may set wind against no wind (an A/B of the same trees), and its
+    defaults serve entries that turn wind off: combined on purpose, not refused as make's
+    --no-wind --wind-speed is."""
+    from treegen_cli.batch import load_catalogue
+
+    species = str(species_dir() / "fan_palm.txt")
+    entries = [
+        {"species": species, "seeds": [1], "wind_speed": 5, "grid": {"no_wind": [True, False]}},
+        {"species": species, "seeds": [2], "no_wind": True},
+    ]
+    (tmp_path / "c.json").write_text(json.dumps({"defaults": {"gust": 0.3}, "entries": entries}))
+    assert len(load_catalogue(tmp_path / "c.json").jobs) == 3
+
+
+def test_scatter_variants_stay_in_the_seed_range(tmp_path):
+    """A scatter's variants are the seeds seed, seed + 1, …: the last must be a seed too."""
+    from treegen_cli.errors import TreegenError
+    from treegen_cli.forest import load_layout
+
+    species = str(species_dir() / "fan_palm.txt")
+    scatter = {"species": [{"file": species}], "rectangle": {"min": [0, 0], "max": [10, 10]}, "count": 2}
+    lay = tmp_path / "l.json"
+    lay.write_text(json.dumps({"scatter": [{**scatter, "seed": 2**63 - 3, "variants": 3}]}))
+    load_layout(lay)
+    lay.write_text(json.dumps({"scatter": [{**scatter, "seed": 2**63 - 2, "variants": 3}]}))
+    with pytest.raises(TreegenError, match=r"scatter\[0\]\.seed: .* reaches seed 9223372036854775808"):
+        load_layout(lay)

@@ -208,19 +208,15 @@ MAX_SEED = 2**63 - 1  # every seed (make, batch, forest layouts): numpy's int64
 # options that shape only the clip, only the LODs: given with --no-wind / --no-lod or for a
 # static format they would be silently ignored
 WIND_ONLY = ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "stiffness")
-LOD_ONLY = ("lod_screen", "lod_distances", "lod_triangles", "lod_files", "schedule")
+LOD_ONLY = ("lod_screen", "lod_distances", "lod_triangles", "lod_files", "schedule", "impostor_size")
 
 
 def _check_no_effect(options: dict, label: Callable[[str], str], output) -> None:
-    """Refuse an option the user gave that the rest of the request makes void (before a
-    profile fills its own: those are defaults, not requests; nor a catalogue's `defaults`,
-    which serve every entry, one with no wind too)."""
+    """Refuse an option the user gave that the rest of the request makes void (called before
+    a profile fills its own: those are defaults, not requests). A flag counts when set, a
+    value when given at all (0 included)."""
     static = output is not None and Path(output).suffix.lower() in STATIC
-    given = [
-        k
-        for k in (*WIND_ONLY, *LOD_ONLY)
-        if options.get(k) not in (None, False) and not label(k).startswith("defaults.")
-    ]
+    given = [k for k in (*WIND_ONLY, *LOD_ONLY) if options.get(k) is not None and options.get(k) is not False]
     for k in given:
         if static:
             why = f"a {Path(output).suffix.lower()} file holds no wind or LODs (static format)"
@@ -234,20 +230,26 @@ def _check_no_effect(options: dict, label: Callable[[str], str], output) -> None
 
 
 def resolve(
-    options: dict, label: Callable[[str], str] = cli_name, output: str | os.PathLike | None = None
+    options: dict,
+    label: Callable[[str], str] = cli_name,
+    output: str | os.PathLike | None = None,
+    void_check: bool = True,
 ) -> Resolved:
     """Validate `make` options (missing ones take DEFAULTS) and build the stage options.
     For a static `output` format (.obj .ply) no wind or LODs are built: it cannot hold them.
 
     `label(key)` names an option in messages: `--max-joints` for the CLI and the API, a JSON
-    path for a catalogue entry. Every refusal is a TreegenError naming the option and range."""
+    path for a catalogue entry. Every refusal is a TreegenError naming the option and range.
+    `void_check`: refuse an option the rest of the request makes void (--wind-speed with
+    --no-wind); a catalogue turns it off, its defaults and grids combine options on purpose."""
     unknown = sorted(set(options) - set(DEFAULTS))
     if unknown:
         raise TreegenError(f"unknown make option '{unknown[0]}'; allowed: {', '.join(DEFAULTS)}")
     typed = _typed_as_joints(label) if options.get("joints") is not None else label
     options = _joints_alias(options, label)
     label = typed  # the joint budget's messages name the spelling the user gave
-    _check_no_effect(options, label, output)
+    if void_check:  # (a catalogue's grids and defaults combine options on purpose)
+        _check_no_effect(options, label, output)
     options = apply_profile(options, label) if options.get("profile") is not None else options
     v = {k: _scalar(k, options.get(k, d), label) for k, d in DEFAULTS.items()}
     v["joint_levels"] = _number_list("joint_levels", v["joint_levels"], int, label)

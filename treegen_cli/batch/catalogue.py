@@ -238,7 +238,7 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
                 return src.get(key, f"{where}.{key}")
 
             try:
-                base_job = api.resolve(opts, label)
+                base_job = api.resolve(opts, label, void_check=False)
             except TreegenError as e:
                 msg = str(e)
                 raise TreegenError(

@@ -14,6 +14,7 @@ import numpy as np
 from ..bundled import resolve_species
 from ..errors import TreegenError
 from ..limits import MAX_TREES
+from ..options import MAX_SEED
 from ..params import load_params
 from .scatter import polygon_area, scatter_points
 from .schema import (
@@ -183,10 +184,16 @@ def _scatter_placements(
         )
     count = int(round(count))
     seed = int(sc.get("seed", defaults.seed))
+    n_variants = int(sc.get("variants", 3))
+    if seed + n_variants - 1 > MAX_SEED:  # the variants' prototypes are seeds seed, seed + 1, …
+        raise TreegenError(
+            f"{where}.seed: {seed} with {n_variants} variants reaches seed {seed + n_variants - 1}; "
+            f"allowed [0, {MAX_SEED - n_variants + 1}]"
+        )
     rng = np.random.default_rng([seed, 0x5CA77E4])
     pts = scatter_points(region, is_poly, count, float(sc.get("min_spacing", 0.0)), rng, where)
     kind = rng.choice(len(files), size=count, p=weights / weights.sum())
-    variant = rng.integers(0, int(sc.get("variants", 3)), size=count)
+    variant = rng.integers(0, n_variants, size=count)
     s_lo, s_hi = (float(x) + 0.0 for x in sc.get("scale", [defaults.scale, defaults.scale]))
     r_lo, r_hi = (float(x) + 0.0 for x in sc.get("rotation_deg", [0.0, 360.0]))  # -0.0 → 0.0
     scale = rng.uniform(s_lo, s_hi, size=count)
