@@ -112,9 +112,10 @@ def build_prototypes(
         client, handoff = None, None
         if remote or workers > 1:  # before the bar: its thread would stop workers forking
             warm = functools.partial(_draw_shared_textures, keys, params, options)
+            if not remote:  # made first, removed last: after every worker has stopped writing
+                folder = tempfile.TemporaryDirectory(prefix="treegen-forest-", ignore_cleanup_errors=True)
+                handoff = stack.enter_context(folder)
             client = stack.enter_context(_cluster(scheduler, workers, report, warm))
-            if not remote:
-                handoff = stack.enter_context(tempfile.TemporaryDirectory(prefix="treegen-forest-"))
         elif report is not None:
             report["cluster"] = "this process"
         bar = None
