@@ -893,3 +893,15 @@ def test_usd_reader_reads_st_and_preview_surface_textures(tmp_path):
     with pytest.raises(TreegenError, match="not found"):
         scene_from_usd(tmp_path / "card.usda")
     assert scene_from_usd(tmp_path / "card.usdz").parts[0].textured  # packaged: still there
+
+
+def test_only_treegens_own_forest_mark_makes_a_forest():
+    """Another tool's glTF with several skinned roots (a body and its clothes) previews as
+    before; a treegen forest file says so in its asset extras."""
+    from treegen_cli.exchange.read_gltf import forest_instances
+
+    nodes = [{"mesh": 0, "skin": 0}, {"mesh": 1, "skin": 0}]
+    two_skinned = {"asset": {"version": "2.0"}, "nodes": nodes, "scenes": [{"nodes": [0, 1]}]}
+    assert forest_instances(two_skinned) == 0
+    marked = {**two_skinned, "asset": {"version": "2.0", "extras": {"forest": "f", "instances": 2}}}
+    assert forest_instances(marked) == 2

@@ -83,16 +83,13 @@ def read_drawable(path: Path, lod: int = 0, refuse_forest: bool = False) -> Draw
 
 
 def forest_instances(gltf: dict) -> int:
-    """Trees in a forest file, or 0 for a single tree: the count forest_gltf.py records in the
-    asset's extras, else the scene's skinned mesh roots when there are several (one per
-    instance; a tree's own LODs hang off its root by MSFT_lod, not as roots)."""
+    """Trees in a treegen forest file (the count forest_gltf.py records in the asset's
+    extras), or 0. Only treegen's own mark counts: another tool's file with several skinned
+    roots (a body and its clothes) is not a forest."""
     extras = gltf.get("asset", {}).get("extras", {})
     if isinstance(extras, dict) and "forest" in extras:
         return int(extras.get("instances", 0))
-    nodes = gltf.get("nodes", [])
-    scene = gltf.get("scenes", [{}])[gltf.get("scene", 0)] if gltf.get("scenes") else {}
-    skinned = [i for i in scene.get("nodes", []) if "mesh" in nodes[i] and "skin" in nodes[i]]
-    return len(skinned) if len(skinned) > 1 else 0
+    return 0
 
 
 def unpack_meshopt(gltf: dict, blob: bytes, path: Path, simd: bool = True) -> tuple[dict, bytes]:
