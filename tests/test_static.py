@@ -175,6 +175,7 @@ def test_cli_static_format_implies_no_wind(tmp_path):
     ]
     s = json.loads(treegen("make", PALM, "-o", tmp_path / "palm.ply", "--json").stdout)
     assert s["keys"] == 0 and len(s["lods"]) == 1
+    assert s["joints"] == s["lods"][0]["joints"] == 0  # no skin in the file
     assert "wind" not in s["stages_s"] and "lod" not in s["stages_s"]
 
 

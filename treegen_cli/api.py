@@ -135,7 +135,9 @@ def make(species: str | os.PathLike, output: str | os.PathLike, **options) -> di
 
 
 def make_summary(asset, tree, written, stages: dict, seconds: float) -> dict:
-    """`treegen make --json`: what was written and how big, per LOD, and seconds per stage."""
+    """`treegen make --json`: what was written and how big, per LOD, and seconds per stage
+    (a static file has no skin: no joints)."""
+    static = Path(written[0]).suffix.lower() in STATIC
 
     def lod_row(lod):
         clip = lod.clips[0] if lod.clips else None
@@ -149,7 +151,7 @@ def make_summary(asset, tree, written, stages: dict, seconds: float) -> dict:
             "distance_m": lod.distance,
             "vertices": sum(len(p.positions) for p in lod.primitives),
             "triangles": sum(len(p.indices) // 3 for p in lod.primitives),
-            "joints": len(lod.skeleton.names),
+            "joints": 0 if static else len(lod.skeleton.names),
             "keys": keys,
             "joint_keys": joint_keys,
             "decimated": clip is not None and clip.keys is not None,
