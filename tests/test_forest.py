@@ -903,6 +903,25 @@ def test_a_profile_budgets_every_prototype(tmp_path):
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1, bad.stderr
     assert 'defaults.profile: "phone"; expected one of mobile, web, desktop, hero' in bad.stderr
     assert not (tmp_path / "g.glb").exists()
+    data["defaults"] = {**FAST, "triangles": 50}  # below the rush's minimum: named as set
+    write_layout(tmp_path, data)
+    low = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            main,
+            "forest",
+            str(tmp_path / "layout.json"),
+            "-o",
+            str(tmp_path / "g.glb"),
+            "--workers",
+            "1",
+        ],
+        capture_output=True,
+        text=True,
+    )
+    assert low.returncode == 2 and "cannot come down to defaults.triangles 50" in low.stderr, low.stderr
+    assert "--triangles" not in low.stderr and not (tmp_path / "g.glb").exists()
 
 
 def test_forest_compress_refused_for_usd(tmp_path):

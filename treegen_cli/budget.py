@@ -70,6 +70,7 @@ class BudgetOptions:
     curve_scales: tuple[float, ...] = (1.0, 0.5, 0.25)
     bark_share: tuple[float, float] = (0.2, 0.8)
     drop_cost: float = 1.0  # a dropped level weighs as much as a share off by ×e
+    flag: str = "--triangles"  # what the user set the budget with (a forest: defaults.triangles)
     curve_cost: float = 0.2  # per halving of CurveRes
 
     def __post_init__(self) -> None:
@@ -243,9 +244,9 @@ def plan_budget(
 
     if T < minimum:
         raise TreegenError(
-            f"species '{params.name}' cannot come down to --triangles {T:,}: the fewest "
+            f"species '{params.name}' cannot come down to {options.flag} {T:,}: the fewest "
             f"triangles it reaches at LOD0 is {minimum:,} (fewest levels, segments, sides and "
-            f"leaves); use --triangles {minimum} or more"
+            f"leaves); use {options.flag} {minimum} or more"
         )
     fits = [c for c in found if (1.0 - options.tolerance) * T <= c.total <= T]
     if fits:  # the bark's share and the leaves' (both ways off), least restructuring

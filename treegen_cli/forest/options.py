@@ -71,9 +71,10 @@ def make_options(layout: Layout, error_px: float | None = None, impostor: bool =
     if d.triangles is not None:
         asked["triangles"] = d.triangles
     made = resolve(asked, label=lambda k: f"defaults.{k}").options
+    flag = "defaults.triangles" if d.triangles is not None else f"defaults.profile '{d.profile}': triangles"
     return replace(
         options,
-        budget=made.budget,
+        budget=replace(made.budget, flag=flag),
         materials=made.materials,
         lod=lod if made.lod is None else replace(lod, triangles=made.lod.triangles),
         impostor=made.impostor if impostor else None,
