@@ -201,6 +201,11 @@ class Forest:
     # time offsets in formats that offset a shared clip, USD)
     looped: list[Asset] = field(default_factory=list)
 
+    def prototype_name(self, p: int) -> str:
+        """Prototype `p`'s name in a written forest: its species and seed ("palm_s2")."""
+        asset = self.prototypes[p]
+        return f"{asset.name}_s{asset.extras.get('seed', p)}"
+
 
 def lod_bounds(lod: Lod) -> tuple[np.ndarray, np.ndarray]:
     """(min, max) corners of a LOD's rest-pose geometry; zeros when it has none."""

@@ -211,11 +211,16 @@ WIND_ONLY = ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", 
 LOD_ONLY = ("lod_screen", "lod_distances", "lod_triangles", "lod_files", "schedule", "impostor_size")
 
 
+def _static(output) -> bool:
+    """Whether `output` is a static format (.obj .ply): no wind or LODs."""
+    return output is not None and Path(output).suffix.lower() in STATIC
+
+
 def _check_no_effect(options: dict, label: Callable[[str], str], output) -> None:
     """Refuse an option the user gave that the rest of the request makes void (called before
     a profile fills its own: those are defaults, not requests). A flag counts when set, a
     value when given at all (0 included)."""
-    static = output is not None and Path(output).suffix.lower() in STATIC
+    static = _static(output)
     given = [k for k in (*WIND_ONLY, *LOD_ONLY) if options.get(k) is not None and options.get(k) is not False]
     for k in given:
         if static:
@@ -304,7 +309,7 @@ def resolve(
             IMPOSTOR_SIZES,
             "the atlas side must be a power of two in [{lo}, {hi}] px",
         )
-    static = output is not None and Path(output).suffix.lower() in STATIC
+    static = _static(output)
     if output is not None:
         check_compress(output, v["compress"], label("compress"))
     try:  # a stage's range check names its own field: say what the user typed instead

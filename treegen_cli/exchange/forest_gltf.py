@@ -96,7 +96,7 @@ class _Shared:
             mats = {m.name: m for m in asset.materials}
             J = len(lod.skeleton.names)
             quant = self.quant(p, k)
-            owner = f"{asset.name}_s{asset.extras.get('seed', p)}"
+            owner = self.scene.prototype_name(p)
             prims = [
                 primitive_dict(self.buf, q, J, self.material(mats[q.material], owner), quant)
                 for q in lod.primitives

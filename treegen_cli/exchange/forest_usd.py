@@ -99,7 +99,7 @@ def build_forest_stage(
     for p, k in sorted(wanted):  # per prototype: a few
         asset = scene.prototypes[p]
         lods = list(range(len(asset.lods))) if k < 0 else [k]
-        proto = identifier(f"{asset.name}_s{asset.extras.get('seed', p)}")
+        proto = identifier(scene.prototype_name(p))
         sub = build_stage(
             _prototype_asset(scene, p, lods, tcps is not None),
             up,
