@@ -447,7 +447,7 @@ def test_catalogue_compress_refuses_usd_formats(tmp_path):
         load_catalogue(cat)
     cat.write_text(json.dumps({"entries": [{"species": str(species_path("rush")), "compress": "zip"}]}))
     with pytest.raises(
-        TreegenError, match=r"entries\[0\]\.compress 'zip': use one of none, quantize, meshopt"
+        TreegenError, match=r"entries\[0\]\.compress: \"zip\"; expected one of none, quantize, meshopt"
     ):
         load_catalogue(cat)
 
