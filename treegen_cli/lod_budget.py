@@ -160,7 +160,7 @@ def plan_lod(
     if triangle:
         thin = triangle_blades(thin)
     sides = (stem_sides(full, mesh0 or mesh), stem_sides(thin, mesh))
-    leaf, radius = cover_factors(full, thin, px, sides, triangle, girth(thin, mesh))
+    leaf, radius = cover_factors(full, thin, px, sides, triangle, girth(thin, mesh, sides[1]))
     mesh_thin = mesh
     if radius != 1.0:  # thicker stems draw the same rings; sides cut to the bark table's
         thin = thicken(thin, radius)

@@ -35,9 +35,9 @@ __all__ = [
     "MeshOptions",
     "bark_offsets",
     "build_mesh",
+    "girth",
     "leaf_variants",
     "merge_influences",
-    "girth",
     "pointed_tips",
     "stem_sides",
 ]

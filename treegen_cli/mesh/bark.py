@@ -164,7 +164,7 @@ def bark_tubes(tree, rig, options: MeshOptions) -> Primitive:
     lobed = p.lobes > 0 and p.lobe_depth != 0
     sides = stem_sides(tree, options)
     sd = sides[rs]
-    radius = radius * girth(tree, options)[rs]  # a LOD's few sides as wide as LOD0's many
+    radius = radius * girth(tree, options, sides)[rs]  # a LOD's few sides as wide as LOD0's many
     nv = sd + 1  # seam column duplicated for UVs
     v0 = np.cumsum(nv) - nv
     Vr = int(nv.sum())

@@ -61,12 +61,13 @@ def stem_sides(tree, options: MeshOptions) -> np.ndarray:
     return np.where(tree.stem_radius < options.thin_radius, np.minimum(sides, options.thin_sides), sides)
 
 
-def girth(tree, options: MeshOptions) -> np.ndarray:
+def girth(tree, options: MeshOptions, sides: np.ndarray | None = None) -> np.ndarray:
     """Radius factor per stem (S,) that draws it, with its sides, as wide on average as with
     options.match_sides (LOD0's): a regular n-gon through the circle is on average
     n·sin(π/n)/π of its diameter wide (a square 0.90, a triangle 0.83, 16 sides 0.994), so a far
-    LOD's few-sided trunk would otherwise thin out when it takes over. 1 without match_sides."""
-    sides = stem_sides(tree, options)
+    LOD's few-sided trunk would otherwise thin out when it takes over. 1 without match_sides.
+    `sides`: stem_sides(tree, options), when the caller has it already."""
+    sides = stem_sides(tree, options) if sides is None else sides
     if not options.match_sides:
         return np.ones(sides.shape)
     sides0 = stem_sides(tree, replace(options, sides=options.match_sides))
