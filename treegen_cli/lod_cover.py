@@ -37,6 +37,8 @@ MAX_CELLS = 1024  # cells across the tree, at most (a near switch is measured co
 OPAQUE_EPS = 0.01  # a blade covers at most 1 − this of a cell (keeps the log finite)
 LOBE_REACH = 0.85  # a lobed trunk's seen width over its round one, per unit LobeDepth: the
 # outline touches a lobe's tip within half a lobe of the side (mean cos over that arc)
+FIRST_STEP = math.log(1.25)  # solve_factor: the second try, from the first
+MAX_STEP = math.log(2.0)  # solve_factor: the longest secant step (log factor)
 MARGIN = 0.25  # the grid reaches this share of the tree's size beyond its bounds
 
 
@@ -281,29 +283,47 @@ def tree_area(tree: Tree, grid: Grid, sides: np.ndarray | None = None) -> np.nda
     return area
 
 
-def solve_factor(cover_at, target: float, lo: float, hi: float, tol: float = 0.005, steps: int = 10) -> float:
+def solve_factor(
+    cover_at, target: float, lo: float, hi: float, tol: float = 0.005, steps: int = 10, start: float = 1.0
+) -> float:
     """The factor in [lo, hi] at which the increasing `cover_at` meets `target` (within `tol`
-    of it): regula falsi on log(factor), Illinois variant, ending at the clamp if out of reach."""
-    a, b = math.log(lo), math.log(hi)
-    fa, fb = cover_at(lo) - target, cover_at(hi) - target
-    if fa >= 0:
-        return lo
-    if fb <= 0:
-        return hi
+    of it), or the clamp it cannot reach past. Secant steps on log(factor) from `start` (a LOD
+    usually needs a factor near 1: its per-leaf factors already hold the area it lost), then
+    regula falsi (Illinois) once the target is bracketed. Each call of `cover_at` bins every
+    blade (lod_cover's main cost in `make`): 2-4 calls, where bracketing [lo, hi] first took
+    4-7 (bench/make_bench.py)."""
+    a_lo, a_hi = math.log(lo), math.log(hi)
+    x0 = min(max(math.log(start), a_lo), a_hi)
+    f0 = cover_at(math.exp(x0)) - target
+    if abs(f0) <= tol * target:
+        return math.exp(x0)
+    below = (x0, f0) if f0 < 0 else None  # the bracket's ends seen so far
+    above = (x0, f0) if f0 > 0 else None
+    x1 = min(max(x0 + (FIRST_STEP if f0 < 0 else -FIRST_STEP), a_lo), a_hi)
     side = 0
     for _ in range(steps):
-        c = (a * fb - b * fa) / (fb - fa)
-        fc = cover_at(math.exp(c)) - target
-        if abs(fc) <= tol * target:
-            return math.exp(c)
-        if fc < 0:
-            a, fa = c, fc
-            if side == -1:
-                fb *= 0.5
-            side = -1
+        f1 = cover_at(math.exp(x1)) - target
+        if abs(f1) <= tol * target:
+            return math.exp(x1)
+        if f1 < 0:
+            if x1 >= a_hi:
+                return hi  # out of reach even at the clamp
+            if above is not None and side == -1:
+                above = (above[0], 0.5 * above[1])
+            below, side = (x1, f1), -1
         else:
-            b, fb = c, fc
-            if side == 1:
-                fa *= 0.5
-            side = 1
-    return math.exp((a * fb - b * fa) / (fb - fa))
+            if x1 <= a_lo:
+                return lo
+            if below is not None and side == 1:
+                below = (below[0], 0.5 * below[1])
+            above, side = (x1, f1), 1
+        if below is not None and above is not None:  # regula falsi, Illinois variant
+            (a, fa), (b, fb) = below, above
+            x2 = (a * fb - b * fa) / (fb - fa)
+        else:  # secant through the last two points, at most MAX_STEP on, towards the target
+            slope = (f1 - f0) / (x1 - x0) if x1 != x0 else 0.0
+            step = -f1 / slope if slope > 0 else (FIRST_STEP if f1 < 0 else -FIRST_STEP)
+            x2 = x1 + max(-MAX_STEP, min(MAX_STEP, step))
+            x2 = min(max(x2, a_lo), a_hi)
+        x0, f0, x1 = x1, f1, x2
+    return math.exp(x1)
