@@ -368,7 +368,7 @@ def test_ctrl_c_closes_the_cluster_and_leaves_no_partial_files(workspace):
                 or (
                     p.suffix in (".usda", ".usdc", ".obj")
                     and q.suffix == ".png"
-                    and q.name.startswith(p.stem + "_")
+                    and q.name.startswith(f"{p.stem}_{p.suffix[1:]}_")  # texture_files.py
                 )
                 or q.name == p.name + ".impostor.json"
             ]

@@ -524,6 +524,10 @@ def test_lod_files_and_usd_carry_the_impostor(tmp_path):
 
     scene = exchange.read_drawable(tmp_path / "u.usda", lod=4)
     assert [p.receives_shadows for p in scene.parts] == [False]  # the cards: no self-shadow
+    assert meta["images"] == {  # the sidecar names the PNGs beside the file, its extension in them
+        "albedo": "u_usda_impostor_albedo.png",
+        "normal_depth": "u_usda_impostor_normal.png",
+    }
     for f in meta["images"].values():
         assert (tmp_path / f).is_file()
     from pxr import Usd

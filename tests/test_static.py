@@ -38,13 +38,13 @@ def test_obj_files_and_names(obj):
     assert [f.name for f in obj] == [
         "tree.obj",
         "tree.mtl",
-        "tree_bark.png",
-        "tree_bark_normal.png",
-        "tree_leaf.png",
+        "tree_obj_bark.png",
+        "tree_obj_bark_normal.png",
+        "tree_obj_leaf.png",
     ]
     tex = synthetic_textures()
     for name, t in tex.items():
-        assert (obj[0].parent / f"tree_{name}.png").read_bytes() == t.png
+        assert (obj[0].parent / f"tree_obj_{name}.png").read_bytes() == t.png
 
 
 def test_mtl_has_both_materials_with_existing_textures(obj):
@@ -52,8 +52,8 @@ def test_mtl_has_both_materials_with_existing_textures(obj):
     assert set(mtl) == {"bark", "leaf"}
     for m in mtl.values():
         assert (obj[0].parent / m["map_Kd"]).is_file()
-    assert mtl["leaf"]["map_d"] == mtl["leaf"]["map_Kd"] == "tree_leaf.png"  # alpha cut-out
-    assert mtl["bark"]["map_Bump"].split()[-1] == "tree_bark_normal.png"
+    assert mtl["leaf"]["map_d"] == mtl["leaf"]["map_Kd"] == "tree_obj_leaf.png"  # alpha cut-out
+    assert mtl["bark"]["map_Bump"].split()[-1] == "tree_obj_bark_normal.png"
     assert "map_d" not in mtl["bark"]
     np.testing.assert_allclose(
         [float(v) for v in mtl["bark"]["Kd"].split()], textured_asset().materials[0].base_color[:3]
@@ -169,9 +169,9 @@ def test_cli_static_format_implies_no_wind(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == [
         "palm.mtl",
         "palm.obj",
-        "palm_bark.png",
-        "palm_bark_normal.png",
-        "palm_leaf.png",
+        "palm_obj_bark.png",
+        "palm_obj_bark_normal.png",
+        "palm_obj_leaf.png",
     ]
     s = json.loads(treegen("make", PALM, "-o", tmp_path / "palm.ply", "--json").stdout)
     assert s["keys"] == 0 and len(s["lods"]) == 1

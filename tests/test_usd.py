@@ -594,20 +594,62 @@ def test_textures_inside_the_usdz(textured):
 
 @pytest.mark.parametrize("fmt", ["usda", "usdc"])
 def test_textures_beside_usda_usdc(textured, fmt):
-    """Flat siblings <stem>_<name>.png in the same folder, referenced "./<stem>_<name>.png"."""
+    """Flat siblings <stem>_<ext>_<name>.png in the same folder, referenced "./<stem>_<ext>_<name>.png"."""
     tex = synthetic_textures()
     files = textured[1, fmt]
     assert [f.name for f in files] == [
         f"tree1.{fmt}",
-        "tree1_bark.png",
-        "tree1_bark_normal.png",
-        "tree1_leaf.png",
+        f"tree1_{fmt}_bark.png",
+        f"tree1_{fmt}_bark_normal.png",
+        f"tree1_{fmt}_leaf.png",
     ]
     for name, t in tex.items():
-        assert (files[0].parent / f"tree1_{name}.png").read_bytes() == t.png
+        assert (files[0].parent / f"tree1_{fmt}_{name}.png").read_bytes() == t.png
     stage = Usd.Stage.Open(str(files[0]))
     f = shader(stage, "leaf", "baseTexture").GetInput("file").Get()
-    assert f.path == "./tree1_leaf.png" and f.resolvedPath == str(files[0].parent / "tree1_leaf.png")
+    leaf = f"tree1_{fmt}_leaf.png"
+    assert f.path == "./" + leaf and f.resolvedPath == str(files[0].parent / leaf)
+
+
+def side_textures(path) -> dict[str, str]:
+    """{file name: SHA-256 of its bytes} of every texture a written .usda/.usdc/.obj refers to beside it (its
+    materials' files, and the impostor sidecar's images)."""
+    import hashlib
+    import json
+
+    if path.suffix == ".obj":
+        mtl = (path.parent / (path.stem + ".mtl")).read_text().splitlines()
+        names = {ln.split()[-1] for ln in mtl if ln.startswith("map_")}
+    else:
+        stage = Usd.Stage.Open(str(path))
+        names = {
+            UsdShade.Shader(p).GetInput("file").Get().path.removeprefix("./")
+            for p in stage.Traverse()
+            if p.IsA(UsdShade.Shader) and UsdShade.Shader(p).GetShaderId() == "UsdUVTexture"
+        }
+        sidecar = path.with_name(path.name + ".impostor.json")
+        if sidecar.is_file():
+            names |= set(json.loads(sidecar.read_text())["images"].values())
+    return {n: hashlib.sha256((path.parent / n).read_bytes()).hexdigest() for n in sorted(names)}
+
+
+def test_outputs_sharing_a_stem_keep_their_own_textures(tmp_path, treegen_cli_run):
+    """a.usdc, a.obj and a.usda (three species) in one folder: each names its own side files
+    (the extension is in their names), so writing one never overwrites another's textures."""
+    outputs = {"a.usdc": "quaking_aspen", "a.obj": "fan_palm", "a.usda": "rush"}
+    own = {}
+    for name, species in outputs.items():
+        proc = treegen_cli_run("make", species, "-o", tmp_path / name, "-q", "--texture-size", "64")
+        assert proc.returncode == 0, proc.stderr
+        own[name] = side_textures(tmp_path / name)
+        assert {n.split("_")[1] for n in own[name]} == {name.split(".")[1]}
+        assert len(own[name]) >= 3  # leaf, bark, bark normal (+ the impostor's with EGL)
+    leaf = {name: t[name.replace(".", "_") + "_leaf.png"] for name, t in own.items()}
+    assert len(set(leaf.values())) == 3  # the species' leaves differ: an overwrite would show
+    names = [set(t) for t in own.values()]
+    assert not (names[0] & names[1] or names[0] & names[2] or names[1] & names[2])
+    for name in outputs:  # after all three were written, each still finds its own bytes
+        assert side_textures(tmp_path / name) == own[name], name
 
 
 @pytest.mark.parametrize("fmt", FORMATS)
@@ -663,7 +705,12 @@ def test_texture_names_are_unique_and_shared_once(tmp_path):
         asset, materials=[bark, replace(leaf, base_texture=other, normal_texture=bark.normal_texture)]
     )
     files = export(prepare(asset), tmp_path / "t.usda")
-    assert [f.name for f in files] == ["t.usda", "t_bark.png", "t_bark_1.png", "t_bark_normal.png"]
+    assert [f.name for f in files] == [
+        "t.usda",
+        "t_usda_bark.png",
+        "t_usda_bark_1.png",
+        "t_usda_bark_normal.png",
+    ]
     assert validate_usd(files[0]) == []
 
 
@@ -764,9 +811,9 @@ def test_textured_forest_validates(tmp_path, fmt):
     else:
         assert names == [
             f"grove.{fmt}",
-            "grove_synthetic_s0_bark.png",
-            "grove_synthetic_s0_bark_normal.png",
-            "grove_synthetic_s0_leaf.png",
+            f"grove_{fmt}_synthetic_s0_bark.png",
+            f"grove_{fmt}_synthetic_s0_bark_normal.png",
+            f"grove_{fmt}_synthetic_s0_leaf.png",
         ]
     stage = Usd.Stage.Open(str(files[0]))
     tree = stage.GetPrimAtPath("/grove/Trees/tree0")

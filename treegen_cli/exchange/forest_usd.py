@@ -19,7 +19,8 @@ any tree switchable, still instanced); otherwise one prototype prim per (prototy
 
 Textures and axes as exchange.usd: a .usdz packages the textures and is Y up (instances then
 translate by the converted position and turn about +Y), a .usda/.usdc keeps Z up with the
-textures beside it; texture names carry their prototype's name (`<stem>_<prototype>_leaf.png`).
+textures beside it; texture names carry their prototype's name (`<stem>_<ext>_<prototype>_leaf.png`,
+`grove.usdc` → `grove_usdc_palm_s2_leaf.png`; texture_files.py).
 """
 
 from __future__ import annotations

@@ -6,7 +6,8 @@ vertex list, then one group per primitive (`g bark` / `g leaves`) with its own m
 bottom-left, OBJ's convention too). `<stem>.mtl` beside it holds the materials: Kd from
 base_color, `map_Kd` the base texture, `map_d` the same RGBA image for cut-out leaves (its
 alpha), `map_Bump -bm 1` the tangent-space normal map (Blender's reading of map_Bump);
-textures are flat siblings `<stem>_<name>.png` (texture_files.py).
+textures are flat siblings `<stem>_obj_<name>.png` (texture_files.py: the extension keeps
+them apart from the textures of an `<stem>.usdc` in the same folder).
 
 PLY goes through trimesh: positions and normals only.
 

@@ -2,8 +2,10 @@
 separate files (USD, OBJ):
 
 - inside a package (.usdz): `textures/<name>.png`;
-- beside the main file: flat siblings `<stem>_<name>.png` (flat, because staging moves the
-  files a writer produced into place; two trees written into one folder keep apart by stem).
+- beside the main file: flat siblings `<stem>_<ext>_<name>.png` (`a.usdc` → `a_usdc_leaf.png`;
+  flat, because staging moves the files a writer produced into place). The prefix is the whole
+  output name, extension included, as no two outputs in one folder share it: `a.usdc` and
+  `a.obj` (or `a.usda`) in one folder each keep their own textures.
 
 Names come from Texture.name (made file- and identifier-safe); a texture used twice is written
 once; two different textures with one name get `_1`, `_2`, ... in the order they are met, so
@@ -31,15 +33,16 @@ class TextureFiles:
     def __init__(self, path, packaged: bool | None = None):
         path = Path(path)
         self.packaged = path.suffix.lower() == ".usdz" if packaged is None else packaged
-        self.stem = path.stem
+        # the whole output name with its dot made `_` (its stem alone if it has no extension)
+        self.prefix = path.stem + path.suffix.replace(".", "_", 1)
         self.files: dict[str, bytes] = {}
         self._names: dict[Texture, str] = {}
 
     def name(self, texture: Texture, prefix: str = "") -> str:
-        """The file's name relative to the main file ("textures/leaf.png", "tree_leaf.png")."""
+        """The file's name relative to the main file ("textures/leaf.png", "tree_usdc_leaf.png")."""
         if texture not in self._names:
             base = safe_name(prefix + texture.name)
-            base = f"textures/{base}" if self.packaged else f"{self.stem}_{base}"
+            base = f"textures/{base}" if self.packaged else f"{self.prefix}_{base}"
             name, k = base, 1
             while name + ".png" in self.files:
                 name, k = f"{base}_{k}", k + 1

@@ -12,7 +12,8 @@ Writers only serialise: everything here is a re-encoding of the Asset. Stage lay
         (LOD0)                     with a single LOD the SkelRoot sits directly under /<Asset>
 
 Textures (texture_files.py): a .usdz packages them (`textures/<name>.png`, after the root
-layer); a .usda/.usdc gets flat siblings `<stem>_<name>.png`, which staging moves into place
+layer); a .usda/.usdc gets flat siblings `<stem>_<ext>_<name>.png` (`a.usdc` → `a_usdc_leaf.png`:
+the extension keeps it apart from an `a.usda` or `a.obj` beside it), which staging moves into place
 like a .gltf's .bin. Asset paths are "./..." relative to the layer.
 
 Up axis (`usd_stage.Axes`): Z for .usda/.usdc (generator space as it is), Y for a .usdz (AR
