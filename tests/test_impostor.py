@@ -517,6 +517,15 @@ def test_lod_files_and_usd_carry_the_impostor(tmp_path):
     )
     names = sorted(p.rsplit("/", 1)[-1] for p in s["files"])
     assert names == sorted([f"r_LOD{k}.glb" for k in range(5)] + ["r_LOD4.glb.impostor.json"])
+    from treegen_cli.exchange.gltf_container import read_gltf
+
+    for k in range(5):  # each part carries the materials (and images) its own LOD draws, no more
+        g, _ = read_gltf(tmp_path / f"r_LOD{k}.glb")
+        drawn = {p["material"] for m in g["meshes"] for p in m["primitives"]}
+        assert set(range(len(g["materials"]))) == drawn, k
+        kinds = {m["name"] for m in g["materials"]}
+        assert kinds == ({"impostor"} if k == 4 else {"bark", "leaf"}), (k, kinds)
+        assert len(g["images"]) == (2 if k == 4 else 3), k  # atlas + normals; bark, its normals, leaf
     s = api.make(species_path("rush"), tmp_path / "u.usda", duration=1.0, fps=10.0, impostor=True)
     meta = json.loads((tmp_path / "u.usda.impostor.json").read_text())
     assert meta["axes"]["up"] == [0.0, 0.0, 1.0]

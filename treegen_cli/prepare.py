@@ -140,13 +140,18 @@ def split_lods(asset: Asset) -> list[Asset]:
     "wind_loop"), for engines that take per-LOD files (Unity LODGroup `_LOD0…`, Unreal, Godot
     with visibility ranges). `extras` record the LOD's index, count, distance and coverage.
 
+    Each part keeps only the materials its LOD draws (LOD0 carried the impostor's atlas, the
+    impostor the bark and leaf textures).
+
     Result: a 4-LOD asset → 4 assets of one LOD each, extras lod_index 0..3."""
     out = []
     for k, lod in enumerate(asset.lods):
         clips = [replace(c, name="wind_loop") for c in lod.clips[:1]] + list(lod.clips[1:])
+        used = {p.material for p in lod.primitives}
         out.append(
             replace(
                 asset,
+                materials=[m for m in asset.materials if m.name in used],
                 lods=[replace(lod, clips=clips)],
                 extras=asset.extras
                 | {
