@@ -25,9 +25,10 @@ from .materials import MATERIAL_DEFAULTS, MaterialOptions, build_materials
 from .mesh import MESH_DEFAULTS, MeshOptions, build_mesh
 from .params import Params
 from .prepare import prepare
-from .rig import RIG_DEFAULTS, RigOptions, build_rig, check_joint_levels
+from .rig import RIG_DEFAULTS, Rig, RigOptions, build_rig, check_joint_levels
 from .tree import Tree, tree_height
-from .wind import DEFAULTS as WIND_DEFAULTS, WindOptions, bake_wind
+from .wind import DEFAULTS as WIND_DEFAULTS, WindOptions, bake_wind, wind_angles
+from .wind_lods import lod_angles
 
 
 @dataclass(frozen=True)
@@ -67,8 +68,20 @@ def clip_name(lod: int) -> str:
     return "wind_loop" if lod == 0 else f"wind_lod{lod}_loop"
 
 
-def build_lod(tree: Tree, options: MakeOptions, seed: int, timings: Timings) -> Lod:
-    """Rig, skin and animate one grown tree."""
+@dataclass(frozen=True)
+class Sway:
+    """LOD0's tree, rig and wind bends: the LODs below sway as it does (wind_lods.lod_angles)."""
+
+    tree: Tree
+    rig: Rig
+    theta: np.ndarray  # (J, n, 3)
+
+
+def build_lod(
+    tree: Tree, options: MakeOptions, seed: int, timings: Timings, sway: Sway | None = None
+) -> tuple[Lod, Sway | None]:
+    """Rig, skin and animate one grown tree: its own wind, or (`sway`, a LOD cut from it)
+    LOD0's motion on its rig. Returns the LOD and the Sway the LODs below it follow."""
     check_mesh(tree, options.mesh, options.limits)
     rig = timings.run("rig", build_rig, tree, options.rig)
     if options.wind is not None:
@@ -76,14 +89,19 @@ def build_lod(tree: Tree, options: MakeOptions, seed: int, timings: Timings) -> 
     primitives = timings.run("mesh", build_mesh, tree, rig, options.mesh)
     clips = []
     if options.wind is not None:
-        clip = timings.run("wind", bake_wind, tree, rig, options.wind, seed)
+        if sway is None:
+            sway = Sway(tree, rig, timings.run("wind", wind_angles, tree, rig, options.wind, seed))
+            theta = sway.theta
+        else:
+            theta = timings.run("wind", lod_angles, sway.theta, sway.tree, sway.rig, tree, rig)
+        clip = timings.run("wind", bake_wind, tree, rig, options.wind, seed, theta)
         clips.append(replace(clip, name=clip_name(0)))
-    return Lod(primitives=primitives, skeleton=rig.skeleton, clips=clips)
+    return Lod(primitives=primitives, skeleton=rig.skeleton, clips=clips), sway
 
 
 def build_lods(params: Params, tree: Tree, options: MakeOptions, seed: int, timings: Timings) -> list[Lod]:
-    """One coarser tree per LOD, each with its own rig, mesh, dense wind (same wind
-    options and seed, so the motion matches) and a clip decimated for its distance
+    """One coarser tree per LOD, each with its own rig and mesh, LOD0's wind on that rig
+    (wind_lods.lod_angles: the motion does not change at a switch) and a clip decimated for its distance
     (clip_name(k)); distances follow the tree's height on screen (lod.switch_distances).
     LOD0 is `tree`; lower LODs are cut from it within their triangle budgets
     (lod_budget.lod_tree: thin stems dropped, leaves thinned and scaled to keep the cover)."""
@@ -92,13 +110,14 @@ def build_lods(params: Params, tree: Tree, options: MakeOptions, seed: int, timi
     distances = switch_distances(height, lo)
     at = replace(lo, distances=tuple(distances))  # lod_tree sizes stems by the switch distance
     lods: list[Lod] = []
+    sway = None
     for k, distance in enumerate(distances):
         t, rig, mesh = tree, options.rig, options.mesh
         if k > 0:
             t, rig, mesh = timings.run(
                 "generate", lod_tree, tree, k, lods[0], lods[-1], options.rig, options.mesh, at
             )
-        lod = build_lod(t, replace(options, rig=rig, mesh=mesh), seed, timings)
+        lod, sway = build_lod(t, replace(options, rig=rig, mesh=mesh), seed, timings, sway)
         clips = [
             timings.run("lod", decimate, lod.skeleton, lod.primitives, c, distance, lo, clip_name(k))[0]
             for c in lod.clips
@@ -145,7 +164,7 @@ def build_asset(
     if tree is None:
         tree = timings.run("generate", generate, params, seed, options.generate)
     lods = (
-        [build_lod(tree, options, seed, timings)]
+        [build_lod(tree, options, seed, timings)[0]]
         if options.lod is None
         else build_lods(params, tree, options, seed, timings)
     )
@@ -174,7 +193,7 @@ def plan_asset(params: Params, seed: int = 0, options: MakeOptions = MakeOptions
     tree = generate(params, seed, plain.generate)
     timings = Timings()
     lods = (
-        [build_lod(tree, plain, seed, timings)]
+        [build_lod(tree, plain, seed, timings)[0]]
         if plain.lod is None
         else build_lods(params, tree, plain, seed, timings)
     )

@@ -169,13 +169,17 @@ def wind_angles(
     return bound_bends(theta, np.asarray(rig.skeleton.parent, dtype=np.int64), options)
 
 
-def bake_wind(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int = 0) -> Clip:
+def bake_wind(
+    tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int = 0, theta: np.ndarray | None = None
+) -> Clip:
     """The wind clip: local rotation q_rest ∘ Δ per joint and key, Δ the wind deviation turned
     from world into the joint's rest frame (Δ_local = R_restᵀ θ_world), so the parent's motion
-    carries through the hierarchy. Times 0..duration inclusive; last key == first key."""
+    carries through the hierarchy. Times 0..duration inclusive; last key == first key.
+    `theta`: the bends (J, n, 3) if already known (wind_angles, wind_lods.lod_angles)."""
     skel = rig.skeleton
     n, times = _frames(options)
-    theta = wind_angles(tree, rig, options, seed)  # (J, n, 3)
+    if theta is None:
+        theta = wind_angles(tree, rig, options, seed)  # (J, n, 3)
     n_j = theta.shape[0]
     rest = np.asarray(skel.rest_rotation, dtype=np.float64)
     rot = np.broadcast_to(rest[None], (n + 1, n_j, 4)).copy()
