@@ -136,6 +136,10 @@ CASES = [
     (["make", "rush", "-o", "x.ply", "--lod-files"], ["--lod-files: has no effect, a .ply file"]),
     (["make", "rush", "-o", "x.glb", "--no-wind", "--wind-speed", "0"], ["--wind-speed: has no effect"]),
     (["make", "rush", "-o", "x.obj", "--impostor-size", "256"], ["--impostor-size: has no effect, a .obj"]),
+    (
+        ["make", "rush", "-o", "x.glb", "--lod-distances", "0,10", "--lod-screen", "0.5"],
+        ["--lod-screen: has no effect, --lod-distances replaces it"],
+    ),
     # click's own parse errors: one line (no usage block), the flag as typed, click's choices
     (["make", "rush", "-o", "x.glb", "--seed", "abc"], ["make: --seed 'abc': not a valid integer"]),
     (["make", "rush", "-o", "x.glb", "--fov", "wide"], ["make: --fov 'wide': not a valid float"]),

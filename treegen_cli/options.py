@@ -232,6 +232,10 @@ def _check_no_effect(options: dict, label: Callable[[str], str], output) -> None
         else:
             continue
         raise TreegenError(f"{label(k)}: has no effect, {why}; leave it out")
+    if options.get("lod_distances") is not None and options.get("lod_screen") is not None:
+        raise TreegenError(
+            f"{label('lod_screen')}: has no effect, {label('lod_distances')} replaces it; give one of them"
+        )
 
 
 def resolve(
