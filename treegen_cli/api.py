@@ -120,6 +120,7 @@ def run_make(make_job: MakeJob, timings=None) -> dict:
     timings = timings if timings is not None else Timings()
     asset, tree = build(make_job.params, make_job.species, make_job.job, timings)
     summary = write(asset, tree, make_job.output, timings, make_job.t0, make_job.job)
+    current_reporter().stage_totals(timings.stages)
     current_reporter().detail(
         f"  counts    stems per level {tree_stats(tree)['stems_per_level']}, "
         f"{tree.n_nodes:,} nodes, {tree.n_leaves:,} leaves, {len(asset.lods)} LOD(s)"

@@ -89,7 +89,11 @@ class Reporter:
     def stage_done(self, name: str, seconds: float) -> None:
         if self._live is not None:
             self._live.advance(self._task)
-        self.detail(f"  {name:<10}{seconds:8.3f} s")
+
+    def stage_totals(self, stages: dict[str, float]) -> None:
+        """With -v: seconds per stage, summed over its runs (each LOD runs rig, mesh, wind…)."""
+        for name, seconds in stages.items():
+            self.detail(f"  {name:<10}{seconds:8.3f} s")
 
     def timings(self, total: int | None = None) -> "StageTimings":
         return StageTimings(reporter=self, total=total)
@@ -141,6 +145,9 @@ def _wrap(callback):
     return run
 
 
+NOT_VERBOSE = ("preview", "species")  # commands that print no stages or extra counts
+
+
 def add_output_options(command: click.Command) -> None:
     """Give `command` (and, for a group, every subcommand) -q/--quiet and -v/--verbose;
     idempotent, so it can run at every start-up after all commands are registered."""
@@ -161,6 +168,9 @@ def add_output_options(command: click.Command) -> None:
             help="Print nothing but errors (and --json output).",
         )
     )
+    if command.name in NOT_VERBOSE:  # nothing more to say: no -v that would do nothing
+        command.callback = _wrap(command.callback)
+        return
     command.params.append(
         click.Option(
             [o for o in ("-v", "--verbose") if o not in taken],

@@ -119,7 +119,7 @@ def forest(
     lods = ", ".join(f"{k} {v}" for k, v in s["instances_per_lod"].items())
     click.echo(f"wrote {', '.join(s['files'])}  ({s['bytes'] / 1e6:.2f} MB)")
     click.echo(
-        f"  {s['instances']} trees from {s['prototypes']} prototypes, "
+        f"  {s['instances']:,} trees from {s['prototypes']} prototypes, "
         + ("each with all its LODs" if s["all_lods"] else "each with one LOD")
         + (f"; at the camera per LOD: {lods}" if s["camera"] else "; no camera")
     )

@@ -50,15 +50,19 @@ def make(species, output, as_json, **options):
         click.echo("  static format: no wind or LODs")
         click.echo(counts)
     else:
-        click.echo(f"{counts}; {s['joints']} joints; {s['joint_keys']:,} keys ({s['keys']} frames)")
+        click.echo(f"{counts}; {_joints(s['joints'])}; {s['joint_keys']:,} keys ({s['keys']} frames)")
     if len(s["lods"]) > 1:
         click.echo(
             "  LODs: "
             + "; ".join(
-                f"{r['distance_m']:.1f} m: {r['triangles']:,} tris, {r['joints']} joints"
+                f"{r['distance_m']:.1f} m: {r['triangles']:,} tris, {_joints(r['joints'])}"
                 + (f", {r['joint_keys']:,} keys" if r["decimated"] else "")
                 for r in s["lods"]
             )
         )
     stages = ", ".join(f"{k} {v:.2f}" for k, v in timings.stages.items())
     click.echo(f"  {time.perf_counter() - t0:.2f} s  ({stages})")
+
+
+def _joints(n: int) -> str:
+    return f"{n:,} joint" + ("" if n == 1 else "s")
