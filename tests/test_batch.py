@@ -389,7 +389,15 @@ def test_ctrl_c_closes_the_cluster_and_leaves_no_partial_files(workspace):
         ({"entries": [{"species": "species/rush.txt", "seeds": "9-3"}]}, ["entries[0].seeds", "9-3"]),
         (
             {"entries": [{"species": "species/rush.txt", "wind_sped": 3}]},
-            ["entries[0].wind_sped", "unknown key", "wind_speed"],
+            ["entries[0].wind_sped: unknown key (did you mean wind_speed?); allowed: "],
+        ),
+        (
+            {"defaults": {"wnd_speed": 3}, "entries": [{"species": "species/rush.txt"}]},
+            ["defaults.wnd_speed: unknown key (did you mean wind_speed?); allowed: "],
+        ),
+        (
+            {"entries": [{"species": "species/rush.txt", "grid": {"gusst": [0.1]}}]},
+            ["entries[0].grid.gusst: unknown key (did you mean gust?)"],
         ),
         (
             {"defaults": {"max_joints": 0}, "entries": [{"species": "species/rush.txt"}]},

@@ -1,7 +1,8 @@
 """The layout file's JSON Schema (package data) and a small interpreter of the subset it uses
 (type, properties, required, additionalProperties, items, min/maxItems, minimum/maximum,
 exclusive bounds, minLength, $ref), so the published schema and the checks cannot drift apart.
-Every message starts with the JSON path of the offending value.
+Every message starts with the JSON path of the offending value; an unknown key names the
+closest allowed one.
 
 The camera, wind and defaults objects are dataclasses here; their defaults (the wind's and the
 screen's read from the stage DEFAULTS) are written into the schema as it is loaded, so the
@@ -10,6 +11,7 @@ published "default"s are never typed twice.
 
 from __future__ import annotations
 
+import difflib
 import json
 import math
 from dataclasses import MISSING, dataclass, fields
@@ -141,6 +143,16 @@ def _num(x) -> str:
     return str(x) if isinstance(x, int) else f"{x:g}"
 
 
+def unknown_key(where: str, key: str, allowed) -> TreegenError:
+    """'<path>: unknown key (did you mean X?); allowed: ...', the closest name as for flags
+    and species keys (difflib)."""
+    names = sorted(allowed)
+    by_lower = {n.lower(): n for n in names}
+    hit = difflib.get_close_matches(str(key).lower(), list(by_lower), n=1, cutoff=0.6)
+    hint = f" (did you mean {by_lower[hit[0]]}?)" if hit else ""
+    return TreegenError(f"{where}: unknown key{hint}; allowed: {', '.join(names)}")
+
+
 def check_schema(value, schema: dict, root: dict, path: str = "") -> None:
     """Raise TreegenError '<json path>: <reason>' at the first place `value` breaks `schema`."""
     if "$ref" in schema:
@@ -194,4 +206,4 @@ def check_schema(value, schema: dict, root: dict, path: str = "") -> None:
             if key in props:
                 check_schema(item, props[key], root, _join(path, key))
             elif schema.get("additionalProperties", True) is False:
-                raise TreegenError(f"{_join(path, key)}: unknown key; allowed: {', '.join(sorted(props))}")
+                raise unknown_key(_join(path, key), key, props)
