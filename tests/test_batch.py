@@ -400,6 +400,50 @@ def test_ctrl_c_closes_the_cluster_and_leaves_no_partial_files(workspace):
             ["entries[0].grid.gusst: unknown key (did you mean gust?)"],
         ),
         (
+            {"entries": [{"species": "species/rush.txt", "seeds": [1.5]}]},
+            ["entries[0].seeds[0]: 1.5 is not a whole number; allowed [0, 9223372036854775807]"],
+        ),
+        (
+            {"entries": [{"species": "species/rush.txt", "seeds": [1, 2, -3]}]},
+            ["entries[0].seeds[2]: -3 is out of range; allowed [0, 9223372036854775807]"],
+        ),
+        (
+            {"defaults": {"seeds": 2.5}, "entries": [{"species": "species/rush.txt"}]},
+            ["defaults.seeds: 2.5 is not a whole number; allowed [0, 9223372036854775807]"],
+        ),
+        (
+            {"entries": [{"species": "species/rush.txt", "seeds": [4, 9, 4]}]},
+            ["entries[0].seeds[2]: seed 4 is listed twice"],
+        ),
+        (
+            {"entries": [{"species": "species/rush.txt", "sides": [8, 4.5]}]},
+            ["entries[0].sides[1]: 4.5 is not a whole number; allowed [3, 64]"],
+        ),
+        (
+            {"entries": [{"species": "species/rush.txt", "grid": {"sides": [[8], [8, 4.5]]}}]},
+            ["entries[0].grid.sides[1][1]: 4.5 is not a whole number; allowed [3, 64]"],
+        ),
+        (
+            {"entries": [{"species": "species/rush.txt", "lod_distances": [0, "far"]}]},
+            ['entries[0].lod_distances[1]: expected a number (finite), got "far"'],
+        ),
+        (
+            {"defaults": {"lod_screen": [0.5, 200]}, "entries": [{"species": "species/rush.txt"}]},
+            ["defaults.lod_screen[1]: 200 is out of range; allowed (0, 100]"],
+        ),
+        (
+            {"entries": [{"species": "species/rush.txt", "joint_levels": [0, True]}]},
+            ["entries[0].joint_levels[1]: expected an integer, got true"],
+        ),
+        (
+            {"entries": [{"species": "species/rush.txt", "grid": {"max_joints": [64, 2.5]}}]},
+            ["entries[0].grid.max_joints[1]: 2.5 is not a whole number; allowed [1, 65535]"],
+        ),
+        (
+            {"entries": [{"species": "species/rush.txt", "formats": ["glb", 3]}]},
+            ["entries[0].formats[1]: expected a string, got 3"],
+        ),
+        (
             {"defaults": {"max_joints": 0}, "entries": [{"species": "species/rush.txt"}]},
             ["defaults.max_joints", "[1, 65535]"],
         ),
@@ -557,6 +601,25 @@ def test_dry_run_plans_what_the_run_builds_with_budgets_and_profiles(workspace):
             assert job[key] == row[key], (path, key)
 
 
+def test_seeds_name_the_bad_item_and_the_whole_seed_range():
+    """parse_seeds (the API's path, after the schema) names a list item by its index."""
+    from treegen_cli.batch import parse_seeds
+    from treegen_cli.errors import TreegenError
+    from treegen_cli.options import MAX_SEED
+
+    assert parse_seeds([5, MAX_SEED], "s") == [5, MAX_SEED] and parse_seeds("1-3,7", "s") == [1, 2, 3, 7]
+    for value, message in (
+        ([1.5], f"s[0]: 1.5 is not a whole number; allowed [0, {MAX_SEED}]"),
+        ([1, "x"], f's[1]: expected a seed (a whole number), got "x"; allowed [0, {MAX_SEED}]'),
+        ([1, MAX_SEED + 1], f"s[1]: seed {MAX_SEED + 1} is out of range; allowed [0, {MAX_SEED}]"),
+        (2.5, f"s: 2.5 is not a whole number; allowed [0, {MAX_SEED}]"),
+        ([3, 1, 3], "s[2]: seed 3 is listed twice"),
+    ):
+        with pytest.raises(TreegenError) as e:
+            parse_seeds(value, "s")
+        assert str(e.value) == message
+
+
 def test_schema_and_defaults_agree_with_make():
     from treegen_cli import api
     from treegen_cli.commands.make import make
@@ -568,6 +631,10 @@ def test_schema_and_defaults_agree_with_make():
         "seeds",
         "formats",
     }
+    from treegen_cli.options import MAX_SEED
+
+    seeds = schema["$defs"]["seeds"]["anyOf"]
+    assert [b.get("maximum", b.get("items", {}).get("maximum")) for b in seeds] == [MAX_SEED, None, MAX_SEED]
     click_defaults = {p.name: p.default for p in make.params if p.name in api.DEFAULTS}
     assert click_defaults == api.DEFAULTS
     for k, v in api.DEFAULTS.items():
