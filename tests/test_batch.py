@@ -12,6 +12,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -324,55 +325,91 @@ def test_embedded_local_cluster_builds_the_same_bytes_and_resumes(workspace, ser
     assert_outputs(out, serial)
 
 
-def test_ctrl_c_closes_the_cluster_and_leaves_no_partial_files(workspace):
+def journaled(out: Path) -> set[str]:
+    """The outputs the workers have journaled so far (whole lines only)."""
+    try:
+        lines = (out / ".manifest.jsonl").read_text().splitlines()
+    except OSError:
+        return set()
+    paths = set()
+    for line in lines:
+        try:
+            paths.add(json.loads(line)["path"])
+        except (ValueError, KeyError):
+            continue
+    return paths
+
+
+def test_ctrl_c_keeps_what_landed_and_leaves_no_partial_files_or_empty_folders(workspace):
+    """Ctrl-C while an aspen's .usdc is being written, its .glb already in place: the task
+    never returns, yet the .glb (journaled by its worker as it landed) is recorded as built
+    and skipped by the rerun. The rush, last in line, writes into `later/`: that folder
+    exists only if one of its jobs ran. No staging folder, journal or partial file is left."""
+    cat = json.loads(json.dumps(CATALOGUE))
+    cat["entries"][2]["name"] = "later/{species}_{seed}.{ext}"
+    catalogue = workspace / "interrupt.json"
+    catalogue.write_text(json.dumps(cat))
     out = workspace / "interrupted"
+    args = [sys.executable, "-m", "treegen_cli", "batch", catalogue, "-o", out, "--workers", "1", "--json"]
     proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "treegen_cli",
-            "batch",
-            workspace / "catalogue.json",
-            "-o",
-            out,
-            "--workers",
-            "1",
-            "--json",
-        ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env=ENV,
-        start_new_session=True,
+        args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV, start_new_session=True
     )
-    for line in proc.stdout:
-        if '"event": "built"' in line:
-            break
+
+    def half_written(landed: set[str]) -> list[str]:
+        """Aspens whose .glb is in place and whose .usdc is not: their task is running."""
+        pairs = [(f"quaking_aspen_{s}.glb", f"quaking_aspen_{s}.usdc") for s in (1, 2)]
+        return [glb for glb, usdc in pairs if glb in landed and usdc not in landed]
+
+    landed: set[str] = set()
+    while not half_written(landed):
+        if all(f"quaking_aspen_{s}.usdc" in landed for s in (1, 2)) or proc.poll() is not None:
+            proc.kill()
+            pytest.fail("no moment with an aspen's .glb in place and its .usdc not yet")
+        time.sleep(0.005)
+        landed = journaled(out)
+    first = half_written(landed)[0]
     os.killpg(proc.pid, signal.SIGINT)  # the terminal sends Ctrl-C to the whole group
-    proc.wait(timeout=60)
-    err = proc.stderr.read()
+    stdout, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err
     assert "Traceback" not in err and "treegen: interrupted:" in err and "rerun" in err, err
     manifest = json.loads((out / "manifest.json").read_text())
     built = {r["path"]: r for r in manifest["assets"] if r["status"] == "built"}
-    assert 1 <= len(built) < 12
-    on_disk = sorted(p.name for p in out.iterdir() if p.name not in ("manifest.json", "manifest.csv"))
-    assert on_disk == sorted(built) or set(built) <= set(on_disk)
-    for p in out.iterdir():
-        assert not p.name.startswith("."), p.name  # no staging folders, no journal
-        if p.name in built:  # the file and its sibling textures
-            mine = [
-                q
-                for q in out.iterdir()
-                if q.name == p.name
-                or (
-                    p.suffix in (".usda", ".usdc", ".obj")
-                    and q.suffix == ".png"
-                    and q.name.startswith(f"{p.stem}_{p.suffix[1:]}_")  # texture_files.py
-                )
-                or q.name == p.name + ".impostor.json"
-            ]
-            assert sum(q.stat().st_size for q in mine) == built[p.name]["bytes"]
+    assert first in built and 1 <= len(built) < 12 and manifest["built"] == len(built)
+    assert f"interrupted: {len(built)} built" in err, err
+    assert sorted(e["path"] for e in events(stdout) if e["event"] == "built") == sorted(built)
+    pending = {r["path"] for r in manifest["assets"] if r["status"] == "pending"}
+    assert pending == {r["path"] for r in manifest["assets"]} - set(built)
+    # every asset on disk is a built one, whole: its files sum to the bytes recorded
+    on_disk = {p.relative_to(out).as_posix() for p in out.rglob("*") if p.suffix in (".glb", ".usdc")}
+    assert on_disk == set(built)
+    for row in built.values():
+        assert sum((out / f).stat().st_size for f in row["files"]) == row["bytes"], row["path"]
+    assert [p.name for p in out.rglob(".*")] == []  # no staging folders, no journal
+    assert [p for p in out.rglob("*") if p.is_dir() and not any(p.iterdir())] == []
+    assert (out / "later").exists() == any(p.startswith("later/") for p in built)
+
+    rerun = treegen("batch", catalogue, "-o", out, "--workers", "1", "--json")
+    assert rerun.returncode == 0, rerun.stderr
+    kinds = {e["path"]: e["event"] for e in events(rerun.stdout) if "path" in e}
+    assert {p for p, k in kinds.items() if k == "skipped"} == set(built)
+    assert {p for p, k in kinds.items() if k == "built"} == pending
+    assert len(list((out / "later").glob("*.glb"))) == 4
+
+
+def test_a_file_where_an_output_folder_goes_is_refused_before_anything_runs(workspace, tmp_path):
+    cat = json.loads(json.dumps(CATALOGUE))
+    cat["entries"][2]["name"] = "later/{species}_{seed}.{ext}"
+    catalogue = workspace / "blocked.json"
+    catalogue.write_text(json.dumps(cat))
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "later").write_text("not a folder")
+    proc = treegen("batch", catalogue, "-o", out)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.strip() == (
+        f"treegen: error: -o {out}: cannot create folder '{out / 'later'}' (a file of that name is there)"
+    )
+    assert sorted(p.name for p in out.iterdir()) == ["later"]
 
 
 # ----------------------------------------------------------------------------- catalogue checks
@@ -389,7 +426,59 @@ def test_ctrl_c_closes_the_cluster_and_leaves_no_partial_files(workspace):
         ({"entries": [{"species": "species/rush.txt", "seeds": "9-3"}]}, ["entries[0].seeds", "9-3"]),
         (
             {"entries": [{"species": "species/rush.txt", "wind_sped": 3}]},
-            ["entries[0].wind_sped", "unknown key", "wind_speed"],
+            ["entries[0].wind_sped: unknown key (did you mean wind_speed?); allowed: "],
+        ),
+        (
+            {"defaults": {"wnd_speed": 3}, "entries": [{"species": "species/rush.txt"}]},
+            ["defaults.wnd_speed: unknown key (did you mean wind_speed?); allowed: "],
+        ),
+        (
+            {"entries": [{"species": "species/rush.txt", "grid": {"gusst": [0.1]}}]},
+            ["entries[0].grid.gusst: unknown key (did you mean gust?)"],
+        ),
+        (
+            {"entries": [{"species": "species/rush.txt", "seeds": [1.5]}]},
+            ["entries[0].seeds[0]: 1.5 is not a whole number; allowed [0, 9223372036854775807]"],
+        ),
+        (
+            {"entries": [{"species": "species/rush.txt", "seeds": [1, 2, -3]}]},
+            ["entries[0].seeds[2]: -3 is out of range; allowed [0, 9223372036854775807]"],
+        ),
+        (
+            {"defaults": {"seeds": 2.5}, "entries": [{"species": "species/rush.txt"}]},
+            ["defaults.seeds: 2.5 is not a whole number; allowed [0, 9223372036854775807]"],
+        ),
+        (
+            {"entries": [{"species": "species/rush.txt", "seeds": [4, 9, 4]}]},
+            ["entries[0].seeds[2]: seed 4 is listed twice"],
+        ),
+        (
+            {"entries": [{"species": "species/rush.txt", "sides": [8, 4.5]}]},
+            ["entries[0].sides[1]: 4.5 is not a whole number; allowed [3, 64]"],
+        ),
+        (
+            {"entries": [{"species": "species/rush.txt", "grid": {"sides": [[8], [8, 4.5]]}}]},
+            ["entries[0].grid.sides[1][1]: 4.5 is not a whole number; allowed [3, 64]"],
+        ),
+        (
+            {"entries": [{"species": "species/rush.txt", "lod_distances": [0, "far"]}]},
+            ['entries[0].lod_distances[1]: expected a number (finite), got "far"'],
+        ),
+        (
+            {"defaults": {"lod_screen": [0.5, 200]}, "entries": [{"species": "species/rush.txt"}]},
+            ["defaults.lod_screen[1]: 200 is out of range; allowed (0, 100]"],
+        ),
+        (
+            {"entries": [{"species": "species/rush.txt", "joint_levels": [0, True]}]},
+            ["entries[0].joint_levels[1]: expected an integer, got true"],
+        ),
+        (
+            {"entries": [{"species": "species/rush.txt", "grid": {"max_joints": [64, 2.5]}}]},
+            ["entries[0].grid.max_joints[1]: 2.5 is not a whole number; allowed [1, 65535]"],
+        ),
+        (
+            {"entries": [{"species": "species/rush.txt", "formats": ["glb", 3]}]},
+            ["entries[0].formats[1]: expected a string, got 3"],
         ),
         (
             {"defaults": {"max_joints": 0}, "entries": [{"species": "species/rush.txt"}]},
@@ -549,6 +638,25 @@ def test_dry_run_plans_what_the_run_builds_with_budgets_and_profiles(workspace):
             assert job[key] == row[key], (path, key)
 
 
+def test_seeds_name_the_bad_item_and_the_whole_seed_range():
+    """parse_seeds (the API's path, after the schema) names a list item by its index."""
+    from treegen_cli.batch import parse_seeds
+    from treegen_cli.errors import TreegenError
+    from treegen_cli.options import MAX_SEED
+
+    assert parse_seeds([5, MAX_SEED], "s") == [5, MAX_SEED] and parse_seeds("1-3,7", "s") == [1, 2, 3, 7]
+    for value, message in (
+        ([1.5], f"s[0]: 1.5 is not a whole number; allowed [0, {MAX_SEED}]"),
+        ([1, "x"], f's[1]: expected a seed (a whole number), got "x"; allowed [0, {MAX_SEED}]'),
+        ([1, MAX_SEED + 1], f"s[1]: seed {MAX_SEED + 1} is out of range; allowed [0, {MAX_SEED}]"),
+        (2.5, f"s: 2.5 is not a whole number; allowed [0, {MAX_SEED}]"),
+        ([3, 1, 3], "s[2]: seed 3 is listed twice"),
+    ):
+        with pytest.raises(TreegenError) as e:
+            parse_seeds(value, "s")
+        assert str(e.value) == message
+
+
 def test_schema_and_defaults_agree_with_make():
     from treegen_cli import api
     from treegen_cli.commands.make import make
@@ -560,6 +668,10 @@ def test_schema_and_defaults_agree_with_make():
         "seeds",
         "formats",
     }
+    from treegen_cli.options import MAX_SEED
+
+    seeds = schema["$defs"]["seeds"]["anyOf"]
+    assert [b.get("maximum", b.get("items", {}).get("maximum")) for b in seeds] == [MAX_SEED, None, MAX_SEED]
     click_defaults = {p.name: p.default for p in make.params if p.name in api.DEFAULTS}
     assert click_defaults == api.DEFAULTS
     for k, v in api.DEFAULTS.items():

@@ -132,8 +132,9 @@ BAD = [
     ({"camera": {**CAMERA, "position": [0, 0, "x"]}}, "camera.position[2]: expected a number"),
     ({"camera": {**CAMERA, "target": CAMERA["position"]}}, "camera.target: must differ"),
     ({"wind": {"speed": -1}}, "wind.speed: -1 is out of range"),
-    ({"wind": {"speeed": 1}}, "wind.speeed: unknown key"),
-    ({"defaults": {"max_joints": 2.5}}, "defaults.max_joints: expected an integer"),
+    ({"wind": {"speeed": 1}}, "wind.speeed: unknown key (did you mean speed?); allowed: direction_deg"),
+    ({"defaults": {"max_joints": 2.5}}, "defaults.max_joints: 2.5 is not a whole number; allowed [1, 1024]"),
+    ({"defaults": {"max_joints": "8"}}, 'defaults.max_joints: expected an integer, got "8"'),
     ({"defaults": {"lod_distances": [0, 30, 30]}}, "defaults.lod_distances: must increase"),
     ({"instances": [], "scatter": []}, "instances: the layout places no trees"),
     ({"instances": [{"species": POPLAR}]}, "instances[0].position: required"),
@@ -201,6 +202,10 @@ BAD = [
         "scatter[0].scale: [low, high]",
     ),
     ({"extra": 1}, "extra: unknown key; allowed:"),
+    (
+        {"instances": [{"species": POPLAR, "position": [0, 0], "sede": 1}]},
+        "instances[0].sede: unknown key (did you mean seed?)",
+    ),
 ]
 
 

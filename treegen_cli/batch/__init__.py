@@ -13,10 +13,11 @@ share one task (one tree built, written once per format), which halves the work 
 glb + usdc catalogue and changes no byte: each file is what `treegen make -o FILE` writes.
 
 Resume: each job is keyed by a hash of (species file bytes, seed, every make option with its
-default filled in, format, treegen version). The client appends a line to DIR/.manifest.jsonl
-as each job finishes, so a killed run loses nothing it finished; a job whose files exist with
+default filled in, format, treegen version). The worker that writes a file appends its row
+to DIR/.manifest.jsonl as soon as the file is in place, so a killed or interrupted run loses
+nothing it finished (even a file whose task never returned); a job whose files exist with
 the recorded size and key is skipped (`force` rebuilds). The manifest is rewritten at the end
-and the journal folded into it.
+and the journal folded into it. Workers make an output's folder when they write into it.
 
 One module per job: catalogue.py (the file → validated jobs and their identity keys),
 plan.py (what to build or skip, each tree's plan for --dry-run, estimates), run.py (the

@@ -16,7 +16,7 @@ from pathlib import Path, PurePosixPath
 from ..build_id import build_id
 from ..options import MAX_SEED
 from ..errors import TreegenError
-from ..forest.schema import check_schema, read_json_file
+from ..forest.schema import check_schema, read_json_file, show_value
 from ..generate import check_trunk
 from ..rig import check_joint_levels
 
@@ -69,19 +69,17 @@ def load_catalogue(path: str | os.PathLike, max_jobs: int = MAX_JOBS) -> Catalog
 
 
 def parse_seeds(value, where: str, max_jobs: int = MAX_JOBS) -> list[int]:
-    """7, [1, 5, 9] or "1-40" / "1-5,9" → sorted-as-given list of distinct seeds."""
+    """7, [1, 5, 9] or "1-40" / "1-5,9" → sorted-as-given list of distinct seeds. A bad
+    list item is named by its index (`entries[0].seeds[1]`)."""
+    allowed = f"allowed [0, {MAX_SEED}]"
     if isinstance(value, bool):
         raise TreegenError(
             f'{where}: expected a seed, a list of seeds or text like "1-40", got {json.dumps(value)}'
         )
-    if isinstance(value, int):
-        values = [value]
-    elif (
-        isinstance(value, list)
-        and value
-        and all(isinstance(v, int) and not isinstance(v, bool) for v in value)
-    ):
-        values = list(value)
+    if isinstance(value, (int, float)):
+        values, at = [value], [where]
+    elif isinstance(value, list) and value:
+        values, at = list(value), [f"{where}[{k}]" for k in range(len(value))]
     elif isinstance(value, str):
         values = []
         for part in value.split(","):
@@ -97,18 +95,23 @@ def parse_seeds(value, where: str, max_jobs: int = MAX_JOBS) -> list[int]:
                     f"over the limit of {max_jobs:,} jobs"
                 )
             values.extend(range(lo, hi + 1))
+        at = [where] * len(values)
     else:
         raise TreegenError(
             f"{where}: expected a seed, a non-empty list of seeds or text like "
             f'"1-40", got {type(value).__name__}'
         )
-    for v in values:
+    for v, w in zip(values, at):
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise TreegenError(f"{w}: expected a seed (a whole number), got {show_value(v)}; {allowed}")
+        if isinstance(v, float):
+            raise TreegenError(f"{w}: {show_value(v)} is not a whole number; {allowed}")
         if not 0 <= v <= MAX_SEED:
-            raise TreegenError(f"{where}: seed {v} is out of range; allowed [0, {MAX_SEED}]")
+            raise TreegenError(f"{w}: seed {v} is out of range; {allowed}")
     seen = set()
-    dupes = [v for v in values if v in seen or seen.add(v)]
+    dupes = [(v, w) for v, w in zip(values, at) if v in seen or seen.add(v)]
     if dupes:
-        raise TreegenError(f"{where}: seed {dupes[0]} is listed twice")
+        raise TreegenError(f"{dupes[0][1]}: seed {dupes[0][0]} is listed twice")
     return values
 
 

@@ -1,5 +1,6 @@
 """DIR/manifest.json and manifest.csv (one row per job) and the journal DIR/.manifest.jsonl
-a run appends to as each job finishes, so a killed run loses nothing it finished."""
+the workers append to as each file lands, so a killed or interrupted run loses nothing it
+finished."""
 
 from __future__ import annotations
 
@@ -55,20 +56,57 @@ def manifest_row(
         "status": status,
     }
     if summary is not None:
-        lods = summary["lods"]
-        row |= {
-            "files": [Path(f).relative_to(out_dir).as_posix() for f in summary["files"]],
-            "bytes": summary["bytes"],
-            "triangles": [r["triangles"] for r in lods],
-            "joints": [r["joints"] for r in lods],
-            "keys": [r["joint_keys"] for r in lods],
-            "lod_distances_m": [r["distance_m"] for r in lods],
-            "seconds": summary["seconds"],
-            "worker": summary.get("worker", ""),
-        }
+        row |= summary_fields(summary, out_dir)
     if error is not None:
         row["error"] = error
     return row
+
+
+def summary_fields(summary: dict, out_dir: str | os.PathLike) -> dict:
+    """A built row's part from a file's `make --json` summary (a worker adds it to the row
+    the client gave it, for the journal; the client the same, for the manifest)."""
+    lods = summary["lods"]
+    return {
+        "files": [Path(f).relative_to(out_dir).as_posix() for f in summary["files"]],
+        "bytes": summary["bytes"],
+        "triangles": [r["triangles"] for r in lods],
+        "joints": [r["joints"] for r in lods],
+        "keys": [r["joint_keys"] for r in lods],
+        "lod_distances_m": [r["distance_m"] for r in lods],
+        "seconds": summary["seconds"],
+        "worker": summary.get("worker", ""),
+    }
+
+
+def append_journal(path: str | os.PathLike, row: dict) -> None:
+    """Append `row` as one line with one O_APPEND write: the workers of a run share the
+    journal, and a line is never interleaved with another's (a torn one, after a kill, is
+    skipped by journal_rows: that job is simply built again)."""
+    data = (json.dumps(row) + "\n").encode("utf-8")
+    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    try:
+        os.write(fd, data)
+    finally:
+        os.close(fd)
+
+
+def journal_since(out_dir: Path, offset: int) -> list[dict]:
+    """The journal's rows from byte `offset` on (what this run's workers appended)."""
+    try:
+        with open(out_dir / JOURNAL, "rb") as f:
+            f.seek(offset)
+            lines = f.read().decode("utf-8", "replace").splitlines()
+    except OSError:
+        return []
+    rows = []
+    for line in lines:
+        try:
+            row = json.loads(line)
+        except ValueError:
+            continue
+        if isinstance(row, dict) and "path" in row:
+            rows.append(row)
+    return rows
 
 
 CSV_COLUMNS = (

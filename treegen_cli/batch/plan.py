@@ -13,7 +13,9 @@ from .catalogue import Catalogue, Job, options_sha, species_sha
 from .manifest import journal_rows
 
 
-def _up_to_date(out_dir: Path, job: Job, row: dict | None) -> bool:
+def up_to_date(out_dir: Path, job: Job, row: dict | None) -> bool:
+    """Whether `row` (an earlier run's) is `job`'s, and its files are on disk at the size
+    recorded: the resume test (written atomically, a file there is a whole file)."""
     if row is None or row.get("options_hash") != job.key:
         return False
     files = [out_dir / f for f in row.get("files", [job.output])]
@@ -35,7 +37,7 @@ def plan_jobs(cat: Catalogue, out_dir: str | os.PathLike, force: bool = False) -
     previous = journal_rows(out_dir) if out_dir.is_dir() else {}
     build, skip = [], []
     for job in cat.jobs:
-        (skip if not force and _up_to_date(out_dir, job, previous.get(job.output)) else build).append(job)
+        (skip if not force and up_to_date(out_dir, job, previous.get(job.output)) else build).append(job)
     return Plan(build=build, skip=skip, previous=previous)
 
 

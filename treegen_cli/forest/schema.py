@@ -1,7 +1,8 @@
 """The layout file's JSON Schema (package data) and a small interpreter of the subset it uses
 (type, properties, required, additionalProperties, items, min/maxItems, minimum/maximum,
-exclusive bounds, minLength, $ref), so the published schema and the checks cannot drift apart.
-Every message starts with the JSON path of the offending value.
+exclusive bounds, minLength, $ref, anyOf), so the published schema and the checks cannot drift
+apart. Every message starts with the JSON path of the offending value (a list's item by its
+index: `entries[0].seeds[0]`), and an unknown key names the closest allowed one.
 
 The camera, wind and defaults objects are dataclasses here; their defaults (the wind's and the
 screen's read from the stage DEFAULTS) are written into the schema as it is loaded, so the
@@ -10,6 +11,7 @@ published "default"s are never typed twice.
 
 from __future__ import annotations
 
+import difflib
 import json
 import math
 from dataclasses import MISSING, dataclass, fields
@@ -141,13 +143,71 @@ def _num(x) -> str:
     return str(x) if isinstance(x, int) else f"{x:g}"
 
 
+def _range(schema: dict) -> str:
+    """The bounds of a number schema as an interval: [0, 100], (0, 600], [1, inf)."""
+    lo, hi = schema.get("minimum"), schema.get("maximum")
+    xlo, xhi = schema.get("exclusiveMinimum"), schema.get("exclusiveMaximum")
+    left = f"[{_num(lo)}" if lo is not None else (f"({_num(xlo)}" if xlo is not None else "(-inf")
+    right = f"{_num(hi)}]" if hi is not None else (f"{_num(xhi)})" if xhi is not None else "inf)")
+    return f"{left}, {right}"
+
+
+def _json_type(value) -> str:
+    if isinstance(value, bool):
+        return "boolean"
+    if isinstance(value, int):
+        return "integer"
+    if isinstance(value, float):
+        return "number"
+    if isinstance(value, str):
+        return "string"
+    if isinstance(value, list):
+        return "array"
+    return "object" if isinstance(value, dict) else "null"
+
+
+def _branch(value, branches: list[dict]) -> dict | None:
+    """The anyOf branch of the value's JSON type (an integer fits a number branch; a
+    fractional number is checked against an integer branch, to be told it is not whole)."""
+    kind = _json_type(value)
+    order = {"integer": ("integer", "number"), "number": ("number", "integer")}.get(kind, (kind,))
+    for want in order:
+        for b in branches:
+            if b.get("type") == want:
+                return b
+    return None
+
+
+def unknown_key(where: str, key: str, allowed) -> TreegenError:
+    """'<path>: unknown key (did you mean X?); allowed: ...', the closest name as for flags
+    and species keys (difflib)."""
+    names = sorted(allowed)
+    by_lower = {n.lower(): n for n in names}
+    hit = difflib.get_close_matches(str(key).lower(), list(by_lower), n=1, cutoff=0.6)
+    hint = f" (did you mean {by_lower[hit[0]]}?)" if hit else ""
+    return TreegenError(f"{where}: unknown key{hint}; allowed: {', '.join(names)}")
+
+
 def check_schema(value, schema: dict, root: dict, path: str = "") -> None:
-    """Raise TreegenError '<json path>: <reason>' at the first place `value` breaks `schema`."""
+    """Raise TreegenError '<json path>: <reason>' at the first place `value` breaks `schema`.
+    anyOf checks the branch of the value's type; a value of no branch's type is left to the
+    code that reads it, which names what it takes in its own words (batch.parse_seeds)."""
     if "$ref" in schema:
         name = schema["$ref"].rsplit("/", 1)[-1]
         schema = {**root["$defs"][name], **{k: v for k, v in schema.items() if k != "$ref"}}
+    if "anyOf" in schema:
+        branch = _branch(value, schema["anyOf"])
+        if branch is not None:
+            check_schema(value, branch, root, path)
     where = path or "(top level)"
     kind = schema.get("type")
+    if kind == "integer" and isinstance(value, float) and _finite(value):
+        if not value.is_integer():
+            bounds = _range(schema)
+            allowed = "" if bounds == "(-inf, inf)" else f"; allowed {bounds}"
+            raise TreegenError(f"{where}: {show_value(value)} is not a whole number{allowed}")
+        write = f" (write {int(value)})" if abs(value) < 2**63 else ""
+        raise TreegenError(f"{where}: expected an integer, got {show_value(value)}{write}")
     if kind and not _TYPES[kind](value):
         shown = show_value(value)
         article = "an" if kind[0] in "aeiou" else "a"
@@ -162,9 +222,7 @@ def check_schema(value, schema: dict, root: dict, path: str = "") -> None:
             or (xlo is not None and value <= xlo)
             or (xhi is not None and value >= xhi)
         ):
-            left = f"[{_num(lo)}" if lo is not None else (f"({_num(xlo)}" if xlo is not None else "(-inf")
-            right = f"{_num(hi)}]" if hi is not None else (f"{_num(xhi)})" if xhi is not None else "inf)")
-            raise TreegenError(f"{where}: {show_value(value)} is out of range; allowed {left}, {right}")
+            raise TreegenError(f"{where}: {show_value(value)} is out of range; allowed {_range(schema)}")
     if kind == "string" and len(value) < schema.get("minLength", 0):
         raise TreegenError(f"{where}: must not be empty")
     if "enum" in schema and value not in schema["enum"]:
@@ -194,4 +252,4 @@ def check_schema(value, schema: dict, root: dict, path: str = "") -> None:
             if key in props:
                 check_schema(item, props[key], root, _join(path, key))
             elif schema.get("additionalProperties", True) is False:
-                raise TreegenError(f"{_join(path, key)}: unknown key; allowed: {', '.join(sorted(props))}")
+                raise unknown_key(_join(path, key), key, props)
