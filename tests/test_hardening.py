@@ -398,6 +398,12 @@ def test_verbose_reports_each_stage_on_stderr(tmp_path):
     assert "nodes" in proc.stderr.splitlines()[-1]
     assert all(line.rstrip().endswith(" s") for line in proc.stderr.splitlines()[:-1])
     assert "\x1b" not in proc.stderr and "\r" not in proc.stderr
+    lods = treegen(
+        "make", SPECIES / "rush.txt", "-o", tmp_path / "r.glb", "-v", "--duration", "1", "--fps", "5"
+    )
+    assert lods.returncode == 0, lods.stderr
+    names = [line.split()[0] for line in lods.stderr.splitlines()]
+    assert len(names) == len(set(names)) and "impostor" in names  # once each, summed over the LODs
     info = treegen("info", SPECIES / "quaking_aspen.txt", "--verbose")
     assert "generate" in info.stderr and "nodes" in info.stderr
     both = treegen("info", SPECIES / "quaking_aspen.txt", "-q", "-v")

@@ -302,3 +302,28 @@ def test_lod_switches_keep_cover(species):
 def test_default_options_build_the_planned_tree():
     """MakeOptions' defaults and resolve()'s agree on the budgets (one source of defaults)."""
     assert MakeOptions().lod.triangles == resolve({}).options.lod.triangles
+
+
+def test_solve_factor_meets_the_target_or_stops_at_the_clamp():
+    """lod_cover.solve_factor (secant from 1, Illinois once bracketed): a smooth cover is met
+    within tolerance in a few calls; a target out of reach, or a cover that does not move,
+    ends at the clamp on the far side; a cover that jumps past the target ends at the jump."""
+    import math
+
+    from treegen_cli.lod_cover import solve_factor
+
+    calls = []
+
+    def smooth(f):
+        calls.append(f)
+        return 1.0 - math.exp(-0.3 * f)
+
+    target = 1.0 - math.exp(-0.3 * 2.7)
+    f = solve_factor(smooth, target, 0.25, 8.0)
+    assert abs(smooth(f) - target) <= 0.005 * target and len(calls) <= 7, (f, calls)
+    assert solve_factor(lambda f: 0.1 * f, 5.0, 0.25, 4.0) == 4.0  # out of reach above
+    assert solve_factor(lambda f: 0.1 * f, 0.001, 0.25, 4.0) == 0.25  # and below
+    assert solve_factor(lambda f: 0.5, 0.7, 0.5, 32.0) == 32.0  # flat, short of the target
+    assert solve_factor(lambda f: 0.5, 0.3, 0.5, 32.0) == 0.5  # flat, past it
+    jump = solve_factor(lambda f: 0.2 if f < 3.0 else 0.9, 0.5, 0.25, 8.0)
+    assert abs(jump - 3.0) < 0.3, jump

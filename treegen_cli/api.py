@@ -96,12 +96,12 @@ class MakeJob:
     @property
     def stage_runs(self) -> int:
         """Stage runs to expect, for a progress bar: per LOD generate, rig, mesh (, wind,
-        lod), then materials, prepare, write (, impostor)."""
+        lod), then materials, textures, prepare, write (, impostor)."""
         o = self.job.options
         per_lod = 3 if o.wind is None else 5
         if o.lod is None:
-            return per_lod + 3
-        return o.lod.count * per_lod + 3 + (o.impostor is not None)
+            return per_lod + 4
+        return o.lod.count * per_lod + 4 + (o.impostor is not None)
 
 
 def plan_make(

@@ -290,8 +290,8 @@ def solve_factor(
     of it), or the clamp it cannot reach past. Secant steps on log(factor) from `start` (a LOD
     usually needs a factor near 1: its per-leaf factors already hold the area it lost), then
     regula falsi (Illinois) once the target is bracketed. Each call of `cover_at` bins every
-    blade (lod_cover's main cost in `make`): 2-4 calls, where bracketing [lo, hi] first took
-    4-7 (bench/make_bench.py)."""
+    blade (lod_cover's main cost in `make`): 1-6 calls over the bundled species, where
+    bracketing [lo, hi] first took 4-7."""
     a_lo, a_hi = math.log(lo), math.log(hi)
     x0 = min(max(math.log(start), a_lo), a_hi)
     f0 = cover_at(math.exp(x0)) - target
@@ -322,8 +322,9 @@ def solve_factor(
             x2 = (a * fb - b * fa) / (fb - fa)
         else:  # secant through the last two points, at most MAX_STEP on, towards the target
             slope = (f1 - f0) / (x1 - x0) if x1 != x0 else 0.0
-            step = -f1 / slope if slope > 0 else (FIRST_STEP if f1 < 0 else -FIRST_STEP)
+            step = -f1 / slope if slope > 0 else (MAX_STEP if f1 < 0 else -MAX_STEP)  # flat: stride
             x2 = x1 + max(-MAX_STEP, min(MAX_STEP, step))
             x2 = min(max(x2, a_lo), a_hi)
         x0, f0, x1 = x1, f1, x2
-    return math.exp(x1)
+    # out of steps: the bracket's next point, else the last factor tried (not an untried guess)
+    return math.exp(x1 if below is not None and above is not None else x0)

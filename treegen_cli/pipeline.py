@@ -27,8 +27,8 @@ from .params import Params
 from .prepare import prepare
 from .rig import RIG_DEFAULTS, Rig, RigOptions, build_rig, check_joint_levels
 from .tree import Tree, tree_height
-from .wind import DEFAULTS as WIND_DEFAULTS, WindOptions, bake_wind, wind_angles
-from .wind_lods import lod_angles
+from .wind import DEFAULTS as WIND_DEFAULTS, WindOptions, bake_wind, bound_bends, wind_angles
+from .wind_lods import Nearest, lod_angles
 
 
 @dataclass(frozen=True)
@@ -75,6 +75,7 @@ class Sway:
     tree: Tree
     rig: Rig
     theta: np.ndarray  # (J, n, 3)
+    near: Nearest = field(default_factory=Nearest)  # LOD0's node and leaf look-ups, built once
 
 
 def build_lod(
@@ -89,19 +90,26 @@ def build_lod(
     primitives = timings.run("mesh", build_mesh, tree, rig, options.mesh)
     clips = []
     if options.wind is not None:
-        if sway is None:
-            sway = Sway(tree, rig, timings.run("wind", wind_angles, tree, rig, options.wind, seed))
-            theta = sway.theta
-        else:
-            theta = timings.run("wind", lod_angles, sway.theta, sway.tree, sway.rig, tree, rig)
-        clip = timings.run("wind", bake_wind, tree, rig, options.wind, seed, theta)
+        clip, sway = timings.run("wind", _wind, tree, rig, options.wind, seed, sway)
         clips.append(replace(clip, name=clip_name(0)))
     return Lod(primitives=primitives, skeleton=rig.skeleton, clips=clips), sway
 
 
+def _wind(tree: Tree, rig: Rig, options: WindOptions, seed: int, sway: Sway | None):
+    """(clip, Sway): `tree`'s own wind, or `sway`'s (LOD0's) fitted onto `rig` and bounded as
+    LOD0's bends are (a LOD joint standing for a chain of LOD0's may sum past the bounds)."""
+    if sway is None:
+        sway = Sway(tree, rig, wind_angles(tree, rig, options, seed))
+        theta = sway.theta
+    else:
+        fitted = lod_angles(sway.theta, sway.tree, sway.rig, tree, rig, sway.near)
+        theta = bound_bends(fitted, np.asarray(rig.skeleton.parent, dtype=np.int64), options)
+    return bake_wind(tree, rig, options, seed, theta), sway
+
+
 def build_lods(params: Params, tree: Tree, options: MakeOptions, seed: int, timings: Timings) -> list[Lod]:
     """One coarser tree per LOD, each with its own rig and mesh, LOD0's wind on that rig
-    (wind_lods.lod_angles: the motion does not change at a switch) and a clip decimated for its distance
+    (wind_lods.lod_angles: the motion changes little at a switch) and a clip decimated for its distance
     (clip_name(k)); distances follow the tree's height on screen (lod.switch_distances).
     LOD0 is `tree`; lower LODs are cut from it within their triangle budgets
     (lod_budget.lod_tree: thin stems dropped, leaves thinned and scaled to keep the cover)."""

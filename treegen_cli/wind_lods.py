@@ -3,17 +3,20 @@
     theta_k = lod_angles(theta0, tree0, rig0, tree_k, rig_k)   # (J_k, n, 3) from (J0, n, 3)
 
 Baked from its own thinned leaves and pruned rig, a LOD moved unlike the tree it stands in for:
-the aspen's LOD1 leaned 30 % less than LOD0 (its twigs, and their joints, gone), and the crown's
-top jumped 4-6 px at the switch, a pop in motion that the rest-pose silhouettes (silhouette.py)
-do not see. Here a LOD's bends are the ones that move the points it draws (leaf middles, branch
-nodes) as LOD0 moves them, in the least-squares sense, on the small-angle model the wind is
-solved in: a point p carried by joints a moves by Σ_a θ_a × (p − pivot_a). The map from LOD0's
-bends to the LOD's is one linear solve (3J × 3J), applied to every frame at once.
+the aspen's LOD1 leaned 30 % less than LOD0 (its twigs, and their joints, gone) and the crown's
+top jumped 5.7 px at the switch (the tupelo's 4.4 px at its second), a pop in motion that the
+rest-pose silhouettes (silhouette.py) do not see (bench/lod_motion_bench.py). Here a LOD's bends
+are the ones that move the points it draws (leaf middles, branch nodes) as LOD0 moves them, in
+the least-squares sense, on the small-angle model the wind is solved in: a point p carried by
+joints a moves by Σ_a θ_a × (p − pivot_a), each θ_a a bend about the two axes across its bone
+(no twist, as wind_dynamics). The map from LOD0's bends to the LOD's is one linear solve
+(2J × 2J), applied to every frame at once; the caller bounds the result as LOD0's (bound_bends).
 
 Leaves weigh by their area (what the eye follows), nodes by their bark's; a LOD leaf moves like
 the nearest of LOD0's (lod_leaves.gather_leaves put it among those it stands for), a node like
-itself (LOD nodes are LOD0's). A joint carrying no sampled point keeps the turn LOD0 gives its
-node (REGULARISE pulls every joint a little towards that).
+itself (LOD nodes are LOD0's). Every joint is also pulled, with a weight REGULARISE of the fit's
+mean, towards the turn LOD0 gives its node: joints the sampled points hardly move (bare, near
+the trunk's base) follow that instead of wandering.
 """
 
 from __future__ import annotations
@@ -21,67 +24,102 @@ from __future__ import annotations
 import numpy as np
 
 from .rig import Rig
+from .skeleton import depth_levels, joint_depth
 from .tree import Tree
 from .wind import one_blas_thread
 
 MAX_POINTS = 2000  # leaves (and as many nodes) sampled, at most: the fit needs shape, not all
 NEAR_POINTS = 50_000  # LOD0's leaves searched for a LOD leaf's nearest, at most
-REGULARISE = 1e-3  # pull towards the node's own turn, relative to the mean point weight·lever²
+REGULARISE = 1e-3  # weight of the pull towards each node's own turn, × the fit's mean diagonal
+
+
+class Nearest:
+    """LOD0's look-ups (KD-trees of its nodes and of a sample of its leaves), built on first use
+    and kept for the next LOD (the willow's: 134,000 nodes, 0.08 s a build)."""
+
+    def __init__(self) -> None:
+        self._cache: dict[str, object] = {}
+
+    def nodes(self, tree0: Tree):
+        if "nodes" not in self._cache:
+            from scipy.spatial import cKDTree
+
+            self._cache["nodes"] = cKDTree(tree0.node_pos)
+        return self._cache["nodes"]
+
+    def leaves(self, tree0: Tree) -> tuple[object, np.ndarray]:
+        if "leaves" not in self._cache:
+            from scipy.spatial import cKDTree
+
+            some = _stride(tree0.n_leaves, NEAR_POINTS)
+            self._cache["leaves"] = (cKDTree(_middles(tree0, some)), some)
+        return self._cache["leaves"]  # type: ignore[return-value]
 
 
 @one_blas_thread  # the same bytes in any process (see wind.one_blas_thread)
-def lod_angles(theta0: np.ndarray, tree0: Tree, rig0: Rig, tree: Tree, rig: Rig) -> np.ndarray:
+def lod_angles(
+    theta0: np.ndarray, tree0: Tree, rig0: Rig, tree: Tree, rig: Rig, near: Nearest | None = None
+) -> np.ndarray:
     """Bends (J, n, 3) for `rig` (on `tree`, a LOD cut from `tree0`) that move the LOD's points
-    as `theta0` (J0, n, 3) on `rig0` moves them in LOD0 (see the module doc)."""
+    as `theta0` (J0, n, 3) on `rig0` moves them in LOD0 (see the module doc); unbounded."""
     from scipy.linalg import cho_factor, cho_solve
-    from scipy.spatial import cKDTree
 
     J0, n = theta0.shape[:2]
     J = len(rig.skeleton.parent)
-    if J == 0 or n == 0:
+    if J == 0 or n == 0 or not np.any(theta0):
         return np.zeros((J, n, 3))
-    leaves = _stride(tree.n_leaves)
-    nodes = _stride(tree.n_nodes)
+    near = near if near is not None else Nearest()
+    leaves, nodes = _stride(tree.n_leaves), _stride(tree.n_nodes)
     # LOD nodes are LOD0's (lod_leaves.prune_stems, lod_nodes.coarsen_nodes copy them)
-    at = cKDTree(tree0.node_pos).query(tree.node_pos[np.r_[nodes, rig.joint_node]])[1]
+    at = near.nodes(tree0).query(tree.node_pos[np.r_[nodes, rig.joint_node]])[1]
     node0, joint_node0 = at[: len(nodes)], at[len(nodes) :]
     mid = _middles(tree, leaves)
-    near = None
+    zero = np.zeros(len(leaves), dtype=np.int64)
+    carry0, cw0 = np.zeros((0, 2), np.int64), np.zeros((0, 2))
     if len(leaves) and tree0.n_leaves:  # among a sample of LOD0's leaves: same twigs, same joints
-        some = _stride(tree0.n_leaves, NEAR_POINTS)
-        near = some[cKDTree(_middles(tree0, some)).query(mid)[1]]
+        index, some = near.leaves(tree0)
+        leaf0 = some[index.query(mid)[1]]
+        carry0 = np.c_[rig0.leaf_joint[leaf0], zero]
+        cw0 = np.c_[np.ones(len(leaves)), zero]
     pts = np.concatenate([mid, tree.node_pos[nodes]])
-    seg_r = tree.node_radius[nodes]
     area = tree.leaf_size[leaves, 0] * tree.leaf_size[leaves, 1]
-    w = np.concatenate([area, 2.0 * seg_r * _node_length(tree)[nodes]])
-    one = np.zeros((len(leaves), 2), dtype=np.int64)
-    carry = np.concatenate([np.c_[rig.leaf_joint[leaves], one[:, 1]], rig.node_joints[nodes]]).astype(
-        np.int64
-    )
-    cw = np.concatenate([np.c_[np.ones(len(leaves)), one[:, 1]], rig.node_weights[nodes]])
-    if near is not None:
-        carry0 = np.c_[rig0.leaf_joint[near], one[:, 1]]
-        cw0 = np.c_[np.ones(len(leaves)), one[:, 1]]
-    else:
-        carry0, cw0 = np.zeros((0, 2), np.int64), np.zeros((0, 2))
+    w = np.concatenate([area, 2.0 * tree.node_radius[nodes] * _node_length(tree)[nodes]])
+    if len(carry0) == 0:
+        w = w[len(leaves) :]
+        pts, mid, leaves = pts[len(leaves) :], mid[:0], leaves[:0]
+        zero = zero[:0]
+    carry = np.concatenate([np.c_[rig.leaf_joint[leaves], zero], rig.node_joints[nodes]]).astype(np.int64)
+    cw = np.concatenate([np.c_[np.ones(len(leaves)), zero], rig.node_weights[nodes]])
     carry0 = np.concatenate([carry0, rig0.node_joints[node0]]).astype(np.int64)
     cw0 = np.concatenate([cw0, rig0.node_weights[node0]])
-    G = _chain_matrix(pts, carry, cw, rig)  # (3P, 3J): LOD bends → point motion
+    E = np.asarray(rig.skeleton.bind_world)[:, :3, :2]  # the two axes across each bone
+    G = _chain_matrix(pts, carry, cw, rig) @ _across(E)  # (3P, 2J): LOD bends → point motion
     H = _chain_matrix(pts, carry0, cw0, rig0)  # (3P, 3J0): LOD0 bends → the same points' motion
     W = np.repeat(w / max(float(w.mean()), 1e-30), 3)
     GtW = G.T.multiply(W).tocsr()
     A = (GtW @ G).toarray()
     B = (GtW @ H).toarray()
-    lam = REGULARISE * max(float(np.trace(A)) / max(3 * J, 1), 1e-12)
-    own = _node_turns(theta0, rig0, rig, joint_node0)  # (J, n, 3)
-    rhs = B @ theta0.transpose(0, 2, 1).reshape(3 * J0, n) + lam * own.transpose(0, 2, 1).reshape(3 * J, n)
-    sol = cho_solve(cho_factor(A + lam * np.eye(3 * J)), rhs)
-    return sol.reshape(J, 3, n).transpose(0, 2, 1)
+    lam = REGULARISE * max(float(np.trace(A)) / max(2 * J, 1), 1e-12)
+    own = np.einsum("jka,jnk->jan", E, _node_turns(theta0, rig0, rig, joint_node0))  # (J, 2, n)
+    rhs = B @ theta0.transpose(0, 2, 1).reshape(3 * J0, n) + lam * own.reshape(2 * J, n)
+    a = cho_solve(cho_factor(A + lam * np.eye(2 * J)), rhs).reshape(J, 2, n)
+    return np.einsum("jka,jan->jnk", E, a)
 
 
-def _stride(count: int, most: int = MAX_POINTS) -> np.ndarray:
-    """Every k-th of `count` items, at most `most` (deterministic)."""
-    step = max(1, -(-count // most))
+def _across(E: np.ndarray):
+    """Sparse block diagonal (3J, 2J) of the per-joint bases E (J, 3, 2): bend → rotation vector."""
+    from scipy.sparse import coo_matrix
+
+    J = len(E)
+    i, k = np.meshgrid(np.arange(3), np.arange(2), indexing="ij")
+    rows = (3 * np.arange(J)[:, None, None] + i).reshape(-1)
+    cols = (2 * np.arange(J)[:, None, None] + k).reshape(-1)
+    return coo_matrix((E.reshape(-1), (rows, cols)), shape=(3 * J, 2 * J)).tocsr()
+
+
+def _stride(count: int, most: int | None = None) -> np.ndarray:
+    """Every k-th of `count` items, at most `most` (MAX_POINTS; deterministic)."""
+    step = max(1, -(-count // (most or MAX_POINTS)))
     return np.arange(0, count, step)
 
 
@@ -100,14 +138,10 @@ def _node_length(tree: Tree) -> np.ndarray:
 
 
 def _ancestors(parent: np.ndarray) -> np.ndarray:
-    """(J, D) each joint and its ancestors, root last, padded with −1 (joints parent-first)."""
-    J = len(parent)
-    depth = np.zeros(J, dtype=np.int64)
-    for j in range(1, J):  # parent-before-child order: one pass (J ≤ a few hundred)
-        depth[j] = depth[parent[j]] + 1 if parent[j] >= 0 else 0
-    D = int(depth.max(initial=0)) + 1
-    out = np.full((J, D), -1, dtype=np.int64)
-    out[:, 0] = np.arange(J)
+    """(J, D) each joint and its ancestors, root last, padded with −1."""
+    D = int(joint_depth(parent).max(initial=0)) + 1
+    out = np.full((len(parent), D), -1, dtype=np.int64)
+    out[:, 0] = np.arange(len(parent))
     for d in range(1, D):
         prev = out[:, d - 1]
         out[:, d] = np.where(prev >= 0, parent[np.maximum(prev, 0)], -1)
@@ -148,8 +182,6 @@ def _chain_matrix(points: np.ndarray, carry: np.ndarray, weight: np.ndarray, rig
 def _node_turns(theta0, rig0: Rig, rig: Rig, at: np.ndarray) -> np.ndarray:
     """Bends (J, n, 3) that give each LOD joint frame the turn LOD0 gives its node (`at`, in
     LOD0's tree: the skin's blend of the jointed nodes around it), less its parent's."""
-    from .skeleton import depth_levels
-
     parent0 = np.asarray(rig0.skeleton.parent, dtype=np.int64)
     total0 = theta0.copy()
     for idx in depth_levels(parent0)[1:]:
