@@ -29,7 +29,8 @@ from treegen_cli.wind import WindOptions
 ROOT = Path(__file__).resolve().parent.parent
 SPECIES = ROOT / "species"
 
-# A small three-level tree: every extreme case below starts from it and overrides a few keys.
+# A small three-level tree: every extreme case below starts from it and overrides a few keys
+# (a fragment: keys it leaves out take Arbaro's defaults).
 BASE = """Name base
 Shape 7
 BaseSize 0.3
@@ -80,7 +81,8 @@ def species(overrides: str):
         lines[k] = v
     levels = int(lines["Levels"])  # level keys beyond Levels are an error: drop them
     lines = {k: v for k, v in lines.items() if not (k[0].isdigit() and int(k[0]) > levels)}
-    return parse_params_text("\n".join(f"{k} {v}" for k, v in lines.items()), "extreme.txt")
+    text = "\n".join(f"{k} {v}" for k, v in lines.items())
+    return parse_params_text(text, "extreme.txt", partial=True)  # the rest: Arbaro's defaults
 
 
 def float_arrays(asset):

@@ -70,12 +70,12 @@ CASES = [
     (["make", "rush", "-o", "x.fbx"], ["-o x.fbx: unknown output extension '.fbx'", ".glb"]),
     (["forest", "forest.json", "-o", "f"], ["-o f: no file extension", ".glb"]),
     (["preview", "rush", "--animate", "loop"], ["--animate loop: no file extension", ".gif"]),
-    # Levels too deep: the key and its range, not the stem count alone
+    # Levels raised with no keys for the new levels: refused as incomplete, naming Levels
     (
         ["make", "levels9.txt", "-o", "x.glb"],
-        ["levels9.txt: Levels = 9", "--max-stems limit of 200,000", "Levels may be 0..9", "at most 5 fits"],
+        ["levels9.txt: missing 3SegSplits, ", "Levels = 9 (line 20) needs levels 4..9", "every parameter"],
     ),
-    (["info", "levels9.txt"], ["Levels = 9", "0..9"]),
+    (["info", "levels9.txt"], ["levels9.txt: missing ", "Levels = 9 (line 20)"]),
     # plausibility bound on the tree's size
     (
         ["make", "scale1300.txt", "-o", "x.glb"],
