@@ -29,7 +29,8 @@ from treegen_cli.wind import WindOptions
 ROOT = Path(__file__).resolve().parent.parent
 SPECIES = ROOT / "species"
 
-# A small three-level tree: every extreme case below starts from it and overrides a few keys.
+# A small three-level tree: every extreme case below starts from it and overrides a few keys
+# (a fragment: keys it leaves out take Arbaro's defaults).
 BASE = """Name base
 Shape 7
 BaseSize 0.3
@@ -80,7 +81,8 @@ def species(overrides: str):
         lines[k] = v
     levels = int(lines["Levels"])  # level keys beyond Levels are an error: drop them
     lines = {k: v for k, v in lines.items() if not (k[0].isdigit() and int(k[0]) > levels)}
-    return parse_params_text("\n".join(f"{k} {v}" for k, v in lines.items()), "extreme.txt")
+    text = "\n".join(f"{k} {v}" for k, v in lines.items())
+    return parse_params_text(text, "extreme.txt", partial=True)  # the rest: Arbaro's defaults
 
 
 def float_arrays(asset):
@@ -498,3 +500,89 @@ def test_openblas_kernel_is_pinned_for_cross_machine_bytes():
     mine = dict(env, OPENBLAS_CORETYPE="Sandybridge")  # the user's own choice wins
     child = subprocess.run([sys.executable, "-c", BLAS_PROBE], env=mine, capture_output=True, text=True)
     assert child.stdout.strip() == "['Sandybridge']", child.stderr
+
+
+# ------------------------------------------------------------------------------ blame
+
+
+def aspen_with(**keys):
+    """The aspen's file with `Key value` lines replaced (`_1Branches` for 1Branches)."""
+    import re
+
+    text = (SPECIES / "quaking_aspen.txt").read_text()
+    for key, value in keys.items():
+        text, n = re.subn(rf"^{key.lstrip('_')}\s.*$", f"{key.lstrip('_')} {value}", text, flags=re.M)
+        assert n == 1, key
+    return parse_params_text(text, "aspen.txt")
+
+
+@pytest.mark.parametrize(
+    "keys, blamed, line",
+    [
+        ({"Leaves": 50000}, "Leaves", 30),
+        ({"_1Branches": 5_000_000}, "1Branches", 60),
+        # Stems are a sum over levels: 2Branches would have to drop further (30 → 0.07) than
+        # 1Branches (190000 → 10526), yet the typo is 1Branches: not "most over its bound".
+        ({"_1Branches": 190_000}, "1Branches", 60),
+        ({"_2Branches": 300_000}, "2Branches", 77),
+        ({"_3Branches": 10**9}, None, None),  # the leaf level's Branches grows nothing: fits
+    ],
+)
+def test_a_count_too_large_is_blamed_on_the_mistyped_key_at_its_line(keys, blamed, line):
+    from dataclasses import replace
+
+    from treegen_cli.errors import in_file
+    from treegen_cli.generate.bounds import DEFAULTS, apply_options, blame, estimate_counts
+
+    p = aspen_with(**keys)
+    if blamed is None:
+        apply_options(p, DEFAULTS)
+        return
+    with pytest.raises(TreegenError) as info:
+        in_file("aspen.txt", apply_options, p, DEFAULTS)
+    msg = str(info.value)
+    assert msg.startswith(f"aspen.txt:{line}: {blamed} = ") and "Levels" not in msg, msg
+    assert msg.endswith("here (or raise --max-stems N)") or msg.endswith("(or raise --max-leaves N)")
+    # the bound it names fits (both limits: a 1Branches that keeps the stems within theirs may
+    # still grow too many leaves), and a little more does not
+    kind = "leaves" if blamed == "Leaves" else "stems"
+    count = estimate_counts(p)[kind == "leaves"]
+    fit = blame(kind, count, p, DEFAULTS).max_fit
+
+    def set_(x):
+        if blamed == "Leaves":
+            return replace(p, leaves=x)
+        n = int(blamed[0])
+        return replace(p, level=p.level[:n] + (replace(p.level[n], branches=x),) + p.level[n + 1 :])
+
+    apply_options(set_(fit), DEFAULTS)
+    with pytest.raises(TreegenError, match="would grow about"):
+        apply_options(set_(fit * 1.01 + 1), DEFAULTS)
+
+
+def test_levels_is_blamed_only_when_no_count_is_a_typo():
+    from treegen_cli.generate.bounds import apply_options
+
+    # every count ordinary, the limit small: the tree is too deep, not mistyped
+    with pytest.raises(TreegenError, match=r"^Levels = 3 would grow about 951 stems.* at most 2 fits"):
+        apply_options(aspen_with(), GenerateOptions(max_stems=500))
+    # a mistyped count under --levels 2: the count, never Levels (the override decides it)
+    with pytest.raises(TreegenError, match=r"^1Branches = 5000000 would grow"):
+        apply_options(aspen_with(_1Branches=5_000_000), GenerateOptions(levels=2))
+    # no key alone can fix it, and Levels is not the cause: the count and the flag
+    with pytest.raises(TreegenError, match=r"^species 'quaking_aspen' would grow about 1 stems"):
+        apply_options(aspen_with(), GenerateOptions(max_stems=0, levels=0))
+
+
+def test_a_blamed_key_of_an_arbaro_file_names_its_param_line():
+    from treegen_cli.errors import in_file
+
+    xml = (
+        "<arbaro>\n<species name='x'>\n<param name='Levels' value='2'/>\n"
+        "<param name='1Branches' value='20'/>\n<param name='Leaves' value='900000'/>\n</species>\n</arbaro>\n"
+    )
+    from treegen_cli.params import parse_params_bytes
+
+    q = parse_params_bytes(xml.encode(), "x.xml")
+    with pytest.raises(TreegenError, match=r"^x\.xml:5: Leaves = 900000 would grow about 13,500,000 leaves"):
+        in_file("x.xml", generate, q, 0)

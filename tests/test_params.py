@@ -34,6 +34,12 @@ FIXTURES = ROOT / "tests" / "fixtures"
 ARBARO = sorted((FIXTURES / "arbaro").glob("*.xml"))
 
 
+def fragment(text: str, source: str = "<string>"):
+    """A few keys over the defaults: the text reader with `partial` (a species file must list
+    every parameter; these tests are about the syntax, not the file)."""
+    return parse_params_text(text, source, partial=True)
+
+
 def expect_error(text: str, *parts: str, source: str = "sp/x.txt") -> str:
     """Parse `text` (bytes dispatch, as load_params does); the error must name every part."""
     data = text.encode() if isinstance(text, str) else text
@@ -139,11 +145,11 @@ def test_pair_small_values():
 
 
 def test_seed_paper_spellings_map_to_weber_penn_keys():
-    seed = parse_params_text(
+    seed = fragment(
         "0CurveResolution 5\n0Curve 10\n1Branches 20\n1BranchLength 0.4\n"
         "1AngleDown 50\n1AngleRotate 140\n1CurveResolution 4\n"
     )
-    wp = parse_params_text(
+    wp = fragment(
         "0CurveRes 5\n0Curve 10\n1Branches 20\n1Length 0.4\n1DownAngle 50\n1Rotate 140\n1CurveRes 4\n"
     )
     assert seed == wp
@@ -157,23 +163,23 @@ def test_seed_paper_spellings_map_to_weber_penn_keys():
 
 
 def test_text_syntax_variants():
-    a = parse_params_text("Levels 2\nScale = 3\n  Ratio\t0.02   # trailing comment\n\n# c\n")
-    b = parse_params_text("levels=2\nSCALE 3\nratio = 0.02")
+    a = fragment("Levels 2\nScale = 3\n  Ratio\t0.02   # trailing comment\n\n# c\n")
+    b = fragment("levels=2\nSCALE 3\nratio = 0.02")
     assert a == b
     assert (a.levels, a.scale, a.ratio) == (2, 3.0, 0.02)
-    assert parse_params_text("Species my oak tree\nLevels 1").name == "my oak tree"
-    assert parse_params_text("Levels 1", source="dir/holly.txt").name == "holly"
+    assert fragment("Species my oak tree\nLevels 1").name == "my oak tree"
+    assert fragment("Levels 1", source="dir/holly.txt").name == "holly"
 
 
 def test_leaf_shape_names():
     for name, code in LEAF_SHAPES.items():
-        assert parse_params_text(f"LeafShape {name}").leaf_shape == code
-        assert parse_params_text(f"LeafShape {name.upper()}").leaf_shape == code
-    assert parse_params_text("LeafShape 3").leaf_shape == 3
+        assert fragment(f"LeafShape {name}").leaf_shape == code
+        assert fragment(f"LeafShape {name.upper()}").leaf_shape == code
+    assert fragment("LeafShape 3").leaf_shape == 3
 
 
 def test_utf8_bom_and_xml_with_leading_whitespace():
-    assert parse_params_bytes("\ufeffLevels 2\n".encode()).levels == 2
+    assert parse_params_bytes("\ufeffLevels 2\n".encode(), partial=True).levels == 2
     xml = "\n  <arbaro><species name='t'><param name='Levels' value='1'/></species></arbaro>"
     assert parse_params_bytes(xml.encode()).levels == 1
 
@@ -182,7 +188,7 @@ def test_utf8_bom_and_xml_with_leading_whitespace():
 
 
 def test_defaults_apply_for_absent_keys_and_file_values_win():
-    p = parse_params_text("Levels 2\nScale 7\n1Branches 7\n", source="<string>")
+    p = fragment("Levels 2\nScale 7\n1Branches 7\n")
     d = default_params("tree")
     assert p == dataclasses.replace(
         d,
@@ -203,7 +209,7 @@ def test_defaults_apply_for_absent_keys_and_file_values_win():
 
 
 def test_levels_above_three_repeat_level_three_unless_given():
-    p = parse_params_text("Levels 5\n3DownAngle 33\n3Rotate -90\n5Rotate 77\n")
+    p = fragment("Levels 5\n3DownAngle 33\n3Rotate -90\n5Rotate 77\n")
     assert p.level[4].down_angle == 33.0 and p.level[4].rotate == -90.0
     assert p.level[5].down_angle == 33.0 and p.level[5].rotate == 77.0
     assert p.level[6].rotate == 77.0
@@ -233,7 +239,7 @@ def test_round_trip_through_text(path):
 
 
 def test_leaf_and_bark_colour_are_srgb_hex_stored_linear():
-    p = parse_params_text("LeafColor 5a7a2e\nBarkColor = FFFFFF\n")
+    p = fragment("LeafColor 5a7a2e\nBarkColor = FFFFFF\n")
     assert p.bark_color == (1.0, 1.0, 1.0)
     # 0x5a = 90 → ((90/255 + 0.055) / 1.055)^2.4, the sRGB curve
     assert p.leaf_color[0] == pytest.approx(((90 / 255 + 0.055) / 1.055) ** 2.4)
@@ -246,7 +252,7 @@ def test_leaf_and_bark_colour_are_srgb_hex_stored_linear():
 
 def test_colour_round_trips_through_the_writer_for_every_byte():
     for b in range(256):
-        p = parse_params_text(f"LeafColor {b:02x}{255 - b:02x}{b // 2:02x}")
+        p = fragment(f"LeafColor {b:02x}{255 - b:02x}{b // 2:02x}")
         text = format_params_text(p)
         assert f"{b:02x}{255 - b:02x}{b // 2:02x}" in text
         assert parse_params_text(text) == p
@@ -259,7 +265,7 @@ def test_colour_in_arbaro_xml_may_keep_its_hash():
         '<param name="BarkColor" value="30201a"/></species></arbaro>'
     )
     p = parse_params_xml(xml)
-    assert p.leaf_color == parse_params_text("LeafColor 5a7a2e").leaf_color
+    assert p.leaf_color == fragment("LeafColor 5a7a2e").leaf_color
     assert params_dict(p)["BarkColor"] == "30201a"
 
 
@@ -346,7 +352,7 @@ def test_error_level_index_beyond_levels():
     expect_error("Levels 2\n3DownAngle 30\n", "sp/x.txt:2:", "3DownAngle", "Levels = 2")
     # Levels given after the key still counts; index == Levels is fine
     expect_error("4Length 1\nLevels 3\n", ":1:", "4Length", "Levels = 3")
-    assert parse_params_text("3Rotate 20\nLevels 3").level[3].rotate == 20.0
+    assert fragment("3Rotate 20\nLevels 3").level[3].rotate == 20.0
     expect_error("12Length 1", ":1:", "12Length", "9")
 
 
@@ -544,12 +550,89 @@ def test_random_bytes_raise_only_treegen_error(data):
 def test_level_params_contract_unchanged():
     # The reader fills every LevelParams field from the key table and nothing else.
     assert {s.field for s in LEVEL_KEYS} == {f.name for f in dataclasses.fields(LevelParams)}
-    assert {s.field for s in TOP_KEYS} == {f.name for f in dataclasses.fields(Params)} - {"name", "level"}
+    assert {s.field for s in TOP_KEYS} == {f.name for f in dataclasses.fields(Params)} - {
+        "name",
+        "level",
+        "key_lines",  # where each key was read, for later errors; not a parameter
+    }
 
 
 def test_a_name_holding_an_equals_sign_survives_the_writer():
     """Found by the fuzz test above: `Name==  fir` names the species '=  fir', which the writer
     wrote as `Name =  fir` and the reader then took for 'fir'."""
     for text in ("Name==   fir\nLevels 2\n", "Name = a=b\nLevels 2\n"):
-        p = parse_params_text(text)
+        p = fragment(text)
         assert "=" in p.name and parse_params_text(format_params_text(p)) == p
+
+
+# ------------------------------------------------------------------------------ completeness
+
+
+def test_a_text_file_missing_parameters_is_refused_through_the_cli(tmp_path):
+    """A name alone used to grow a leafless 45-stem default tree and exit 0."""
+    from conftest import run_treegen
+
+    (tmp_path / "nameonly.txt").write_text("Name my_oak\n")
+    proc = run_treegen("make", tmp_path / "nameonly.txt", "-o", tmp_path / "t.glb")
+    assert proc.returncode == 2 and proc.stdout == ""
+    err = proc.stderr.strip()
+    assert "\n" not in err and "Traceback" not in err
+    assert "nameonly.txt: missing Shape, BaseSize, Scale, ScaleV, Levels and " in err
+    assert "more; a species file lists every parameter" in err and "quaking_aspen.txt" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["nameonly.txt"]
+
+
+@pytest.mark.parametrize("path", SPECIES + sorted(FIXTURES.glob("*.txt")), ids=lambda p: p.name)
+def test_every_required_line_of_a_species_file_is_missed_when_deleted(path):
+    """Each bundled (and fixture) text file lists every parameter its tree uses; deleting any
+    one of those lines is refused naming exactly that key, deleting an optional one is not."""
+    from treegen_cli.params.keys import lookup, required_keys
+
+    text = path.read_text()
+    p = parse_params_text(text, path.name)
+    required = set(required_keys(p.levels, p.leaves))
+    lines = text.split("\n")
+    checked = 0
+    for i, raw in enumerate(lines):
+        key = raw.split("#", 1)[0].replace("=", " ").split()[:1]
+        found = lookup(key[0]) if key else None
+        if found is None:
+            continue
+        cut = "\n".join(lines[:i] + lines[i + 1 :])
+        if found[2] in ("Levels", "Leaves"):  # they decide which keys are needed: still refused
+            with pytest.raises(TreegenError, match=rf"^{path.name}:"):
+                parse_params_text(cut, path.name)
+            checked += 1
+        elif found[2] in required:
+            with pytest.raises(TreegenError, match=rf"^{path.name}: missing {found[2]}; a species file"):
+                parse_params_text(cut, path.name)
+            checked += 1
+        else:
+            parse_params_text(cut, path.name)  # optional (or unused, like the leaf level's Length)
+    assert checked == len(required)
+
+
+def test_required_keys_follow_levels_and_leaves():
+    from treegen_cli.params.keys import OPTIONAL_TOP, required_keys
+
+    three = required_keys(3, 25)
+    assert {"1DownAngle", "2Branches", "3DownAngle", "3RotateV"} <= set(three)
+    assert not {"3Branches", "3Length", "0DownAngle", "0Branches", "1BranchDist"} & set(three)
+    assert not OPTIONAL_TOP & set(three) and "LeafQuality" in OPTIONAL_TOP
+    assert "3DownAngle" not in required_keys(3, 0)  # no leaves: nothing to orient
+    assert not any(k[0] == "1" for k in required_keys(0, 25))  # a trunk alone
+    assert len(required_keys(4, -6)) == len(three) + 15
+
+
+def test_arbaro_xml_stays_partial_and_the_writer_writes_complete_files():
+    xml = "<arbaro><species name='t'><param name='Levels' value='1'/></species></arbaro>"
+    p = parse_params_bytes(xml.encode(), "t.xml")  # Arbaro fills its defaults: accepted
+    assert p.levels == 1
+    for q in (p, default_params(), load_params(FIXTURES / "pair_small.xml")):
+        assert parse_params_text(format_params_text(q)) == q  # strict: nothing missing
+
+
+def test_a_fragment_is_accepted_only_when_asked():
+    with pytest.raises(TreegenError, match=r"^x\.txt: missing Shape, .* and \d+ more; "):
+        parse_params_text("Levels 2\n", "x.txt")
+    assert fragment("Levels 2\n").levels == 2

@@ -8,20 +8,27 @@ Anything else escaping is a bug in treegen.
 class TreegenError(Exception):
     """A user-caused error: bad species file, bad option, oversized tree, bad layout.
 
-    The message names the file, the line or JSON path, the key and the allowed range.
+    The message names the file, the line or JSON path, the key and the allowed range. `line`:
+    the species file's line the message is about, when it was raised without the file's name
+    (e.g. by the generator, from Params.line_of); `in_file` puts it after the name.
     """
 
     exit_code = 2
 
+    def __init__(self, *args, line: int | None = None):
+        super().__init__(*args)
+        self.line = line
+
 
 def in_file(path, fn, *args):
-    """Run `fn(*args)`; a user error it raises is reported against `path` (once)."""
+    """Run `fn(*args)`; a user error it raises is reported against `path` (once), at its line."""
     try:
         return fn(*args)
     except TreegenError as e:
         if str(e).startswith(str(path)):
             raise
-        raise TreegenError(f"{path}: {e}") from None
+        at = f"{path}:{e.line}" if e.line is not None else f"{path}"
+        raise TreegenError(f"{at}: {e}") from None
 
 
 class OptionError(TreegenError):

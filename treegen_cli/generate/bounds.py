@@ -7,6 +7,7 @@ size (--max-size). Every refusal is one line naming the key or flag to change.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -63,20 +64,129 @@ def estimate_counts(p: Params, leaf_quality: float | None = None, levels: int | 
     return int(round(stems)), int(round(leaves))
 
 
-def refuse(kind: str, count: float, limit: int, flag: str, p: Params, levels: int | None):
-    """Refuse an oversized tree, naming the key to lower: Levels when fewer levels would fit
-    (each level multiplies the count by its nBranches), else the count keys."""
-    fits = [n for n in range(p.levels) if estimate_counts(p, levels=n)[kind == "leaves"] <= limit]
-    if levels is None and fits and max(fits) < p.levels:
+def refuse(kind: str, count: float, p: Params, options: GenerateOptions):
+    """Refuse a tree whose `kind` (stems or leaves) count is over its limit, naming the key to
+    change (see `blame`) and its file line."""
+    limit, flag = (
+        (options.max_leaves, "--max-leaves") if kind == "leaves" else (options.max_stems, "--max-stems")
+    )
+    blamed = blame(kind, count, p, options)
+    over = f"would grow about {int(count):,} {kind}, over the {flag} limit of {limit:,}"
+    if blamed is not None and blamed.key != "Levels":
+        value = p.leaves if blamed.key == "Leaves" else p.level[int(blamed.key[0])].branches
+        bound = _floor_text(blamed.max_fit)
+        allowed = f"at least -{bound}" if value < 0 else f"at most {bound}"
         raise TreegenError(
-            f"Levels = {p.levels} would grow about {int(count):,} {kind}, over the {flag} limit "
-            f"of {limit:,}; Levels may be 0..{MAX_LEVELS} and at most {max(fits)} fits this "
-            f"species' nBranches (or raise {flag} N)"
+            f"{blamed.key} = {_num(value)} {over}; {blamed.key} may be {allowed} here (or raise {flag} N)",
+            line=p.line_of(blamed.key),
+        )
+    if blamed is not None:
+        raise TreegenError(
+            f"Levels = {p.levels} {over}; Levels may be 0..{MAX_LEVELS} and at most "
+            f"{int(blamed.max_fit)} fits this species' nBranches (or raise {flag} N)",
+            line=p.line_of("Levels"),
         )
     raise TreegenError(
-        f"species '{p.name}' would grow about {int(count):,} {kind}, over the limit of {limit:,}; "
-        f"raise it with {flag} N (or lower the species' Branches/Leaves/LeafQuality)"
+        f"species '{p.name}' {over}; raise it with {flag} N (or lower the species' Branches/Leaves/LeafQuality)"
     )
+
+
+# A count this many times the median of the file's other counts may be a typo (an extra digit
+# is 10x); the bundled species keep theirs within 20x of each other (the willow's 3Branches 300
+# against Leaves 15), so this only filters, and "putting it back fits" decides.
+OUTLIER = 4.0
+
+
+@dataclass(frozen=True)
+class Blame:
+    """The key an oversized count is blamed on, and the largest value of it alone that fits."""
+
+    key: str  # "Leaves", "2Branches", "Levels"
+    max_fit: float
+
+
+def blame(kind: str, count: float, p: Params, options: GenerateOptions) -> Blame | None:
+    """The key the user most likely mistyped, for `count` (`kind`: stems or leaves) over its
+    limit in `options`; its `max_fit` keeps both the stem and the leaf count within theirs.
+
+    The count is a product of per-parent counts (0Branches, nBranches of the grown levels and,
+    for leaves, Leaves), so every factor alone fits when cut by about count / limit: how far a
+    value is over its own bound does not single one out (and for stems, a sum over levels, it
+    points at the deepest level, whatever was mistyped). A typo does: a count far above the
+    file's other counts (OUTLIER times their median or more) that, put back to that median,
+    brings the tree within the limits. Of those the count most above the median is blamed
+    (0Branches, the number of trunks, against 1). With none, Levels is blamed when fewer levels
+    fit and --levels is not given; else None. The estimate of `kind` is scaled to the `count`
+    actually reached, so a refusal made while growing blames the same way."""
+    levels = options.levels
+    n_levels = p.levels if levels is None else max(0, min(levels, p.levels))
+    index = 1 if kind == "leaves" else 0
+    base = estimate_counts(p, levels=n_levels)[index]
+    if not base > 0:
+        return None
+    scale = [1.0, 1.0]
+    scale[index] = count / base
+
+    def fits(q: Params, lv: int = n_levels) -> bool:
+        stems, leaves = estimate_counts(q, levels=lv)
+        return stems * scale[0] <= options.max_stems and leaves * scale[1] <= options.max_leaves
+
+    counts = {f"{n}Branches": p.level[n].branches for n in range(1, n_levels)}
+    counts["0Branches"] = p.level[0].branches
+    if kind == "leaves" and n_levels >= 1:
+        counts["Leaves"] = abs(p.leaves)
+    best: tuple[float, Blame] | None = None
+    for key, value in counts.items():
+        if value <= 0:
+            continue
+        others = sorted(v for k, v in counts.items() if k not in (key, "0Branches"))
+        # below one per parent is no typical count to put a value back to
+        typical = 1.0 if key == "0Branches" else (max(1.0, float(np.median(others))) if others else None)
+        if typical is not None and not (value >= OUTLIER * typical and fits(_with(p, key, typical))):
+            continue
+        max_fit = _max_fit(lambda x, key=key: fits(_with(p, key, x)), value)
+        if max_fit is None:
+            continue
+        score = value / typical if typical is not None else float("inf")
+        if best is None or score > best[0]:
+            best = (score, Blame(key, max_fit))
+    if best is not None:
+        return best[1]
+    fewer = [n for n in range(n_levels) if fits(p, n)]
+    if levels is None and fewer:
+        return Blame("Levels", max(fewer))
+    return None
+
+
+def _with(p: Params, key: str, value: float) -> Params:
+    """`p` with one count key set (Leaves keeps its sign: negative is a fan)."""
+    if key == "Leaves":
+        return replace(p, leaves=value if p.leaves >= 0 else -value)
+    n = int(key[0])
+    lp = replace(p.level[n], branches=value)
+    return replace(p, level=p.level[:n] + (lp,) + p.level[n + 1 :])
+
+
+def _max_fit(fits, value: float) -> float | None:
+    """The largest x in [0, value] with fits(x) (the count grows with x), or None."""
+    if not fits(0.0):
+        return None
+    lo, hi = 0.0, value
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if fits(mid) else (lo, mid)
+    return lo
+
+
+def _num(v: float) -> str:
+    return str(int(v)) if float(v).is_integer() else f"{v:.10g}"
+
+
+def _floor_text(x: float) -> str:
+    """`x` rounded down for the message, so the value it names does fit."""
+    if x >= 10:
+        return f"{math.floor(x):,}"
+    return _num(math.floor(x * 100) / 100)
 
 
 def check_trunk(p: Params, options: GenerateOptions = DEFAULTS) -> None:
@@ -122,8 +232,8 @@ def apply_options(p: Params, options: GenerateOptions) -> tuple[Params, int]:
     n_levels = p.levels if options.levels is None else max(0, min(options.levels, p.levels))
     est_stems, est_leaves = estimate_counts(p, levels=n_levels)
     if est_stems > options.max_stems:
-        refuse("stems", est_stems, options.max_stems, "--max-stems", p, options.levels)
+        refuse("stems", est_stems, p, options)
     if est_leaves > options.max_leaves:
-        refuse("leaves", est_leaves, options.max_leaves, "--max-leaves", p, options.levels)
+        refuse("leaves", est_leaves, p, options)
     check_trunk(p, options)
     return p, n_levels

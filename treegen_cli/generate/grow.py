@@ -58,7 +58,7 @@ def generate(p: Params, seed: int = 0, options: GenerateOptions = DEFAULTS) -> T
         n_local = origin.shape[0]
         total_stems += n_local
         if total_stems > options.max_stems:
-            refuse("stems", total_stems, options.max_stems, "--max-stems", p, options.levels)
+            refuse("stems", total_stems, p, options)
 
         # global indices
         g0, n0 = out.n_stems, out.n_nodes

@@ -42,7 +42,7 @@ def grow_leaves(
         totals = abs(p.leaves) * shape_ratio(distrib, np.clip(rel, 0, 1)) * quality
         z_lo = np.minimum(p.base_size * scale_tree, L) if ctx.level == 0 else np.zeros_like(L)
     if totals.sum() > options.max_leaves:
-        refuse("leaves", totals.sum(), options.max_leaves, "--max-leaves", p, options.levels)
+        refuse("leaves", totals.sum(), p, options)
 
     if not fan and lp.rotate < 0:
         # whorls: groups of 360/(−Rotate) leaves share an offset, evenly around the stem
@@ -76,7 +76,7 @@ def grow_leaves(
             stem = assign_members(ctx, rng, orig, z)
     k = stem.shape[0]
     if k > options.max_leaves:
-        refuse("leaves", k, options.max_leaves, "--max-leaves", p, options.levels)
+        refuse("leaves", k, p, options)
     pos, pframe, _, pnode = ctx.attach(stem, np.minimum(z, ctx.length[stem] * (1 - 1e-9)))
     if fan:
         down = lp.down_angle * 2.0 * spread + deviation(rng, k, lp.down_angle_v)

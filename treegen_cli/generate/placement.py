@@ -165,7 +165,7 @@ def place_children(
     totals = np.maximum(totals, 0.0)
     expected = stems_so_far + totals.sum()
     if expected > options.max_stems:
-        refuse("stems", expected, options.max_stems, "--max-stems", p, options.levels)
+        refuse("stems", expected, p, options)
 
     n, orig, j, z = placements(totals, base, L)
     z = _branch_dist(z, ctx.seg_len[orig], base[orig], lp.branch_dist)

@@ -1,6 +1,8 @@
 """Weber–Penn species parameters: the `Params` record, its defaults, and the file readers.
 
-Defaults for absent keys follow Arbaro; the file's own values always win.
+A text file lists every parameter (keys.required_keys: the paper's table for the levels it
+grows); keys beyond the paper, and any key of an Arbaro XML file, may be absent and take
+Arbaro's defaults. The file's own values always win.
 `load_params(path)` is the front door (load.py); its parts, one module each:
 
 - record.py — `Params` / `LevelParams` (the paper's names in snake_case) and Arbaro's defaults

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from ..errors import TreegenError
 from .colors import COLOR_FORMAT, srgb_hex_to_linear
-from .keys import LEAF_SHAPES, KeySpec, lookup, suggest
+from .keys import LEAF_SHAPES, KeySpec, lookup, required_keys, suggest
 from .record import LEVEL_SLOTS, MAX_LEVELS, LevelParams, Params, arbaro_level_defaults, default_params
 
 
@@ -98,13 +98,16 @@ class Builder:
             return int(v)
         return v
 
-    def build(self, default_name: str) -> Params:
+    def build(self, default_name: str, complete: bool = False) -> Params:
+        """Validate every entry into Params; `complete`: refuse a file missing a key the
+        text format requires (keys.required_keys)."""
         if not self.entries and self.name is None:
             raise self.fail(1, "empty species file: no parameters found")
         top: dict[str, int | float] = {}
         per_level: list[dict[str, int | float]] = [{} for _ in range(LEVEL_SLOTS)]
         seen: dict[tuple[str, int | None], Entry] = {}
         level_refs: list[tuple[int, str, Entry]] = []
+        lines_seen: list[tuple[tuple[str, int | None], str, Entry]] = []
         for e in self.entries:
             found = lookup(e.key)
             if found is None:
@@ -117,6 +120,7 @@ class Builder:
                 at = f"line {first.line}" if first.line is not None else "earlier"
                 raise self.fail(e.line, f"duplicate key {e.key}: {canon} already set on {at}{was}")
             seen[ident] = e
+            lines_seen.append((ident, canon, e))
             if n is not None and n > MAX_LEVELS:
                 raise self.fail(
                     e.line,
@@ -138,12 +142,34 @@ class Builder:
                     f"(level keys may use 0..{levels}; level {levels} "
                     f"holds the leaves' DownAngle/Rotate)",
                 )
+        if complete:
+            leaves = top.get("leaves", Params.leaves)
+            missing = [
+                k for k in required_keys(levels, leaves) if (lookup(k)[0].key, lookup(k)[1]) not in seen
+            ]
+            if missing:
+                more = f" and {len(missing) - 5} more" if len(missing) > 5 else ""
+                listed = {n for _, n in seen}
+                bare = sorted({n for n in (lookup(k)[1] for k in missing) if n and n not in listed})
+                deep = ""
+                if bare and ("Levels", None) in seen:  # likely a Levels typo: say so
+                    where = seen[("Levels", None)].line
+                    at = f" (line {where})" if where is not None else ""
+                    span = f"{bare[0]}..{bare[-1]}" if len(bare) > 1 else f"{bare[0]}"
+                    deep = f"; Levels = {levels}{at} needs level{'s' if len(bare) > 1 else ''} {span}, which the file has no keys for"
+                raise self.fail(
+                    None,
+                    f"missing {', '.join(missing[:5])}{more}{deep}; a species file lists every "
+                    f"parameter (start from a bundled one, e.g. quaking_aspen.txt: `treegen species` "
+                    f"lists them)",
+                )
         slots: list[LevelParams] = []
         for n in range(LEVEL_SLOTS):
             base = arbaro_level_defaults(n) if n <= 3 else slots[n - 1]
             slots.append(replace(base, **per_level[n]))
         name = self.name if self.name is not None else default_name
-        return replace(default_params(name), **top, level=tuple(slots))
+        lines = tuple((canon, e.line) for _, canon, e in lines_seen if e.line is not None)
+        return replace(default_params(name), **top, level=tuple(slots), key_lines=lines)
 
 
 def default_name(source: str) -> str:

@@ -165,6 +165,42 @@ LEVEL_KEYS: tuple[KeySpec, ...] = (
     _n("BranchDist", "branch_dist", float, 0, 1),
 )
 
+# What a Weber–Penn text file must list (params/assemble.py refuses a file missing any): the
+# paper's own parameter table, for the levels the tree grows. Optional, as keys beyond the paper:
+# Arbaro's LeafQuality, LeafBend, LeafDistrib, LeafStemLen, Smooth and nBranchDist, Arbaro's
+# level-0 DownAngle/Rotate/Branches (several trunks), and treegen's LeafColor/BarkColor; a file
+# leaving them out gets Arbaro's (or the species') defaults. Arbaro XML files stay partial.
+OPTIONAL_TOP = frozenset(
+    {"LeafQuality", "LeafBend", "LeafDistrib", "LeafStemLen", "Smooth", "LeafColor", "BarkColor"}
+)
+TRUNK_KEYS = (
+    "Length",
+    "LengthV",
+    "Taper",
+    "SegSplits",
+    "SplitAngle",
+    "SplitAngleV",
+    "CurveRes",
+    "Curve",
+    "CurveBack",
+    "CurveV",
+)
+LEAF_LEVEL_KEYS = ("DownAngle", "DownAngleV", "Rotate", "RotateV")  # orient the leaves
+
+
+def required_keys(levels: int, leaves: float) -> list[str]:
+    """The keys a text file must list for a tree of `levels` stem levels and `leaves` Leaves, in
+    the writer's order: top-level keys, the trunk's, every key of stem levels 1..levels-1, and
+    the leaf level's angles when there are leaves (level `levels`; no leaves grow at Levels 0)."""
+    keys = [s.key for s in TOP_KEYS if s.key not in OPTIONAL_TOP]
+    keys += [f"0{k}" for k in TRUNK_KEYS]
+    for n in range(1, levels):
+        keys += [f"{n}{s.key}" for s in LEVEL_KEYS if s.key != "BranchDist"]
+    if levels >= 1 and leaves != 0:
+        keys += [f"{levels}{k}" for k in LEAF_LEVEL_KEYS]
+    return keys
+
+
 # The seed paper's (Kondo et al.) spellings of per-level keys.
 LEVEL_ALIASES: dict[str, str] = {
     "CurveResolution": "CurveRes",

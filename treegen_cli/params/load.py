@@ -14,8 +14,9 @@ def _looks_xml(text: str) -> bool:
     return text.lstrip("\ufeff \t\r\n").startswith("<")
 
 
-def parse_params_bytes(data: bytes, source: str = "<string>") -> Params:
-    """Parse a species file's raw bytes: Arbaro XML if it starts with '<', else text."""
+def parse_params_bytes(data: bytes, source: str = "<string>", partial: bool = False) -> Params:
+    """Parse a species file's raw bytes: Arbaro XML if it starts with '<', else text (which
+    must list every parameter unless `partial`; Arbaro XML is partial by design)."""
     if b"\x00" in data:
         line = data.count(b"\n", 0, data.index(b"\x00")) + 1
         raise TreegenError(f"{source}:{line}: binary data (NUL byte): not a species file")
@@ -33,7 +34,7 @@ def parse_params_bytes(data: bytes, source: str = "<string>") -> Params:
         raise TreegenError(f"{source}:1: empty species file: no parameters found")
     if _looks_xml(text):
         return parse_params_xml(data, source)
-    return parse_params_text(text, source)
+    return parse_params_text(text, source, partial)
 
 
 def load_params(path: str | Path) -> Params:

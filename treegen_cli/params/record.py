@@ -75,6 +75,13 @@ class Params:
     level: tuple[LevelParams, ...] = field(
         default_factory=lambda: tuple(LevelParams() for _ in range(LEVEL_SLOTS))
     )
+    # (canonical key, line) of each key the file set: lets a refusal made later (an oversized
+    # tree) name the line to edit. Not part of the species: equal Params may differ here.
+    key_lines: tuple[tuple[str, int], ...] = field(default=(), compare=False, repr=False)
+
+    def line_of(self, key: str) -> int | None:
+        """The line of the species file that set `key` (canonical spelling), or None."""
+        return dict(self.key_lines).get(key)
 
 
 # Arbaro's per-level defaults for levels 0..3 (its LevelParams); level n > 3 repeats level 3,

@@ -12,8 +12,12 @@ from .keys import LEAF_SHAPE_NAMES, LEVEL_KEYS, TOP_KEYS, lookup, suggest
 from .record import MAX_LEVELS, Params
 
 
-def parse_params_text(text: str, source: str = "<string>") -> Params:
-    """Parse the plain text species format: `Key value` or `Key = value`, `#` comments."""
+def parse_params_text(text: str, source: str = "<string>", partial: bool = False) -> Params:
+    """Parse the plain text species format: `Key value` or `Key = value`, `#` comments.
+
+    A file lists every parameter (keys.required_keys) and one missing any is refused, so a
+    forgotten or deleted line is not silently Arbaro's default; `partial` accepts a fragment
+    (a few keys over the defaults, as tests and snippets write them)."""
     b = Builder(source)
     if "\x00" in text:
         line = text.count("\n", 0, text.index("\x00")) + 1
@@ -46,7 +50,7 @@ def parse_params_text(text: str, source: str = "<string>") -> Params:
         if len(value.split()) > 1:
             raise b.fail(lineno, f"{key} = {clip(value)!r}: expected one value, got {len(value.split())}")
         b.add(key, value, lineno)
-    return b.build(default_name(source))
+    return b.build(default_name(source), complete=not partial)
 
 
 def _fmt(v: int | float | str) -> str:
