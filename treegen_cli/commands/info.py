@@ -48,7 +48,7 @@ def info(species, as_json, with_lod, with_wind, triangles, **options):
     With --lod: one row per LOD, and the analogue of the paper's Table 3: the full tree's
     clip at the paper's 30 m and 130 m under the bounded and the paper's schedule, side by side.
     With --wind: the wind model's numbers, to tune --wind-speed, --gust and --stiffness."""
-    stats = api.info(species, lod=with_lod, wind=with_wind, triangles=triangles, **options)
+    stats = api.info(species, lod=with_lod, wind=with_wind, triangles=triangles, **flags.given(options))
     if as_json:
         click.echo(json.dumps(stats, indent=2))
         return
