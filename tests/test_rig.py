@@ -105,7 +105,7 @@ def test_budget_drops_finest_levels_first_then_coarsens():
 
 def test_coarse_chain_blends_by_node_z():
     tree = synthetic_tree()
-    rig = build_rig(tree, RigOptions(max_joints=3))  # trunk joints on nodes 0 and 2
+    rig = build_rig(tree, RigOptions(max_joints=2))  # trunk joints on nodes 0 and 2
     assert list(rig.joint_node) == [0, 2]
     # Trunk node 1 (z = 2) lies halfway between joints at z = 0 and z = 4.
     assert list(rig.node_joints[1]) == [0, 1]
@@ -182,3 +182,76 @@ def test_species_rig_under_several_budgets(species):
         check_rig(tree, rig, budget)
         if full_joint_count(tree) > budget:
             assert len(rig.joint_node) > budget // 2  # the budget is used, not wasted
+
+
+BUDGETS = (16, 40, 64, 100, 150, 200, 256)
+
+
+@pytest.mark.parametrize("species", ["quaking_aspen", "black_tupelo", "ca_black_oak", "fan_palm"])
+def test_species_rig_uses_the_whole_budget(species):
+    """The rig has min(budget, candidate nodes) joints: the budget is spent, not rounded down to
+    a chain stride (the aspen got 53 joints for 64 and for 100). The fan palm has 249 candidates."""
+    tree = species_tree(species, seed=0)
+    for budget in BUDGETS:
+        rig = build_rig(tree, RigOptions(max_joints=budget))
+        check_rig(tree, rig, budget)
+        assert len(rig.joint_node) == min(budget, full_joint_count(tree))
+    # Restricted to level 1: the pool is the root and level 1's candidates.
+    one = tree.stem_level == 1
+    pool = 1 + int(np.sum(tree.stem_node_count[one] - 1) - np.count_nonzero(tree.stem_clone[one]))
+    for budget in (2, 40, 100):
+        rig = build_rig(tree, RigOptions(max_joints=budget, joint_levels=(1,)))
+        check_rig(tree, rig, budget)
+        assert len(rig.joint_node) == min(budget, pool)
+
+
+def _pieces(tree, rig) -> np.ndarray:
+    """Per stem: its longest jointless piece (m along node_z) from a joint of its own to the next
+    or to the tip; NaN for a stem without joints of its own."""
+    own = np.bincount(rig.joint_stem, minlength=tree.n_stems)
+    tip = tree.stem_node_start + tree.stem_node_count - 1
+    ends = np.concatenate([rig.joint_node, tip[own > 0]])
+    stem = tree.node_stem[ends]
+    order = np.lexsort((ends, stem))
+    ends, stem = ends[order], stem[order]
+    gap = np.where(stem[1:] == stem[:-1], np.diff(tree.node_z[ends]), -np.inf)
+    out = np.full(tree.n_stems, -np.inf)
+    np.maximum.at(out, stem[:-1], gap)
+    return np.where(own > 0, out, np.nan)
+
+
+@pytest.mark.parametrize("species", ["quaking_aspen", "black_tupelo", "weeping_willow", "ca_black_oak"])
+def test_joints_spread_as_the_budget_grows(species):
+    """More budget never takes a joint from a stem; levels fill from the trunk down; the level
+    being filled has a joint at every stem's base (once they fit) and its longest jointless
+    piece shrinks as the budget grows; no chain of it is left coarser than the pieces another
+    was split into (the old stride rule split short and long chains alike)."""
+    tree = species_tree(species, seed=0)
+    level = tree.stem_level
+    full = np.bincount(tree.node_stem, minlength=tree.n_stems) - 1 - tree.stem_clone
+    prev_count, prev_piece = np.zeros(tree.n_stems, dtype=np.int64), {}
+    for budget in BUDGETS:
+        rig = build_rig(tree, RigOptions(max_joints=budget))
+        count = np.bincount(rig.joint_stem, minlength=tree.n_stems)
+        assert np.all(count >= prev_count)
+        prev_count = count
+        filled = np.array([np.all(count[level == lv] == full[level == lv]) for lv in range(level.max() + 1)])
+        partial = int(np.argmin(filled)) if not filled.all() else None
+        if partial is None:
+            continue
+        assert not np.any(count[level > partial])  # deeper levels wait for this one
+        on = (level == partial) & ~tree.stem_clone
+        if budget - count[level < partial].sum() >= np.count_nonzero(on):
+            assert np.all(count[on] >= 1)  # every stem's base first
+            # Balance: with m extra joints a chain's pieces average length / (m + 1); no chain
+            # of the level (clones too) is left coarser than the pieces another was split into.
+            lv = np.flatnonzero(level == partial)
+            tip = tree.stem_node_start[lv] + tree.stem_node_count[lv] - 1
+            length = tree.node_z[tip] - tree.node_z[tree.stem_node_start[lv]]
+            m = count[lv] - ~tree.stem_clone[lv]
+            room = m < tree.stem_node_count[lv] - 2
+            if room.any() and (m > 0).any():
+                assert (length[room] / (m[room] + 1)).max() <= (length[m > 0] / m[m > 0]).min() + 1e-9
+            piece = np.nanmax(_pieces(tree, rig)[on])
+            assert piece <= prev_piece.get(partial, np.inf) + 1e-9
+            prev_piece[partial] = piece

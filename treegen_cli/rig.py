@@ -7,10 +7,12 @@ point; stems without joints ride rigidly on the nearest ancestor joint.
     rig = build_rig(tree, RigOptions(max_joints=128))   # → len(rig.skeleton.names) <= 128,
     rig.skeleton.parent[0] == -1                         #   joint 0 on the trunk base node
 
-Budget (never exceeded): levels are filled from the trunk down. A level whose full chains fit
-gets them; the first level that does not fit has its chains coarsened (every k-th segment node,
-the smallest k that fits, the stem's base always kept) and deeper levels get no joints; if even
-one joint per stem does not fit, only that level's longest stems get one (at their base).
+Budget (never exceeded, and used: the rig has min(budget, candidate nodes) joints): levels are
+filled from the trunk down. A level whose full chains fit gets them; the first level that does
+not fit gets a joint at every stem's base and spends the rest of the budget along its chains,
+a stem's share growing with its length (the longest jointless spans are split first, D'Hondt
+style), spaced evenly from base to tip; deeper levels get no joints. If even one joint per stem
+does not fit, only that level's longest stems get one (at their base).
 """
 
 from __future__ import annotations
@@ -48,22 +50,29 @@ class RigOptions:
 RIG_DEFAULTS = RigOptions()
 
 MAX_JOINTS = 65535  # skin joint indices are uint16
-_BASE_ONLY = np.iinfo(np.int32).max  # chain stride that keeps only a stem's base node
 
 
-def _chain_joints(chain: np.ndarray, clone: np.ndarray, stride: int) -> int:
-    """Joints on chains of `chain` candidate positions kept every `stride`-th (a clone's
-    position 0 sits on its parent's split node and is not its own joint)."""
-    return int(np.sum(-(-chain // stride)) - np.count_nonzero(clone))
+def _chain_shares(length: np.ndarray, free: np.ndarray, extra: int) -> np.ndarray:
+    """Extra joints per chain (int64, like `free`): `extra` joints in all, at most `free[i]` on
+    chain i, each to the chain whose pieces are then longest (D'Hondt: chain i's j-th extra joint
+    bids length[i] / j, the highest `extra` bids win; ties go to the earlier chain). Splitting
+    the longest jointless span first is where a joint adds the most bending."""
+    chain_of = np.repeat(np.arange(len(free)), free)
+    j = np.arange(len(chain_of)) - np.repeat(np.cumsum(free) - free, free) + 1
+    won = np.lexsort((j, chain_of, -length[chain_of] / j))[:extra]
+    return np.bincount(chain_of[won], minlength=len(free))
 
 
 def _select(tree, options: RigOptions) -> np.ndarray:
     """Bool (N,): which nodes become joints, following the budget rules in the module doc."""
     level = tree.stem_level.astype(np.int64)
     clone = tree.stem_clone.astype(bool)
-    chain = tree.stem_node_count.astype(np.int64) - 1  # segment-start nodes per stem
-    include = np.zeros(tree.n_stems, dtype=bool)
-    stride = np.ones(tree.n_stems, dtype=np.int64)
+    chain = tree.stem_node_count.astype(np.int64) - 1  # segment-start nodes per stem (tip: chain)
+    start = tree.stem_node_start.astype(np.int64)
+    s = tree.node_stem
+    p = np.arange(tree.n_nodes) - start[s]  # position along the stem
+    candidate = (p < chain[s]) & ~(clone[s] & (p == 0))  # a clone's 0 is its parent's split node
+    jointed = np.zeros(tree.n_nodes, dtype=bool)
     budget = options.max_joints
     roots = np.flatnonzero(tree.stem_parent < 0)
 
@@ -74,33 +83,35 @@ def _select(tree, options: RigOptions) -> np.ndarray:
         else np.intersect1d(present, np.asarray(options.joint_levels, dtype=np.int64))
     )
     if 0 not in allowed:  # the root joint exists regardless
-        include[roots[:budget]] = True
-        stride[roots] = _BASE_ONLY
+        jointed[start[roots[:budget]]] = True
         budget -= int(min(len(roots), budget))
     for lev in allowed:
         idx = np.flatnonzero(level == lev)
-        for k in range(1, int(chain[idx].max()) + 1):
-            used = _chain_joints(chain[idx], clone[idx], k)
-            if used <= budget:
-                include[idx] = True
-                stride[idx] = k
-                budget -= used
-                break
+        own = idx[~clone[idx]]
+        full = int(chain[idx].sum()) - (len(idx) - len(own))
+        if full <= budget:  # every segment start of the level
+            jointed |= candidate & (level[s] == lev)
+            budget -= full
+            continue
+        if len(own) <= budget:
+            # Every stem's base, then the rest spread along the chains (fewer than their free
+            # positions 1..chain-1, since the full chains did not fit): m extra joints on a
+            # chain at positions round(i * chain / (m + 1)), i = 1..m — distinct, as m < chain.
+            jointed[start[own]] = True
+            free = chain[idx] - 1
+            length = tree.node_z[start[idx] + chain[idx]] - tree.node_z[start[idx]]
+            m = _chain_shares(length, free, budget - len(own))
+            rep = np.repeat(np.arange(len(idx)), m)
+            i = np.arange(len(rep)) - np.repeat(np.cumsum(m) - m, m) + 1
+            c, mm = chain[idx][rep], m[rep]
+            jointed[start[idx][rep] + (2 * i * c + mm + 1) // (2 * (mm + 1))] = True
         else:
             # Not even one joint per stem: the longest (non-clone) stems keep a base joint.
-            own = idx[~clone[idx]]
             is_root = tree.stem_parent[own] < 0
             order = np.lexsort((-tree.stem_length[own], ~is_root))
-            keep = own[order[:budget]]
-            include[keep] = True
-            stride[keep] = _BASE_ONLY
-            k = _BASE_ONLY
-        if k > 1:  # this level was coarsened: deeper levels get none
-            break
-
-    s = tree.node_stem
-    p = np.arange(tree.n_nodes) - tree.stem_node_start[s]
-    return include[s] & (p < chain[s]) & (p % stride[s] == 0) & ~(clone[s] & (p == 0))
+            jointed[start[own[order[:budget]]]] = True
+        break  # this level was coarsened: deeper levels get none
+    return jointed
 
 
 def joint_names(tree, joint_node: np.ndarray, joint_stem: np.ndarray) -> list[str]:
