@@ -49,7 +49,6 @@ bounds and bakes, and reports what an artist tunes with.
 from __future__ import annotations
 
 import functools
-from dataclasses import replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
