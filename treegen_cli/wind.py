@@ -49,6 +49,7 @@ bounds and bakes, and reports what an artist tunes with.
 from __future__ import annotations
 
 import functools
+from dataclasses import replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -80,7 +81,7 @@ __all__ = [
     "joint_loads",
     "one_blas_thread",
     "steady_state",
-    "sway_mode",
+    "sway",
     "wind_angles",
     "wind_report",
     "wind_velocity",
@@ -133,6 +134,8 @@ def bound_bends(theta: np.ndarray, parent: np.ndarray, options: WindOptions) -> 
 
 
 CROWN_SAMPLES = 200  # leaves whose mean is the crown's centre (crown_map)
+SWAY_RUN = 120.0  # s of wind whose crown spectrum gives the sway frequency (1/120 Hz bins)
+SWAY_FPS = 4.0  # its frames per second (sways are well under 2 Hz)
 
 # BLAS/LAPACK libraries found once, at import (before any worker thread of ours runs): a scan
 # walks the loaded libraries under the dynamic loader's lock and would deadlock against a
@@ -219,35 +222,52 @@ def crown_map(tree: Tree, rig: Rig, dyn: Dynamics, loads: JointLoads) -> np.ndar
     return np.tensordot(w, np.stack(maps), axes=1)
 
 
-def sway_mode(dyn: Dynamics, crown: np.ndarray, theta: np.ndarray) -> int:
-    """Index of the mode that carries most of the crown centre's horizontal sway velocity in
-    the clip's bends `theta` (J, n, 3): the tree's sway mode as one sees it. The mode carrying
-    most of the trunk top's static deflection was a single heavy limb's pendulum on a finer rig
-    (the willow's 0.11 Hz, while its crown sways at 0.19 Hz)."""
+def sway(tree: Tree, rig: Rig, options: WindOptions, seed: int, dyn: Dynamics, loads: JointLoads):
+    """(Hz, mode) of the tree's sway as one sees it: the peak of the crown centre's horizontal
+    sway-velocity spectrum (smoothed over ±0.02 Hz) in a SWAY_RUN-long run of the same wind,
+    and the mode carrying most of that motion within ±25 % of the peak. A single mode picked
+    by the trunk top's static deflection was one heavy limb's pendulum on a fine rig (the
+    willow's 0.11 Hz, while its crown sways at 0.2 Hz), and the mode with the most crown
+    velocity alone jumped between close modes with the clip's length."""
+    run = replace(options, duration=max(options.duration, SWAY_RUN), fps=min(options.fps, SWAY_FPS))
+    theta = wind_angles(tree, rig, run, seed, dyn)
+    if not np.any(theta):
+        return float(dyn.omega[0] / (2 * np.pi)) if len(dyn.omega) else 0.0, 0
+    crown = crown_map(tree, rig, dyn, loads)
     dof = np.einsum("jca,jkc->jak", dyn.basis, theta).reshape(2 * theta.shape[0], -1)  # (2J, n)
+    x = (crown[:2] @ dof).T  # (n, 2) horizontal crown motion
+    v = np.diff(np.concatenate([x, x[:1]]), axis=0)  # periodic
+    power = (np.abs(np.fft.rfft(v, axis=0)) ** 2).sum(axis=1)
+    f = np.fft.rfftfreq(len(v), 1.0 / run.fps)
+    k = max(1, int(round(0.02 * run.duration)))
+    smooth = np.convolve(power, np.ones(2 * k + 1) / (2 * k + 1), mode="same")
+    band = f > 0.05
+    peak = float(f[band][np.argmax(smooth[band])])
     q = dyn.modes.T @ (dyn.mass @ dof)  # modal coordinates (φᵀ M φ = I)
-    q_dot = np.diff(q, axis=1, append=q[:, :1])  # periodic
-    c = crown[:2] @ dyn.modes  # (2, modes): horizontal crown motion per modal coordinate
-    return int(np.argmax((c**2).sum(axis=0) * q_dot.var(axis=1)))
+    share = ((crown[:2] @ dyn.modes) ** 2).sum(axis=0) * np.diff(q, axis=1, append=q[:, :1]).var(axis=1)
+    hz = dyn.omega / (2 * np.pi)
+    near = np.abs(hz - peak) <= 0.25 * peak
+    mode = int(np.argmax(np.where(near, share, -np.inf))) if near.any() else int(np.argmin(np.abs(hz - peak)))
+    return peak, mode
 
 
 @one_blas_thread
 def wind_report(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int = 0, modes: int = 4) -> dict:
     """`treegen info --wind`: natural frequencies (Hz) and damping of the lowest modes and of
-    the tree's sway mode (sway_mode), and what the clip does at `options.speed`: the tree top's mean
+    the tree's sway (sway: its crown's spectrum peak and that mode's damping), and what the clip does at `options.speed`: the tree top's mean
     downwind lean and RMS sway (m), the largest joint turn (degrees)."""
     parent = np.asarray(rig.skeleton.parent, dtype=np.int64)
     loads = joint_loads(tree, rig, options)
     dyn = dynamics(tree, rig, options, loads)
     theta = wind_angles(tree, rig, options, seed, dyn)  # (J, n, 3)
-    sway = sway_mode(dyn, crown_map(tree, rig, dyn, loads), theta) if np.any(theta) else 0
+    sway_hz, mode = sway(tree, rig, options, seed, dyn, loads)
     out = {
         "modes": [
             {"hz": round(float(w / (2 * np.pi)), 4), "damping": round(float(z), 4)}
             for w, z in zip(dyn.omega[:modes], dyn.damping[:modes])
         ],
-        "sway_hz": round(float(dyn.omega[sway] / (2 * np.pi)), 4),
-        "sway_damping": round(float(dyn.damping[sway]), 4),
+        "sway_hz": round(sway_hz, 4),
+        "sway_damping": round(float(dyn.damping[mode]), 4),
         "speed_m_s": options.speed,
     }
     j, x = trunk_top(tree, rig)

@@ -130,7 +130,9 @@ def _wind_lines(w: dict, o: dict) -> None:
         "    modes        " + ", ".join(f"{m['hz']:.2f} Hz (ζ {m['damping']:.2f})" for m in w["modes"])
     )
     if w["sway_hz"] is not None:
-        click.echo(f"    trunk sway   {w['sway_hz']:.3f} Hz, damping ζ {w['sway_damping']:.2f}")
+        click.echo(
+            f"    crown sway   {w['sway_hz']:.3f} Hz (its motion's peak), damping ζ {w['sway_damping']:.2f}"
+        )
         click.echo(
             f"    tree top     leans {w['top_lean_m']:.2f} m downwind, sways "
             f"{w['top_sway_rms_m']:.2f} m RMS; largest joint turn {w['max_joint_deg']:.1f}°"
