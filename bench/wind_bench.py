@@ -9,19 +9,11 @@ Target (issue 14): bake under 0.5 s at the default budget, the willow ≤ 1 s.
     (default: the paper's four species; OPENBLAS_NUM_THREADS=1 is faster on a busy machine;
     --joints: the median leaf movement at 4 m/s per joint budget instead)
 
-Measured 2026-11-26 07:50, seed 0, OPENBLAS_NUM_THREADS=1, 2 shared cores at load average 8-11
-(wall time ran 2-3x the CPU time; read the cpu column). The willow's limbs weep (sag stiffness,
-wind.py): before it, its sway mode was 0.535 Hz and the median leaf moved 2.1 / 13.8 cm at 4 / 12
-m/s in 0.29 CPU s; the other three species are unchanged:
-species          joints              modes Hz  sway Hz  bake s  cpu s    m/s     ζ  lean m  sway m  max ° leaf cm
-quaking_aspen       256      0.56, 0.56, 0.85    0.565   0.367  0.168      4  0.22    0.10    0.03    5.9    14.5
-                                                                          12  0.28    0.56    0.24   19.5    93.7
-black_tupelo        210      0.39, 0.39, 0.70    0.393   0.267  0.099      4  0.23    0.23    0.07    4.9    17.8
-                                                                          12  0.29    1.28    0.49   21.4   115.5
-weeping_willow      222      0.14, 0.14, 0.14    0.201   0.863  0.306      4  0.18    0.02    0.00   11.1     8.7
-                                                                          12  0.20    0.14    0.03   33.5    47.5
-ca_black_oak        238      0.51, 0.51, 0.87    0.511   0.473  0.133      4  0.16    0.03    0.01    8.5     2.0
-                                                                          12  0.17    0.14    0.07   29.1    14.5
+Measured 2026-11-26 07:50 (load 8-11; read the cpu column), before the rig spent the whole
+joint budget: joints 256 / 210 / 222 / 238, sway (the mode carrying the trunk top's static
+deflection) 0.565 / 0.393 / 0.201 / 0.511 Hz, cpu 0.168 / 0.099 / 0.306 / 0.133 s for the aspen,
+tupelo, willow and oak; the willow's largest joint turn 11.1° / 33.5° at 4 / 12 m/s. Before the
+willow's sag stiffness its sway mode was 0.535 Hz and its median leaf moved 2.1 / 13.8 cm.
 Measured 2026-11-26 23:30 (quiet box, same command) after the rig spends the whole joint budget
 (rig.py: every species now has 256 joints) and `sway Hz` became the crown's spectral peak (it was
 the mode carrying the trunk top's static deflection, which on the finer rig was one heavy willow
