@@ -222,15 +222,25 @@ def crown_map(tree: Tree, rig: Rig, dyn: Dynamics, loads: JointLoads) -> np.ndar
     return np.tensordot(w, np.stack(maps), axes=1)
 
 
-def sway(tree: Tree, rig: Rig, options: WindOptions, seed: int, dyn: Dynamics, loads: JointLoads):
+def sway(
+    tree: Tree,
+    rig: Rig,
+    options: WindOptions,
+    seed: int,
+    dyn: Dynamics,
+    loads: JointLoads,
+    theta: np.ndarray | None = None,
+):
     """(Hz, mode) of the tree's sway as one sees it: the peak of the crown centre's horizontal
     sway-velocity spectrum (smoothed over ±0.02 Hz) in a SWAY_RUN-long run of the same wind,
     and the mode carrying most of that motion within ±25 % of the peak. A single mode picked
     by the trunk top's static deflection was one heavy limb's pendulum on a fine rig (the
     willow's 0.11 Hz, while its crown sways at 0.2 Hz), and the mode with the most crown
-    velocity alone jumped between close modes with the clip's length."""
+    velocity alone jumped between close modes with the clip's length. `theta`: the clip's
+    bends at `options`, reused when that clip is already the run."""
     run = replace(options, duration=max(options.duration, SWAY_RUN), fps=min(options.fps, SWAY_FPS))
-    theta = wind_angles(tree, rig, run, seed, dyn)
+    if theta is None or run != options:
+        theta = wind_angles(tree, rig, run, seed, dyn)
     if not np.any(theta):
         return float(dyn.omega[0] / (2 * np.pi)) if len(dyn.omega) else 0.0, 0
     crown = crown_map(tree, rig, dyn, loads)
@@ -260,7 +270,7 @@ def wind_report(tree: Tree, rig: Rig, options: WindOptions = DEFAULTS, seed: int
     loads = joint_loads(tree, rig, options)
     dyn = dynamics(tree, rig, options, loads)
     theta = wind_angles(tree, rig, options, seed, dyn)  # (J, n, 3)
-    sway_hz, mode = sway(tree, rig, options, seed, dyn, loads)
+    sway_hz, mode = sway(tree, rig, options, seed, dyn, loads, theta)
     out = {
         "modes": [
             {"hz": round(float(w / (2 * np.pi)), 4), "damping": round(float(z), 4)}

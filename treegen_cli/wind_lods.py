@@ -69,29 +69,26 @@ def lod_angles(
     if J == 0 or n == 0 or not np.any(theta0):
         return np.zeros((J, n, 3))
     near = near if near is not None else Nearest()
-    leaves, nodes = _stride(tree.n_leaves), _stride(tree.n_nodes)
+    # leaves take part where LOD0 has leaves to move them by (a leafless tree: its nodes only)
+    leaves = _stride(tree.n_leaves if tree0.n_leaves else 0)
+    nodes = _stride(tree.n_nodes)
     # LOD nodes are LOD0's (lod_leaves.prune_stems, lod_nodes.coarsen_nodes copy them)
     at = near.nodes(tree0).query(tree.node_pos[np.r_[nodes, rig.joint_node]])[1]
     node0, joint_node0 = at[: len(nodes)], at[len(nodes) :]
     mid = _middles(tree, leaves)
     zero = np.zeros(len(leaves), dtype=np.int64)
-    carry0, cw0 = np.zeros((0, 2), np.int64), np.zeros((0, 2))
-    if len(leaves) and tree0.n_leaves:  # among a sample of LOD0's leaves: same twigs, same joints
+    leaf0 = zero
+    if len(leaves):  # among a sample of LOD0's leaves: same twigs, same joints
         index, some = near.leaves(tree0)
         leaf0 = some[index.query(mid)[1]]
-        carry0 = np.c_[rig0.leaf_joint[leaf0], zero]
-        cw0 = np.c_[np.ones(len(leaves)), zero]
     pts = np.concatenate([mid, tree.node_pos[nodes]])
     area = tree.leaf_size[leaves, 0] * tree.leaf_size[leaves, 1]
     w = np.concatenate([area, 2.0 * tree.node_radius[nodes] * _node_length(tree)[nodes]])
-    if len(carry0) == 0:
-        w = w[len(leaves) :]
-        pts, mid, leaves = pts[len(leaves) :], mid[:0], leaves[:0]
-        zero = zero[:0]
+    ones = np.c_[np.ones(len(leaves)), zero]
     carry = np.concatenate([np.c_[rig.leaf_joint[leaves], zero], rig.node_joints[nodes]]).astype(np.int64)
-    cw = np.concatenate([np.c_[np.ones(len(leaves)), zero], rig.node_weights[nodes]])
-    carry0 = np.concatenate([carry0, rig0.node_joints[node0]]).astype(np.int64)
-    cw0 = np.concatenate([cw0, rig0.node_weights[node0]])
+    cw = np.concatenate([ones, rig.node_weights[nodes]])
+    carry0 = np.concatenate([np.c_[rig0.leaf_joint[leaf0], zero], rig0.node_joints[node0]]).astype(np.int64)
+    cw0 = np.concatenate([ones, rig0.node_weights[node0]])
     E = np.asarray(rig.skeleton.bind_world)[:, :3, :2]  # the two axes across each bone
     G = _chain_matrix(pts, carry, cw, rig) @ _across(E)  # (3P, 2J): LOD bends → point motion
     H = _chain_matrix(pts, carry0, cw0, rig0)  # (3P, 3J0): LOD0 bends → the same points' motion
