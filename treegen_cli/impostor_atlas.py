@@ -125,7 +125,8 @@ def _atlas_parts(prims: list[Primitive], materials: list[Material], decoded: dic
     return parts
 
 
-CALIBRATION_STEPS = 8  # bisections of the thinned cards' area factor (log scale)
+CALIBRATION_TOL = 0.005  # the thinned cards cover the card cells' texels to this share; the
+# factor's secant solve (lod_cover.solve_factor) takes 2-4 draws, eight bisections took eight
 
 
 def render_views(
@@ -140,6 +141,7 @@ def render_views(
     covered up to 47 % more than the tree (the fir) and the impostor popped at its switch."""
     from .drawable import Drawable
     from .impostor_render import AtlasRenderer
+    from .lod_cover import solve_factor
 
     prims = [_widest_bark(p, options.max_bark_triangles) for p in lod.primitives]
     thin = [_fewer_leaves(p, options.max_leaf_cards) for p in prims]
@@ -157,11 +159,8 @@ def render_views(
             r.draw(Drawable(parts=_atlas_parts(prims, materials, decoded), n_joints=1), cells)
             target = r.covered(cells)
             k = max(len(p.positions) / max(len(t.positions), 1) for p, t in zip(prims, thin))
-            lo, hi = 0.0, math.log(2.0 * k)  # area factor 1 (never more cover) .. 2k
-            for _ in range(CALIBRATION_STEPS):
-                mid = 0.5 * (lo + hi)
-                lo, hi = (mid, hi) if cover(math.exp(mid)) < target else (lo, mid)
-            area = math.exp(0.5 * (lo + hi))
+            # area factor 1 (never more cover) .. 2k, from the summed area k
+            area = solve_factor(cover, target, 1.0, 2.0 * k, CALIBRATION_TOL, start=k)
             parts = [_enlarged(q, area, t) if t else q for q, t in zip(parts, thinned)]
         r.draw(Drawable(parts=parts, n_joints=1))
         albedo, normal = r.read()
