@@ -27,6 +27,18 @@ with blue 0.515; with 0.56 (and the preview's hash and tint per triangle card, n
                 drawn twice the size they are used at). Brightness differs per species
 (green 0.85-1.10×) and no constant removes it: the bark inside the crown (CROWN_SHADE 0.4 → 1.0
 moves the oak to 0.97× but the aspen to 1.15×).
+Contrast (last column): the std of the crown pixels' linear luminance, impostor / LOD3.
+2026-11-27, the cards lit through a normal map of their own cells (impostor.card_textures)
+instead of one bent normal per corner, `--size 96`, before → after (R G B ratio, contrast):
+    quaking_aspen   1.175 1.175 1.134 0.49  →  1.224 1.233 1.208 0.67
+    balsam_fir      1.034 1.114 1.166 0.60  →  0.936 1.034 1.122 0.68
+    ca_black_oak    0.850 0.905 0.825 0.64  →  0.805 0.882 0.807 0.72
+    weeping_willow  1.067 1.015 1.037 0.63  →  0.937 0.934 0.969 0.82
+Relative to brightness (contrast / green ratio) 0.42/0.54/0.71/0.62 → 0.54/0.66/0.82/0.88;
+hue (blue/green) 0.98/1.09/0.92/1.04.
+The leaves' own normals alone (no blur, no rounded mass) gave 0.68-0.92 but lit leaves
+turned from the sun as black blotches a texel or two wide; LEAF_SHADE 0.37/0.40/0.56 →
+0.53/0.575/0.84 (the cards lit per texel read 0.65-0.87× as bright at the old values).
 """
 
 from __future__ import annotations
@@ -54,12 +66,13 @@ def linear(img: np.ndarray) -> np.ndarray:
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
-def crown_means(asset, size: int = 192, views=VIEWS) -> tuple[np.ndarray, np.ndarray]:
-    """(coarsest LOD, impostor) mean linear RGB over the pixels both cover, all views."""
+def crown_means(asset, size: int = 192, views=VIEWS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(coarsest LOD, impostor) mean linear RGB over the pixels both cover, all views, and
+    their contrast: the standard deviation of linear luminance over those pixels (2,)."""
     k = len(asset.lods) - 1
     scenes = [from_asset(asset, k - 1), from_asset(asset, k)]
     pts = np.concatenate([p.positions for p in scenes[0].parts])
-    sums, n = np.zeros((2, 3)), 0
+    pixels: list[list[np.ndarray]] = [[], []]
     for az in views:
         cam = frame_points(pts, az, 8.0)
         imgs, masks = [], []
@@ -71,9 +84,10 @@ def crown_means(asset, size: int = 192, views=VIEWS) -> tuple[np.ndarray, np.nda
             masks.append(np.abs(img.astype(int) - bg.astype(int)).sum(-1) > 30)
         both = masks[0] & masks[1]
         for i in range(2):
-            sums[i] += imgs[i][both].sum(0)
-        n += int(both.sum())
-    return sums[0] / max(n, 1), sums[1] / max(n, 1)
+            pixels[i].append(imgs[i][both])
+    geo, imp = (np.concatenate(p) if p else np.zeros((1, 3)) for p in pixels)
+    lum = np.array([0.2126, 0.7152, 0.0722])
+    return geo.mean(0), imp.mean(0), np.array([np.std(geo @ lum), np.std(imp @ lum)])
 
 
 def main() -> None:
@@ -82,15 +96,21 @@ def main() -> None:
     ap.add_argument("--size", type=int, default=192)
     args = ap.parse_args()
     job = api.resolve({"no_wind": True})
-    print(f"{'species':<20}{'LOD3 linear RGB':<24}{'impostor linear RGB':<24}impostor / LOD3 (R G B)")
+    print(
+        f"{'species':<20}{'LOD3 linear RGB':<24}{'impostor linear RGB':<24}{'impostor / LOD3 RGB':<20}"
+        "contrast"
+    )
     for name in args.species.split(","):
         asset, _ = build_asset(
             load_params(ROOT / "treegen_cli" / "species" / f"{name}.txt"), 0, job.options, Timings()
         )
-        geo, imp = crown_means(asset, args.size)
+        geo, imp, spread = crown_means(asset, args.size)
         ratio = imp / np.maximum(geo, 1e-9)
         fmt = lambda v: " ".join(f"{x:.4f}" for x in v)  # noqa: E731
-        print(f"{name:<20}{fmt(geo):<24}{fmt(imp):<24}{' '.join(f'{x:.3f}' for x in ratio)}")
+        print(
+            f"{name:<20}{fmt(geo):<24}{fmt(imp):<24}{' '.join(f'{x:.3f}' for x in ratio):<20}"
+            f"{spread[1] / max(spread[0], 1e-9):.2f}"
+        )
 
 
 if __name__ == "__main__":

@@ -705,7 +705,8 @@ def test_default_forest_needs_no_camera_and_carries_every_lod(walk):
         assert len(geo) == len(FAST["lod_distances"]) and imp.impostor is not None
         assert all(lod.impostor is None for lod in geo) and imp.distance >= 1.5 * geo[-1].distance
         assert sum(len(p.indices) for p in imp.primitives) == 3 * 8
-        assert any(m.base_texture is imp.impostor.albedo for m in a.materials)
+        mat = next(m for m in a.materials if m.name == "impostor")  # the cards' strip, normal-mapped
+        assert mat.base_texture.name == "impostor_cards" and mat.normal_texture is not None
     from treegen_cli.forest.build import make_options
 
     assert make_options(layout).impostor is not None and make_options(layout, impostor=False).impostor is None

@@ -261,7 +261,14 @@ def test_impostor_is_the_last_lod_within_budget_and_shows_the_tree(species):
             covered,
         )
     mat = next(m for m in asset.materials if m.name == "impostor")
-    assert not mat.double_sided and mat.alpha_cutoff == 0.5 and mat.base_texture is imp.impostor.albedo
+    assert not mat.double_sided and mat.alpha_cutoff == 0.5
+    # the cards sample a strip of their own cells, cut from the atlas (which stays in the file
+    # for impostor shaders), and its normal map
+    c = imp.impostor.cell
+    strip = decode_image(mat.base_texture.png, 4)
+    assert strip.shape == (c, 2 * c, 4) and mat.normal_texture is not None
+    for i, (col, row) in enumerate(imp.impostor.cards):
+        assert np.array_equal(strip[:, i * c : (i + 1) * c, 3], _alpha(asset, col, row))
     # the impostor's clip is decimated within the bound like any LOD's
     (clip,) = imp.clips
     assert clip.name == f"wind_lod{len(geo)}_loop"
@@ -349,6 +356,74 @@ def test_cards_ride_one_joint_that_sways_with_the_crown():
     crown_move = crown - crown[0] + (card_move[0])
     for axis in (0, 1):
         assert np.corrcoef(card_move[:, axis], crown_move[:, axis])[0, 1] > 0.8
+
+
+@needs_gl
+def test_the_cards_normal_map_holds_the_crowns_normals_in_their_tangent_space():
+    """Each card's texels carry the atlas's normals turned into the card's frame (x along
+    its right, y up, z towards the viewer), blurred over 3 × 3 texels and leaning on the
+    crown's rounded mass: covered texels point out of the card and agree with the atlas's
+    normals there; the crown's top leans up, its sides outwards; background texels are flat.
+    The quads' own normals are flat and their tangents run along +u (glTF's TANGENT)."""
+    asset = _asset("quaking_aspen")
+    lod = asset.lods[-1]
+    imp = lod.impostor
+    mat = next(m for m in asset.materials if m.name == "impostor")
+    c, grid = imp.cell, imp.grid
+    t = decode_image(mat.normal_texture.png, 3).astype(float) / 127.5 - 1.0
+    alpha = decode_image(mat.base_texture.png, 4)[..., 3]
+    atlas = decode_image(imp.normal_depth.png, 4)[..., :3].astype(float) / 127.5 - 1.0
+    assert np.all(np.abs(t[alpha == 0] - [0.0, 0.0, 1.0]) < 0.01)
+    on = alpha > 0
+    assert np.all(np.abs(np.linalg.norm(t[on], axis=1) - 1.0) < 0.02) and np.all(t[on][:, 2] > 0.0)
+    for i, (col, row) in enumerate(imp.cards):
+        d = cell_direction(col, row, grid)
+        right, up = view_basis(d)
+        ti, oi = t[:, i * c : (i + 1) * c], on[:, i * c : (i + 1) * c]
+        world = ti[..., :1] * right + ti[..., 1:2] * up + ti[..., 2:] * d
+        n = atlas[row * c : (row + 1) * c, col * c : (col + 1) * c]
+        assert np.mean(np.sum(world * n, axis=-1)[oi]) > 0.6
+        ys, xs = np.nonzero(oi)
+        top = ys < np.percentile(ys, 20)
+        left, rim = xs < np.percentile(xs, 15), xs > np.percentile(xs, 85)
+        assert ti[ys[top], xs[top], 1].mean() > 0.2  # the crown's top faces up
+        assert ti[ys[left], xs[left], 0].mean() < -0.1 < 0.1 < ti[ys[rim], xs[rim], 0].mean()
+    (prim,) = lod.primitives
+    n, tan = prim.normals.astype(float), prim.tangents.astype(float)
+    assert np.allclose(np.sum(n * tan[:, :3], axis=1), 0.0, atol=1e-6)
+    assert set(np.round(tan[:, 3]).tolist()) == {-1.0, 1.0}
+
+
+@needs_gl
+def test_the_impostor_keeps_the_crowns_light_and_shade():
+    """The preview's sun on the aspen's coarsest LOD and its impostor, 96 px tall (the switch),
+    as bench/impostor_colour_bench.py renders them: the spread of luminance over the crown's
+    pixels (std / mean) on the cards is at least 0.5 × the LOD's (0.54). Lit by one bent normal per
+    corner, the cards read flat: 0.45 ×."""
+    from treegen_cli.drawable import from_asset
+    from treegen_cli.render import Renderer
+    from treegen_cli.render_view import frame_points
+
+    asset = _asset("quaking_aspen")
+    k = len(asset.lods) - 1
+    scenes = [from_asset(asset, k - 1), from_asset(asset, k)]
+    pts = np.concatenate([p.positions for p in scenes[0].parts])
+    lum: list[list[np.ndarray]] = [[], []]
+    for az in (-90.0, -45.0):
+        cam = frame_points(pts, az, 8.0)
+        imgs, masks = [], []
+        for scene in scenes:
+            with Renderer(scene, 96, 96) as r:
+                img = r.render(cam, sun_azimuth_deg=az - 50.0)
+                bg = r.render(cam, sun_azimuth_deg=az - 50.0, draw_tree=False)
+            imgs.append(_srgb_to_linear(img) @ np.array([0.2126, 0.7152, 0.0722]))
+            masks.append(np.abs(img.astype(int) - bg.astype(int)).sum(-1) > 30)
+        both = masks[0] & masks[1]
+        for i in range(2):
+            lum[i].append(imgs[i][both])
+    geo, cards = (np.concatenate(x) for x in lum)
+    spread = (np.std(cards) / np.mean(cards)) / (np.std(geo) / np.mean(geo))
+    assert spread >= 0.5, spread
 
 
 @needs_gl
@@ -525,7 +600,9 @@ def test_lod_files_and_usd_carry_the_impostor(tmp_path):
         assert set(range(len(g["materials"]))) == drawn, k
         kinds = {m["name"] for m in g["materials"]}
         assert kinds == ({"impostor"} if k == 4 else {"bark", "leaf"}), (k, kinds)
-        assert len(g["images"]) == (2 if k == 4 else 3), k  # atlas + normals; bark, its normals, leaf
+        assert len(g["images"]) == (4 if k == 4 else 3), (
+            k
+        )  # cards, their normals, atlas + normals; bark, its normals, leaf
     s = api.make(species_path("rush"), tmp_path / "u.usda", duration=1.0, fps=10.0, impostor=True)
     meta = json.loads((tmp_path / "u.usda.impostor.json").read_text())
     assert meta["axes"]["up"] == [0.0, 0.0, 1.0]

@@ -3,7 +3,8 @@
     lod, material = build_impostor(coarse_lod, materials, lod_options, distance, "wind_lod4_loop")
     # Result: a Lod of 2 crossed cards (8 triangles: a face each way) skinned to one joint swaying like the
     # trunk, with `lod.impostor` holding the hemi-octahedral atlas (albedo + alpha, normals +
-    # depth) for engines with impostor shaders; `material` ("impostor") samples the atlas.
+    # depth) for engines with impostor shaders; `material` ("impostor") samples the cards'
+    # strip cut from it (albedo + alpha, tangent-space normal map).
 
 The atlas (impostor_render.render_atlas, one batched GL pass) holds grid × grid orthographic
 views of the bounding sphere (centre, radius), one per cell. Views look at the centre from the
@@ -20,7 +21,10 @@ pixel (x, y) ∈ [−1, 1]² (y towards the top of the cell) shows centre + radi
 
 Cards: the two cells nearest the horizon along +a and +b (elevation about 90°/grid), each a
 quad through the centre in its view's plane showing that cell, one face each way: seen from
-behind, a card shows the mirror image, the true silhouette from there. The cards ride one joint at the trunk base whose rotation is the trunk's world rotation at the crown's height
+behind, a card shows the mirror image, the true silhouette from there. The cards sample a
+strip of their own cells (card_textures), its normals in the cards' tangent space, so engines
+light them with the crown's own normals. They ride one joint at the trunk base whose rotation
+is the trunk's world rotation at the crown's height
 (decimated for the impostor's distance like any LOD clip), so the tree keeps swaying.
 """
 
@@ -152,30 +156,32 @@ def card_cells(grid: int) -> list[tuple[int, int]]:
 
 
 def cards(centre: np.ndarray, radius: float, grid: int) -> Primitive:
-    """Per card cell, a quad in its view's plane through the centre, UVs on that cell (bottom-
-    left origin), twice: one face towards each side (the back face shows the mirror image,
-    the true silhouette from there). Single-sided twins instead of one double-sided quad, so
-    each face has its own normals, bent outwards over the card (0.6 facing + the corner's
-    sideways offset, level at the foot and up at the top), which light the crown like a
-    rounded mass in any engine instead of one flat shade per card (a flipped back-face normal
-    would be dark where the front is lit)."""
+    """Per card cell, a quad in its view's plane through the centre, twice: one face towards
+    each side (seen from behind, a card shows the mirror image, the true silhouette from
+    there). UVs (bottom-left origin) on the card's slot of card_textures' strip. Flat normals
+    (±the view) and tangents along the view's right: the crown's own normals come from the
+    strip's normal map, one map for both faces (see card_textures), so any engine lights the
+    cards texel by texel as it lights the geometric LOD's leaves and bark."""
     corners = np.array([(-1, -1), (1, -1), (-1, 1), (1, 1)], np.float64)
+    cells = card_cells(grid)
     pos: list[np.ndarray] = []
     nrm: list[np.ndarray] = []
+    tan: list[np.ndarray] = []
     uv: list[np.ndarray] = []
     idx: list[np.ndarray] = []
-    for col, row in card_cells(grid):  # two cards
+    for i, (col, row) in enumerate(cells):
         d = cell_direction(col, row, grid)
         right, up = view_basis(d)
         offset = corners[:, :1] * right + corners[:, 1:] * up
-        u = (col + 0.5 + 0.5 * corners[:, 0]) / grid
-        v_top = (row + 0.5 - 0.5 * corners[:, 1]) / grid
-        for facing, tri in ((d, (0, 1, 3, 0, 3, 2)), (-d, (0, 3, 1, 0, 2, 3))):
+        u = (i + 0.5 + 0.5 * corners[:, 0]) / len(cells)
+        v = 0.5 + 0.5 * corners[:, 1]
+        # w · cross(normal, tangent) is up' on both faces: the image's up (glTF's TANGENT)
+        for facing, w, tri in ((d, 1.0, (0, 1, 3, 0, 3, 2)), (-d, -1.0, (0, 3, 1, 0, 2, 3))):
             idx.append(np.array(tri) + 4 * len(pos))
             pos.append(centre + radius * offset)
-            n = 0.6 * facing + corners[:, :1] * right + (0.5 + 0.5 * corners[:, 1:]) * up
-            nrm.append(n / np.linalg.norm(n, axis=1, keepdims=True))
-            uv.append(np.stack([u, 1.0 - v_top], 1))
+            nrm.append(np.tile(facing, (4, 1)))
+            tan.append(np.tile(np.append(right, w), (4, 1)))
+            uv.append(np.stack([u, v], 1))
     V = 4 * len(pos)
     return Primitive(
         name="impostor",
@@ -186,7 +192,54 @@ def cards(centre: np.ndarray, radius: float, grid: int) -> Primitive:
         indices=np.concatenate(idx).astype(np.uint32),
         joints=np.zeros((V, 4), np.uint16),
         weights=np.tile(np.array([1, 0, 0, 0], np.float32), (V, 1)),
+        tangents=np.concatenate(tan).astype(np.float32),
     )
+
+
+FLAT_NORMAL = (128, 128, 255)  # a tangent-space normal map's "no bump" texel
+MIN_FACING = 0.05  # a card texel's normal leans at most this close to the card's plane
+MASS_FACING = 0.6  # the crown's rounded mass: its normal at a card's middle is the view,
+MASS_WEIGHT = 1.0  # at its sides tilted sideways, at its top upwards; each texel's normal is
+# its leaf's (or bark's) plus this much of the mass's: one leaf's own normal alone lit leaves
+# turned from the sun as black blotches, a texel or two wide, that the geometric LOD's
+# finer, translucent leaves do not show
+
+
+def _box3(a: np.ndarray) -> np.ndarray:
+    """Sum over each texel's 3 × 3 neighbourhood (zero outside) of an (H, W, C) array."""
+    p = np.pad(a, ((1, 1), (1, 1), (0, 0)))
+    rows = p[:-2] + p[1:-1] + p[2:]
+    return rows[:, :-2] + rows[:, 1:-1] + rows[:, 2:]
+
+
+def card_textures(
+    albedo: np.ndarray, normal: np.ndarray, grid: int, cell: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The cards' own images: their cells cut from the atlases into one strip (cell px high,
+    a cell per card), so an engine samples a strip a few per cent of the atlas's size (the
+    atlas stays in the file for impostor shaders, unsampled). The normals, in the atlas's
+    (a, b, up) frame, are turned into each card's tangent space, (n·right, n·up', n·d): the
+    front face's frame, and also the back face's, since the back shows the mirror image and
+    its normals mirror through the card's plane with it. Background texels are flat."""
+    a_strip, n_strip = [], []
+    for col, row in card_cells(grid):
+        rows, cols = slice(row * cell, (row + 1) * cell), slice(col * cell, (col + 1) * cell)
+        a_cell = albedo[rows, cols]
+        n = normal[rows, cols, :3].astype(np.float64) / 127.5 - 1.0
+        d = cell_direction(col, row, grid)
+        right, up = view_basis(d)
+        x = (np.arange(cell) + 0.5) / cell * 2.0 - 1.0  # texel centres, [-1, 1] across the cell
+        y = -x  # rows run down the cell
+        mass = MASS_FACING * d + x[None, :, None] * right + (0.5 + 0.5 * y[:, None, None]) * up
+        mass /= np.linalg.norm(mass, axis=-1, keepdims=True)
+        n = _box3(n * (a_cell[..., 3:] > 0)) + MASS_WEIGHT * mass  # the crown lit as a rounded mass
+        t = np.stack([n @ right, n @ up, np.maximum(n @ d, MIN_FACING)], axis=-1)
+        t /= np.linalg.norm(t, axis=-1, keepdims=True)
+        enc = np.clip(np.rint(127.5 * t + 127.5), 0, 255).astype(np.uint8)
+        enc[a_cell[..., 3] == 0] = FLAT_NORMAL
+        a_strip.append(a_cell)
+        n_strip.append(enc)
+    return np.concatenate(a_strip, axis=1), np.concatenate(n_strip, axis=1)
 
 
 # ----------------------------------------------------------------------------------- the sway
@@ -263,10 +316,13 @@ def build_impostor(
     source = atlas_source(coarse)
     centre, radius, (lo, hi) = sphere(source)
     albedo, normal = render_views(source, materials, centre, radius, options, card_cells(options.grid))
-    from .texture_png import png_bytes_unfiltered as png
+    from .texture_png import png_bytes, png_bytes_unfiltered as png
 
     albedo_tex = Texture("impostor_albedo", png(albedo), wrap="CLAMP")
     normal_tex = Texture("impostor_normal", png(normal), wrap="CLAMP", srgb=False)
+    card_albedo, card_normal = card_textures(albedo, normal, options.grid, options.cell)
+    cards_tex = Texture("impostor_cards", png_bytes(card_albedo), wrap="CLAMP")
+    cards_normal = Texture("impostor_cards_normal", png_bytes(card_normal), wrap="CLAMP", srgb=False)
     prim = cards(centre, radius, options.grid)
     skel, dense = trunk_sway(coarse, float(centre[2]))
     clips = [] if dense is None else [decimate(skel, [prim], dense, distance, lod_options, clip_name)[0]]
@@ -286,7 +342,8 @@ def build_impostor(
         base_color=(1.0, 1.0, 1.0, 1.0),
         roughness=0.95,
         alpha_cutoff=options.alpha_cutoff,
-        base_texture=albedo_tex,
+        base_texture=cards_tex,
+        normal_texture=cards_normal,
     )
     return Lod(
         primitives=[prim], skeleton=skel, clips=clips, distance=distance, screen_coverage=0.0, impostor=imp

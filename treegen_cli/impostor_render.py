@@ -27,14 +27,14 @@ from .errors import TreegenError
 from .render_gl import GL_SRGB8_ALPHA8, gl_context
 
 # A card faces the light as one surface; a crown's leaves face every way and shade each other.
-# Leaves' albedo is scaled by this so the cards, lit by an engine, match the coarsest LOD's
-# colour at the switch (the aspen's cards came out 2.1× brighter than its LOD3 without it).
-# Per channel: the crown's self-shadowing dims the warm sun more than the blue sky, so one grey
-# 0.4 left the cards yellower (blue/green 0.85-0.91× LOD3's on aspen, fir, oak and willow);
-# these balance the hue over those four at the switch size (impostor_colour_bench --size 96:
-# 0.91-1.05×), green the mean brightness. Brightness still differs per species (oak 0.90×,
-# aspen 1.18×, mostly the bark inside the crown, CROWN_SHADE): a constant cannot match all.
-LEAF_SHADE = np.array([0.37, 0.40, 0.56])
+# Leaves' albedo is scaled by this so the cards, lit by an engine through their normal map
+# (impostor.card_textures), match the coarsest LOD's colour at the switch (the aspen's cards
+# came out 2.1× brighter than its LOD3 without it). Per channel: the crown's self-shadowing
+# dims the warm sun more than the blue sky, so one grey left the cards yellower (blue/green
+# 0.85-0.91× LOD3's on aspen, fir, oak and willow); these balance the hue over those four at
+# the switch size (impostor_colour_bench --size 96: blue/green 0.92-1.09×), green the mean
+# brightness (0.88-1.23×, mean 1.01; per species, mostly from the bark inside the crown).
+LEAF_SHADE = np.array([0.53, 0.575, 0.84])
 # Bark inside the crown is shaded by its leaves (the aspen's white limbs showed as specks).
 CROWN_SHADE = 0.4
 
