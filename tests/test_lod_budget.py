@@ -281,6 +281,46 @@ def test_coarsened_branches_stay_within_the_tolerance():
     assert coarsen_nodes(tree, 0.0) is tree
 
 
+def test_far_lods_keep_the_stems_their_leaves_hang_from(monkeypatch):
+    """The fan palm's fronds sit at the end of petioles 1-2 m long. A LOD that cannot afford a
+    petiole whole keeps it as a pointed cone from base to tip (lod_budget.floating,
+    lod_nodes.stub_stems), so every leaf of every LOD is within GAP_PX pixels, at the LOD's
+    switch, of the bark it is drawn with (dropped, the fronds floated round a bare trunk:
+    56 px at LOD2, 24 px at LOD3). The stubs are one segment ending in a point; the leaves
+    keep their places and bind to kept nodes."""
+    import treegen_cli.pipeline as pipeline
+    from scipy.spatial import cKDTree
+
+    from treegen_cli.lod_budget import GAP_PX
+
+    built = []
+    real = pipeline.lod_tree
+
+    def record(tree, k, *args):
+        out = real(tree, k, *args)
+        built.append((k, out[0], args[-1]))
+        return out
+
+    monkeypatch.setattr(pipeline, "lod_tree", record)
+    job = resolve(dict(no_wind=True, texture_size=128, impostor=False))
+    build_asset(load_params(species_path("fan_palm")), 0, job.options, tree=grown("fan_palm"))
+    stubs = 0
+    for k, t, at in built:
+        px = pixel_size(at.distances[k], at)
+        seg = np.flatnonzero(t.node_stem[:-1] == t.node_stem[1:])  # points along every segment
+        p0, p1 = t.node_pos[seg], t.node_pos[seg + 1]
+        n = np.maximum(1, np.ceil(np.linalg.norm(p1 - p0, axis=1) / (0.25 * px))).astype(int)
+        w = np.repeat(np.arange(n.size), n)
+        s = (np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)) / n[w]
+        gap, _ = cKDTree(p0[w] + s[:, None] * (p1 - p0)[w]).query(t.leaf_pos)
+        assert gap.max() <= GAP_PX * px, (k, gap.max() / px)
+        assert np.array_equal(t.node_stem[t.leaf_node], t.leaf_stem)
+        tips = t.stem_node_start + t.stem_node_count - 1
+        stub = (t.stem_level > 0) & (t.stem_node_count == 2) & (t.node_radius[tips] == 0.0)
+        stubs += int(stub.sum())
+    assert stubs > 0  # LOD2 and LOD3 draw petioles as cones
+
+
 @pytest.mark.parametrize("species", SPECIES)
 def test_lod_switches_keep_cover(species):
     """Consecutive LODs rendered at the tree's size on screen at their switch (fov 60°, 1920

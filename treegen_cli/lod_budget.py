@@ -12,7 +12,9 @@ Each LOD is cut from LOD0's tree (lod_leaves.py), in this order:
      MIN_RADIUS_PX only if they show as much area per triangle as its leaves (`worth_keeping`),
      a leafless one spreads its kept branches over the crown (`keep_stems`), its trunks'
      nodes are coarsened too and its branches end in points (cones: a twig of one segment
-     costs a third of its triangles, lod_nodes.point_tips);
+     costs a third of its triangles, lod_nodes.point_tips); a leafy stem dropped whose
+     leaves start GAP_PX pixels or more from its base is kept as one pointed segment
+     (`floating`, lod_nodes.stub_stems): its leaves would float (the fan palm's fronds);
   4. leaves: as many stratified leaves of LOD0's as the rest of the budget holds — from
      LOD2 on, blades a few pixels long are drawn as triangle cards, one triangle each
      instead of a card's two, so twice as many stay (`TRIANGLE_CARD_PX`) — (nested: a
@@ -39,7 +41,7 @@ import numpy as np
 from .limits import bark_triangles
 from .leafshapes import triangle_share
 from .lod_cover import Blades, Grid, solve_factor, stem_area, tree_area
-from .lod_nodes import coarsen_nodes, point_tips, twig_keys
+from .lod_nodes import coarsen_nodes, point_tips, stub_stems, twig_keys
 from .lod_leaves import LENGTH_SHARE, grow_leaves, prune_stems, stem_closure, thin_leaves
 from .mesh import MeshOptions, girth, stem_sides
 from .mesh.options import FULL_CARD_CELL
@@ -48,6 +50,7 @@ from .tree import Tree
 
 REGION_PX = 4.0  # cells (pixels at the switch) over which a LOD keeps LOD0's area
 REGION_CLIP = 2.0  # a region's leaves grow at most this much more (or less) than the crown's
+GAP_PX = 6.0  # a dropped stem whose leaves start this many pixels out is kept as a cone
 NODE_TOL_PX = 1.0  # a branch node within this many pixels of its neighbours' chord is dropped
 STEM_WORTH = 1.0  # a leafy tree keeps stems showing at least this × a leaf's area per triangle
 FILL_PASSES = 3  # keep_stems: passes filling what forks cut with their parent left free
@@ -154,6 +157,12 @@ def plan_lod(
     if leaf0:  # stems a pixel wide carry the crown (and its joints); thinner ones must show
         worth = (coarse.stem_radius >= min_radius) | worth_keeping(coarse, per_stem, per_leaf)
     keep = keep_stems(coarse, per_stem, budget * share, worth)
+    if leaf0:  # leaves far out on a dropped stem would float: the stem stays, as a cone
+        stubs = floating(coarse, keep, GAP_PX * px)
+        if stubs.any():
+            coarse = stub_stems(coarse, stubs)
+            per_stem = bark_triangles(coarse, mesh)
+            keep = keep | stubs
     pruned = prune_stems(coarse, keep)
     n_keep = int(min(L, max(1, math.floor((budget - per_stem[keep].sum()) / per_leaf)))) if L else 0
     thin = thin_leaves(pruned, n_keep, 1.0)
@@ -169,6 +178,21 @@ def plan_lod(
     return LodPlan(
         grow_leaves(thin, leaf), bark, int(round(n_keep * per_leaf)), float(np.mean(leaf)), mesh_thin
     )
+
+
+def floating(tree: Tree, keep: np.ndarray, gap: float) -> np.ndarray:
+    """Stems (S,) dropped from `keep` whose parent is kept and whose nearest leaf is `gap`
+    metres or more from their base: dropped, their leaves would hang in the air that far from
+    any bark (the fan palm's fronds at the end of long petioles), where a dropped twig's
+    leaves still sit against its parent."""
+    S = tree.n_stems
+    if not tree.n_leaves or keep.all():
+        return np.zeros(S, dtype=bool)
+    base = tree.node_pos[tree.stem_node_start[tree.leaf_stem]]
+    reach = np.full(S, np.inf)
+    np.minimum.at(reach, tree.leaf_stem, np.linalg.norm(tree.leaf_pos - base, axis=1))
+    parent = tree.stem_parent
+    return ~keep & (parent >= 0) & keep[np.maximum(parent, 0)] & np.isfinite(reach) & (reach >= gap)
 
 
 def triangle_blades(tree: Tree) -> Tree:

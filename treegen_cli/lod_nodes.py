@@ -70,6 +70,12 @@ def coarsen_nodes(tree: Tree, tol: float, trunks: bool = False) -> Tree:
         if not drop.any():
             break
         keep &= ~drop
+    return drop_nodes(tree, keep)
+
+
+def drop_nodes(tree: Tree, keep: np.ndarray) -> Tree:
+    """`tree` with only the nodes `keep` (N,) (every stem's first and last among them); leaves
+    and child stems on a dropped node move to the kept node below it."""
     if keep.all():
         return tree
     new_node = np.cumsum(keep) - 1  # a dropped node maps to the kept node below it
@@ -123,6 +129,24 @@ def point_tips(tree: Tree) -> Tree:
     radius = tree.node_radius.copy()
     radius[tip] = 0.0
     return replace(tree, node_radius=radius)
+
+
+def stub_stems(tree: Tree, which: np.ndarray) -> Tree:
+    """`tree` with the stems `which` (S,) drawn as one pointed segment from their base to their
+    tip (a cone: sides triangles), their leaves bound at the base: a leafy stem a far LOD
+    cannot afford whole still reaches its leaves (the fan palm's petioles)."""
+    if not which.any():
+        return tree
+    start = tree.stem_node_start.astype(np.int64)
+    last = start + tree.stem_node_count - 1
+    keep = np.ones(tree.n_nodes, dtype=bool)
+    keep[which[tree.node_stem]] = False
+    keep[start[which]] = keep[last[which]] = True
+    out = drop_nodes(tree, keep)
+    tip = (out.stem_node_start.astype(np.int64) + out.stem_node_count - 1)[which & (out.stem_node_count > 1)]
+    radius = out.node_radius.copy()
+    radius[tip] = 0.0
+    return replace(out, node_radius=radius)
 
 
 TWIGS_PER_CELL = 4  # twig_keys: stems per (azimuth, height) cell, about
