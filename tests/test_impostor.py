@@ -392,6 +392,21 @@ def test_the_cards_normal_map_holds_the_crowns_normals_in_their_tangent_space():
     n, tan = prim.normals.astype(float), prim.tangents.astype(float)
     assert np.allclose(np.sum(n * tan[:, :3], axis=1), 0.0, atol=1e-6)
     assert set(np.round(tan[:, 3]).tolist()) == {-1.0, 1.0}
+    # per triangle, against its own UV gradient (as for the bark): the tangent along +u, the
+    # bitangent w·(n × t) along +v, the image's up, on the front faces and the mirrored backs
+    tri = prim.indices.reshape(-1, 3)
+    P, UV = prim.positions.astype(float)[tri], prim.uvs.astype(float)[tri]
+    e1, e2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
+    d1, d2 = UV[:, 1] - UV[:, 0], UV[:, 2] - UV[:, 0]
+    det = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+    dPdu = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) / det[:, None]
+    dPdv = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) / det[:, None]
+    tv, nv = tan[tri[:, 0]], n[tri[:, 0]]
+    bv = np.cross(nv, tv[:, :3]) * tv[:, 3:4]
+    assert np.all(np.einsum("ij,ij->i", tv[:, :3], dPdu) > 0)
+    assert np.all(np.einsum("ij,ij->i", bv, dPdv) > 0)
+    face = np.cross(e1, e2)  # counter-clockwise front faces face along their normals
+    assert np.all(np.einsum("ij,ij->i", face, nv) > 0)
 
 
 @needs_gl
