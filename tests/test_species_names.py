@@ -120,6 +120,20 @@ def test_bad_species_arguments_exit_2_with_one_line(tmp_path, args, needles):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("command", ["make", "info"])
+def test_a_written_tree_given_as_species_is_named_as_such(tmp_path, command):
+    """`treegen info tree.glb` (or make) read the GLB as a species text and refused it for a NUL
+    byte at "line 1"; now it says what the file is and what reads it."""
+    (tmp_path / "tree.glb").write_bytes(b"glTF\x02\x00\x00\x00")
+    args = [command, "tree.glb"] + (["-o", "x.glb"] if command == "make" else [])
+    proc = treegen(*args, cwd=tmp_path)
+    assert proc.returncode == 2 and proc.stdout == ""
+    (line,) = proc.stderr.strip().splitlines()
+    assert "'tree.glb' is a written tree (.glb), not a species file" in line, line
+    assert "treegen preview tree.glb -o tree.png" in line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["tree.glb"]
+
+
 def test_preview_input_resolves_names(tmp_path, monkeypatch):
     from treegen_cli.preview import resolve_input
 

@@ -22,6 +22,7 @@ from .errors import TreegenError
 
 SUFFIXES = (".txt", ".xml")  # species files: Weber–Penn text or Arbaro XML (params/)
 LIST_HINT = "`treegen species` lists the bundled ones"
+WRITTEN = (".glb", ".gltf", ".usd", ".usda", ".usdc", ".usdz", ".obj")  # what make writes
 
 
 def species_dir() -> Path:
@@ -90,6 +91,12 @@ def resolve_species(value: str | os.PathLike, base: Path | None = None, subject:
             f"{subject} is a directory; expected a species file "
             f"({' '.join(SUFFIXES)}) or a bundled species name such as "
             f"quaking_aspen ({LIST_HINT})"
+        )
+    if is_file and path.suffix.lower() in WRITTEN:
+        raise TreegenError(
+            f"{subject} is a written tree ({path.suffix.lower()}), not a species file: give a "
+            f"Weber–Penn .txt or Arbaro .xml file or a bundled name ({LIST_HINT}); "
+            f"`treegen preview {text} -o tree.png` renders a written tree"
         )
     if is_file:
         return path
