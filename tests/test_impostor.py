@@ -447,7 +447,7 @@ def test_crossed_cards_do_not_shade_each_other_in_a_wedge():
     crossed by the other card, edge-on here, which used to cast its solid crown on the far
     half as a dark wedge (that half at 0.67× the near half's brightness). The cards cast
     shadows but receive none, as engines set up billboard LODs: both halves within 20 %
-    (the bent normals' shading), on either side of the sun."""
+    (the normal map's shading), on either side of the sun."""
     from treegen_cli.drawable import from_asset
     from treegen_cli.render import Renderer
     from treegen_cli.render_view import frame_points, look_at

@@ -52,7 +52,7 @@ class Primitive:
     # each triangle using it (planar leaf cards), so a
     # writer may omit normals (glTF clients then compute
     # exactly these flat normals)
-    tangents: np.ndarray | None = None  # float32 (V, 4) for normal-mapped primitives (bark):
+    tangents: np.ndarray | None = None  # float32 (V, 4) for normal-mapped primitives (bark, impostor cards):
     # xyz unit, along +u, orthogonal to the normal; w = ±1
     # with w·cross(normal, xyz) along +v (up in the image),
     # glTF's TANGENT convention

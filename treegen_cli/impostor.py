@@ -199,10 +199,11 @@ def cards(centre: np.ndarray, radius: float, grid: int) -> Primitive:
 FLAT_NORMAL = (128, 128, 255)  # a tangent-space normal map's "no bump" texel
 MIN_FACING = 0.05  # a card texel's normal leans at most this close to the card's plane
 MASS_FACING = 0.6  # the crown's rounded mass: its normal at a card's middle is the view,
-MASS_WEIGHT = 1.0  # at its sides tilted sideways, at its top upwards; each texel's normal is
-# its leaf's (or bark's) plus this much of the mass's: one leaf's own normal alone lit leaves
-# turned from the sun as black blotches, a texel or two wide, that the geometric LOD's
-# finer, translucent leaves do not show
+MASS_WEIGHT = 1.0  # at its sides tilted sideways, at its top upwards. Each texel's normal is
+# the sum of its covered 3 × 3 neighbours' (unit leaf or bark normals) plus this much of the
+# mass's: inside the crown the neighbours' outweigh the mass up to 9 : 1, at its sparse rim
+# the mass takes over. One leaf's own normal alone lit leaves turned from the sun as black
+# blotches, a texel or two wide, that the geometric LOD's finer, translucent leaves do not show
 
 
 def _box3(a: np.ndarray) -> np.ndarray:
@@ -233,7 +234,9 @@ def card_textures(
         mass = MASS_FACING * d + x[None, :, None] * right + (0.5 + 0.5 * y[:, None, None]) * up
         mass /= np.linalg.norm(mass, axis=-1, keepdims=True)
         n = _box3(n * (a_cell[..., 3:] > 0)) + MASS_WEIGHT * mass  # the crown lit as a rounded mass
-        t = np.stack([n @ right, n @ up, np.maximum(n @ d, MIN_FACING)], axis=-1)
+        t = np.stack([n @ right, n @ up, n @ d], axis=-1)
+        t /= np.maximum(np.linalg.norm(t, axis=-1, keepdims=True), 1e-12)
+        t[..., 2] = np.maximum(t[..., 2], MIN_FACING)  # then unit again: facing at least that
         t /= np.linalg.norm(t, axis=-1, keepdims=True)
         enc = np.clip(np.rint(127.5 * t + 127.5), 0, 255).astype(np.uint8)
         enc[a_cell[..., 3] == 0] = FLAT_NORMAL

@@ -125,8 +125,10 @@ def _atlas_parts(prims: list[Primitive], materials: list[Material], decoded: dic
     return parts
 
 
-CALIBRATION_TOL = 0.005  # the thinned cards cover the card cells' texels to this share; the
-# factor's secant solve (lod_cover.solve_factor) takes 2-4 draws, eight bisections took eight
+CALIBRATION_TOL = 0.005  # the thinned cards cover the card cells' texels to this share (or
+# to a texel); the factor's secant solve (lod_cover.solve_factor) takes 2-4 draws at the
+# default atlas, 4-6 at 128-256 px ones, eight bisections took eight
+CALIBRATION_STEPS = 6  # secant steps at most, then the factor last tried
 
 
 def render_views(
@@ -160,7 +162,8 @@ def render_views(
             target = r.covered(cells)
             k = max(len(p.positions) / max(len(t.positions), 1) for p, t in zip(prims, thin))
             # area factor 1 (never more cover) .. 2k, from the summed area k
-            area = solve_factor(cover, target, 1.0, 2.0 * k, CALIBRATION_TOL, start=k)
+            tol = max(CALIBRATION_TOL, 1.0 / max(target, 1))  # a small atlas: a texel at least
+            area = solve_factor(cover, target, 1.0, 2.0 * k, tol, CALIBRATION_STEPS, start=k)
             parts = [_enlarged(q, area, t) if t else q for q, t in zip(parts, thinned)]
         r.draw(Drawable(parts=parts, n_joints=1))
         albedo, normal = r.read()
