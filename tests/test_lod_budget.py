@@ -286,8 +286,8 @@ def test_far_lods_keep_the_stems_their_leaves_hang_from(monkeypatch):
     petiole whole keeps it as a pointed cone from base to tip (lod_budget.floating,
     lod_nodes.stub_stems), so every leaf of every LOD is within GAP_PX pixels, at the LOD's
     switch, of the bark it is drawn with (dropped, the fronds floated round a bare trunk:
-    56 px at LOD2, 24 px at LOD3). The stubs are one segment ending in a point; the leaves
-    keep their places and bind to kept nodes."""
+    56 px at LOD2, 24 px at LOD3). The stubs end in a point; the leaves keep their places and
+    bind to kept nodes; a budget with no room for them gets none."""
     import treegen_cli.pipeline as pipeline
     from scipy.spatial import cKDTree
 
@@ -304,7 +304,7 @@ def test_far_lods_keep_the_stems_their_leaves_hang_from(monkeypatch):
     monkeypatch.setattr(pipeline, "lod_tree", record)
     job = resolve(dict(no_wind=True, texture_size=128, impostor=False))
     build_asset(load_params(species_path("fan_palm")), 0, job.options, tree=grown("fan_palm"))
-    stubs = 0
+    stubs = []
     for k, t, at in built:
         px = pixel_size(at.distances[k], at)
         seg = np.flatnonzero(t.node_stem[:-1] == t.node_stem[1:])  # points along every segment
@@ -315,10 +315,21 @@ def test_far_lods_keep_the_stems_their_leaves_hang_from(monkeypatch):
         gap, _ = cKDTree(p0[w] + s[:, None] * (p1 - p0)[w]).query(t.leaf_pos)
         assert gap.max() <= GAP_PX * px, (k, gap.max() / px)
         assert np.array_equal(t.node_stem[t.leaf_node], t.leaf_stem)
-        tips = t.stem_node_start + t.stem_node_count - 1
-        stub = (t.stem_level > 0) & (t.stem_node_count == 2) & (t.node_radius[tips] == 0.0)
-        stubs += int(stub.sum())
-    assert stubs > 0  # LOD2 and LOD3 draw petioles as cones
+        stubs.append(_pointed(t))
+    assert stubs[1] > 0 and stubs[2] > 0  # LOD2 and LOD3 draw petioles as cones
+    # a budget too tight for them keeps leaves instead: LOD3 at 0.5 % of the triangles
+    built.clear()
+    tight = resolve(dict(no_wind=True, texture_size=128, impostor=False, lod_triangles=(0.5, 0.05, 0.005)))
+    asset, _ = build_asset(load_params(species_path("fan_palm")), 0, tight.options, tree=grown("fan_palm"))
+    assert _pointed(built[-1][1]) == 0
+    assert sum(len(p.indices) // 3 for p in asset.lods[3].primitives if p.name == "leaves") > 0
+
+
+def _pointed(tree) -> int:
+    """Branches of a leafy LOD that end in a point: the stubs (only a leafless LOD points
+    its twigs, lod_nodes.point_tips)."""
+    tips = tree.stem_node_start + tree.stem_node_count - 1
+    return int(((tree.stem_level > 0) & (tree.node_radius[tips] == 0.0)).sum())
 
 
 @pytest.mark.parametrize("species", SPECIES)

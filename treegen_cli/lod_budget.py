@@ -13,8 +13,9 @@ Each LOD is cut from LOD0's tree (lod_leaves.py), in this order:
      a leafless one spreads its kept branches over the crown (`keep_stems`), its trunks'
      nodes are coarsened too and its branches end in points (cones: a twig of one segment
      costs a third of its triangles, lod_nodes.point_tips); a leafy stem dropped whose
-     leaves start GAP_PX pixels or more from its base is kept as one pointed segment
-     (`floating`, lod_nodes.stub_stems): its leaves would float (the fan palm's fronds);
+     leaves start GAP_PX pixels or more from its base is kept as a pointed cone of a few
+     segments (`floating`, lod_nodes.stub_stems), within STUB_SHARE of what is left for
+     leaves: its leaves would float (the fan palm's fronds);
   4. leaves: as many stratified leaves of LOD0's as the rest of the budget holds — from
      LOD2 on, blades a few pixels long are drawn as triangle cards, one triangle each
      instead of a card's two, so twice as many stay (`TRIANGLE_CARD_PX`) — (nested: a
@@ -51,6 +52,9 @@ from .tree import Tree
 REGION_PX = 4.0  # cells (pixels at the switch) over which a LOD keeps LOD0's area
 REGION_CLIP = 2.0  # a region's leaves grow at most this much more (or less) than the crown's
 GAP_PX = 6.0  # a dropped stem whose leaves start this many pixels out is kept as a cone
+STUB_TOL_PX = 4.0  # ... within this many pixels of the stem it stands for
+STUB_SHARE = 0.5  # ... while the cones take at most this share of the triangles the kept bark
+# leaves for leaves
 NODE_TOL_PX = 1.0  # a branch node within this many pixels of its neighbours' chord is dropped
 STEM_WORTH = 1.0  # a leafy tree keeps stems showing at least this × a leaf's area per triangle
 FILL_PASSES = 3  # keep_stems: passes filling what forks cut with their parent left free
@@ -158,11 +162,7 @@ def plan_lod(
         worth = (coarse.stem_radius >= min_radius) | worth_keeping(coarse, per_stem, per_leaf)
     keep = keep_stems(coarse, per_stem, budget * share, worth)
     if leaf0:  # leaves far out on a dropped stem would float: the stem stays, as a cone
-        stubs = floating(coarse, keep, GAP_PX * px)
-        if stubs.any():
-            coarse = stub_stems(coarse, stubs)
-            per_stem = bark_triangles(coarse, mesh)
-            keep = keep | stubs
+        coarse, per_stem, keep = _stubs(coarse, per_stem, keep, mesh, px, budget)
     pruned = prune_stems(coarse, keep)
     n_keep = int(min(L, max(1, math.floor((budget - per_stem[keep].sum()) / per_leaf)))) if L else 0
     thin = thin_leaves(pruned, n_keep, 1.0)
@@ -178,6 +178,28 @@ def plan_lod(
     return LodPlan(
         grow_leaves(thin, leaf), bark, int(round(n_keep * per_leaf)), float(np.mean(leaf)), mesh_thin
     )
+
+
+def _stubs(tree: Tree, per_stem: np.ndarray, keep: np.ndarray, mesh: MeshOptions, px: float, budget: float):
+    """(tree, per_stem, keep) with the `floating` stems kept as cones (lod_nodes.stub_stems),
+    those carrying the most leaf area first, while they fit STUB_SHARE of what the kept bark
+    leaves of the budget (a tight `--lod-triangles` keeps its leaves rather than stubs)."""
+    stubs = floating(tree, keep, GAP_PX * px)
+    if not stubs.any():
+        return tree, per_stem, keep
+    stubbed = stub_stems(tree, stubs, STUB_TOL_PX * px)
+    cost = bark_triangles(stubbed, mesh)
+    carried = np.bincount(tree.leaf_stem, weights=tree.leaf_area, minlength=tree.n_stems)
+    order = np.flatnonzero(stubs)
+    order = order[np.lexsort((order, -carried[order]))]
+    room = STUB_SHARE * max(budget - float(per_stem[keep].sum()), 0.0)
+    chosen = order[np.cumsum(cost[order]) <= room]
+    if not chosen.size:
+        return tree, per_stem, keep
+    which = np.zeros(tree.n_stems, dtype=bool)
+    which[chosen] = True
+    stubbed = stub_stems(tree, which, STUB_TOL_PX * px)
+    return stubbed, bark_triangles(stubbed, mesh), keep | which
 
 
 def floating(tree: Tree, keep: np.ndarray, gap: float) -> np.ndarray:

@@ -131,17 +131,20 @@ def point_tips(tree: Tree) -> Tree:
     return replace(tree, node_radius=radius)
 
 
-def stub_stems(tree: Tree, which: np.ndarray) -> Tree:
-    """`tree` with the stems `which` (S,) drawn as one pointed segment from their base to their
-    tip (a cone: sides triangles), their leaves bound at the base: a leafy stem a far LOD
-    cannot afford whole still reaches its leaves (the fan palm's petioles)."""
+def stub_stems(tree: Tree, which: np.ndarray, tol: float) -> Tree:
+    """`tree` with the stems `which` (S,) coarsened to within `tol` metres of their nodes
+    (every interior node the chord test allows, not one pass in two) and ending in a point:
+    a leafy stem a far LOD cannot afford whole, drawn as a cone of a segment or a few, still
+    reaches its leaves (the fan palm's petioles) along where it was."""
     if not which.any():
         return tree
-    start = tree.stem_node_start.astype(np.int64)
-    last = start + tree.stem_node_count - 1
     keep = np.ones(tree.n_nodes, dtype=bool)
-    keep[which[tree.node_stem]] = False
-    keep[start[which]] = keep[last[which]] = True
+    mine = which[tree.node_stem]
+    for _ in range(2 * PASSES):
+        drop = _droppable(tree, keep, tol) & mine
+        if not drop.any():
+            break
+        keep &= ~drop
     out = drop_nodes(tree, keep)
     tip = (out.stem_node_start.astype(np.int64) + out.stem_node_count - 1)[which & (out.stem_node_count > 1)]
     radius = out.node_radius.copy()
