@@ -171,6 +171,14 @@ BAD = [
         {"scatter": [{"species": [{"file": PALM}], "rectangle": {"min": [0, 0], "max": [0, 5]}, "count": 1}]},
         "scatter[0].rectangle.max: must exceed min in x and y, got min [0, 0], max [0, 5]",
     ),
+    (  # 100,000 trees on 20 × 20 m passed and took 13 GB to write
+        {
+            "scatter": [
+                {"species": [{"file": PALM}], "rectangle": {"min": [0, 0], "max": [2, 2]}, "count": 41}
+            ]
+        },
+        "scatter[0].count: 41 trees on 4 m² is 10.25 per m²; allowed at most 10 per m² (as 'density')",
+    ),
     (
         {"scatter": [{"species": [{"file": PALM}], "polygon": [[0, 0], [1, 1], [2, 2]], "count": 1}]},
         "scatter[0].polygon: has zero area",

@@ -119,9 +119,11 @@ def forest(
     lods = ", ".join(f"{k} {v}" for k, v in s["instances_per_lod"].items())
     click.echo(f"wrote {', '.join(s['files'])}  ({s['bytes'] / 1e6:.2f} MB)")
     click.echo(
-        f"  {s['instances']:,} trees from {s['prototypes']} prototypes, "
+        f"  {s['instances']:,} tree{'s' * (s['instances'] != 1)} from {s['prototypes']} "
+        f"prototype{'s' * (s['prototypes'] != 1)}, "
         + ("each with all its LODs" if s["all_lods"] else "each with one LOD")
-        + (f"; at the camera per LOD: {lods}" if s["camera"] else "; no camera")
+        + (f"; at the camera per LOD: {lods}" if s["camera"] and lods else "")
+        + ("; no camera" if not s["camera"] else "")
     )
     if s["camera"]:
         w, wo = s["leaf_vertex_updates_per_frame"], s["leaf_vertex_updates_per_frame_without_lod"]
