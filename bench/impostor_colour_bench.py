@@ -30,15 +30,17 @@ moves the oak to 0.97× but the aspen to 1.15×).
 Contrast (last column): the std of the crown pixels' linear luminance, impostor / LOD3.
 2026-11-27, the cards lit through a normal map of their own cells (impostor.card_textures)
 instead of one bent normal per corner, `--size 96`, before → after (R G B ratio, contrast):
-    quaking_aspen   1.175 1.175 1.134 0.49  →  1.224 1.233 1.208 0.67
-    balsam_fir      1.034 1.114 1.166 0.60  →  0.936 1.034 1.122 0.68
-    ca_black_oak    0.850 0.905 0.825 0.64  →  0.805 0.882 0.807 0.72
-    weeping_willow  1.067 1.015 1.037 0.63  →  0.937 0.934 0.969 0.82
-Relative to brightness (contrast / green ratio) 0.42/0.54/0.71/0.62 → 0.54/0.66/0.82/0.88;
-hue (blue/green) 0.98/1.09/0.92/1.04.
-The leaves' own normals alone (no blur, no rounded mass) gave 0.68-0.92 but lit leaves
-turned from the sun as black blotches a texel or two wide; LEAF_SHADE 0.37/0.40/0.56 →
-0.53/0.575/0.84 (the cards lit per texel read 0.65-0.87× as bright at the old values).
+    quaking_aspen   1.175 1.175 1.134 0.49  →  1.257 1.261 1.266 0.76
+    balsam_fir      1.034 1.114 1.166 0.60  →  0.896 0.992 1.072 0.81
+    ca_black_oak    0.850 0.905 0.825 0.64  →  0.876 0.950 0.868 0.73
+    weeping_willow  1.067 1.015 1.037 0.63  →  0.980 0.971 1.003 1.00
+Relative to brightness (contrast / green ratio) 0.42/0.54/0.71/0.62 → 0.60/0.82/0.77/1.03;
+hue (blue/green) 1.00/1.08/0.91/1.03. The leaves' own normals alone (no blur, no rounded
+mass) gave 0.68-0.92 but lit leaves turned from the sun as black blotches a texel or two
+wide. With their part along the view kept (the atlas flips double-sided leaves to face its
+camera), each card faced its own view: at 45° between the cards the one turned to the sun
+lit its half of the crown, the other went dark (0.67×, the geometric LOD 1.15× the other
+way). LEAF_SHADE 0.37/0.40/0.56 → 0.445/0.483/0.706.
 """
 
 from __future__ import annotations

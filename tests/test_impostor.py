@@ -362,8 +362,8 @@ def test_cards_ride_one_joint_that_sways_with_the_crown():
 def test_the_cards_normal_map_holds_the_crowns_normals_in_their_tangent_space():
     """Each card's texels carry the atlas's normals turned into the card's frame (x along
     its right, y up, z towards the viewer), blurred over 3 × 3 texels and leaning on the
-    crown's rounded mass: covered texels point out of the card and agree with the atlas's
-    normals there; the crown's top leans up, its sides outwards; background texels are flat.
+    crown's rounded mass: covered texels point out of the card and turn across it as the
+    atlas's normals do; the crown's top leans up, its sides outwards; background texels are flat.
     The quads' own normals are flat and their tangents run along +u (glTF's TANGENT)."""
     asset = _asset("quaking_aspen")
     lod = asset.lods[-1]
@@ -380,9 +380,16 @@ def test_the_cards_normal_map_holds_the_crowns_normals_in_their_tangent_space():
         d = cell_direction(col, row, grid)
         right, up = view_basis(d)
         ti, oi = t[:, i * c : (i + 1) * c], on[:, i * c : (i + 1) * c]
-        world = ti[..., :1] * right + ti[..., 1:2] * up + ti[..., 2:] * d
         n = atlas[row * c : (row + 1) * c, col * c : (col + 1) * c]
-        assert np.mean(np.sum(world * n, axis=-1)[oi]) > 0.6
+        # across the card the texels turn as the atlas's normals do (their part along the
+        # view was the leaves facing the camera that drew them, and is left to the mass)
+        a = np.stack([n @ right, n @ up], axis=-1)
+        b = ti[..., :2]
+        turned = oi & (np.linalg.norm(a, axis=-1) > 0.3)
+        cos = np.sum(a * b, axis=-1) / np.maximum(
+            np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1), 1e-9
+        )
+        assert turned.sum() > 300 and cos[turned].mean() > 0.4, cos[turned].mean()
         ys, xs = np.nonzero(oi)
         top = ys < np.percentile(ys, 20)
         left, rim = xs < np.percentile(xs, 15), xs > np.percentile(xs, 85)
@@ -439,6 +446,34 @@ def test_the_impostor_keeps_the_crowns_light_and_shade():
     geo, cards = (np.concatenate(x) for x in lum)
     spread = (np.std(cards) / np.mean(cards)) / (np.std(geo) / np.mean(geo))
     assert spread >= 0.5, spread
+
+
+@needs_gl
+def test_crossed_cards_seen_at_45_degrees_light_alike():
+    """Seen between its cards (azimuth 45°, the preview's sun 60° either side), each half of
+    the crown is one card's near half. With the leaves' normals as the atlas drew them (each
+    facing the view it was drawn from) the card turned to the sun lit its half and the other
+    went dark: 0.67× (83 against 124), the wrong way round from the geometric LOD's 100
+    against 87. Both halves now within 15 % of each other, either sun."""
+    from treegen_cli.drawable import from_asset
+    from treegen_cli.render import Renderer
+    from treegen_cli.render_view import frame_points
+
+    asset = _asset("quaking_aspen")
+    k = len(asset.lods) - 1
+    pts = np.concatenate([p.positions for p in from_asset(asset, k - 1).parts])
+    scene = from_asset(asset, k)
+    cam = frame_points(pts, 45.0, 8.0)
+    with Renderer(scene, 128, 128) as r:
+        for sun in (-15.0, 105.0):
+            img = r.render(cam, sun_azimuth_deg=sun).astype(float)
+            bg = r.render(cam, sun_azimuth_deg=sun, draw_tree=False).astype(float)
+            crown = np.abs(img - bg).sum(-1) > 30
+            crown[100:] = False  # the crown, not the trunk's foot and shadow
+            mid = int(np.median(np.nonzero(crown)[1]))
+            lum = img.mean(-1)
+            left, right = lum[:, :mid][crown[:, :mid]].mean(), lum[:, mid:][crown[:, mid:]].mean()
+            assert min(left, right) > 0.85 * max(left, right), (sun, left, right)
 
 
 @needs_gl

@@ -200,10 +200,13 @@ FLAT_NORMAL = (128, 128, 255)  # a tangent-space normal map's "no bump" texel
 MIN_FACING = 0.05  # a card texel's normal leans at most this close to the card's plane
 MASS_FACING = 0.6  # the crown's rounded mass: its normal at a card's middle is the view,
 MASS_WEIGHT = 1.0  # at its sides tilted sideways, at its top upwards. Each texel's normal is
-# the sum of its covered 3 × 3 neighbours' (unit leaf or bark normals) plus this much of the
-# mass's: inside the crown the neighbours' outweigh the mass up to 9 : 1, at its sparse rim
-# the mass takes over. One leaf's own normal alone lit leaves turned from the sun as black
-# blotches, a texel or two wide, that the geometric LOD's finer, translucent leaves do not show
+# the sum of its covered 3 × 3 neighbours' (leaf or bark normals, less their part along the
+# view) plus this much of the mass's: the mass says which way the card faces, the
+# neighbours how the crown's surface turns across it. One leaf's own normal alone lit
+# leaves turned from the sun as black blotches a texel or two wide; with their part along
+# the view (double-sided leaves face the camera that drew them) each card faced its own view
+# and, seen at 45°, the card turned to the sun lit its half of the crown and the other's
+# went dark, the opposite of the geometric LOD's halves
 
 
 def _box3(a: np.ndarray) -> np.ndarray:
@@ -233,6 +236,7 @@ def card_textures(
         y = -x  # rows run down the cell
         mass = MASS_FACING * d + x[None, :, None] * right + (0.5 + 0.5 * y[:, None, None]) * up
         mass /= np.linalg.norm(mass, axis=-1, keepdims=True)
+        n = n - (n @ d)[..., None] * d  # the leaves faced this view in the atlas: no more
         n = _box3(n * (a_cell[..., 3:] > 0)) + MASS_WEIGHT * mass  # the crown lit as a rounded mass
         t = np.stack([n @ right, n @ up, n @ d], axis=-1)
         t /= np.maximum(np.linalg.norm(t, axis=-1, keepdims=True), 1e-12)
