@@ -173,6 +173,27 @@ def test_triangles_never_rise_whatever_the_options():
     assert capped_sides((8, 6, 4, 3), (5, 3)) == (5, 3, 3, 3)
 
 
+def test_more_distances_than_budgets_step_on_by_the_last_ratio():
+    """Five distances and the default 0.5, 0.15, 0.05: LOD4 gets a third of LOD3's budget (the
+    last value repeated made it a copy of LOD3, 4,176 triangles each on the aspen)."""
+    from treegen_cli.lod_budget import triangle_fraction
+
+    table = LodOptions().triangles
+    assert [round(triangle_fraction(table, k), 6) for k in range(6)] == [
+        1,
+        0.5,
+        0.15,
+        0.05,
+        0.016667,
+        0.005556,
+    ]
+    assert triangle_fraction((1.0, 0.4), 3) == pytest.approx(0.064)
+    assert triangle_fraction((1.0,), 2) == 1.0
+    asset = _asset("quaking_aspen", lod_distances="0,10,20,30,40", impostor=False)
+    tris = [_tris(lod) for lod in asset.lods]
+    assert len(tris) == 5 and tris[4] <= tris[0] * 0.05 / 3 < tris[3], tris
+
+
 def test_lod_triangles_option_is_checked():
     from treegen_cli.errors import TreegenError
 

@@ -315,9 +315,19 @@ def _triangles(lod, name: str | None = None) -> int:
     return sum(len(p.indices) // 3 for p in lod.primitives if name is None or p.name == name)
 
 
+def triangle_fraction(table: tuple[float, ...], k: int) -> float:
+    """LOD `k`'s share of LOD0's triangles: `table[k]`, and beyond the table each further LOD
+    a step of the table's last ratio down (0.15, 0.05: a third each), never up (the last
+    value repeated made a fifth distance's LOD a copy of the fourth's)."""
+    if k < len(table):
+        return table[k]
+    ratio = min(table[-1] / table[-2], 1.0) if len(table) > 1 and table[-2] > 0 else 1.0
+    return table[-1] * ratio ** (k - len(table) + 1)
+
+
 def lod_budget(k: int, lod0, previous, options) -> float:
     """Triangles LOD `k` may have: its fraction of LOD0's, never above the LOD before it."""
-    frac = min(options.triangles[min(i, len(options.triangles) - 1)] for i in range(k + 1))
+    frac = min(triangle_fraction(options.triangles, i) for i in range(k + 1))
     return min(frac * _triangles(lod0), _triangles(previous))
 
 
