@@ -291,6 +291,7 @@ def test_sample_track_hits_keys_and_holds_ends():
         (["preview", str(SMALL), "-o", "{d}/x.png", "--lod", "99"], "out of range"),
         (["preview", "{d}/palm.glb", "-o", "{d}/x.png", "--lod", "7"], "out of range"),
         (["preview", "{d}/broken.glb", "-o", "{d}/x.png"], "not a readable glTF"),
+        (["preview", str(SMALL), "-o", "{d}/x.png", "--sun", "nan"], "--sun nan: give a bearing"),
     ],
 )
 def test_bad_input_is_one_line_exit_2(argv, needle, written, capsys):
@@ -379,6 +380,30 @@ def test_species_lists_every_bundled_file_with_counts(capsys):
     assert (palm["stems"], palm["leaves"]) == (tree.n_stems, tree.n_leaves)
     assert describe(ROOT / "species" / "quaking_aspen.txt").startswith("Quaking Aspen (Populus")
     assert describe(SMALL) == "Fan palm — Arbaro trees/fanpalm.xml"
+
+
+def test_sun_bearing_is_fixed_by_sun(written, capsys):
+    """--sun fixes where the light comes from (the default turns with the camera, 50° to its
+    left): the default's bearing given explicitly draws the same bytes; from the other side
+    the crown's lit half moves across."""
+    from PIL import Image
+
+    images = {}
+    for name, extra in {"default": [], "same": ["--sun", "-140"], "other": ["--sun", "-40"]}.items():
+        out = written / f"sun_{name}.png"
+        code, _out, err = run(
+            ["preview", str(written / "palm.glb"), "-o", str(out), "--size", "96", *extra], capsys
+        )
+        assert code == 0, err
+        images[name] = np.asarray(Image.open(out).convert("RGB")).astype(float)
+    assert np.array_equal(images["default"], images["same"])
+    sky = images["default"][2, 2]
+    crown = np.abs(images["default"] - sky).sum(-1) > 60
+    crown[60:] = False  # the palm's fronds, not its trunk's foot or the ground
+    mid = int(np.median(np.nonzero(crown)[1]))
+    lum = {k: v.mean(-1) for k, v in images.items()}
+    left = {k: v[:, :mid][crown[:, :mid]].mean() / v[:, mid:][crown[:, mid:]].mean() for k, v in lum.items()}
+    assert left["default"] > left["other"], left
 
 
 def test_preview_json_summary(tmp_path):

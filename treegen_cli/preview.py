@@ -10,6 +10,7 @@ renderer applies them per vertex, so what you see is what the file's skin and an
 from __future__ import annotations
 
 import json
+import math
 
 import os
 import re
@@ -231,6 +232,16 @@ def _size(text: str) -> tuple[int, int]:
     help="Camera height angle above the horizon, degrees (-89..89).",
 )
 @click.option(
+    "--sun",
+    "sun",
+    type=float,
+    default=None,
+    metavar="DEGREES",
+    help="Sun bearing, degrees as --azimuth (the way the light comes from) [default: 50° "
+    "left of the camera, so it turns with it]; fixed, it shows how a LOD or the impostor "
+    "is lit from each side.",
+)
+@click.option(
     "--size",
     "size",
     default=str(DEFAULTS.width),
@@ -257,7 +268,7 @@ def _size(text: str) -> tuple[int, int]:
 )
 @click.option("--json", "as_json", is_flag=True, help="Print what was written as JSON.")
 def preview_command(
-    input_path, output, animate, azimuth, elevation, size, lod, seed, fps, png_colors, as_json
+    input_path, output, animate, azimuth, elevation, sun, size, lod, seed, fps, png_colors, as_json
 ):
     """Render INPUT headless (OpenGL on EGL; no display needed): a species file (.txt .xml,
     grown in-process) or bundled species name (`treegen species`), or a tree written by
@@ -280,8 +291,17 @@ def preview_command(
     if lod < 0:
         raise TreegenError(f"--lod {lod}: must be 0 or more")
     width, height = _size(size)
+    if sun is not None and not math.isfinite(sun):
+        raise TreegenError(f"--sun {sun:g}: give a bearing in degrees, e.g. -140")
     options = PreviewOptions(
-        azimuth=azimuth, elevation=elevation, width=width, height=height, lod=lod, seed=seed, fps=fps
+        azimuth=azimuth,
+        elevation=elevation,
+        sun_azimuth=sun,
+        width=width,
+        height=height,
+        lod=lod,
+        seed=seed,
+        fps=fps,
     )
     t0 = time.perf_counter()
     scene = load_scene(input_path, options)
