@@ -171,6 +171,14 @@ BAD = [
         {"scatter": [{"species": [{"file": PALM}], "rectangle": {"min": [0, 0], "max": [0, 5]}, "count": 1}]},
         "scatter[0].rectangle.max: must exceed min in x and y, got min [0, 0], max [0, 5]",
     ),
+    (  # a bow-tie passed (the schema says simple); one whose lobes cancel read as "zero area"
+        {
+            "scatter": [
+                {"species": [{"file": PALM}], "polygon": [[0, 0], [20, 20], [20, 0], [0, 5]], "count": 1}
+            ]
+        },
+        "scatter[0].polygon: edges 0-1 and 2-3 cross; give a simple polygon",
+    ),
     (  # 100,000 trees on 20 × 20 m passed and took 13 GB to write
         {
             "scatter": [

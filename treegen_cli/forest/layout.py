@@ -16,7 +16,7 @@ from ..errors import TreegenError
 from ..limits import MAX_TREES
 from ..options import MAX_SEED
 from ..params import load_params
-from .scatter import polygon_area, scatter_points
+from .scatter import crossing_edges, polygon_area, scatter_points
 from .schema import (
     Camera,
     Defaults,
@@ -166,6 +166,14 @@ def _scatter_placements(
         area = float(np.prod(hi - lo))
     else:
         region, is_poly = np.array(sc["polygon"], float), True
+        crossing = crossing_edges(region)
+        if crossing is not None:
+            i, j = crossing
+            n = len(region)
+            raise TreegenError(
+                f"{where}.polygon: edges {i}-{(i + 1) % n} and {j}-{(j + 1) % n} cross; give a "
+                "simple polygon, its vertices in order round its outline"
+            )
         area = polygon_area(region)
         if area <= 0:
             raise TreegenError(f"{where}.polygon: has zero area")

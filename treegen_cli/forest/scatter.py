@@ -19,6 +19,31 @@ def polygon_area(poly: np.ndarray) -> float:
     return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
 
 
+def crossing_edges(poly: np.ndarray) -> tuple[int, int] | None:
+    """The first pair of edges (i, j), edge i from vertex i to i + 1, that cross or touch
+    although they are not neighbours; None for a simple polygon. All pairs at once: a
+    layout's polygon has tens of vertices, a thousand is a million pairs."""
+    a, b = poly, np.roll(poly, -1, axis=0)
+    n = len(poly)
+
+    def side(p, q, r):  # sign of the turn p → q → r, (N, N)
+        return np.sign(
+            (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1])
+            - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0])
+        )
+
+    A, B = a[:, None, :], b[:, None, :]
+    C, D = a[None, :, :], b[None, :, :]
+    d1, d2 = side(C, D, A), side(C, D, B)
+    d3, d4 = side(A, B, C), side(A, B, D)
+    cross = (d1 * d2 <= 0) & (d3 * d4 <= 0)
+    i, j = np.triu_indices(n, 2)
+    apart = (j - i) % n != n - 1  # the last edge neighbours the first
+    hit = cross[i, j] & apart & ~((d1 == 0) & (d2 == 0) & (d3 == 0) & (d4 == 0))[i, j]
+    k = np.flatnonzero(hit)
+    return (int(i[k[0]]), int(j[k[0]])) if k.size else None
+
+
 def inside_polygon(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
     """Even-odd rule, vectorised over points × edges: bool (P,)."""
     a, b = poly, np.roll(poly, -1, axis=0)
