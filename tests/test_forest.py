@@ -309,6 +309,26 @@ def test_scatter_polygon_bounds_and_spacing():
     assert abs(inside_polygon(probe, sq).mean() - 1 / 9) < 0.01
 
 
+def test_an_instance_scaled_past_max_size_is_refused_by_its_place(tmp_path):
+    """A scale of 100 on the palm built a 2.5 km tree (make refuses anything over 150 m): the
+    biggest offender is named by its place in the layout before anything is written; the
+    layout's defaults.max_size raises the bound on purpose."""
+    data = layout_dict(
+        instances=[
+            {"species": PALM, "position": [0, 0]},
+            {"species": PALM, "position": [9, 0], "scale": 100},
+        ],
+        camera=None,
+    )
+    data.pop("camera")
+    layout = load_layout(write_layout(tmp_path, data))
+    with pytest.raises(TreegenError, match=r"instances\[1\]: scale 100 makes palm [\d,.]+ m across "):
+        build_scene(layout, workers=1, progress=False)
+    data["defaults"] = {**FAST, "max_size": 5000}
+    sc = build_scene(load_layout(write_layout(tmp_path, data)), workers=1, progress=False)
+    assert max(i.scale for i in sc.instances) == 100.0
+
+
 def test_density_sets_the_count(tmp_path):
     data = layout_dict(
         instances=[],

@@ -196,6 +196,22 @@ def _on_dask(client, keys, params, options, handoff: str | None = None):
         fut.release()
 
 
+def _check_sizes(layout: Layout, prototypes: list[Asset], proto: np.ndarray, scale: np.ndarray, limit: float):
+    """Refuse the largest tree an instance's scale makes bigger than `limit` metres (height or
+    crown width; defaults.max_size), naming its place in the layout: a scale of 100 on a
+    palm built a 2.5 km tree, where `make` refuses anything over 150 m."""
+    size = np.array([float(np.ptp(np.stack(lod_bounds(a.lods[0])), axis=0).max()) for a in prototypes])
+    big = scale * size[proto]
+    if big.size and big.max() > limit:
+        i = int(np.argmax(big))
+        p = layout.placements[i]
+        raise TreegenError(
+            f"{layout.path}: {p.source}: scale {scale[i]:g} makes {p.species.stem} {big[i]:,.1f} m "
+            f"across ({size[proto[i]]:.1f} m at scale 1); allowed at most {limit:g} m, raise "
+            "defaults.max_size for giants on purpose"
+        )
+
+
 def _crown_center(asset: Asset) -> np.ndarray:
     lo, hi = lod_bounds(asset.lods[0])
     return 0.5 * (lo + hi)
@@ -241,6 +257,7 @@ def build_scene(
     proto = np.array([index[(p.species, p.seed)] for p in placements], int)
     pos = np.array([p.position for p in placements], float).reshape(-1, 3)
     scale = np.array([p.scale for p in placements], float)
+    _check_sizes(layout, prototypes, proto, scale, options.generate.max_size)
     rot = np.array([p.rotation_deg for p in placements], float)
     centers = np.array([_crown_center(a) for a in prototypes]).reshape(-1, 3)
     world_center = pos + scale[:, None] * np.einsum("nij,nj->ni", _rotz(rot), centers[proto])

@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 from ..exchange import GltfOptions
+from ..generate import DEFAULTS as GENERATE_DEFAULTS
 from ..impostor import IMPOSTOR_DEFAULTS
 from ..lod import LOD_DEFAULTS, pixel_size
 from ..pipeline import MakeOptions
@@ -56,6 +57,7 @@ def make_options(layout: Layout, error_px: float | None = None, impostor: bool =
         distances=d.lod_distances or LOD_DEFAULTS.distances,
     )
     options = MakeOptions(
+        generate=replace(GENERATE_DEFAULTS, max_size=d.max_size),
         rig=RigOptions(max_joints=d.max_joints),
         wind=wind,
         lod=lod,

@@ -19,6 +19,7 @@ from importlib import resources
 from pathlib import Path
 
 from ..errors import TreegenError
+from ..generate import DEFAULTS as GENERATE_DEFAULTS
 from ..lod import LOD_DEFAULTS
 from ..wind import DEFAULTS as WIND_DEFAULTS
 
@@ -61,6 +62,7 @@ class Defaults:
     phase_variants: int = 4
     profile: str | None = None  # forest/options.py: the prototypes' budgets and sizes
     triangles: int | None = None
+    max_size: float = GENERATE_DEFAULTS.max_size
 
 
 # the schema's objects whose "default"s the dataclasses define
