@@ -416,21 +416,18 @@ def test_the_cards_normal_map_holds_the_crowns_normals_in_their_tangent_space():
     assert np.all(np.einsum("ij,ij->i", face, nv) > 0)
 
 
-@needs_gl
-def test_the_impostor_keeps_the_crowns_light_and_shade():
-    """The preview's sun on the aspen's coarsest LOD and its impostor, 96 px tall (the switch),
-    as bench/impostor_colour_bench.py renders them: the spread of luminance over the crown's
-    pixels (std / mean) on the cards is at least 0.5 × the LOD's (0.54). Lit by one bent normal per
-    corner, the cards read flat: 0.45 ×."""
+def _switch_pixels(asset) -> tuple[np.ndarray, np.ndarray]:
+    """Linear RGB (N, 3) of the coarsest LOD and of the impostor over the pixels both cover,
+    rendered with the preview's sun and sky 96 px tall (the switch, ImpostorOptions.switch_px)
+    from two cameras, a card face-on and 45° off (bench/impostor_colour_bench.py's)."""
     from treegen_cli.drawable import from_asset
     from treegen_cli.render import Renderer
     from treegen_cli.render_view import frame_points
 
-    asset = _asset("quaking_aspen")
     k = len(asset.lods) - 1
     scenes = [from_asset(asset, k - 1), from_asset(asset, k)]
     pts = np.concatenate([p.positions for p in scenes[0].parts])
-    lum: list[list[np.ndarray]] = [[], []]
+    out: list[list[np.ndarray]] = [[], []]
     for az in (-90.0, -45.0):
         cam = frame_points(pts, az, 8.0)
         imgs, masks = [], []
@@ -438,12 +435,21 @@ def test_the_impostor_keeps_the_crowns_light_and_shade():
             with Renderer(scene, 96, 96) as r:
                 img = r.render(cam, sun_azimuth_deg=az - 50.0)
                 bg = r.render(cam, sun_azimuth_deg=az - 50.0, draw_tree=False)
-            imgs.append(_srgb_to_linear(img) @ np.array([0.2126, 0.7152, 0.0722]))
+            imgs.append(_srgb_to_linear(img))
             masks.append(np.abs(img.astype(int) - bg.astype(int)).sum(-1) > 30)
         both = masks[0] & masks[1]
         for i in range(2):
-            lum[i].append(imgs[i][both])
-    geo, cards = (np.concatenate(x) for x in lum)
+            out[i].append(imgs[i][both])
+    geo, imp = (np.concatenate(x) for x in out)
+    return geo, imp
+
+
+@needs_gl
+def test_the_impostor_keeps_the_crowns_light_and_shade():
+    """At the switch (_switch_pixels) the spread of luminance over the crown's pixels (std /
+    mean) on the cards is at least 0.5 × the LOD's (0.54). Lit by one bent normal per
+    corner, the cards read flat: 0.45 ×."""
+    geo, cards = (x @ np.array([0.2126, 0.7152, 0.0722]) for x in _switch_pixels(_asset("quaking_aspen")))
     spread = (np.std(cards) / np.mean(cards)) / (np.std(geo) / np.mean(geo))
     assert spread >= 0.5, spread
 
@@ -507,34 +513,12 @@ def test_crossed_cards_do_not_shade_each_other_in_a_wedge():
 
 @needs_gl
 def test_the_impostor_has_the_coarsest_lods_hue():
-    """The preview's sun and sky on the aspen's coarsest LOD and its impostor, two cameras (a
-    card face-on and 45° off, bench/impostor_colour_bench.py's), the tree 96 px tall as when
-    the impostor takes over (ImpostorOptions.switch_px): over the pixels both cover, the
-    impostor's blue/green and red/green match within 7 % (one grey LEAF_SHADE left the cards
+    """At the switch (_switch_pixels), over the pixels both cover, the impostor's blue/green
+    and red/green match the coarsest LOD's within 7 % (one grey LEAF_SHADE left the cards
     yellower: blue/green −15 %)."""
-    from treegen_cli.drawable import from_asset
-    from treegen_cli.render import Renderer
-    from treegen_cli.render_view import frame_points
-
-    asset = _asset("quaking_aspen")
-    k = len(asset.lods) - 1
-    scenes = [from_asset(asset, k - 1), from_asset(asset, k)]
-    pts = np.concatenate([p.positions for p in scenes[0].parts])
-    sums, n = np.zeros((2, 3)), 0
-    for az in (-90.0, -45.0):
-        cam = frame_points(pts, az, 8.0)
-        imgs, masks = [], []
-        for scene in scenes:
-            with Renderer(scene, 96, 96) as r:
-                img = r.render(cam, sun_azimuth_deg=az - 50.0)
-                bg = r.render(cam, sun_azimuth_deg=az - 50.0, draw_tree=False)
-            imgs.append(_srgb_to_linear(img))
-            masks.append(np.abs(img.astype(int) - bg.astype(int)).sum(-1) > 30)
-        both = masks[0] & masks[1]
-        sums += [im[both].sum(0) for im in imgs]
-        n += int(both.sum())
-    assert n > 1000
-    geo, imp = sums / n
+    pixels = _switch_pixels(_asset("quaking_aspen"))
+    assert len(pixels[0]) > 1000
+    geo, imp = (x.mean(0) for x in pixels)
     hue = (imp / imp[1]) / (geo / geo[1])
     assert np.all(np.abs(hue - 1) < 0.07), (geo, imp, hue)
 
