@@ -59,14 +59,20 @@ def _droppable(tree: Tree, keep: np.ndarray, tol: float, trunks: bool = False) -
     return out
 
 
-def coarsen_nodes(tree: Tree, tol: float, trunks: bool = False) -> Tree:
-    """`tree` with the branch nodes (and the trunks' too if `trunks`) within `tol` metres of
-    their kept neighbours' chord dropped (see the module doc); the same tree when none is."""
+def coarsen_nodes(
+    tree: Tree, tol: float, trunks: bool = False, stems: np.ndarray | None = None, passes: int = PASSES
+) -> Tree:
+    """`tree` with the branch nodes (and the trunks' too if `trunks`; only those of `stems`
+    (S,) if given) within `tol` metres of their kept neighbours' chord dropped, in at most
+    `passes` passes (see the module doc); the same tree when none is."""
     if tol <= 0 or tree.n_nodes < 3:
         return tree
     keep = np.ones(tree.n_nodes, dtype=bool)
-    for _ in range(PASSES):
+    mine = None if stems is None else stems[tree.node_stem]
+    for _ in range(passes):
         drop = _droppable(tree, keep, tol, trunks)
+        if mine is not None:
+            drop &= mine
         if not drop.any():
             break
         keep &= ~drop
@@ -117,13 +123,13 @@ def _frames(tree: Tree, keep: np.ndarray) -> np.ndarray:
     return F
 
 
-def point_tips(tree: Tree) -> Tree:
-    """`tree` with every branch ending in a point (its last node's radius 0): the mesh closes
-    a pointed tip on its apex instead of a last ring and a cap, so a one-segment twig costs a
-    third of its triangles (a cone) and a far leafless LOD keeps three times the twigs; the
-    area the cones lose is made up by thickening (lod_budget.cover_factors)."""
+def point_tips(tree: Tree, stems: np.ndarray | None = None) -> Tree:
+    """`tree` with every branch (or those of `stems` (S,)) ending in a point (its last node's
+    radius 0): the mesh closes a pointed tip on its apex instead of a last ring and a cap, so a
+    one-segment twig costs a third of its triangles (a cone) and a far leafless LOD keeps three
+    times the twigs; the area the cones lose is made up by thickening (lod_budget.cover_factors)."""
     tip = tree.stem_node_start.astype(np.int64) + tree.stem_node_count - 1
-    tip = tip[(tree.stem_level > 0) & (tree.stem_node_count > 1)]
+    tip = tip[(tree.stem_level > 0 if stems is None else stems) & (tree.stem_node_count > 1)]
     if not tip.size:
         return tree
     radius = tree.node_radius.copy()
@@ -138,18 +144,7 @@ def stub_stems(tree: Tree, which: np.ndarray, tol: float) -> Tree:
     reaches its leaves (the fan palm's petioles) along where it was."""
     if not which.any():
         return tree
-    keep = np.ones(tree.n_nodes, dtype=bool)
-    mine = which[tree.node_stem]
-    for _ in range(2 * PASSES):
-        drop = _droppable(tree, keep, tol) & mine
-        if not drop.any():
-            break
-        keep &= ~drop
-    out = drop_nodes(tree, keep)
-    tip = (out.stem_node_start.astype(np.int64) + out.stem_node_count - 1)[which & (out.stem_node_count > 1)]
-    radius = out.node_radius.copy()
-    radius[tip] = 0.0
-    return replace(out, node_radius=radius)
+    return point_tips(coarsen_nodes(tree, tol, stems=which, passes=2 * PASSES), which)
 
 
 TWIGS_PER_CELL = 4  # twig_keys: stems per (azimuth, height) cell, about
