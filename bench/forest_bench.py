@@ -5,11 +5,13 @@ Three tables:
      and format: seconds (prototypes / write), output MB, and the size against the sum of the
      prototypes' own files (what `treegen make` writes for each; issue 15: all LODs ≤ 1.2 ×);
   2. building the prototypes: the process pool `treegen forest` used before issue 15 (kept
-     here only as the reference) against the Dask cluster it uses now (executor.dask_client,
-     embedded: "dask", its workers forked from the client; "dask fs", from the fork server,
-     as when the client cannot fork safely and as `treegen batch` starts them) and against
-     one process; wall and CPU seconds (the whole process tree) as medians of --reps
-     interleaved runs, and whether every path's prototypes write the same bytes (they must);
+     here only as the reference) against the Dask path it uses now ("dask": Dask's local
+     process scheduler on workers forked from the client, executor.process_pool; "dask fs":
+     the same with workers from the fork server, as when the client cannot fork safely) and
+     against one process; wall and CPU seconds (the whole process tree) as medians of --reps
+     interleaved runs, and whether every path's prototypes write the same bytes (they must).
+     (Until 2026-11-27 "dask" was an embedded distributed cluster, as `treegen batch` starts;
+     the figures below before that date are for it.)
   3. peak MB (this process + its worker processes, ru_maxrss).
 
     python bench/forest_bench.py [layout.json] [--workers N] [--reps R]
@@ -112,6 +114,15 @@ Where the Dask path's remaining time went (2026-11-26, load 3-9; rusage and /pro
     tried: 5.88 vs 5.80 s (medians of 4), the two sassafras built side by side take 2.4-2.7 s
     each against 2.0-2.2 s beside smaller ones. Dask's own multiprocessing scheduler (no
     cluster) was tried: 5.89 s, its client loads each result before sending the next task.
+Measured 2026-11-27: "dask" is now Dask's local process scheduler (dask.multiprocessing.get)
+    on a pool forked from the client (executor.process_pool): no distributed import, scheduler
+    or comms on the critical path; dask itself is imported before the fork so the workers
+    inherit it (imported after, each worker's first task imported it again: 1.04×), and
+    results cross once, pickled by the pool (Dask's default cloudpickles them to bytes first).
+    Quiet box (load 0.7-2.4), `--pools-only --reps 5`:
+        old pool 5.12 s, dask 5.18 s 1.01× (paired 1.01×, CPU 1.00×), dask fs 1.16×,
+        in process 1.30×; same bytes from every path. The embedded distributed cluster it
+        replaces measured 1.09× (paired, 8 rounds, load 2-3) the same morning.
 """
 
 from __future__ import annotations

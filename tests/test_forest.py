@@ -74,33 +74,12 @@ def write_layout(folder: Path, data: dict, name: str = "layout.json") -> Path:
     return p
 
 
-HANDOFF: dict[str, list[str]] = {}  # what the `scene` fixture's temporary folder held
-
-
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
-    """Built on an embedded 2-worker cluster, its temporary files in a folder of its own
-    (Dask keeps its scratch space there too)."""
-    import tempfile
-
+    """Built on 2 local worker processes (Dask's local process scheduler)."""
     folder = tmp_path_factory.mktemp("forest")
     layout = load_layout(write_layout(folder, layout_dict()))
-    temp = tmp_path_factory.mktemp("temp")
-    made = []
-
-    class Recorded(tempfile.TemporaryDirectory):
-        def __init__(self, *a, **k):
-            super().__init__(*a, **k)
-            made.append(self.name)
-
-    saved = tempfile.tempdir, tempfile.TemporaryDirectory
-    tempfile.tempdir, tempfile.TemporaryDirectory = str(temp), Recorded
-    try:
-        built = build_scene(layout, all_lods=False, workers=2, progress=False)
-    finally:
-        tempfile.tempdir, tempfile.TemporaryDirectory = saved
-    HANDOFF.update(made=made, left=sorted(str(p) for p in temp.rglob("treegen-forest-*")))
-    return layout, built
+    return layout, build_scene(layout, all_lods=False, workers=2, progress=False)
 
 
 # ----------------------------------------------------------------------------- schema + CLI
@@ -567,14 +546,11 @@ def test_oversized_forest_is_refused_naming_the_flag(tmp_path):
 
 
 def test_dask_prototypes_equal_the_in_process_build_byte_for_byte(scene, tmp_path):
-    """The `scene` fixture built its prototypes on an embedded 2-worker Dask cluster; built
-    in this process instead, every writer gives the same bytes. The handoff folder is gone."""
+    """The `scene` fixture built its prototypes on 2 local worker processes; built in this
+    process instead, every writer gives the same bytes."""
     layout, on_dask = scene
     here = build_scene(layout, all_lods=False, workers=1, progress=False)
     assert (on_dask.cluster, here.cluster) == ("2 local worker(s)", "this process")
-    # the prototypes came back through a temporary folder (build_prototype_to), left empty
-    assert [Path(d).name.startswith("treegen-forest-") for d in HANDOFF["made"]] == [True]
-    assert HANDOFF["left"] == []
     (tmp_path / "dask").mkdir()
     (tmp_path / "here").mkdir()
     for suffix in (".glb", ".usda"):  # (.usda: texture files are named after the stem)
@@ -584,42 +560,91 @@ def test_dask_prototypes_equal_the_in_process_build_byte_for_byte(scene, tmp_pat
         assert a.read_bytes() == b.read_bytes(), suffix
 
 
-def test_embedded_cluster_forks_workers_only_from_a_threadless_client():
-    """A client with one thread and no OpenGL (the forest command's) forks its workers
-    (executor.dask_client(fork=True): their parent is the client), after running `warm`,
-    whose result they inherit; with another thread running they come from the fork server
-    instead and `warm` is not run. Both run tasks, and leave no process."""
+def test_local_workers_are_forks_of_a_threadless_client_and_run_tasks_in_order(tmp_path):
+    """executor.process_pool: a client with one thread and no OpenGL (the forest command's)
+    forks its workers, which inherit what it holds; with another thread running they come
+    from the fork server instead. Either way the tasks start in list order, one a worker at
+    a time (the long first one holds its worker, the other takes every other task in turn),
+    results come back in list order, done(i) is called once per task, a task's TreegenError
+    is raised in the client as it was raised, a worker that dies is reported in one line, a
+    Ctrl-C stops the running tasks, and no worker process is left."""
+    import os
     import subprocess
     import sys
 
+    # the tasks live in a module: the fork server's workers import them (as build_prototype)
+    (tmp_path / "jobs.py").write_text("""
+import os, time
+from treegen_cli.errors import TreegenError
+held = []
+def job(seconds):
+    start = time.monotonic()
+    time.sleep(seconds)
+    return os.getpid(), os.getppid(), start, len(held)
+def fails():
+    raise TreegenError("species/x.txt:3: shape 9 is not in 0-8")
+def dies():
+    os.kill(os.getpid(), 9)
+""")
     code = """
 import json, os, threading, time
 import psutil
-from treegen_cli.executor import can_fork, dask_client
-warmed = []
-def seen():
-    return len(warmed)
+import signal
+from jobs import dies, fails, held, job
+from treegen_cli.errors import TreegenError
+from treegen_cli.executor import can_fork, process_pool
 def run():
     safe = can_fork()
-    with dask_client(None, 2, fork=True, warm=lambda: warmed.append(1)) as (client, where):
-        client.wait_for_workers(2, timeout=60)
-        parents = sorted(set(client.run(os.getppid).values()))
-        inherited = sorted(set(client.run(seen).values()))
-        return safe, parents, inherited, len(warmed), client.submit(pow, 2, 10).result(), where
+    done = []
+    with process_pool(2) as (run, where):
+        out = run([(job, s) for s in (1.5, 0.05, 0.05, 0.05, 0.05)], done=done.append)
+        try:
+            run([(job, 0.0), (fails,)])
+            error = None
+        except TreegenError as e:
+            error = str(e)
+    return safe, out, sorted(done), error, where
+def interrupted():
+    def ctrl_c(*_):
+        raise KeyboardInterrupt
+    signal.signal(signal.SIGALRM, ctrl_c)
+    start = time.monotonic()
+    try:
+        with process_pool(2) as (run, where):
+            signal.alarm(1)
+            run([(job, 60.0)] * 3)
+    except KeyboardInterrupt:
+        return time.monotonic() - start
+def died():
+    try:
+        with process_pool(2) as (run, where):
+            run([(job, 0.5), (dies,), (job, 0.1)])
+    except TreegenError as e:
+        return str(e)
+held.append(1)
 first = run()
-warmed.clear()
+stopped, crashed = interrupted(), died()
 threading.Thread(target=time.sleep, args=(600,), daemon=True).start()
 second = run()
 helpers = ('multiprocessing.forkserver', 'multiprocessing.resource_tracker')
 kids = [p for p in psutil.Process().children(recursive=True) if not any(h in ' '.join(p.cmdline()) for h in helpers)]
-print(json.dumps([os.getpid(), first, second, len(kids)]))
+print(json.dumps([os.getpid(), first, second, stopped, crashed, len(kids)]))
 """
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=DASK_ENV)
+    env = {**DASK_ENV, "PYTHONPATH": f"{tmp_path}{os.pathsep}{DASK_ENV.get('PYTHONPATH', '')}"}
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
     assert proc.returncode == 0, proc.stderr
-    pid, first, second, kids = json.loads(proc.stdout.strip().splitlines()[-1])
-    assert first == [True, [pid], [1], 1, 1024, "2 local worker(s)"]
-    assert second[0] is False and pid not in second[1]
-    assert second[2:] == [[0], 0, 1024, "2 local worker(s)"]  # no warm, nothing inherited
+    pid, first, second, stopped, crashed, kids = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert stopped < 30  # Ctrl-C stops the workers' 60 s tasks instead of waiting for them
+    assert crashed.startswith("a worker process died while building"), crashed
+    for (safe, out, done, error, where), forked in ((first, True), (second, False)):
+        assert safe is forked and where == "2 local worker(s)"
+        assert [p == pid for _w, p, _s, _h in out] == [forked] * 5
+        assert [h for _w, _p, _s, h in out] == [int(forked)] * 5  # inherited only when forked
+        long, *short = out
+        assert long[0] not in [w for w, _p, _s, _h in short]  # the long task's worker ran nothing else
+        assert [s for _w, _p, s, _h in short] == sorted(s for _w, _p, s, _h in short)
+        assert done == [0, 1, 2, 3, 4]
+        assert error == "species/x.txt:3: shape 9 is not in 0-8"
     assert kids == 0  # no worker left behind (the fork server's helpers stay, as multiprocessing's do)
 
 
@@ -639,7 +664,7 @@ def job(seconds):
     start = time.monotonic()
     time.sleep(seconds)
     return worker_name(), start
-with dask_client(None, 2, fork=True) as (client, where):
+with dask_client(None, 2) as (client, where):
     client.wait_for_workers(2, timeout=60)
     seconds = (3.0,) + (0.05,) * 5
     futures = client.map(job, seconds, key=[f"treegen-test-{k}" for k in range(len(seconds))])
@@ -706,7 +731,7 @@ def test_forest_on_a_dask_scheduler_writes_the_in_process_bytes(dask_scheduler, 
         text=True,
         env=env,
     )
-    assert proc.returncode == 2 and "--workers 2: only for the embedded cluster" in proc.stderr
+    assert proc.returncode == 2 and "--workers 2: only for workers on this machine" in proc.stderr
 
 
 # ----------------------------------------------------------------------------- a forest to walk through

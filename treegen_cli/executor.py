@@ -1,20 +1,27 @@
-"""Where many builds run: a Dask cluster, embedded or remote, behind one context manager.
+"""Where many builds run: Dask, on a cluster (embedded or remote) or on its local process
+scheduler, behind small context managers.
 
-    with dask_client(scheduler=None, workers=2) as (client, where):
+    with dask_client(scheduler=None, workers=2) as (client, where):    # treegen batch
         futures = [client.submit(fn, *args) for ...]
+    with process_pool(workers=2) as (run, where):                      # treegen forest
+        results = run([(fn, *args), ...], done=bar_step)
 
-No scheduler (and no DASK_SCHEDULER_ADDRESS): an embedded cluster with one single-threaded
-worker process per core (the pipeline is numpy-bound and holds the GIL between calls, so
-processes, not threads), started from a fork server, or (`fork=True`, the forest) forked
-from this process while that is safe (can_fork). With an address: the same jobs go to an
-existing cluster, whose workers must see the same file system paths (outputs are written by
-the workers).
-Closing the block closes the client and, if embedded, the cluster and its processes.
+dask_client: no scheduler (and no DASK_SCHEDULER_ADDRESS) gives an embedded cluster with one
+single-threaded worker process per core (the pipeline is numpy-bound and holds the GIL between
+calls, so processes, not threads), started from a fork server; with an address, the same jobs
+go to an existing cluster, whose workers must see the same file system paths (outputs are
+written by the workers). Closing the block closes the client and, if embedded, the cluster.
+
+process_pool: a handful of tasks whose results come back to this process (the
+forest's prototypes) run under Dask's local process scheduler, on processes forked from this
+one: no scheduler, comms or imports to start, so a forest builds as fast as the process pool it
+had before Dask (bench/forest_bench.py). A forest sent to a cluster uses dask_client.
 """
 
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import os
 import signal
@@ -104,35 +111,18 @@ def can_fork() -> bool:
 
 
 @contextlib.contextmanager
-def dask_client(
-    scheduler: str | None = None,
-    workers: int | None = None,
-    fork: bool = False,
-    warm: Callable[[], object] | None = None,
-):
+def dask_client(scheduler: str | None = None, workers: int | None = None):
     """Yield (client, description); the cluster is closed on exit, even on Ctrl-C.
 
     The embedded cluster's workers start from a fork server (STARTUP): a fork of this process
-    once its event loop runs can inherit a held lock and hang. With `fork` (the forest) and
-    while can_fork(), they are forked from this process instead, before the scheduler's loop
-    starts: they inherit everything imported here and are ready at once, where the fork
-    server is a fresh interpreter importing it all again (~1 s of CPU). Such workers have no
-    nanny (not restarted if they die: their tasks go to the others). `warm`, called just
-    before they are forked (and only then), does work each of them would otherwise repeat
-    (the forest: species textures); they inherit its result."""
+    once its event loop runs can inherit a held lock and hang."""
     address = scheduler_address(scheduler)
     n = workers or default_workers()
-    forked = fork and not address and can_fork()
-    if not address and not forked:
+    if not address:
         start_fork_server()  # first: its imports overlap ours below
     import dask
     from distributed import Client
 
-    if forked and warm is not None:
-        warm()
-    if forked and not can_fork():  # the imports (or warm) started a thread after all
-        forked = False
-        start_fork_server()
     if address:
         try:
             client = Client(address, timeout="10s", set_as_default=False)
@@ -153,21 +143,16 @@ def dask_client(
         **QUIET,
         **STARTUP,
     }
-    if forked:  # no nanny restarts them: should all die, their tasks fail instead of waiting
-        config["distributed.scheduler.no-workers-timeout"] = "60s"
     with dask.config.set(config), contextlib.ExitStack() as stack:
         # Worker processes inherit an ignored SIGINT (Python keeps SIG_IGN across fork and
         # exec), so a Ctrl-C reaches only this process, which then closes the cluster in
         # order; without this every worker prints its own KeyboardInterrupt traceback.
         previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
         try:
-            send_address = stack.enter_context(forked_workers(n)) if forked else None
-            cluster = _local_cluster(0 if forked else n)
+            cluster = _local_cluster(n)
         finally:
             signal.signal(signal.SIGINT, previous)
         stack.callback(cluster.close)
-        if send_address is not None:
-            send_address(cluster.scheduler_address)
         client = Client(cluster, set_as_default=False)
         stack.callback(client.close)
         yield client, f"{n} local worker(s)"
@@ -189,78 +174,93 @@ def _local_cluster(n: int):
 
 
 @contextlib.contextmanager
-def forked_workers(n: int):
-    """Fork `n` processes that each wait for the scheduler's address on a pipe and then run
-    one single-threaded Dask worker until the scheduler closes it (or this process goes: the
-    pipe's end then closes and they exit); yields `send(address)`, which tells them all. On
-    exit, wait for them (then kill stragglers)."""
+def process_pool(workers: int):
+    """Yield (run, description): run(tasks, done) is run_local on `workers` processes,
+    started now. They are
+    forks of this process while can_fork(), as the forest's process pool before Dask was (they
+    inherit everything imported here and are ready at once), else children of the fork server.
+    They ignore SIGINT: a Ctrl-C reaches only this process, which stops them on the way out,
+    as it does when a task fails (the caller writes nothing they return)."""
     import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
 
-    ctx = multiprocessing.get_context("fork")
-    pipes = [ctx.Pipe(duplex=False) for _ in range(n)]
-    mine = [w for _r, w in pipes]
-    processes = []
+    import dask.multiprocessing  # noqa: F401  (before the fork: the workers run its code too)
+
+    if can_fork():
+        context = multiprocessing.get_context("fork")
+    else:
+        start_fork_server()
+        context = multiprocessing.get_context("forkserver")
+    before = set(multiprocessing.active_children())
+    pool = ProcessPoolExecutor(workers, mp_context=context, initializer=_ignore_sigint)
     try:
-        for k, (r, _w) in enumerate(pipes):
-            p = ctx.Process(
-                target=_worker_main, args=(r, mine, n, k), name=f"treegen-worker-{k}", daemon=True
-            )
-            p.start()
-            processes.append(p)
-        for r, _w in pipes:
-            r.close()
-
-        def send(address: str) -> None:
-            for pipe in mine:
-                pipe.send(address)
-
-        yield send
+        # the first task forks them all (a fork pool starts every process then, before its
+        # own thread): now, while this process has no other thread (no progress bar yet)
+        pool.submit(int).result()
+        yield functools.partial(run_local, pool, workers), f"{workers} local worker(s)"
+    except BaseException:  # Ctrl-C or a failed task: stop the others' builds now
+        for process in set(multiprocessing.active_children()) - before:
+            process.terminate()
+        raise
     finally:
-        for w in mine:
-            w.close()
-        for p in processes:
-            p.join(10)
-            if p.exitcode is None:
-                p.kill()
-                p.join()
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _worker_main(pipe, parents, n: int, k: int) -> None:
-    """In a forked process: wait for the scheduler's address, then serve as a Dask worker."""
-    import asyncio
+def _ignore_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
-    for w in parents:  # this process keeps no write end: EOF then means the client is gone
-        w.close()
-    logging.getLogger("distributed").setLevel(logging.CRITICAL)  # as the nannies' workers
+
+def run_local(pool, workers: int, tasks: list[tuple], done: Callable[[int], object] | None = None) -> list:
+    """Run independent tasks [(fn, *args), ...] on `pool` (`workers` processes) under Dask's local process scheduler
+    (dask.multiprocessing.get) and return their results in list order. Tasks start in list
+    order, one per process at a time (a process takes the next when it is free); `done(i)` is
+    called here as task i finishes. A task's exception is raised here. Arguments and results
+    cross once, pickled by the pool (Dask's default would cloudpickle them to bytes first and
+    the pool pickle those again: two copies of every prototype)."""
+    import dask.multiprocessing
+    from dask.callbacks import Callback
+
+    keys = [("treegen-task", i) for i in range(len(tasks))]
+
+    def in_order(_dsk, state) -> None:  # Dask pops its next task from the end of the list
+        state["ready"].sort(key=lambda key: -key[1])
+
+    def finished(key, _result, _dsk, _state, _worker) -> None:
+        if done is not None:
+            done(key[1])
+
+    graph = dict(zip(keys, tasks))
+    with Callback(start_state=in_order, posttask=finished), _died_as_error(workers):
+        return list(
+            dask.multiprocessing.get(
+                graph,
+                keys,
+                num_workers=workers,
+                pool=pool,
+                chunksize=1,
+                optimize_graph=False,
+                func_dumps=_as_is,
+                func_loads=_as_is,
+            )
+        )
+
+
+@contextlib.contextmanager
+def _died_as_error(workers: int):
+    """A worker process that dies (killed, out of memory) breaks the pool: say so in one line."""
+    from concurrent.futures.process import BrokenProcessPool
+
     try:
-        address = pipe.recv()
-    except EOFError:
-        return
+        yield
+    except BrokenProcessPool:
+        raise TreegenError(
+            f"a worker process died while building (killed, or out of memory?); "
+            f"rerun, with fewer --workers than {workers} if memory is short"
+        ) from None
 
-    def watch() -> None:
-        try:
-            pipe.recv()
-        except (EOFError, OSError):
-            pass
-        os._exit(0)
 
-    threading.Thread(target=watch, name="treegen-parent-watch", daemon=True).start()
-
-    async def serve() -> None:
-        from distributed import Worker
-
-        async with Worker(
-            address,
-            nthreads=1,
-            host="127.0.0.1",
-            dashboard=False,
-            memory_limit=1.0 / n,
-            name=f"forked-{k}",
-            silence_logs=logging.CRITICAL,
-        ) as worker:
-            await worker.finished()
-
-    asyncio.run(serve())
+def _as_is(x):
+    return x
 
 
 def treegen_version() -> str:

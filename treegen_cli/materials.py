@@ -157,14 +157,6 @@ def _generated_pngs(params: Params, size: int) -> tuple[bytes, bytes, bytes]:
     return pngs["leaf"], pngs["bark"], pngs["bark_normal"]
 
 
-def draw_textures(params: Params, options: MaterialOptions = MATERIAL_DEFAULTS) -> None:
-    """Draw now, into this process's cache, the generated textures build_materials would draw
-    for `params`: processes forked afterwards find them there instead of each drawing its own
-    (the forest's workers). Nothing to draw with --no-textures or an artist's images."""
-    if _draws_textures(params, options):
-        _generated_pngs(params, options.texture_size)
-
-
 def _draws_textures(params: Params, options: MaterialOptions) -> bool:
     """Whether build_materials draws generated textures: textures on, and the bark or a leafy
     tree's leaves without an artist's image."""

@@ -252,12 +252,12 @@ def cluster(workers_help: str, scheduler_help: str):
 
 
 def check_cluster(workers: int | None, scheduler: str | None) -> None:
-    """--workers only makes sense for the embedded cluster, and needs at least one."""
+    """--workers only makes sense on this machine (not with a cluster), and needs at least one."""
     if workers is not None and workers < 1:
         raise TreegenError(f"--workers {workers}: must be at least 1")
     if workers is not None and scheduler_address(scheduler):
         raise TreegenError(
-            f"--workers {workers}: only for the embedded cluster; a --scheduler "
+            f"--workers {workers}: only for workers on this machine; a --scheduler "
             "(or DASK_SCHEDULER_ADDRESS) cluster has its own workers"
         )
 

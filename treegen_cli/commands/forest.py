@@ -40,10 +40,10 @@ from . import flags
     "layout's defaults.error_px, else 1].",
 )
 @flags.cluster(
-    "Worker processes of the embedded Dask cluster building the prototypes "
-    "[default: one per core; 1: in this process].",
+    "Worker processes building the prototypes on this machine (Dask's local process "
+    "scheduler) [default: one per core; 1: in this process].",
     "Build the prototypes on this Dask scheduler's workers instead [default: "
-    "$DASK_SCHEDULER_ADDRESS, else an embedded cluster].",
+    "$DASK_SCHEDULER_ADDRESS, else on this machine].",
 )
 @click.option(
     "--max-trees",

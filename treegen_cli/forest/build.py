@@ -15,7 +15,6 @@ import functools
 import math
 import os
 import sys
-import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -68,19 +67,6 @@ def build_prototype(params, seed: int, options) -> Asset:
     return asset
 
 
-def build_prototype_to(directory: str, params, seed: int, options) -> str:
-    """The embedded cluster's task: build_prototype, handed back as a pickle file in
-    `directory` (this machine's) rather than through Dask's comms, which take ~0.25 s to bring
-    a 44 MB prototype across while the worker's next build holds its GIL (the file: ~0.05 s)."""
-    import pickle
-
-    asset = build_prototype(params, seed, options)
-    fd, path = tempfile.mkstemp(dir=directory, suffix=".pickle")
-    with os.fdopen(fd, "wb") as f:
-        pickle.dump(asset, f, protocol=pickle.HIGHEST_PROTOCOL)
-    return path
-
-
 def build_prototypes(
     keys: list[tuple[Path, int]],
     options,
@@ -90,14 +76,14 @@ def build_prototypes(
     scheduler: str | None = None,
     report: dict | None = None,
 ) -> list[Asset]:
-    """Each (species file, seed) built once, on the Dask cluster `treegen batch` uses
-    (executor.dask_client): an embedded one with `workers` processes (default one per core),
-    or the one at `scheduler` / $DASK_SCHEDULER_ADDRESS. Without a scheduler, one worker or
-    one prototype builds in this process (no cluster to start). Results stream back as they
-    finish; the list is in `keys` order, so the bytes never depend on who built what. A rich
-    progress bar on an interactive stderr only. `parsed`: species already read (the
-    layout's), so no file is parsed twice. `report["cluster"]` is set to where they ran."""
-    from ..executor import default_workers, scheduler_address
+    """Each (species file, seed) built once: on `workers` local processes under Dask's local
+    process scheduler (default one per core; executor.process_pool), or on the Dask cluster at
+    `scheduler` / $DASK_SCHEDULER_ADDRESS (executor.dask_client), as `treegen batch` builds.
+    One worker or one prototype builds in this process. The list is in `keys` order, so the
+    bytes never depend on who built what. A rich progress bar on an interactive stderr only.
+    `parsed`: species already read (the layout's), so no file is parsed twice.
+    `report["cluster"]` is set to where they ran."""
+    from ..executor import default_workers, dask_client, process_pool, scheduler_address
 
     params = dict(parsed or {})
     for path, _seed in keys:
@@ -107,93 +93,61 @@ def build_prototypes(
     workers = max(1, min(workers or default_workers(), len(keys)))
     if progress is None:
         progress = sys.stderr.isatty()
-    out: list[Asset | None] = [None] * len(keys)
+    tasks = [(functools.partial(_in_file, p, build_prototype), params[p], s, options) for p, s in keys]
     with contextlib.ExitStack() as stack:
-        client, handoff = None, None
-        if remote or workers > 1:  # before the bar: its thread would stop workers forking
-            warm = functools.partial(_draw_shared_textures, keys, params, options)
-            if not remote:  # made first, removed last: after every worker has stopped writing
-                folder = tempfile.TemporaryDirectory(prefix="treegen-forest-", ignore_cleanup_errors=True)
-                handoff = stack.enter_context(folder)
-            client = stack.enter_context(_cluster(scheduler, workers, report, warm))
-        elif report is not None:
-            report["cluster"] = "this process"
-        bar = None
+        # workers first: the bar's thread would stop them forking
+        if remote:
+            client, where = stack.enter_context(dask_client(scheduler, workers))
+            names = [f"treegen-forest-{p.stem}-{s}" for p, s in keys]
+            run = functools.partial(_on_cluster, client, names)
+        elif workers > 1:
+            run, where = stack.enter_context(process_pool(workers))
+        else:
+            run, where = _here, "this process"
+        if report is not None:
+            report["cluster"] = where
+        step = None
         if progress:
             bar = Progress(console=Console(stderr=True), transient=True)
             bar.start()
             stack.callback(bar.stop)
             task = bar.add_task("prototypes", total=len(keys))
-        if client is None:
-            results = (
-                (i, _in_file(p, build_prototype, params[p], s, options)) for i, (p, s) in enumerate(keys)
-            )
-        else:
-            results = _on_dask(client, keys, params, options, handoff)
-        for i, asset in results:
-            out[i] = asset
-            if bar:
-                bar.advance(task)
-    return out  # type: ignore[return-value]
+            step = lambda _i: bar.advance(task)  # noqa: E731
+        return run(tasks, done=step)
 
 
-def _draw_shared_textures(keys, params: dict, options) -> None:
-    """Draw here the textures of every species with more than one prototype, before the
-    workers are forked: each would otherwise draw them again for the first of its prototypes
-    of that species (measured: ~0.09 s of CPU a species, 3 of 7 draws saved on the 1,000-tree
-    example); a species built once draws its own on its worker."""
-    from collections import Counter
-
-    from ..materials import draw_textures
-
-    count = Counter(path for path, _seed in keys)
-    for path, n in count.items():
-        if n > 1:
-            _in_file(path, draw_textures, params[path], options.materials)
+def _here(tasks: list[tuple], done=None) -> list:
+    out = []
+    for i, (fn, *args) in enumerate(tasks):
+        out.append(fn(*args))
+        if done is not None:
+            done(i)
+    return out
 
 
-@contextlib.contextmanager
-def _cluster(scheduler: str | None, workers: int, report: dict | None, warm=None):
-    """The Dask client the prototypes are built on. The embedded cluster's workers are forks
-    of this process (executor.dask_client(fork=True)): it has not rendered, and no thread of
-    ours runs yet; `warm` runs just before they are forked. Otherwise they come from the fork
-    server."""
-    from ..executor import dask_client
-
-    with dask_client(scheduler, workers, fork=True, warm=warm) as (client, where):
-        if report is not None:
-            report["cluster"] = where
-        yield client
-
-
-def _on_dask(client, keys, params, options, handoff: str | None = None):
-    """Yield (index, prototype) as the cluster finishes them; a worker's TreegenError comes
-    back naming its species file. `handoff`: a directory the workers share with this process
-    (the embedded cluster's), through which prototypes come back (build_prototype_to)."""
-    import pickle
-
+def _on_cluster(client, names: list[str], tasks: list[tuple], done=None) -> list:
+    """Run the tasks (Dask keys: `names` and this run's id) on a Dask cluster, in list order as its workers free up; `done(i)` as
+    each comes back. A worker's TreegenError (it names its species file) is raised here."""
     from distributed import as_completed
 
     run = f"{os.getpid():x}{time.time_ns() & 0xFFFFFF:x}"
     # one map, not a submit each: the scheduler sees the group whole and queues it (a worker
     # takes its next prototype when free); tasks submitted one by one are placed as they come
-    mapped = client.map(
-        build_prototype if handoff is None else functools.partial(build_prototype_to, handoff),
-        [params[p] for p, _s in keys],
-        [s for _p, s in keys],
-        options=options,
-        key=[f"treegen-forest-{p.stem}-{s}-{run}" for p, s in keys],
-    )
-    futures = {fut: i for i, fut in enumerate(mapped)}
-    for fut in as_completed(list(futures), loop=client.loop):
-        i = futures.pop(fut)
-        result = _in_file(keys[i][0], fut.result)
-        if handoff is not None:
-            with open(result, "rb") as f:
-                result = pickle.load(f)
-            os.unlink(f.name)
-        yield i, result
+    mapped = client.map(_call, tasks, key=[f"{name}-{run}" for name in names])
+    index = {fut: i for i, fut in enumerate(mapped)}
+    out: list = [None] * len(tasks)
+    for fut in as_completed(list(index), loop=client.loop):
+        i = index.pop(fut)
+        out[i] = fut.result()
         fut.release()
+        if done is not None:
+            done(i)
+    return out
+
+
+def _call(task: tuple):
+    fn, *args = task
+    return fn(*args)
 
 
 def _check_sizes(layout: Layout, prototypes: list[Asset], proto: np.ndarray, scale: np.ndarray, limit: float):
