@@ -16,6 +16,7 @@ import math
 import os
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -94,6 +95,7 @@ def build_prototypes(
     if progress is None:
         progress = sys.stderr.isatty()
     tasks = [(functools.partial(_in_file, p, build_prototype), params[p], s, options) for p, s in keys]
+    run: Callable[..., list]
     with contextlib.ExitStack() as stack:
         # workers first: the bar's thread would stop them forking
         if remote:
