@@ -22,6 +22,14 @@ free cores; byte-identical outputs checked in every run):
     treegen batch --workers 1             21.7    1.86×  19.5 s building on workers; cluster start+stop 0.7 s
     treegen batch --workers 2             16.3    2.48×  28.2 s building on workers
     scheduler overhead per job (1 worker): 2 ms
+
+Again 2026-11-27 (load 0.7-2.4; every job now renders an impostor, so each costs more):
+
+    loop (treegen make processes)        109.5    1.00×
+    loop (api.make in one process)        74.0    1.48×
+    treegen batch --workers 1             71.8    1.53×  69.3 s building on workers; cluster start+stop 1.0 s
+    treegen batch --workers 2             46.7    2.34×  88.6 s building on workers
+    scheduler overhead per job (1 worker): 4 ms
 """
 
 from __future__ import annotations
