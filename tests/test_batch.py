@@ -74,7 +74,16 @@ def workspace(tmp_path_factory) -> Path:
     ):
         shutil.copy(src, root / "species" / src.name)
     (root / "catalogue.json").write_text(json.dumps(CATALOGUE, indent=1))
+    (root / "images").mkdir()
+    (root / "images" / "not.png").write_text("a text file named .png")
+    _png(root / "images" / "leaf.png", (40, 160, 40, 255))
     return root
+
+
+def _png(path: Path, rgba: tuple) -> None:
+    from PIL import Image
+
+    Image.new("RGBA", (8, 8), rgba).save(path)
 
 
 @pytest.fixture(scope="module")
@@ -255,7 +264,10 @@ def test_a_failing_entry_is_reported_by_its_json_path_and_the_rest_complete(
     proc = treegen("batch", cat, "-o", out, "--scheduler", cluster["address"], "--force", "--json")
     assert proc.returncode == 1, proc.stderr
     err = [line for line in proc.stderr.splitlines() if line.strip()]
-    assert len(err) == 1 and "entries[3]" in err[0] and "seed 1" in err[0] and "--max-leaves" in err[0], err
+    assert len(err) == 1 and "entries[3]" in err[0] and "seed 1" in err[0], err
+    assert "raise entries[3].max_leaves" in err[0] and "--max-leaves" not in err[0], (
+        err
+    )  # the key, not the flag
     done = events(proc.stdout)[-1]
     assert done["built"] == 12 and done["failed"] == 1, done
     rows = {r["path"]: r for r in json.loads((out / "manifest.json").read_text())["assets"]}
@@ -509,6 +521,23 @@ def test_a_file_where_an_output_folder_goes_is_refused_before_anything_runs(work
             {"entries": [{"species": "species/rush.txt", "wind_speed": 3, "grid": {"wind_speed": [1]}}]},
             ["entries[0].grid.wind_speed", "also set as entries[0].wind_speed"],
         ),
+        # an artist's images are read before anything runs, relative to the catalogue
+        (
+            {"entries": [{"species": "species/rush.txt", "leaf_texture": "images/missing.png"}]},
+            ["entries[0].leaf_texture", "images/missing.png: no such file"],
+        ),
+        (
+            {"defaults": {"bark_texture": "images/not.png"}, "entries": [{"species": "species/rush.txt"}]},
+            ["defaults.bark_texture", "images/not.png: not a PNG image"],
+        ),
+        (
+            {
+                "entries": [
+                    {"species": "species/rush.txt", "no_textures": True, "leaf_texture": "images/leaf.png"}
+                ]
+            },
+            ["entries[0].leaf_texture", "cannot be combined with entries[0].no_textures"],
+        ),
     ],
 )
 def test_catalogue_errors_name_the_json_path_exit_2_and_write_nothing(workspace, change, needles):
@@ -555,6 +584,41 @@ def test_seeds_grid_and_names_expand_as_documented(workspace):
     ]
     assert cat.jobs[-1].task == cat.jobs[-2].task and cat.jobs[-1].key != cat.jobs[-2].key
     assert len(cat.params) == 2  # each species parsed once
+
+
+def test_artist_images_are_relative_to_the_catalogue_and_keyed_by_their_bytes(workspace):
+    """A leaf PNG named in a catalogue is found beside the catalogue (as species files are),
+    whatever the working directory, and its bytes are part of the task's key: an edited image
+    rebuilds, an unchanged one does not."""
+    from treegen_cli.batch import parse_catalogue
+
+    def task(**entry) -> tuple:
+        data = {"entries": [{"species": "species/rush.txt", "seeds": [1], **entry}]}
+        cat = parse_catalogue(data, workspace / "x.json")
+        (job,) = cat.jobs
+        return job.task, cat.resolved[job.task].options.materials.leaf_texture
+
+    plain, none = task()
+    image = workspace / "images" / "edited.png"
+    _png(image, (40, 160, 40, 255))
+    first, path = task(leaf_texture="images/edited.png")
+    again, _ = task(leaf_texture="images/edited.png")
+    _png(image, (40, 120, 40, 255))
+    edited, _ = task(leaf_texture="images/edited.png")
+    assert none is None and path == image
+    assert first == again and len({plain, first, edited}) == 3
+
+
+def test_a_build_error_names_the_catalogue_key_not_the_make_flag(workspace):
+    """Errors a tree's build raises (here the triangle budget, planned by --dry-run) come in
+    `treegen make`'s words (`--triangles 5`); batch says which JSON path set the option."""
+    cat = workspace / "tiny.json"
+    cat.write_text(
+        json.dumps({"entries": [{"species": "species/rush.txt", "seeds": [1], "grid": {"triangles": [5]}}]})
+    )
+    proc = treegen("batch", cat, "-o", workspace / "tiny", "--dry-run")
+    assert proc.returncode == 1, proc.stderr
+    assert "entries[0].grid.triangles[0] 5" in proc.stderr and "--triangles" not in proc.stderr, proc.stderr
 
 
 def test_dry_run_prints_the_table_and_an_estimate_and_writes_nothing(workspace):
@@ -620,7 +684,7 @@ def test_dry_run_plans_what_the_run_builds_with_budgets_and_profiles(workspace):
     assert doc["build"] == 4 and doc["trees"] == 3 and doc["failing"] == 1
     assert doc["estimated_bytes"] > 0 and "plan" in doc["estimate"]
     planned = {j["path"]: j for j in doc["jobs"]}
-    assert "use --triangles" in planned["tiny.glb"]["error"]
+    assert "use entries[2].triangles" in planned["tiny.glb"]["error"]
     rush, pair = planned["rush_1.glb"], planned["pair_small_2.glb"]
     assert rush["triangles"][0] <= 20_000 and max(rush["joints"]) <= 64  # the mobile row
     assert len(rush["triangles"]) == 4  # 0.3,0.1 switches + the impostor

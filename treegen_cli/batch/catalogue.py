@@ -56,6 +56,22 @@ class Catalogue:
     params: dict = field(default_factory=dict)  # species file → Params, parsed once
     digests: dict = field(default_factory=dict)  # species file → sha256 of its bytes
     resolved: dict = field(default_factory=dict)  # task → api.Resolved
+    labels: dict = field(default_factory=dict)  # task → {option: the JSON path that set it}
+
+    def reword(self, job: Job, message: str) -> str:
+        """A build's error in the catalogue's terms: each make option's `--flag` in it
+        (`--triangles 5`, from the code `treegen make` shares) becomes the JSON path that set
+        the option for this job (`entries[0].triangles 5`), as the checks before a run say."""
+        labels = self.labels.get(job.task, {})
+
+        def path(m: re.Match) -> str:
+            key = m.group(1).replace("-", "_")
+            return labels.get(key, m.group(0))
+
+        return _FLAG.sub(path, message)
+
+
+_FLAG = re.compile(r"(?<![\w-])--([a-z][a-z0-9-]*)")
 
 
 def load_catalogue(path: str | os.PathLike, max_jobs: int = MAX_JOBS) -> Catalogue:
@@ -198,6 +214,8 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
     loaded: dict = {}
     jobs: list[Job] = []
     resolved: dict = {}
+    labels: dict = {}
+    seen_images: dict = {}
     outputs: dict[str, str] = {}
     for i, entry in enumerate(data["entries"]):
         where = f"entries[{i}]"
@@ -247,6 +265,7 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
                 raise TreegenError(
                     msg if msg.startswith(("entries[", "defaults.")) else f"{where}: {msg}"
                 ) from None
+            base_job, images = _artist_images(base_job, base, label, seen_images)
             if base_job.values["compress"] == "meshopt":
                 from ..exchange.compress import check_encoder
 
@@ -272,7 +291,11 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
                 if k != "seed" and not (k in api.UNSET_FREE and v is None)
             }
             for seed in seeds:
-                task = short_hash({"species": digest, "seed": seed, "options": values, "treegen": build_id()})
+                identity = {"species": digest, "seed": seed, "options": values, "treegen": build_id()}
+                if images:  # an edited PNG rebuilds (only keyed when given: older keys hold)
+                    identity["images"] = images
+                task = short_hash(identity)
+                labels[task] = {k: label(k) for k in api.DEFAULTS}
                 resolved[task] = api.Resolved(
                     seed=seed, options=base_job.options, values={**base_job.values, "seed": seed}
                 )
@@ -316,7 +339,37 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
         params={p: v[0] for p, v in loaded.items()},
         digests={p: v[1][:16] for p, v in loaded.items()},
         resolved=resolved,
+        labels=labels,
     )
+
+
+def _artist_images(job, base: Path, label, seen: dict):
+    """An entry's own leaf and bark PNGs: relative to the catalogue (as species files are),
+    read and checked now (a broken file fails before anything runs, not on a worker), and
+    with --no-textures refused. Returns the job with absolute paths and {option: sha256 of
+    the file} for its key."""
+    from dataclasses import replace
+
+    from ..materials import check_options, read_png
+
+    mats = job.options.materials
+    fixed, images = {}, {}
+    for key in ("leaf_texture", "bark_texture"):
+        given = getattr(mats, key)
+        if given is None:
+            continue
+        path = given if given.is_absolute() else base / given
+        if path not in seen:
+            seen[path] = hashlib.sha256(read_png(path, label(key))).hexdigest()[:16]
+        fixed[key], images[key] = path, seen[path]
+    if not fixed:
+        return job, images
+    try:
+        check_options(mats)
+    except TreegenError as e:
+        raise TreegenError(_FLAG.sub(lambda m: label(m.group(1).replace("-", "_")), str(e))) from None
+    materials = replace(mats, **fixed)
+    return replace(job, options=replace(job.options, materials=materials)), images
 
 
 def species_sha(cat: Catalogue, job: Job) -> str:

@@ -60,7 +60,7 @@ def plan_trees(
         try:
             out[job.task] = plan_asset(cat.params[job.species], r.seed, r.options)
         except TreegenError as e:
-            out[job.task] = str(e)
+            out[job.task] = cat.reword(job, str(e))
         if seconds is not None:
             seconds[job.task] = time.process_time() - t0
     return out

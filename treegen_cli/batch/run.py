@@ -196,7 +196,7 @@ def _build_all(cat, plan, out_dir, tasks, client, rows, on_event, as_completed) 
         try:
             results = fut.result()
         except TreegenError as e:
-            results, reason = None, str(e)
+            results, reason = None, cat.reword(jobs[0], str(e))
         except Exception as e:  # worker crash, KilledWorker, a bug
             results, reason = None, f"{type(e).__name__}: {e}"
         for k, job in enumerate(jobs):
