@@ -304,6 +304,16 @@ def test_usdz_under_a_temp_name(tmp_path):
     assert Usd.Stage.Open(str(final)).GetDefaultPrim().GetName() == "synthetic"
 
 
+def test_accented_names_become_ascii_prim_names(tmp_path):
+    """`palmé` is the prim `palme`, not `palm__` (its é as two UTF-8 bytes); the file validates."""
+    from dataclasses import replace
+
+    path = tmp_path / "palme.usda"
+    write_usd(replace(synthetic_asset(lods=1), name="palmé"), path)
+    assert validate_usd(path) == []
+    assert Usd.Stage.Open(str(path)).GetDefaultPrim().GetName() == "palme"
+
+
 def test_no_clip_writes_a_static_skinned_tree(tmp_path):
     path = tmp_path / "static.usdc"
     write_usd(synthetic_asset(lods=1, with_clip=False), path)

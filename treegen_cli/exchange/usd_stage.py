@@ -149,9 +149,15 @@ def gf_vec3f(v):
 
 
 def identifier(name: str) -> str:
+    """A prim name every USD reader takes: ASCII (accents dropped, `palmé` → `palme`, where
+    Tf.MakeValidIdentifier alone makes `palm__` of its two UTF-8 bytes; readers before USD
+    24.03 refuse UTF-8 names), other characters as underscores."""
+    import unicodedata
+
     from pxr import Tf
 
-    return Tf.MakeValidIdentifier(name or "tree")
+    plain = unicodedata.normalize("NFKD", name or "").encode("ascii", "ignore").decode("ascii")
+    return Tf.MakeValidIdentifier(plain or name or "tree")
 
 
 def unique(name: str, used: set[str]) -> str:
