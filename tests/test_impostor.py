@@ -591,6 +591,41 @@ def test_atlas_side_follows_texture_size_and_profile():
 
 
 @needs_gl
+def test_impostor_distance_places_the_impostor_beyond_the_last_lod(tmp_path):
+    """--impostor-distance sets the impostor's switch in metres, as --lod-distances sets the
+    LODs': written in the file's LOD list; nearer than the last LOD, not positive or without
+    an impostor it is refused naming the option (a catalogue names its JSON path) and nothing
+    is written."""
+    from treegen_cli import api
+    from treegen_cli.batch import parse_catalogue
+    from treegen_cli.errors import TreegenError
+
+    out = tmp_path / "rush.glb"
+    clip = dict(duration=1.0, fps=10.0, lod_distances=[0, 15, 60])
+    s = api.make(species_path("rush"), out, impostor_distance=200, **clip)
+    assert [lod["distance_m"] for lod in s["lods"]] == [0, 15, 60, 200]
+    assert s["lods"][-1]["triangles"] <= 8  # the cards
+    refused = {
+        "40": ({"impostor_distance": 40}, r"--impostor-distance 40: .*after the last LOD, used from 60 m"),
+        "0": ({"impostor_distance": 0}, r"^--impostor-distance 0: the distance must be > 0 metres$"),
+        "off": (
+            {"impostor_distance": 400, "impostor": False},
+            r"^--impostor-distance: .*--no-impostor builds",
+        ),
+    }
+    for name, (options, message) in refused.items():
+        bad = tmp_path / f"{name}.glb"
+        with pytest.raises(TreegenError, match=message):
+            api.make(species_path("rush"), bad, **{**clip, **options})
+        assert not bad.exists()
+    with pytest.raises(
+        TreegenError, match=r"^entries\[0\]\.impostor_distance: 0 is out of range; allowed \(0, inf\)$"
+    ):
+        entry = {"species": str(species_path("rush")), "impostor_distance": 0}
+        parse_catalogue({"entries": [entry]}, tmp_path / "c.json")
+
+
+@needs_gl
 def test_a_smaller_atlas_is_written_smaller_and_says_so(tmp_path):
     """At --impostor-size 512 the PNGs are 512² with 32 px views, the extras and the sidecar
     say so, and the atlas takes at most a third of the default's bytes."""

@@ -48,7 +48,8 @@ class ImpostorOptions:
 
     switch_px: the tree's height on screen (pixels of the LOD options' view, width / aspect
     high) below which the impostor is used; at 1.5 × cell an atlas texel spans 1.5 pixels there.
-    The switch is never nearer than min_factor × the last geometric LOD's distance."""
+    The switch is never nearer than min_factor × the last geometric LOD's distance.
+    distance: metres that replace both (--impostor-distance), beyond the last LOD's."""
 
     grid: int = 16  # views per side of the atlas (engine plug-ins' 16 × 16)
     cell: int = 64  # pixels per view: a 1024 × 1024 atlas
@@ -59,6 +60,7 @@ class ImpostorOptions:
     # LODs have ≤ 17,000); thin twigs, dropped, lose a bush's cover (−51 % at 8,000 of 11,294)
     max_bark_triangles: int = 40_000
     alpha_cutoff: float = 0.5
+    distance: float | None = None
 
     def __post_init__(self) -> None:
         if not 2 <= self.grid <= 64 or not 8 <= self.cell <= 512 or self.grid * self.cell > 8192:
@@ -71,9 +73,11 @@ class ImpostorOptions:
             and self.min_factor >= 1
             and self.max_leaf_cards >= 1
             and self.max_bark_triangles >= 1
+            and (self.distance is None or self.distance > 0)
         ):
             raise TreegenError(
-                "impostor: switch_px > 0, min_factor >= 1, max_leaf_cards and max_bark_triangles >= 1"
+                "impostor: switch_px > 0, min_factor >= 1, max_leaf_cards and max_bark_triangles "
+                ">= 1, distance > 0 metres"
             )
 
 
@@ -296,7 +300,15 @@ def trunk_sway(lod: Lod, height: float) -> tuple[Skeleton, Clip | None]:
 
 
 def switch_distance(height: float, last: float, lod_options: LodOptions, options: ImpostorOptions) -> float:
-    """Metres from which the tree is at most switch_px tall on screen (and ≥ min_factor × last)."""
+    """Metres from which the tree is at most switch_px tall on screen (and ≥ min_factor × last),
+    or the user's `distance`, which must lie beyond the last LOD's."""
+    if options.distance is not None:
+        if not options.distance > last:
+            raise TreegenError(
+                f"--impostor-distance {options.distance:g}: the impostor comes after the last LOD, "
+                f"used from {last:.4g} m on this tree; give more than {last:.4g}"
+            )
+        return float(options.distance)
     d = screen_distance(height, options.switch_px, lod_options, of=lod_options.width / lod_options.aspect)
     return float(max(d, options.min_factor * last, 1e-3))
 

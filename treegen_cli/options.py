@@ -47,6 +47,7 @@ DEFAULTS: dict[str, object] = {
     "leaf_geometry": MESH_DEFAULTS.leaf_geometry,
     "texture_size": MATERIAL_DEFAULTS.texture_size,
     "impostor_size": None,  # None: impostor.atlas_side(texture_size)
+    "impostor_distance": None,  # None: where the tree is switch_px tall (impostor.switch_distance)
     "leaf_texture": MATERIAL_DEFAULTS.leaf_texture,
     "bark_texture": MATERIAL_DEFAULTS.bark_texture,
     "no_textures": not MATERIAL_DEFAULTS.textures,
@@ -87,7 +88,8 @@ INTS = ("seed", "max_stems", "max_leaves", "max_joints", "width", "max_vertices"
 OPTIONAL_INTS = ("triangles", "joints", "impostor_size")
 # Options added after assets were first keyed: left out of identity hashes while unset, so a
 # catalogue built before they existed keeps its keys (batch/catalogue.py).
-UNSET_FREE = ("triangles", "joints", "profile", "impostor_size")
+UNSET_FREE = ("triangles", "joints", "profile", "impostor_size", "impostor_distance")
+OPTIONAL_FLOATS = ("impostor_distance",)
 PATHS = ("leaf_texture", "bark_texture")
 FLOATS = (
     "max_size",
@@ -174,13 +176,13 @@ def _scalar(key: str, value, label: Callable[[str], str]):
         if not isinstance(value, bool):
             raise TreegenError(f"{label(key)} {value!r}: expected true or false")
         return value
-    if key in OPTIONAL_INTS and value is None:
+    if key in (*OPTIONAL_INTS, *OPTIONAL_FLOATS) and value is None:
         return None
     if key in INTS or key in OPTIONAL_INTS:
         if isinstance(value, bool) or not isinstance(value, int):
             raise TreegenError(f"{label(key)} {value!r}: expected a whole number")
         return value
-    if key in FLOATS:
+    if key in FLOATS or key in OPTIONAL_FLOATS:
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
             raise TreegenError(f"{label(key)} {value!r}: expected a finite number")
         return float(value)
@@ -208,7 +210,16 @@ MAX_SEED = 2**63 - 1  # every seed (make, batch, forest layouts): numpy's int64
 # options that shape only the clip, only the LODs: given with --no-wind / --no-lod or for a
 # static format they would be silently ignored
 WIND_ONLY = ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "stiffness")
-LOD_ONLY = ("lod_screen", "lod_distances", "lod_triangles", "lod_files", "schedule", "impostor_size")
+LOD_ONLY = (
+    "lod_screen",
+    "lod_distances",
+    "lod_triangles",
+    "lod_files",
+    "schedule",
+    "impostor_size",
+    "impostor_distance",
+)
+IMPOSTOR_ONLY = ("impostor_size", "impostor_distance")
 
 
 def _static(output) -> bool:
@@ -229,6 +240,11 @@ def _check_no_effect(options: dict, label: Callable[[str], str], output) -> None
             why = f"{label('no_wind')} builds no clip"
         elif k in LOD_ONLY and options.get("no_lod"):
             why = f"{label('no_lod')} builds one LOD"
+        elif k in IMPOSTOR_ONLY and options.get("impostor") is False:
+            off = (
+                "--no-impostor" if label("impostor") == cli_name("impostor") else f"{label('impostor')} false"
+            )
+            why = f"{off} builds no impostor"
         else:
             continue
         raise TreegenError(f"{label(k)}: has no effect, {why}; leave it out")
@@ -313,6 +329,9 @@ def resolve(
             IMPOSTOR_SIZES,
             "the atlas side must be a power of two in [{lo}, {hi}] px",
         )
+    distance = v["impostor_distance"]
+    if distance is not None and not distance > 0:
+        raise TreegenError(f"{label('impostor_distance')} {distance:g}: the distance must be > 0 metres")
     static = _static(output)
     if output is not None:
         check_compress(output, v["compress"], label("compress"))
@@ -350,7 +369,7 @@ def resolve(
     lod = None if static else lod
 
     make_options = MakeOptions(
-        impostor=sized(side or atlas_side(n), IMPOSTOR_DEFAULTS)
+        impostor=replace(sized(side or atlas_side(n), IMPOSTOR_DEFAULTS), distance=distance)
         if v["impostor"] and lod is not None
         else None,
         generate=GenerateOptions(

@@ -13,7 +13,7 @@ from click.core import ParameterSource
 
 from ..errors import TreegenError
 from ..executor import scheduler_address
-from ..options import CHOICES, DEFAULTS, FLAGS, FLOATS, GROUPS, INTS, OPTIONAL_INTS, PATHS
+from ..options import CHOICES, DEFAULTS, FLAGS, FLOATS, GROUPS, INTS, OPTIONAL_FLOATS, OPTIONAL_INTS, PATHS
 
 # name → (extra flag spelling or None, help, metavar or None); the type and default are not here
 HELP: dict[str, tuple[str | None, str, str | None]] = {
@@ -95,6 +95,13 @@ HELP: dict[str, tuple[str | None, str, str | None]] = {
         "Impostor atlas side in pixels, a power of two in [128, 2048]: 16 × 16 "
         "views of a sixteenth of it each [default: 2 × --texture-size, at most 1024].",
         "PX",
+    ),
+    "impostor_distance": (
+        None,
+        "Metres (from the tree's centre) from which the impostor is used, beyond the "
+        "last LOD [default: where the tree is 96 px tall on screen, at least 1.5 × the "
+        "last LOD's distance].",
+        "M",
     ),
     "leaf_texture": (
         None,
@@ -196,6 +203,7 @@ MAKE = (
     "lod_files",
     "impostor",
     "impostor_size",
+    "impostor_distance",
     "compress",
     "max_vertices",
     "max_keys",
@@ -218,7 +226,7 @@ def option(name: str, help: str | None = None):
         kw["type"] = click.Choice([c for c in CHOICES[name] if c is not None])
     elif name in INTS or name in OPTIONAL_INTS:
         kw["type"] = int
-    elif name in FLOATS:
+    elif name in FLOATS or name in OPTIONAL_FLOATS:
         kw["type"] = float
     elif name in PATHS:
         kw["type"] = click.Path(path_type=Path)
