@@ -91,18 +91,12 @@ OPTIONAL_INTS = ("triangles", "joints", "impostor_size")
 UNSET_FREE = ("triangles", "joints", "profile", "impostor_size", "impostor_distance")
 OPTIONAL_FLOATS = ("impostor_distance",)
 PATHS = ("leaf_texture", "bark_texture")
-FLOATS = (
-    "max_size",
-    "wind_speed",
-    "wind_dir",
-    "gust",
-    "turbulence",
-    "duration",
-    "fps",
-    "fov",
-    "error_px",
-    "stiffness",
-)
+# options that shape only the clip, only the LODs, only the impostor: given with --no-wind,
+# --no-lod or --no-impostor or for a static format they would be silently ignored
+WIND_ONLY = ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "stiffness")
+IMPOSTOR_ONLY = ("impostor_size", "impostor_distance")
+LOD_ONLY = ("lod_screen", "lod_distances", "lod_triangles", "lod_files", "schedule", *IMPOSTOR_ONLY)
+FLOATS = ("max_size", "fov", "error_px", *WIND_ONLY)
 FLAGS = ("no_wind", "no_lod", "lod_files", "no_textures", "impostor")
 CHOICES = {
     "leaf_geometry": ("card", "shape"),
@@ -207,19 +201,6 @@ def _power_of_two(flag: str, n: int, bounds: tuple[int, int], rule: str) -> None
 
 
 MAX_SEED = 2**63 - 1  # every seed (make, batch, forest layouts): numpy's int64
-# options that shape only the clip, only the LODs: given with --no-wind / --no-lod or for a
-# static format they would be silently ignored
-WIND_ONLY = ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "stiffness")
-LOD_ONLY = (
-    "lod_screen",
-    "lod_distances",
-    "lod_triangles",
-    "lod_files",
-    "schedule",
-    "impostor_size",
-    "impostor_distance",
-)
-IMPOSTOR_ONLY = ("impostor_size", "impostor_distance")
 
 
 def _static(output) -> bool:
