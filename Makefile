@@ -41,6 +41,7 @@ gallery:
 		echo "docs/gallery/$$s.png"; done
 	treegen preview species/quaking_aspen.txt --animate docs/gallery/quaking_aspen_wind.gif --size 240 --fps 10 -q
 	treegen preview species/weeping_willow.txt --animate docs/gallery/weeping_willow_wind.gif --size 240 --fps 10 -q
+	treegen preview examples/forest_1000.json -o docs/gallery/forest_1000.png --size 640x360 --png-colors 256 -q
 	@ls -l docs/gallery
 
 clean:

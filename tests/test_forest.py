@@ -1055,3 +1055,110 @@ def test_200_trees_with_all_lods_cost_little_more_than_their_prototypes(tmp_path
         p.stat().st_size for k, a in enumerate(sc.prototypes) for p in export(a, tmp_path / f"p{k}.glb")
     )
     assert forest <= 1.2 * own, (forest, own)
+
+
+# ----------------------------------------------------------------------------- preview of a layout
+
+ROW = [-12, 0, 12]  # three poplars in a row, across the camera's view
+
+
+def row_layout(**over) -> dict:
+    return layout_dict(
+        camera={"position": [0, -45, 5], "target": [0, 0, 8], "fov_deg": 60, "width_px": 1280},
+        instances=[{"species": POPLAR, "position": [x, 0], "seed": 1} for x in ROW],
+        scatter=[],
+        **over,
+    )
+
+
+@pytest.fixture(scope="module")
+def row_view(tmp_path_factory):
+    """The row layout's preview, drawn in this process: (image, camera, summary)."""
+    from treegen_cli.preview import PreviewOptions, render_still
+    from treegen_cli.preview_forest import forest_view
+
+    path = write_layout(tmp_path_factory.mktemp("row"), row_layout())
+    options = PreviewOptions(width=240, height=135, sun_azimuth=-90.0, sun_elevation=85.0)
+    scene, camera, summary = forest_view(path, options.azimuth, options.elevation, 240 / 135, workers=1)
+    return render_still(scene, options, camera=camera), camera, summary
+
+
+def _columns(camera, width: int, height: int, points_z_up) -> np.ndarray:
+    """Pixel columns of world points (Z up) seen by the preview camera."""
+    from treegen_cli.axes import Z_UP_TO_Y_UP
+
+    p = np.asarray(points_z_up, float) @ Z_UP_TO_Y_UP.T
+    clip = np.c_[p, np.ones(len(p))] @ camera.view_proj(width / height).T
+    return (clip[:, 0] / clip[:, 3] * 0.5 + 0.5) * width
+
+
+def test_layout_preview_draws_each_tree_where_the_layout_puts_it(row_view):
+    """`treegen preview LAYOUT.json`: from the layout's camera, each poplar shows as tree
+    pixels (not sky) in the column its position projects to, with sky between them; all
+    three at the LOD the camera needs (25-60 m: LOD1)."""
+    img, camera, summary = row_view
+    assert summary == {
+        "trees": 3,
+        "prototypes": 1,
+        "trees_per_lod": [0, 3, 0, 0],
+        "camera": "layout",
+    }  # 45 m: LOD1
+    h, w = img.shape[:2]
+    rgb = img.astype(float)
+    sky = (rgb[..., 2] > rgb[..., 1] + 8) & (rgb[..., 2] > rgb[..., 0] + 8)
+    band = slice(int(0.15 * h), int(0.45 * h))  # rows of the crowns, above the horizon
+    trees = _columns(camera, w, h, [[x, 0, 10] for x in ROW])
+    gaps = _columns(camera, w, h, [[x, 0, 10] for x in (-6, 6)])
+    for c in trees:
+        assert not sky[band, int(c) - 2 : int(c) + 3].all(axis=0).any(), c  # a tree in every column
+    for c in gaps:
+        assert sky[band, int(c)].mean() > 0.5, c  # sky between them
+
+
+def test_layout_preview_shades_each_tree_by_its_own_crown(row_view):
+    """Each tree's sky light is dimmed inside its own crown (Part.crown), as a single tree's
+    preview does: the middle poplar is as bright as its neighbours under a sun from overhead.
+    With one crown around the whole row it came out darker (it sat in that crown's core)."""
+    img, camera, _summary = row_view
+    h, w = img.shape[:2]
+    rgb = img.astype(float)
+    lum = rgb @ [0.2126, 0.7152, 0.0722]
+    sky = (rgb[..., 2] > rgb[..., 1] + 8) & (rgb[..., 2] > rgb[..., 0] + 8)
+    band = slice(int(0.15 * h), int(0.45 * h))
+    means = []
+    for c in _columns(camera, w, h, [[x, 0, 10] for x in ROW]):
+        cols = slice(int(c) - 6, int(c) + 7)
+        tree = ~sky[band, cols]
+        means.append(lum[band, cols][tree].mean())
+    left, middle, right = means
+    assert abs(middle / ((left + right) / 2) - 1) < 0.04, means  # one crown: 9 % darker
+
+
+def test_layout_preview_without_a_camera_frames_every_tree(tmp_path):
+    """With no camera, the preview frames every tree's box from --azimuth/--elevation and
+    picks each tree's LOD by its distance to that camera, as the layout's camera would."""
+    from treegen_cli.preview_forest import forest_view
+
+    data = no_camera(instances=[{"species": POPLAR, "position": [x, 0], "seed": 1} for x in ROW], scatter=[])
+    scene, camera, summary = forest_view(write_layout(tmp_path, data), -90.0, 20.0, 16 / 9, workers=1)
+    assert summary["camera"] == "framed" and summary["trees"] == 3
+    cols = _columns(camera, 160, 90, [[x, 0, z] for x in (-14, 14) for z in (0, 20)])
+    assert (cols > 0).all() and (cols < 160).all(), cols
+    assert sorted({round(float(p.crown[0][0])) for p in scene.parts}) == ROW  # a crown each tree
+
+
+def test_layout_preview_cli_writes_a_png_and_refuses_tree_only_flags(tmp_path):
+    import subprocess
+    import sys
+
+    path = write_layout(tmp_path, row_layout())
+    out = tmp_path / "row.png"
+    run = [sys.executable, "-m", "treegen_cli", "preview", str(path)]
+    proc = subprocess.run([*run, "-o", str(out), "--size", "96x54", "--json"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads(proc.stdout)
+    assert summary["trees"] == 3 and summary["image"] == str(out) and out.stat().st_size > 0
+    for flag in (["--animate", str(tmp_path / "a.gif")], ["--lod", "2"]):
+        bad = subprocess.run([*run, "-o", str(tmp_path / "x.png"), *flag], capture_output=True, text=True)
+        assert bad.returncode == 2 and f"{flag[0]}: not for a forest layout" in bad.stderr, bad.stderr
+        assert "Traceback" not in bad.stderr and not (tmp_path / "x.png").exists()

@@ -161,12 +161,15 @@ def _renderer(scene: Drawable, options: PreviewOptions, renderer=None):
     return nullcontext(renderer) if renderer is not None else Renderer(scene, options.width, options.height)
 
 
-def render_still(scene: Drawable, options: PreviewOptions = DEFAULTS, renderer=None) -> np.ndarray:
+def render_still(
+    scene: Drawable, options: PreviewOptions = DEFAULTS, renderer=None, camera=None
+) -> np.ndarray:
     """The rest (bind) pose, no wind, as uint8 (height, width, 3); `renderer`: an open one to
-    reuse. (The wind clip's t = 0 is a swayed pose, not the rest pose the help promises.)"""
+    reuse; `camera`: a fixed one (a layout's), else one framing the scene. (The wind clip's
+    t = 0 is a swayed pose, not the rest pose the help promises.)"""
     rest = replace(scene, skinning=None)
     times = np.zeros(1)
-    camera = camera_for(rest, options, times)
+    camera = camera or camera_for(rest, options, times)
     with _renderer(scene, options, renderer) as r:
         az, el = sun_angles(options)
         return r.render(camera, rest.pose(times)[0], az, el)
@@ -189,6 +192,17 @@ def render_loop(scene: Drawable, options: PreviewOptions = DEFAULTS, renderer=No
 
 
 # ------------------------------------------------------------------------------ command
+
+
+def _layout_only(animate, lod: int, seed: int) -> None:
+    """What a layout's preview does not take: it draws a still, each tree at the LOD its
+    camera needs, with the layout's seeds."""
+    for given, flag in ((animate is not None, "--animate"), (lod != 0, "--lod"), (seed != 0, "--seed")):
+        if given:
+            raise TreegenError(
+                f"{flag}: not for a forest layout (its preview is a still, each tree at the LOD "
+                "its camera needs, with the layout's seeds); leave it out"
+            )
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -271,8 +285,9 @@ def preview_command(
     input_path, output, animate, azimuth, elevation, sun, size, lod, seed, fps, png_colors, as_json
 ):
     """Render INPUT headless (OpenGL on EGL; no display needed): a species file (.txt .xml,
-    grown in-process) or bundled species name (`treegen species`), or a tree written by
-    `treegen make` (.glb .gltf .usda .usdc .usdz).
+    grown in-process) or bundled species name (`treegen species`), a tree written by
+    `treegen make` (.glb .gltf .usda .usdc .usdz), or a forest layout (.json, as `treegen
+    forest` takes; a still from its camera, each tree at the LOD that camera needs).
     Lit by a sun with shadows and sky light; bark and leaves as their materials say: colours,
     textures (cut-out leaves, casting cut-out shadows; bark with its normal map), framed
     automatically from the bounds of the whole animation."""
@@ -304,12 +319,27 @@ def preview_command(
         fps=fps,
     )
     t0 = time.perf_counter()
-    scene = load_scene(input_path, options)
+    camera, forest = None, None
+    if Path(input_path).suffix.lower() == ".json":  # a forest layout: seen from its camera
+        from .preview_forest import forest_view
+
+        _layout_only(animate, lod, seed)
+        scene, camera, forest = forest_view(input_path, azimuth, elevation, width / height)
+    else:
+        scene = load_scene(input_path, options)
     lines, summary = [], {"input": str(input_path), "width": width, "height": height, "lod": lod}
+    if forest is not None:
+        summary = {"input": str(input_path), "width": width, "height": height, **forest}
     with _renderer(scene, options) as renderer:  # one GL context for the still and the loop
         if output is not None:
-            exchange.save_still(render_still(scene, options, renderer), output, png_colors)
-            lines.append(f"wrote {output}  ({width}×{height}, LOD {lod})")
+            exchange.save_still(render_still(scene, options, renderer, camera), output, png_colors)
+            what = (
+                f"LOD {lod}"
+                if forest is None
+                else f"{forest['trees']:,} trees from the {forest['camera']} camera, per LOD "
+                + " ".join(f"{n:,}" for n in forest["trees_per_lod"])
+            )
+            lines.append(f"wrote {output}  ({width}×{height}, {what})")
             summary["image"] = str(output)
         if animate is not None:
             frames = render_loop(scene, options, renderer)

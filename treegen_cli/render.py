@@ -81,6 +81,7 @@ class Renderer:
         self.shadow_tex.repeat_x = self.shadow_tex.repeat_y = False
         self.shadow_fbo = ctx.framebuffer(depth_attachment=self.shadow_tex)
         self.skin_tex = ctx.texture((4, max(scene.n_joints, 1)), 4, dtype="f4")
+        self._textures: dict = {}
         self.parts = [self._upload(p) for p in scene.parts if len(p.indices)]
         quad = np.array([-1, -1, 1, -1, -1, 1, 1, 1], dtype="f4")
         self.sky_vao = ctx.vertex_array(self.sky_prog, [(ctx.buffer(quad.tobytes()), "2f", "in_ndc")])
@@ -102,9 +103,16 @@ class Renderer:
         dvao = ctx.vertex_array(
             self.depth_prog, [b for b in bufs if b[2] != "in_normal"], index_buffer=ibo, index_element_size=4
         )
-        tex = self._texture(p.texture, True, p.wrap) if p.textured else None
-        nmap = self._texture(p.normal_map, False, p.normal_wrap) if p.bumpy else None
+        tex = self._shared(p.texture, True, p.wrap) if p.textured else None
+        nmap = self._shared(p.normal_map, False, p.normal_wrap) if p.bumpy else None
         return _GpuPart(vao, dvao, p, tex, nmap)
+
+    def _shared(self, image: np.ndarray, srgb: bool, wrap):
+        """One GL texture per image array (a forest's trees share their prototype's)."""
+        key = (id(image), srgb, tuple(wrap))
+        if key not in self._textures:
+            self._textures[key] = (image, self._texture(image, srgb, wrap))  # holds the array
+        return self._textures[key][1]
 
     def _texture(self, image: np.ndarray, srgb: bool, wrap):
         """A mipmapped GL texture; rows flipped so texture t = the bottom-left-origin v."""
@@ -245,8 +253,6 @@ class Renderer:
             self._set(self.tree_prog, k, v)
         self._set(self.tree_prog, "view_proj", view_proj)
         self._set(self.tree_prog, "skin", 0)
-        self._set(self.tree_prog, "crown_center", self.crown_center)
-        self._set(self.tree_prog, "crown_radius", self.crown_radius)
         self._set(self.tree_prog, "eye", camera.eye)
         self._set(self.tree_prog, "base_tex", 2)
         self._set(self.tree_prog, "normal_tex", 3)
@@ -256,6 +262,9 @@ class Renderer:
             self._set(self.tree_prog, "base_color", g.part.color)
             self._set(self.tree_prog, "leaf", g.part.double_sided)
             self._set(self.tree_prog, "receive_shadows", g.part.receives_shadows)
+            centre, radius = g.part.crown or (self.crown_center, self.crown_radius)
+            self._set(self.tree_prog, "crown_center", centre)
+            self._set(self.tree_prog, "crown_radius", radius)
             self._material(self.tree_prog, g)
             if g.part.one_sided:  # an engine culls single-sided faces' backs
                 ctx.enable(ctx.CULL_FACE)

@@ -36,6 +36,19 @@ from .layout import Layout, WindSpec, load_layout
 from .options import gltf_options, make_options
 
 
+def camera_lods(prototypes, proto, pos, rot, scale, eye) -> tuple[np.ndarray, np.ndarray]:
+    """(LOD, distance) of each instance seen from `eye` (Z up): its crown's centre placed,
+    per prototype (few), vectorised over its instances."""
+    centers = np.array([_crown_center(a) for a in prototypes]).reshape(-1, 3)
+    world_center = pos + scale[:, None] * np.einsum("nij,nj->ni", _rotz(rot), centers[proto])
+    dist = np.linalg.norm(world_center - np.asarray(eye, float), axis=1)
+    lods = np.zeros(len(pos), int)
+    for k, asset in enumerate(prototypes):
+        sel = proto == k
+        lods[sel] = select_lod(dist[sel], [lod.distance for lod in asset.lods], scale[sel])
+    return lods, dist
+
+
 def select_lod(distance: np.ndarray, lod_distances, scale: np.ndarray | float = 1.0) -> np.ndarray:
     """LOD index per instance: the last LOD whose `distance` ≤ the instance's effective
     distance (camera distance / scale: a tree twice as big looks like one twice as near)."""
@@ -215,16 +228,11 @@ def build_scene(
     scale = np.array([p.scale for p in placements], float)
     _check_sizes(layout, prototypes, proto, scale, options.generate.max_size)
     rot = np.array([p.rotation_deg for p in placements], float)
-    centers = np.array([_crown_center(a) for a in prototypes]).reshape(-1, 3)
-    world_center = pos + scale[:, None] * np.einsum("nij,nj->ni", _rotz(rot), centers[proto])
     lods = np.zeros(len(placements), int)
     dist = np.zeros(len(placements))
     order = np.arange(len(placements))
     if layout.camera is not None:
-        dist = np.linalg.norm(world_center - np.asarray(layout.camera.position), axis=1)
-        for k, asset in enumerate(prototypes):  # per prototype (few), vectorised over instances
-            sel = proto == k
-            lods[sel] = select_lod(dist[sel], [lod.distance for lod in asset.lods], scale[sel])
+        lods, dist = camera_lods(prototypes, proto, pos, rot, scale, layout.camera.position)
         if all_lods:
             order = np.argsort(dist / scale, kind="stable")  # nearest (on screen) first
     animated = layout.wind.enabled

@@ -1,0 +1,150 @@
+"""`treegen preview LAYOUT.json`: the forest a layout places, seen from its camera, so a layout
+can be checked by eye before it is written.
+
+The prototypes are built as `treegen forest` builds them (forest.build_scene) and each tree is
+drawn at the LOD the camera needs (the layout's camera; without one, a camera at --azimuth and
+--elevation that frames every tree, whose distances pick the LODs the same way), in the rest
+pose, placed by its instance's position, bearing and scale. Each tree is its own set of parts
+with its own crown (render.Renderer's sky occlusion is per crown); parts of one prototype's LOD
+share their textures, uploaded once.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from .axes import Z_UP_TO_Y_UP
+from .drawable import Drawable, Part, from_asset
+from .render_view import Camera, frame_points
+
+NEAR_M = 0.1  # near plane of a layout's camera, metres
+
+
+def forest_view(path, azimuth: float, elevation: float, aspect: float, workers: int | None = None):
+    """(Drawable, Camera, summary) of the layout at `path`: every tree at the LOD its camera
+    (the layout's, else one framing the forest from `azimuth`/`elevation`) needs."""
+    from .forest import build_scene, load_layout
+    from .forest.build import camera_lods
+
+    layout = load_layout(path)
+    forest = build_scene(layout, all_lods=True, workers=workers, progress=None)
+    inst = forest.instances
+    pos = np.array([i.position for i in inst], float).reshape(-1, 3)
+    rot = np.array([i.rotation_deg for i in inst], float)
+    scale = np.array([i.scale for i in inst], float)
+    proto = np.array([i.prototype for i in inst], int)
+    if layout.camera is not None:
+        cam = layout.camera
+        camera = layout_camera(cam.position, cam.target, cam.fov_deg, aspect, pos, forest)
+    else:
+        camera = _framing(forest, pos, scale, proto, azimuth, elevation, aspect)
+    lods, _dist = camera_lods(forest.prototypes, proto, pos, rot, scale, Z_UP_TO_Y_UP.T @ camera.eye)
+    drawable = placed(forest, lods)
+    counts = np.bincount(lods, minlength=max((len(a.lods) for a in forest.prototypes), default=1))
+    summary = {
+        "trees": len(inst),
+        "prototypes": len(forest.prototypes),
+        "trees_per_lod": [int(c) for c in counts],
+        "camera": "layout" if layout.camera is not None else "framed",
+    }
+    return drawable, camera, summary
+
+
+def layout_camera(position, target, fov_x_deg: float, aspect: float, pos: np.ndarray, forest) -> Camera:
+    """The layout's pinhole camera (Z up; `fov_deg` horizontal, as the LOD maths use it) as
+    the preview's (Y up; vertical field of view for an image `aspect` wide)."""
+    eye = Z_UP_TO_Y_UP @ np.asarray(position, float)
+    look = Z_UP_TO_Y_UP @ np.asarray(target, float)
+    fov_y = 2 * math.degrees(math.atan(math.tan(math.radians(fov_x_deg) / 2) / aspect))
+    tallest = max((_height(a) for a in forest.prototypes), default=1.0)
+    far = float(np.max(np.linalg.norm(pos - np.asarray(position, float), axis=1), initial=0.0))
+    return Camera(eye=eye, target=look, near=NEAR_M, far=2 * far + 4 * tallest + 100.0, fov_deg=fov_y)
+
+
+def _framing(forest, pos, scale, proto, azimuth, elevation, aspect) -> Camera:
+    """A camera at (azimuth, elevation) that fits every tree's bounding box."""
+    corners = []
+    for p, asset in enumerate(forest.prototypes):
+        lo, hi = _bounds(asset)
+        box = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        mine = proto == p
+        corners.append((pos[mine, None, :] + box[None] * scale[mine, None, None]).reshape(-1, 3))
+    pts = np.concatenate(corners) if corners else np.zeros((1, 3))
+    return frame_points(pts @ Z_UP_TO_Y_UP.T, azimuth, elevation, aspect=aspect)
+
+
+def placed(forest, lods: np.ndarray) -> Drawable:
+    """Every instance's parts at its LOD, rest pose, in world space (Y up)."""
+    shapes: dict[tuple[int, int], tuple[list[Part], np.ndarray, np.ndarray]] = {}
+    parts: list[Part] = []
+    for inst, lod in zip(forest.instances, lods):
+        key = (inst.prototype, int(lod))
+        if key not in shapes:
+            local = from_asset(forest.prototypes[inst.prototype], int(lod)).parts
+            shapes[key] = (local, *_crown(local))
+        local, centre, radius = shapes[key]
+        turn = _turn_y_up(inst.rotation_deg)
+        move = Z_UP_TO_Y_UP @ np.asarray(inst.position, float)
+        crown = (turn @ centre * inst.scale + move, _turned_radius(radius, inst.rotation_deg) * inst.scale)
+        for part in local:
+            parts.append(
+                replace(
+                    part,
+                    positions=(part.positions @ (turn.T * inst.scale) + move).astype(np.float32),
+                    normals=(part.normals @ turn.T).astype(np.float32),
+                    joints=np.zeros_like(part.joints),
+                    weights=_first_only(len(part.positions)),
+                    crown=crown,
+                )
+            )
+    return Drawable(parts=parts, n_joints=1, label=forest.name)
+
+
+def _turn_y_up(degrees: float) -> np.ndarray:
+    """A turn by `degrees` about the layout's +Z, in Y-up world space (about +Y)."""
+    a = math.radians(degrees)
+    c, s = math.cos(a), math.sin(a)
+    z = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return Z_UP_TO_Y_UP @ z @ Z_UP_TO_Y_UP.T
+
+
+def _turned_radius(radius: np.ndarray, degrees: float) -> np.ndarray:
+    """The crown's half-extents (Y up) after a turn about Y: an axis-aligned box around the
+    turned ellipse (exact at multiples of 90°)."""
+    a = math.radians(degrees)
+    c, s = abs(math.cos(a)), abs(math.sin(a))
+    rx, ry, rz = radius
+    return np.array([c * rx + s * rz, ry, s * rx + c * rz])
+
+
+def _crown(parts: list[Part]) -> tuple[np.ndarray, np.ndarray]:
+    """Centre and half-extents of a tree's leaves (all its vertices if leafless), as the
+    renderer's own crown for a single tree."""
+    pts = [p.positions for p in parts if len(p.positions)]
+    allp = np.concatenate(pts).astype(np.float64) if pts else np.zeros((1, 3))
+    leaves = [p.positions for p in parts if p.double_sided and len(p.positions)]
+    crown = np.concatenate(leaves).astype(np.float64) if leaves else allp
+    lo, hi = crown.min(0), crown.max(0)
+    size = max(float(np.max(allp.max(0) - allp.min(0))), 1e-3)
+    return 0.5 * (lo + hi), np.maximum(0.5 * (hi - lo), 0.05 * size)
+
+
+def _first_only(n: int) -> np.ndarray:
+    w = np.zeros((n, 4), np.float32)
+    w[:, 0] = 1.0
+    return w
+
+
+def _bounds(asset) -> tuple[np.ndarray, np.ndarray]:
+    """The tree's box (Z up, its own frame) over its LOD0 vertices."""
+    pts = [p.positions for p in asset.lods[0].primitives if len(p.positions)]
+    allp = np.concatenate(pts) if pts else np.zeros((1, 3))
+    return allp.min(0), allp.max(0)
+
+
+def _height(asset) -> float:
+    lo, hi = _bounds(asset)
+    return float(hi[2] - lo[2])
