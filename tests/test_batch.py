@@ -265,9 +265,8 @@ def test_a_failing_entry_is_reported_by_its_json_path_and_the_rest_complete(
     assert proc.returncode == 1, proc.stderr
     err = [line for line in proc.stderr.splitlines() if line.strip()]
     assert len(err) == 1 and "entries[3]" in err[0] and "seed 1" in err[0], err
-    assert "raise entries[3].max_leaves" in err[0] and "--max-leaves" not in err[0], (
-        err
-    )  # the key, not the flag
+    # the make option by the key that set it, not by make's flag
+    assert "raise entries[3].max_leaves" in err[0] and "--max-leaves" not in err[0], err
     done = events(proc.stdout)[-1]
     assert done["built"] == 12 and done["failed"] == 1, done
     rows = {r["path"]: r for r in json.loads((out / "manifest.json").read_text())["assets"]}
@@ -323,18 +322,72 @@ def test_a_cluster_whose_worker_lacks_this_treegen_is_refused_before_anything_is
 # ----------------------------------------------------------------------------- embedded cluster
 
 
-def test_embedded_local_cluster_builds_the_same_bytes_and_resumes(workspace, serial):
+def _listening_pid(address: str) -> int:
+    """The process listening at a worker's tcp://HOST:PORT (the manifest's `worker`)."""
+    import psutil
+
+    port = int(address.rsplit(":", 1)[1])
+    return next(c.pid for c in psutil.net_connections("tcp") if c.laddr and c.laddr.port == port and c.pid)
+
+
+def test_embedded_local_cluster_is_tested_as_the_scheduler_path(workspace, serial):
+    """Without --scheduler (an embedded cluster, 2 workers), as the --scheduler tests: a worker
+    SIGKILLed mid-run (its nanny starts another, Dask runs its job again), a failing entry
+    reported with its JSON path while the rest complete byte-identical and validator-clean; a
+    rerun skips all 12 (the failing one fails again); a lost file is rebuilt alone; a changed
+    option rebuilds only its jobs."""
+    from treegen_cli.exchange.validate import validate_gltf
+
     out = workspace / "local"
-    proc = treegen("batch", workspace / "catalogue.json", "-o", out, "--workers", "2", "-v")
-    assert proc.returncode == 0, proc.stderr
-    assert "built 12, skipped 0, failed 0 of 12" in proc.stdout and "2 local worker(s)" in proc.stdout
-    assert sum(line.lstrip().startswith("built ") for line in proc.stderr.splitlines()) == 12
+    failing = json.loads(json.dumps(CATALOGUE))
+    failing["entries"].append({"species": "species/weeping_willow.txt", "seeds": [1], "max_leaves": 1000})
+    cat = workspace / "local_failing.json"
+    cat.write_text(json.dumps(failing))
+    args = [sys.executable, "-m", "treegen_cli", "batch", cat, "-o", out, "--workers", "2", "--json"]
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+    lines, killed = [], None
+    for line in proc.stdout:
+        lines.append(line)
+        if killed is None and '"event": "built"' in line:
+            killed = _listening_pid(json.loads(line)["worker"])
+            os.kill(killed, signal.SIGKILL)
+    proc.wait(timeout=300)
+    err = proc.stderr.read()
+    assert proc.returncode == 1, err
+    done = events("".join(lines))[-1]
+    assert killed is not None and done["built"] == 12 and done["failed"] == 1, done
+    assert [line for line in err.splitlines() if line.strip()][0].startswith(
+        "treegen: failed: entries[3] seed 1 (weeping_willow_1.glb)"
+    ), err
     assert_outputs(out, serial)
+    for name in OUTPUTS:
+        if name.endswith(".glb"):
+            issues = validate_gltf((out / name).resolve())["issues"]
+            assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, name
+
+    rerun = treegen("batch", cat, "-o", out, "--workers", "2", "--json")
+    assert rerun.returncode == 1, rerun.stderr
+    done = events(rerun.stdout)[-1]
+    assert (done["skipped"], done["built"], done["failed"]) == (12, 0, 1), done
+
     (out / "rush_6.glb").unlink()  # a lost file is rebuilt, alone
     proc = treegen("batch", workspace / "catalogue.json", "-o", out, "--workers", "1", "--json")
     assert proc.returncode == 0, proc.stderr
     assert [e["path"] for e in events(proc.stdout) if e["event"] == "built"] == ["rush_6.glb"]
     assert_outputs(out, serial)
+
+    changed = json.loads(json.dumps(CATALOGUE))
+    changed["entries"][1]["grid"]["wind_speed"] = [2, 9]
+    (workspace / "local_changed.json").write_text(json.dumps(changed))
+    proc = treegen("batch", workspace / "local_changed.json", "-o", out, "--workers", "2", "-v")
+    assert proc.returncode == 0, proc.stderr
+    assert "built 2, skipped 10, failed 0 of 12" in proc.stdout and "2 local worker(s)" in proc.stdout
+    assert sorted(
+        line.split()[1] for line in proc.stderr.splitlines() if line.lstrip().startswith("built ")
+    ) == [
+        "pair_small_3_wind_speed-9.glb",
+        "pair_small_4_wind_speed-9.glb",
+    ]
 
 
 def journaled(out: Path) -> set[str]:
