@@ -1162,3 +1162,25 @@ def test_layout_preview_cli_writes_a_png_and_refuses_tree_only_flags(tmp_path):
         bad = subprocess.run([*run, "-o", str(tmp_path / "x.png"), *flag], capture_output=True, text=True)
         assert bad.returncode == 2 and f"{flag[0]}: not for a forest layout" in bad.stderr, bad.stderr
         assert "Traceback" not in bad.stderr and not (tmp_path / "x.png").exists()
+
+
+def test_layout_impostor_distance_places_every_prototypes_impostor(tmp_path):
+    """defaults.impostor_distance sets each prototype's impostor switch in metres, as `make
+    --impostor-distance` does; nearer than a prototype's last LOD it is refused by its key."""
+    one = [{"species": POPLAR, "position": [0, 0], "seed": 1}]
+    far = {**FAST, "impostor_distance": 150}
+    sc = build_scene(
+        load_layout(write_layout(tmp_path, layout_dict(instances=one, scatter=[], defaults=far))),
+        workers=1,
+        progress=False,
+    )
+    assert [lod.distance for lod in sc.prototypes[0].lods] == [0, 25, 60, 150]
+    near = {**FAST, "impostor_distance": 40}
+    layout = load_layout(
+        write_layout(tmp_path, layout_dict(instances=one, scatter=[], defaults=near), "near.json")
+    )
+    with pytest.raises(
+        TreegenError,
+        match=r"defaults\.impostor_distance 40: the impostor comes after the last LOD, used from 60 m",
+    ):
+        build_scene(layout, workers=1, progress=False)

@@ -49,7 +49,8 @@ class ImpostorOptions:
     switch_px: the tree's height on screen (pixels of the LOD options' view, width / aspect
     high) below which the impostor is used; at 1.5 × cell an atlas texel spans 1.5 pixels there.
     The switch is never nearer than min_factor × the last geometric LOD's distance.
-    distance: metres that replace both (--impostor-distance), beyond the last LOD's."""
+    distance: metres that replace both (--impostor-distance), beyond the last LOD's; `flag`
+    names it in messages as the user gave it (a catalogue's or a layout's key)."""
 
     grid: int = 16  # views per side of the atlas (engine plug-ins' 16 × 16)
     cell: int = 64  # pixels per view: a 1024 × 1024 atlas
@@ -61,6 +62,7 @@ class ImpostorOptions:
     max_bark_triangles: int = 40_000
     alpha_cutoff: float = 0.5
     distance: float | None = None
+    flag: str = "--impostor-distance"
 
     def __post_init__(self) -> None:
         if not 2 <= self.grid <= 64 or not 8 <= self.cell <= 512 or self.grid * self.cell > 8192:
@@ -305,7 +307,7 @@ def switch_distance(height: float, last: float, lod_options: LodOptions, options
     if options.distance is not None:
         if not options.distance > last:
             raise TreegenError(
-                f"--impostor-distance {options.distance:g}: the impostor comes after the last LOD, "
+                f"{options.flag} {options.distance:g}: the impostor comes after the last LOD, "
                 f"used from {last:.4g} m on this tree; give more than {last:.4g}"
             )
         return float(options.distance)

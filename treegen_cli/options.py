@@ -289,8 +289,9 @@ def resolve(
     for key in ("max_stems", "max_leaves", "max_vertices", "max_keys"):
         if v[key] < 1:
             raise TreegenError(f"{label(key)} {v[key]}: the limit must be at least 1")
-    if not v["max_size"] > 0:
-        raise TreegenError(f"{label('max_size')} {v['max_size']:g}: the bound must be > 0 metres")
+    for key, what in (("max_size", "the bound"), ("impostor_distance", "the distance")):
+        if v[key] is not None and not v[key] > 0:
+            raise TreegenError(f"{label(key)} {v[key]:g}: {what} must be > 0 metres")
     if v["joint_levels"] is not None and not all(0 <= n <= MAX_LEVELS for n in v["joint_levels"]):
         raise TreegenError(
             f"{label('joint_levels')} '{_text(v['joint_levels'])}': each stem "
@@ -310,9 +311,6 @@ def resolve(
             IMPOSTOR_SIZES,
             "the atlas side must be a power of two in [{lo}, {hi}] px",
         )
-    distance = v["impostor_distance"]
-    if distance is not None and not distance > 0:
-        raise TreegenError(f"{label('impostor_distance')} {distance:g}: the distance must be > 0 metres")
     static = _static(output)
     if output is not None:
         check_compress(output, v["compress"], label("compress"))
@@ -350,7 +348,11 @@ def resolve(
     lod = None if static else lod
 
     make_options = MakeOptions(
-        impostor=replace(sized(side or atlas_side(n), IMPOSTOR_DEFAULTS), distance=distance)
+        impostor=replace(
+            sized(side or atlas_side(n), IMPOSTOR_DEFAULTS),
+            distance=v["impostor_distance"],
+            flag=label("impostor_distance"),
+        )
         if v["impostor"] and lod is not None
         else None,
         generate=GenerateOptions(

@@ -58,6 +58,7 @@ class Defaults:
     rotation_deg: float = 0.0
     max_joints: int = FOREST_MAX_JOINTS
     lod_distances: tuple[float, ...] | None = LOD_DEFAULTS.distances
+    impostor_distance: float | None = None
     error_px: float = LOD_DEFAULTS.error_px
     phase_variants: int = 4
     profile: str | None = None  # forest/options.py: the prototypes' budgets and sizes
