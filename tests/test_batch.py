@@ -832,3 +832,17 @@ def test_staging_sweep_leaves_other_hosts_folders_alone(tmp_path):
         d.mkdir()
     assert staging.sweep(tmp_path) == [mine]
     assert other.exists()
+
+
+def test_errors_cross_process_boundaries_whole():
+    """A build's error reaches the client through pickling (Dask's comms, the forest's process
+    pool): TreegenError keeps its line, OptionError its field, value, rule and message."""
+    import pickle
+
+    from treegen_cli.errors import OptionError, TreegenError
+
+    e = pickle.loads(pickle.dumps(TreegenError("Levels = 9: allowed 0..9", line=7)))
+    assert (str(e), e.line) == ("Levels = 9: allowed 0..9", 7)
+    o = pickle.loads(pickle.dumps(OptionError("speed", 70.0, "allowed range [0, 60] m/s", "--wind-speed")))
+    assert isinstance(o, OptionError) and (o.field, o.value, o.label) == ("speed", 70.0, "--wind-speed")
+    assert str(o) == "--wind-speed 70: allowed range [0, 60] m/s"

@@ -38,8 +38,13 @@ class OptionError(TreegenError):
     the value and the allowed range."""
 
     def __init__(self, field: str, value, rule: str, label: str | None = None):
-        self.field, self.value, self.rule = field, value, rule
+        self.field, self.value, self.rule, self.label = field, value, rule, label
         super().__init__(self.worded(label or field))
+
+    def __reduce__(self):
+        """Pickled whole (its own arguments, not the message alone), so it crosses from a
+        worker process to the client as it was raised."""
+        return type(self), (self.field, self.value, self.rule, self.label), self.__dict__
 
     def worded(self, label: str) -> str:
         value = f"{self.value:g}" if isinstance(self.value, float) else str(self.value)
