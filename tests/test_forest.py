@@ -648,6 +648,46 @@ print(json.dumps([os.getpid(), first, second, stopped, crashed, len(kids)]))
     assert kids == 0  # no worker left behind (the fork server's helpers stay, as multiprocessing's do)
 
 
+def test_local_workers_exit_when_their_parent_is_killed(tmp_path):
+    """A forest killed outright (SIGKILL: a CI job cancelled, `timeout -s KILL`) leaves no
+    worker building on as an orphan: each watches its parent and exits once it is gone."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    import psutil
+
+    (tmp_path / "napjobs.py").write_text(
+        "import os, time\ndef nap(s):\n    time.sleep(s)\n    return os.getpid()\n"
+    )
+    code = """
+import sys
+from napjobs import nap
+from treegen_cli.executor import process_pool
+with process_pool(2) as (run, where):
+    print(*sorted(set(run([(nap, 0.3), (nap, 0.3)]))), flush=True)
+    run([(nap, 120.0), (nap, 120.0)])
+"""
+    env = {**DASK_ENV, "PYTHONPATH": f"{tmp_path}{os.pathsep}{DASK_ENV.get('PYTHONPATH', '')}"}
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True, env=env)
+    workers = [int(x) for x in proc.stdout.readline().split()]
+    assert len(workers) == 2, workers
+    time.sleep(0.5)  # both are in their 120 s naps
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline and any(psutil.pid_exists(w) for w in workers):
+        time.sleep(0.2)
+    alive = [
+        w for w in workers if psutil.pid_exists(w) and psutil.Process(w).status() != psutil.STATUS_ZOMBIE
+    ]
+    for w in alive:  # (do not leave them behind if the test fails)
+        os.kill(w, signal.SIGKILL)
+    assert alive == []
+
+
 def test_embedded_cluster_gives_a_worker_its_next_task_only_when_it_is_free():
     """A worker of the embedded cluster holds one task at a time (executor.QUIET's
     worker-saturation): the one running a long task is given no other, so at the end no worker

@@ -24,9 +24,12 @@ import contextlib
 import functools
 import logging
 import os
+import pickle
 import signal
 import sys
+import tempfile
 import threading
+import time
 from collections.abc import Callable
 
 from .errors import TreegenError
@@ -175,12 +178,12 @@ def _local_cluster(n: int):
 
 @contextlib.contextmanager
 def process_pool(workers: int):
-    """Yield (run, description): run(tasks, done) is run_local on `workers` processes,
-    started now. They are
-    forks of this process while can_fork(), as the forest's process pool before Dask was (they
-    inherit everything imported here and are ready at once), else children of the fork server.
-    They ignore SIGINT: a Ctrl-C reaches only this process, which stops them on the way out,
-    as it does when a task fails (the caller writes nothing they return)."""
+    """Yield (run, description): run(tasks, done) is run_local on `workers` processes, started
+    now: forks of this process while can_fork(), as the forest's process pool before Dask was
+    (they inherit everything imported here and are ready at once), else children of the fork
+    server. They ignore SIGINT (a Ctrl-C reaches only this process, which stops them on the
+    way out, as it does when a task fails: the caller writes nothing they return) and exit
+    when their parent goes (killed, a CI job cancelled), instead of building on as orphans."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
@@ -192,57 +195,84 @@ def process_pool(workers: int):
         start_fork_server()
         context = multiprocessing.get_context("forkserver")
     before = set(multiprocessing.active_children())
-    pool = ProcessPoolExecutor(workers, mp_context=context, initializer=_ignore_sigint)
-    try:
-        # the first task forks them all (a fork pool starts every process then, before its
-        # own thread): now, while this process has no other thread (no progress bar yet)
-        pool.submit(int).result()
-        yield functools.partial(run_local, pool, workers), f"{workers} local worker(s)"
-    except BaseException:  # Ctrl-C or a failed task: stop the others' builds now
-        for process in set(multiprocessing.active_children()) - before:
-            process.terminate()
-        raise
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+    with tempfile.TemporaryDirectory(prefix="treegen-results-") as handoff:
+        pool = ProcessPoolExecutor(workers, mp_context=context, initializer=_worker_start)
+        try:
+            # the first task forks them all (a fork pool starts every process then, before its
+            # own thread): now, while this process has no other thread (no progress bar yet)
+            pool.submit(int).result()
+            yield functools.partial(run_local, pool, workers, handoff), f"{workers} local worker(s)"
+        except BaseException:  # Ctrl-C or a failed task: stop the others' builds now
+            for process in set(multiprocessing.active_children()) - before:
+                process.terminate()
+            raise
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _ignore_sigint() -> None:
+def _worker_start() -> None:
+    """In each worker: ignore SIGINT, and exit once the parent is gone (re-parented)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    parent = os.getppid()
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="treegen-parent-watch", daemon=True).start()
 
 
-def run_local(pool, workers: int, tasks: list[tuple], done: Callable[[int], object] | None = None) -> list:
-    """Run independent tasks [(fn, *args), ...] on `pool` (`workers` processes) under Dask's local process scheduler
-    (dask.multiprocessing.get) and return their results in list order. Tasks start in list
-    order, one per process at a time (a process takes the next when it is free); `done(i)` is
-    called here as task i finishes. A task's exception is raised here. Arguments and results
-    cross once, pickled by the pool (Dask's default would cloudpickle them to bytes first and
-    the pool pickle those again: two copies of every prototype)."""
+def run_local(
+    pool, workers: int, handoff: str, tasks: list[tuple], done: Callable[[int], object] | None = None
+) -> list:
+    """Run independent tasks [(fn, *args), ...] on `pool` (`workers` processes) under Dask's
+    local process scheduler (dask.multiprocessing.get) and return their results in list
+    order. Tasks start in list order, one per process at a time (a process takes the next
+    when it is free); `done(i)` is called here as task i finishes; a task's exception is
+    raised here. Each result comes back as a pickle file in `handoff` whose path is all that
+    crosses the pool's shared result pipe: a worker killed while writing a 44 MB prototype into
+    that pipe would leave half a message that its reader waits on for ever (a path is one
+    atomic write); and the prototype is pickled once, not cloudpickled to bytes by Dask and
+    pickled again by the pool."""
     import dask.multiprocessing
     from dask.callbacks import Callback
 
     keys = [("treegen-task", i) for i in range(len(tasks))]
+    out: list = [None] * len(tasks)
 
     def in_order(_dsk, state) -> None:  # Dask pops its next task from the end of the list
         state["ready"].sort(key=lambda key: -key[1])
 
-    def finished(key, _result, _dsk, _state, _worker) -> None:
+    def finished(key, path, _dsk, _state, _worker) -> None:
+        with open(path, "rb") as f:
+            out[key[1]] = pickle.load(f)
+        os.unlink(path)
         if done is not None:
             done(key[1])
 
-    graph = dict(zip(keys, tasks))
+    graph = {k: (_to_file, handoff, *task) for k, task in zip(keys, tasks)}
     with Callback(start_state=in_order, posttask=finished), _died_as_error(workers):
-        return list(
-            dask.multiprocessing.get(
-                graph,
-                keys,
-                num_workers=workers,
-                pool=pool,
-                chunksize=1,
-                optimize_graph=False,
-                func_dumps=_as_is,
-                func_loads=_as_is,
-            )
+        dask.multiprocessing.get(
+            graph,
+            keys,
+            num_workers=workers,
+            pool=pool,
+            chunksize=1,
+            optimize_graph=False,
+            func_dumps=_as_is,
+            func_loads=_as_is,
         )
+    return out
+
+
+def _to_file(directory: str, fn, *args) -> str:
+    """In a worker: fn(*args), pickled into a new file in `directory`; its path."""
+    result = fn(*args)
+    fd, path = tempfile.mkstemp(dir=directory, suffix=".pickle")
+    with os.fdopen(fd, "wb") as f:
+        pickle.dump(result, f, protocol=pickle.HIGHEST_PROTOCOL)
+    return path
 
 
 @contextlib.contextmanager
@@ -254,7 +284,8 @@ def _died_as_error(workers: int):
         yield
     except BrokenProcessPool:
         raise TreegenError(
-            f"a worker process died while building (killed, or out of memory?); "
+            f"a worker process died while building (killed, or out of memory?), or its "
+            "result could not be read; "
             f"rerun, with fewer --workers than {workers} if memory is short"
         ) from None
 
