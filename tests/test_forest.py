@@ -774,6 +774,31 @@ def test_forest_on_a_dask_scheduler_writes_the_in_process_bytes(dask_scheduler, 
     assert proc.returncode == 2 and "--workers 2: only for workers on this machine" in proc.stderr
 
 
+def test_same_named_species_files_are_two_prototypes_on_a_scheduler(dask_scheduler, tmp_path):
+    """a/tree.txt and b/tree.txt with one seed are two prototypes (Dask keys carry the index:
+    by name and seed alone both tasks were one, and one tree was built for both)."""
+    import shutil
+
+    address, env = dask_scheduler
+    for folder, src in (("a", POPLAR), ("b", PALM)):
+        (tmp_path / folder).mkdir()
+        shutil.copy(src, tmp_path / folder / "tree.txt")
+    data = layout_dict(
+        instances=[
+            {"species": f"{f}/tree.txt", "position": [x, 0], "seed": 1} for f, x in (("a", 0), ("b", 8))
+        ],
+        scatter=[],
+    )
+    layout = load_layout(write_layout(tmp_path, data))
+    remote = build_scene(layout, all_lods=False, progress=False, scheduler=address)
+    here = build_scene(layout, all_lods=False, workers=1, progress=False)
+    assert [a.name for a in remote.prototypes] == [a.name for a in here.prototypes]
+    assert len({a.name for a in here.prototypes}) == 2
+    write_scene(remote, tmp_path / "remote.glb")
+    write_scene(here, tmp_path / "here.glb")
+    assert (tmp_path / "remote.glb").read_bytes() == (tmp_path / "here.glb").read_bytes()
+
+
 # ----------------------------------------------------------------------------- a forest to walk through
 
 

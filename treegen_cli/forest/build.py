@@ -113,7 +113,8 @@ def build_prototypes(
         # workers first: the bar's thread would stop them forking
         if remote:
             client, where = stack.enter_context(dask_client(scheduler, workers))
-            names = [f"treegen-forest-{p.stem}-{s}" for p, s in keys]
+            # the index too: two species files may share a name (a/oak.txt, b/oak.txt)
+            names = [f"treegen-forest-{i}-{p.stem}-{s}" for i, (p, s) in enumerate(keys)]
             run = functools.partial(_on_cluster, client, names)
         elif workers > 1:
             run, where = stack.enter_context(process_pool(workers))
