@@ -639,18 +639,24 @@ def test_seeds_grid_and_names_expand_as_documented(workspace):
     assert len(cat.params) == 2  # each species parsed once
 
 
-def test_artist_images_are_relative_to_the_catalogue_and_keyed_by_their_bytes(workspace):
+def test_artist_images_are_relative_to_the_catalogue_and_keyed_by_their_bytes(workspace, monkeypatch):
     """A leaf PNG named in a catalogue is found beside the catalogue (as species files are),
     whatever the working directory, and its bytes are part of the task's key: an edited image
     rebuilds, an unchanged one does not."""
     from treegen_cli.batch import parse_catalogue
 
-    def task(**entry) -> tuple:
+    def task_at(path: Path, **entry) -> tuple:
         data = {"entries": [{"species": "species/rush.txt", "seeds": [1], **entry}]}
-        cat = parse_catalogue(data, workspace / "x.json")
+        cat = parse_catalogue(data, path)
         (job,) = cat.jobs
         return job.task, cat.resolved[job.task].options.materials.leaf_texture
 
+    def task(**entry) -> tuple:
+        return task_at(workspace / "x.json", **entry)
+
+    monkeypatch.chdir(workspace)  # a relative catalogue path: the image is still absolute
+    relative, rel_path = task_at(Path("x.json"), leaf_texture="images/leaf.png")
+    assert rel_path == workspace / "images" / "leaf.png"
     plain, none = task()
     image = workspace / "images" / "edited.png"
     _png(image, (40, 160, 40, 255))
@@ -672,6 +678,26 @@ def test_a_build_error_names_the_catalogue_key_not_the_make_flag(workspace):
     proc = treegen("batch", cat, "-o", workspace / "tiny", "--dry-run")
     assert proc.returncode == 1, proc.stderr
     assert "entries[0].grid.triangles[0] 5" in proc.stderr and "--triangles" not in proc.stderr, proc.stderr
+
+
+def test_reword_names_only_what_the_catalogue_set(workspace):
+    """Catalogue.reword: a flag of an option this job's catalogue set becomes its JSON path
+    (`seeds` for --seed, `joints` for --max-joints when that alias was used, `impostor` false
+    for --no-impostor); a flag the catalogue left to its default, or one inside a file path,
+    stays as `make` wrote it."""
+    from treegen_cli.batch import parse_catalogue
+
+    data = {
+        "defaults": {"seeds": [1], "impostor": True},
+        "entries": [{"species": "species/rush.txt", "joints": 64, "grid": {"fps": [12]}}],
+    }
+    cat = parse_catalogue(data, workspace / "x.json")
+    (job,) = cat.jobs
+    said = "--seed 1, --max-joints 64, --fps 12, --wind-speed 9, --no-impostor; see /x/--fov/y"
+    assert cat.reword(job, said) == (
+        "defaults.seeds 1, entries[0].joints 64, entries[0].grid.fps[0] 12, --wind-speed 9, "
+        "defaults.impostor false; see /x/--fov/y"
+    )
 
 
 def test_dry_run_prints_the_table_and_an_estimate_and_writes_nothing(workspace):

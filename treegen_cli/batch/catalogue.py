@@ -60,18 +60,24 @@ class Catalogue:
 
     def reword(self, job: Job, message: str) -> str:
         """A build's error in the catalogue's terms: each make option's `--flag` in it
-        (`--triangles 5`, from the code `treegen make` shares) becomes the JSON path that set
-        the option for this job (`entries[0].triangles 5`), as the checks before a run say."""
+        (`--triangles 5`, from the code `treegen make` shares) that this job's catalogue set
+        becomes the JSON path that set it (`entries[0].triangles 5`, `entries[0].seeds`), as
+        the checks before a run say; options left to their defaults keep make's flag."""
         labels = self.labels.get(job.task, {})
 
         def path(m: re.Match) -> str:
             key = m.group(1).replace("-", "_")
-            return labels.get(key, m.group(0))
+            if key in labels:
+                return labels[key]
+            if key.startswith("no_") and key[3:] in labels:  # --no-impostor: "impostor": false
+                return f"{labels[key[3:]]} false"
+            return m.group(0)  # an option the catalogue left to its default: make's own words
 
         return _FLAG.sub(path, message)
 
 
-_FLAG = re.compile(r"(?<![\w-])--([a-z][a-z0-9-]*)")
+# a flag as a word of its own (not inside a path such as /a/--fov/b)
+_FLAG = re.compile(r"(?<![^\s(\[`'\"])--([a-z][a-z0-9-]*)")
 
 
 def load_catalogue(path: str | os.PathLike, max_jobs: int = MAX_JOBS) -> Catalogue:
@@ -228,7 +234,8 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
                 return defaults[key], f"defaults.{key}"
             return fallback, f"{where}.{key}"
 
-        seeds = parse_seeds(*pick("seeds", 0), max_jobs)
+        seeds_given, seeds_where = pick("seeds", 0)
+        seeds = parse_seeds(seeds_given, seeds_where, max_jobs)
         formats, fwhere = pick("formats", ["glb"])
         for k, f in enumerate(formats):
             if f not in FORMATS:
@@ -295,7 +302,9 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
                 if images:  # an edited PNG rebuilds (only keyed when given: older keys hold)
                     identity["images"] = images
                 task = short_hash(identity)
-                labels[task] = {k: label(k) for k in api.DEFAULTS}
+                labels[task] = {**src, "seed": seeds_where}  # the keys this job's file set
+                if "joints" in src and "max_joints" not in src:  # `joints` sets --max-joints
+                    labels[task]["max_joints"] = src["joints"]
                 resolved[task] = api.Resolved(
                     seed=seed, options=base_job.options, values={**base_job.values, "seed": seed}
                 )
@@ -358,7 +367,7 @@ def _artist_images(job, base: Path, label, seen: dict):
         given = getattr(mats, key)
         if given is None:
             continue
-        path = given if given.is_absolute() else base / given
+        path = (base / given).resolve()  # (an absolute `given` stays as it is)
         if path not in seen:
             seen[path] = hashlib.sha256(read_png(path, label(key))).hexdigest()[:16]
         fixed[key], images[key] = path, seen[path]
