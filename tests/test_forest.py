@@ -1157,6 +1157,18 @@ def _columns(camera, width: int, height: int, points_z_up) -> np.ndarray:
     return (clip[:, 0] / clip[:, 3] * 0.5 + 0.5) * width
 
 
+def _layout_columns(layout_camera: dict, width: int, points) -> np.ndarray:
+    """Pixel columns of points (Z up) on a `width`-pixel image from the layout's own pinhole
+    camera: `fov_deg` spans the image's width (independent of the preview's Camera)."""
+    eye, target = np.array(layout_camera["position"], float), np.array(layout_camera["target"], float)
+    forward = (target - eye) / np.linalg.norm(target - eye)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    rel = np.asarray(points, float) - eye
+    tangent = (rel @ right) / (rel @ forward)
+    return width / 2 * (1 + tangent / np.tan(np.radians(layout_camera["fov_deg"]) / 2))
+
+
 def test_layout_preview_draws_each_tree_where_the_layout_puts_it(row_view):
     """`treegen preview LAYOUT.json`: from the layout's camera, each poplar shows as tree
     pixels (not sky) in the column its position projects to, with sky between them; all
@@ -1172,8 +1184,10 @@ def test_layout_preview_draws_each_tree_where_the_layout_puts_it(row_view):
     rgb = img.astype(float)
     sky = (rgb[..., 2] > rgb[..., 1] + 8) & (rgb[..., 2] > rgb[..., 0] + 8)
     band = slice(int(0.15 * h), int(0.45 * h))  # rows of the crowns, above the horizon
-    trees = _columns(camera, w, h, [[x, 0, 10] for x in ROW])
-    gaps = _columns(camera, w, h, [[x, 0, 10] for x in (-6, 6)])
+    cam = row_layout()["camera"]
+    trees = _layout_columns(cam, w, [[x, 0, 10] for x in ROW])
+    gaps = _layout_columns(cam, w, [[x, 0, 10] for x in (-6, 6)])
+    assert np.allclose(trees, _columns(camera, w, h, [[x, 0, 10] for x in ROW]), atol=0.5)
     for c in trees:
         assert not sky[band, int(c) - 2 : int(c) + 3].all(axis=0).any(), c  # a tree in every column
     for c in gaps:
@@ -1199,10 +1213,10 @@ def test_layout_preview_shades_each_tree_by_its_own_crown(row_view):
     assert abs(middle / ((left + right) / 2) - 1) < 0.04, means  # one crown: 9 % darker
 
 
-def test_layout_preview_without_a_camera_frames_every_tree(tmp_path):
+def test_layout_preview_without_a_camera_frames_every_tree(tmp_path, monkeypatch):
     """With no camera, the preview frames every tree's box from --azimuth/--elevation and
     picks each tree's LOD by its distance to that camera, as the layout's camera would."""
-    from treegen_cli.preview_forest import forest_view
+    from treegen_cli.preview_forest import bearing, forest_view
 
     data = no_camera(instances=[{"species": POPLAR, "position": [x, 0], "seed": 1} for x in ROW], scatter=[])
     scene, camera, summary = forest_view(write_layout(tmp_path, data), -90.0, 20.0, 16 / 9, workers=1)
@@ -1210,6 +1224,14 @@ def test_layout_preview_without_a_camera_frames_every_tree(tmp_path):
     cols = _columns(camera, 160, 90, [[x, 0, z] for x in (-14, 14) for z in (0, 20)])
     assert (cols > 0).all() and (cols < 160).all(), cols
     assert sorted({round(float(p.crown[0][0])) for p in scene.parts}) == ROW  # a crown each tree
+    assert bearing(camera) == pytest.approx(-90.0)  # the default sun stands as for one tree
+    from treegen_cli import preview_forest
+
+    monkeypatch.setattr(preview_forest, "MAX_TRIANGLES", 1000)  # too many: refused, by name
+    with pytest.raises(
+        TreegenError, match=r"layout.json: the trees this camera sees come to [\d,]+ triangles"
+    ):
+        forest_view(write_layout(tmp_path, data), -90.0, 20.0, 16 / 9, workers=1)
 
 
 def test_layout_preview_cli_writes_a_png_and_refuses_tree_only_flags(tmp_path):

@@ -321,10 +321,11 @@ def preview_command(
     t0 = time.perf_counter()
     camera, forest = None, None
     if Path(input_path).suffix.lower() == ".json":  # a forest layout: seen from its camera
-        from .preview_forest import forest_view
+        from .preview_forest import bearing, forest_view
 
         _layout_only(animate, lod, seed)
         scene, camera, forest = forest_view(input_path, azimuth, elevation, width / height)
+        options = replace(options, azimuth=bearing(camera))  # the default sun turns with it
     else:
         scene = load_scene(input_path, options)
     lines, summary = [], {"input": str(input_path), "width": width, "height": height, "lod": lod}

@@ -18,9 +18,13 @@ import numpy as np
 
 from .axes import Z_UP_TO_Y_UP
 from .drawable import Drawable, Part, from_asset
+from .errors import TreegenError
 from .render_view import Camera, frame_points
 
 NEAR_M = 0.1  # near plane of a layout's camera, metres
+# what one preview draws at most: each tree is its own copy on the GPU (about 100 bytes a
+# triangle); the 1,000-tree example at its camera is ~6.6 million
+MAX_TRIANGLES = 30_000_000
 
 
 def forest_view(path, azimuth: float, elevation: float, aspect: float, workers: int | None = None):
@@ -42,6 +46,7 @@ def forest_view(path, azimuth: float, elevation: float, aspect: float, workers: 
     else:
         camera = _framing(forest, pos, scale, proto, azimuth, elevation, aspect)
     lods, _dist = camera_lods(forest.prototypes, proto, pos, rot, scale, Z_UP_TO_Y_UP.T @ camera.eye)
+    _check_size(path, forest, proto, lods)
     drawable = placed(forest, lods)
     counts = np.bincount(lods, minlength=max((len(a.lods) for a in forest.prototypes), default=1))
     summary = {
@@ -51,6 +56,30 @@ def forest_view(path, azimuth: float, elevation: float, aspect: float, workers: 
         "camera": "layout" if layout.camera is not None else "framed",
     }
     return drawable, camera, summary
+
+
+def bearing(camera: Camera) -> float:
+    """The camera's bearing as --azimuth gives one (degrees counter-clockwise from +X, Z up,
+    from the target towards the eye), so the default sun stands where it does in a tree's
+    preview: 50° to the camera's left."""
+    d = Z_UP_TO_Y_UP.T @ (np.asarray(camera.eye, float) - np.asarray(camera.target, float))
+    return math.degrees(math.atan2(d[1], d[0]))
+
+
+def _check_size(path, forest, proto: np.ndarray, lods: np.ndarray) -> None:
+    """Refuse a view whose trees come to more than MAX_TRIANGLES, before any is placed."""
+    per = {
+        (p, k): sum(len(prim.indices) // 3 for prim in lod.primitives)
+        for p, asset in enumerate(forest.prototypes)
+        for k, lod in enumerate(asset.lods)
+    }
+    total = sum(per[(int(p), int(k))] for p, k in zip(proto, lods))
+    if total > MAX_TRIANGLES:
+        raise TreegenError(
+            f"{path}: the trees this camera sees come to {total:,} triangles; a preview draws "
+            f"at most {MAX_TRIANGLES:,} (about 4 × examples/forest_1000.json): preview part of "
+            "the layout, or move its camera further off"
+        )
 
 
 def layout_camera(position, target, fov_x_deg: float, aspect: float, pos: np.ndarray, forest) -> Camera:
@@ -84,19 +113,20 @@ def placed(forest, lods: np.ndarray) -> Drawable:
         key = (inst.prototype, int(lod))
         if key not in shapes:
             local = from_asset(forest.prototypes[inst.prototype], int(lod)).parts
-            shapes[key] = (local, *_crown(local))
-        local, centre, radius = shapes[key]
+            rigid = [(np.zeros_like(p.joints), _first_only(len(p.positions))) for p in local]
+            shapes[key] = (local, rigid, *_crown(local))
+        local, rigid, centre, radius = shapes[key]
         turn = _turn_y_up(inst.rotation_deg)
         move = Z_UP_TO_Y_UP @ np.asarray(inst.position, float)
         crown = (turn @ centre * inst.scale + move, _turned_radius(radius, inst.rotation_deg) * inst.scale)
-        for part in local:
+        for part, (joints, weights) in zip(local, rigid):  # one joint, the rest pose: shared
             parts.append(
                 replace(
                     part,
                     positions=(part.positions @ (turn.T * inst.scale) + move).astype(np.float32),
                     normals=(part.normals @ turn.T).astype(np.float32),
-                    joints=np.zeros_like(part.joints),
-                    weights=_first_only(len(part.positions)),
+                    joints=joints,
+                    weights=weights,
                     crown=crown,
                 )
             )
