@@ -623,6 +623,10 @@ def test_impostor_distance_places_the_impostor_beyond_the_last_lod(tmp_path):
     ):
         entry = {"species": str(species_path("rush")), "impostor_distance": 0}
         parse_catalogue({"entries": [entry]}, tmp_path / "c.json")
+    # with the LODs' metres given, a catalogue is refused before anything runs
+    with pytest.raises(TreegenError, match=r"^entries\[0\]\.impostor_distance 40: .*used from 60 m"):
+        entry = {"species": str(species_path("rush")), "lod_distances": [0, 15, 60], "impostor_distance": 40}
+        parse_catalogue({"entries": [entry]}, tmp_path / "c.json")
 
 
 @needs_gl

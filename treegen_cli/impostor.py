@@ -102,6 +102,19 @@ def sized(side: int, options: ImpostorOptions = IMPOSTOR_DEFAULTS) -> ImpostorOp
     return replace(options, cell=side // options.grid)
 
 
+def placed(side: int, distance: float | None, flag: str, lod: LodOptions) -> ImpostorOptions:
+    """The impostor of a tree whose LODs are `lod`: an atlas `side` px wide, used from
+    `distance` metres if given (`flag` names it). With the LODs' own metres given
+    (--lod-distances), a distance not beyond the last is refused now, before anything grows."""
+    last = lod.distances[-1] if lod.distances else None
+    if distance is not None and last is not None and not distance > last:
+        raise TreegenError(
+            f"{flag} {distance:g}: the impostor comes after the last LOD, used from {last:g} m; "
+            f"give more than {last:g}"
+        )
+    return replace(sized(side), distance=distance, flag=flag)
+
+
 # ------------------------------------------------------------------ hemi-octahedral mapping
 
 

@@ -16,7 +16,7 @@ from .budget import BudgetOptions
 from .errors import OptionError, TreegenError
 from .exchange import COMPRESS, GLTF_DEFAULTS, STATIC, GltfOptions, check_compress
 from .generate import DEFAULTS as GENERATE_DEFAULTS, GenerateOptions
-from .impostor import IMPOSTOR_DEFAULTS, IMPOSTOR_SIZES, atlas_side, sized
+from .impostor import IMPOSTOR_SIZES, atlas_side, placed
 from .limits import LIMITS_DEFAULTS, Limits
 from .lod import LOD_DEFAULTS, SCHEDULES, LodOptions, pixel_size
 from .materials import MATERIAL_DEFAULTS, TEXTURE_SIZES, MaterialOptions
@@ -348,11 +348,7 @@ def resolve(
     lod = None if static else lod
 
     make_options = MakeOptions(
-        impostor=replace(
-            sized(side or atlas_side(n), IMPOSTOR_DEFAULTS),
-            distance=v["impostor_distance"],
-            flag=label("impostor_distance"),
-        )
+        impostor=placed(side or atlas_side(n), v["impostor_distance"], label("impostor_distance"), lod)
         if v["impostor"] and lod is not None
         else None,
         generate=GenerateOptions(
