@@ -142,8 +142,9 @@ def _here(tasks: list[tuple], done=None) -> list:
 
 
 def _on_cluster(client, names: list[str], tasks: list[tuple], done=None) -> list:
-    """Run the tasks (Dask keys: `names` and this run's id) on a Dask cluster, in list order as its workers free up; `done(i)` as
-    each comes back. A worker's TreegenError (it names its species file) is raised here."""
+    """Run the tasks (Dask keys: `names` and this run's id) on a Dask cluster, in list order
+    as its workers free up; `done(i)` as each comes back. A worker's TreegenError (it names
+    its species file) is raised here."""
     from distributed import as_completed
 
     run = f"{os.getpid():x}{time.time_ns() & 0xFFFFFF:x}"
