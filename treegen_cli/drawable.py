@@ -70,6 +70,19 @@ class Part:
 WRAPS = ("REPEAT", "CLAMP", "MIRROR")
 
 
+def crown(parts: list[Part]) -> tuple[np.ndarray, np.ndarray]:
+    """Centre and half-extents (at least a twentieth of the whole tree's size) of the box
+    around the leaves' rest positions, or around every vertex of a leafless tree: the volume
+    whose depth dims a vertex's sky light in the preview (Part.crown, render.Renderer)."""
+    pts = [p.positions for p in parts if len(p.positions)]
+    allp = np.concatenate(pts).astype(np.float64) if pts else np.zeros((1, 3))
+    leaves = [p.positions for p in parts if p.double_sided and len(p.positions)]
+    box = np.concatenate(leaves).astype(np.float64) if leaves else allp
+    lo, hi = box.min(0), box.max(0)
+    size = max(float(np.max(allp.max(0) - allp.min(0))), 1e-3)
+    return 0.5 * (lo + hi), np.maximum(0.5 * (hi - lo), 0.05 * size)
+
+
 def decode_image(data: bytes, channels: int, what: str = "texture") -> np.ndarray:
     """PNG/JPEG/WebP bytes → uint8 (H, W, channels), top row first (Pillow; any mode in)."""
     import io

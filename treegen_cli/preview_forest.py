@@ -5,7 +5,7 @@ The prototypes are built as `treegen forest` builds them (forest.build_scene) an
 drawn at the LOD the camera needs (the layout's camera; without one, a camera at --azimuth and
 --elevation that frames every tree, whose distances pick the LODs the same way), in the rest
 pose, placed by its instance's position, bearing and scale. Each tree is its own set of parts
-with its own crown (render.Renderer's sky occlusion is per crown); parts of one prototype's LOD
+with its own crown (drawable.crown; the renderer's sky occlusion is per crown); parts of one prototype's LOD
 share their textures, uploaded once.
 """
 
@@ -17,7 +17,8 @@ from dataclasses import replace
 import numpy as np
 
 from .axes import Z_UP_TO_Y_UP
-from .drawable import Drawable, Part, from_asset
+from .asset import lod_bounds
+from .drawable import Drawable, Part, crown, from_asset
 from .errors import TreegenError
 from .render_view import Camera, frame_points
 
@@ -97,7 +98,7 @@ def _framing(forest, pos, scale, proto, azimuth, elevation, aspect) -> Camera:
     """A camera at (azimuth, elevation) that fits every tree's bounding box."""
     corners = []
     for p, asset in enumerate(forest.prototypes):
-        lo, hi = _bounds(asset)
+        lo, hi = lod_bounds(asset.lods[0])
         box = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
         mine = proto == p
         corners.append((pos[mine, None, :] + box[None] * scale[mine, None, None]).reshape(-1, 3))
@@ -114,11 +115,11 @@ def placed(forest, lods: np.ndarray) -> Drawable:
         if key not in shapes:
             local = from_asset(forest.prototypes[inst.prototype], int(lod)).parts
             rigid = [(np.zeros_like(p.joints), _first_only(len(p.positions))) for p in local]
-            shapes[key] = (local, rigid, *_crown(local))
+            shapes[key] = (local, rigid, *crown(local))
         local, rigid, centre, radius = shapes[key]
         turn = _turn_y_up(inst.rotation_deg)
         move = Z_UP_TO_Y_UP @ np.asarray(inst.position, float)
-        crown = (turn @ centre * inst.scale + move, _turned_radius(radius, inst.rotation_deg) * inst.scale)
+        own = (turn @ centre * inst.scale + move, _turned_radius(radius, inst.rotation_deg) * inst.scale)
         for part, (joints, weights) in zip(local, rigid):  # one joint, the rest pose: shared
             parts.append(
                 replace(
@@ -127,7 +128,7 @@ def placed(forest, lods: np.ndarray) -> Drawable:
                     normals=(part.normals @ turn.T).astype(np.float32),
                     joints=joints,
                     weights=weights,
-                    crown=crown,
+                    crown=own,
                 )
             )
     return Drawable(parts=parts, n_joints=1, label=forest.name)
@@ -150,31 +151,12 @@ def _turned_radius(radius: np.ndarray, degrees: float) -> np.ndarray:
     return np.array([c * rx + s * rz, ry, s * rx + c * rz])
 
 
-def _crown(parts: list[Part]) -> tuple[np.ndarray, np.ndarray]:
-    """Centre and half-extents of a tree's leaves (all its vertices if leafless), as the
-    renderer's own crown for a single tree."""
-    pts = [p.positions for p in parts if len(p.positions)]
-    allp = np.concatenate(pts).astype(np.float64) if pts else np.zeros((1, 3))
-    leaves = [p.positions for p in parts if p.double_sided and len(p.positions)]
-    crown = np.concatenate(leaves).astype(np.float64) if leaves else allp
-    lo, hi = crown.min(0), crown.max(0)
-    size = max(float(np.max(allp.max(0) - allp.min(0))), 1e-3)
-    return 0.5 * (lo + hi), np.maximum(0.5 * (hi - lo), 0.05 * size)
-
-
 def _first_only(n: int) -> np.ndarray:
     w = np.zeros((n, 4), np.float32)
     w[:, 0] = 1.0
     return w
 
 
-def _bounds(asset) -> tuple[np.ndarray, np.ndarray]:
-    """The tree's box (Z up, its own frame) over its LOD0 vertices."""
-    pts = [p.positions for p in asset.lods[0].primitives if len(p.positions)]
-    allp = np.concatenate(pts) if pts else np.zeros((1, 3))
-    return allp.min(0), allp.max(0)
-
-
 def _height(asset) -> float:
-    lo, hi = _bounds(asset)
+    lo, hi = lod_bounds(asset.lods[0])
     return float(hi[2] - lo[2])

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .drawable import Drawable, Part
+from .drawable import Drawable, Part, crown
 from .errors import TreegenError
 from .leafshapes import card_corners
 from .render_gl import GL_SRGB8_ALPHA8, gl_context, mip_chain
@@ -136,13 +136,8 @@ class Renderer:
         pts = np.concatenate(
             [p.positions for p in self.scene.parts if len(p.positions)] or [np.zeros((1, 3), np.float32)]
         ).astype(np.float64)
-        lo, hi = pts.min(0), pts.max(0)
-        self.bounds = (lo, hi)
-        leaves = [p.positions for p in self.scene.parts if p.double_sided and len(p.positions)]
-        crown = np.concatenate(leaves).astype(np.float64) if leaves else pts
-        clo, chi = crown.min(0), crown.max(0)
-        self.crown_center = 0.5 * (clo + chi)
-        self.crown_radius = np.maximum(0.5 * (chi - clo), 0.05 * max(float(np.max(hi - lo)), 1e-3))
+        self.bounds = (pts.min(0), pts.max(0))
+        self.crown_center, self.crown_radius = crown(self.scene.parts)
 
     def _set(self, prog, name, value) -> None:
         if name in prog:
