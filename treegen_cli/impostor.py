@@ -106,13 +106,19 @@ def placed(side: int, distance: float | None, flag: str, lod: LodOptions) -> Imp
     """The impostor of a tree whose LODs are `lod`: an atlas `side` px wide, used from
     `distance` metres if given (`flag` names it). With the LODs' own metres given
     (--lod-distances), a distance not beyond the last is refused now, before anything grows."""
-    last = lod.distances[-1] if lod.distances else None
-    if distance is not None and last is not None and not distance > last:
+    options = replace(sized(side), distance=distance, flag=flag)
+    if lod.distances:
+        check_beyond(options, lod.distances[-1])
+    return options
+
+
+def check_beyond(options: ImpostorOptions, last: float) -> None:
+    """Refuse the user's switch `distance` unless it lies beyond the last LOD's, `last` m."""
+    if options.distance is not None and not options.distance > last:
         raise TreegenError(
-            f"{flag} {distance:g}: the impostor comes after the last LOD, used from {last:g} m; "
-            f"give more than {last:g}"
+            f"{options.flag} {options.distance:g}: the impostor comes after the last LOD, "
+            f"used from {last:.4g} m on this tree; give more than {last:.4g}"
         )
-    return replace(sized(side), distance=distance, flag=flag)
 
 
 # ------------------------------------------------------------------ hemi-octahedral mapping
@@ -318,11 +324,7 @@ def switch_distance(height: float, last: float, lod_options: LodOptions, options
     """Metres from which the tree is at most switch_px tall on screen (and ≥ min_factor × last),
     or the user's `distance`, which must lie beyond the last LOD's."""
     if options.distance is not None:
-        if not options.distance > last:
-            raise TreegenError(
-                f"{options.flag} {options.distance:g}: the impostor comes after the last LOD, "
-                f"used from {last:.4g} m on this tree; give more than {last:.4g}"
-            )
+        check_beyond(options, last)
         return float(options.distance)
     d = screen_distance(height, options.switch_px, lod_options, of=lod_options.width / lod_options.aspect)
     return float(max(d, options.min_factor * last, 1e-3))

@@ -49,7 +49,6 @@ def make_options(layout: Layout, error_px: float | None = None, impostor: bool =
     )
     cam = layout.camera
     d = layout.defaults
-    where = "defaults.impostor_distance"
     lod = replace(
         LOD_DEFAULTS,
         fov_deg=cam.fov_deg if cam else LOD_DEFAULTS.fov_deg,
@@ -62,7 +61,9 @@ def make_options(layout: Layout, error_px: float | None = None, impostor: bool =
         rig=RigOptions(max_joints=d.max_joints),
         wind=wind,
         lod=lod,
-        impostor=replace(IMPOSTOR_DEFAULTS, distance=d.impostor_distance, flag=where) if impostor else None,
+        impostor=replace(IMPOSTOR_DEFAULTS, distance=d.impostor_distance, flag="defaults.impostor_distance")
+        if impostor
+        else None,
     )
     if d.profile is None and d.triangles is None:
         return options
@@ -80,8 +81,8 @@ def make_options(layout: Layout, error_px: float | None = None, impostor: bool =
         budget=replace(made.budget, flag=flag),
         materials=made.materials,
         lod=lod if made.lod is None else replace(lod, triangles=made.lod.triangles),
-        impostor=replace(made.impostor, distance=d.impostor_distance, flag=where)
-        if impostor and made.impostor
+        impostor=replace(options.impostor, cell=made.impostor.cell)  # the profile's atlas size
+        if options.impostor and made.impostor
         else None,
     )
 
