@@ -214,19 +214,33 @@ class Blades:
     def area(self, grid: Grid, factor) -> np.ndarray:
         """(V, cells) area of the blades grown by `factor` in area about their middles."""
         f = np.broadcast_to(np.asarray(factor, dtype=np.float64), self.length.shape)
-        ls = (self.length * f**self.share)[None, :, None] * self.s
-        ws = (self.width * f ** (1.0 - self.share))[None, :, None] * self.t
-        u = self.mu[:, :, None] + ls * self.lu[:, :, None] + ws * self.wu[:, :, None]
-        w = self.mw[:, :, None] + ls * self.lw[:, :, None] + ws * self.ww[:, :, None]
-        return _opaque_blades(grid, u, w, self.seen * f[None, :])
+        # in cells: a sample is its blade's middle plus s lengths and t widths, so each view's
+        # (L, S) coordinates are one (L, 3) @ (3, S) product (no (V, L, S) temporaries)
+        ls = self.length * f**self.share / grid.px
+        ws = self.width * f ** (1.0 - self.share) / grid.px
+        st = np.stack([np.ones_like(self.s), self.s, self.t])
+        cells = []
+        for v in range(self.mu.shape[0]):
+            u = np.stack([(self.mu[v] - grid.origin[v, 0]) / grid.px, ls * self.lu[v], ws * self.wu[v]], 1)
+            w = np.stack([(self.mw[v] - grid.origin[v, 1]) / grid.px, ls * self.lw[v], ws * self.ww[v]], 1)
+            cells.append(_cell_index(grid, u @ st, w @ st))
+        return _opaque_blades(grid, cells, self.seen * f[None, :])
+
+
+def _cell_index(grid: Grid, u: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """The flat cell index (u · nw + w, clipped to the grid) of samples at (u, w) in cells
+    from the view's origin (overwritten)."""
+    nu, nw = grid.shape
+    iu = np.clip(np.floor(u, out=u), 0, nu - 1, out=u).astype(np.int64)
+    iw = np.clip(np.floor(w, out=w), 0, nw - 1, out=w).astype(np.int64)
+    iu *= nw
+    iu += iw
+    return iu
 
 
 def _cells(grid: Grid, u: np.ndarray, w: np.ndarray, v: int) -> np.ndarray:
     """The flat cell index (u · nw + w, clipped to the grid) of view `v`'s samples at (u, w)."""
-    nu, nw = grid.shape
-    iu = np.clip(np.floor((u - grid.origin[v, 0]) / grid.px).astype(np.int64), 0, nu - 1)
-    iw = np.clip(np.floor((w - grid.origin[v, 1]) / grid.px).astype(np.int64), 0, nw - 1)
-    return iu * nw + iw
+    return _cell_index(grid, (u - grid.origin[v, 0]) / grid.px, (w - grid.origin[v, 1]) / grid.px)
 
 
 def _effective(c: np.ndarray, a: float) -> np.ndarray:
@@ -235,20 +249,21 @@ def _effective(c: np.ndarray, a: float) -> np.ndarray:
     return -np.log1p(-np.minimum(c, 1.0 - OPAQUE_EPS)) * a
 
 
-def _opaque_blades(grid: Grid, u: np.ndarray, w: np.ndarray, seen: np.ndarray) -> np.ndarray:
-    """(V, cells) effective area of blade samples at (u, w) (V, L, S), each carrying its
-    blade's `seen` (V, L): _opaque with one piece per blade, its runs found by sorting each
-    blade's S samples (a sort of all samples at once costs several times more)."""
-    V, L, S = u.shape
+def _opaque_blades(grid: Grid, cells: list[np.ndarray], seen: np.ndarray) -> np.ndarray:
+    """(V, cells) effective area of blade samples in `cells` (per view, (L, S) flat cell
+    indices), each carrying its blade's `seen` (V, L): _opaque with one piece per blade, its
+    runs found by sorting each blade's S samples (a sort of all samples at once costs several
+    times more)."""
     nu, nw = grid.shape
     a = grid.px * grid.px
-    out = np.zeros((V, nu * nw))
-    for v in range(V):
-        cell = np.sort(_cells(grid, u[v], w[v], v), axis=1)  # (L, S): runs of one blade's samples in a cell
+    out = np.zeros((len(cells), nu * nw))
+    for v, cell in enumerate(cells):
+        L, S = cell.shape
+        cell.sort(axis=1)  # (L, S): runs of one blade's samples in a cell
         first = np.ones((L, S), dtype=bool)
-        first[:, 1:] = cell[:, 1:] != cell[:, :-1]
+        np.not_equal(cell[:, 1:], cell[:, :-1], out=first[:, 1:])
         at = np.flatnonzero(first)
-        runs = np.diff(np.r_[at, L * S])
+        runs = np.diff(at, append=L * S)
         c = runs * seen[v][at // S] / a
         out[v] = np.bincount(cell.reshape(-1)[at], weights=_effective(c, a), minlength=nu * nw)
     return out
@@ -268,9 +283,14 @@ def _opaque(grid: Grid, u: np.ndarray, w: np.ndarray, seen: np.ndarray, piece: n
     out = np.zeros((V, n))
     for v in range(V):
         key = piece.astype(np.int64) * n + _cells(grid, u[v], w[v], v)
-        first, inv = np.unique(key, return_inverse=True)  # runs of one piece's samples in a cell
-        c = np.bincount(inv.reshape(-1), weights=seen[v], minlength=first.size) / a
-        out[v] = np.bincount(first % n, weights=_effective(c, a), minlength=n)
+        # runs of one piece's samples in a cell; a stable sort (pieces come in order, their
+        # samples mostly so) sums each run in the samples' order, as np.unique's inverse did
+        order = np.argsort(key, kind="stable")
+        key = key[order]
+        first = np.ones(P, dtype=bool)
+        np.not_equal(key[1:], key[:-1], out=first[1:])
+        c = np.bincount(np.cumsum(first) - 1, weights=seen[v][order]) / a
+        out[v] = np.bincount(key[first] % n, weights=_effective(c, a), minlength=n)
     return out
 
 
