@@ -27,7 +27,7 @@ from .params import Params
 from .prepare import prepare
 from .rig import RIG_DEFAULTS, Rig, RigOptions, build_rig, check_joint_levels
 from .tree import Tree, tree_height
-from .wind import DEFAULTS as WIND_DEFAULTS, WindOptions, bake_wind, bound_bends, wind_angles
+from .wind import DEFAULTS as WIND_DEFAULTS, WindOptions, bake_wind, bound_bends, one_blas_thread, wind_angles
 from .wind_lods import Nearest, lod_angles
 
 
@@ -149,6 +149,7 @@ def add_impostor(
     return [*lods[:-1], last, imp], [*materials, material]
 
 
+@one_blas_thread
 def build_asset(
     params: Params,
     seed: int = 0,
@@ -157,7 +158,9 @@ def build_asset(
     tree: Tree | None = None,
 ) -> tuple[Asset, Tree]:
     """Grow, rig, mesh and animate `params` with `seed`; returns the asset and its tree.
-    `tree`: the tree `generate(params, seed, options.generate)` already grew, to reuse."""
+    `tree`: the tree `generate(params, seed, options.generate)` already grew, to reuse.
+    BLAS runs on one thread: its products here are small, and idle OpenBLAS threads spin on
+    every core (0.3 CPU-s of the aspen's 1.4, no faster), taking it from a batch's workers."""
     timings = timings if timings is not None else Timings()
     check_joint_levels(params.levels, options.rig)
     # Materials first: they fix the leaf atlas layout the mesh maps leaves into, and a bad
