@@ -134,10 +134,10 @@ def _segments(tree: Tree, px: float, radius_factor, sides: np.ndarray | None = N
     k = np.arange(which.size) - np.repeat(np.cumsum(nm) - nm, nm)
     along = (k // m[which] + 0.5) / n[which]
     across = (k % m[which] + 0.5) / m[which] - 0.5
-    cu, cw = _project(p0[which] + along[:, None] * d[which])
+    (u0, w0), (du, dw) = _project(p0), _project(d)  # per segment, then along it
     off = across[None, :] * width[:, which]
-    u = cu - off * (aw / norm)[:, which]
-    w = cw + off * (au / norm)[:, which]
+    u = u0[:, which] + along * du[:, which] - off * (aw / norm)[:, which]
+    w = w0[:, which] + along * dw[:, which] + off * (au / norm)[:, which]
     seen = sin * width * length[None, :] / nm[None, :]
     return u, w, seen[:, which], which
 
