@@ -352,11 +352,15 @@ def build_impostor(
     source = atlas_source(coarse)
     centre, radius, (lo, hi) = sphere(source)
     albedo, normal = render_views(source, materials, centre, radius, options, card_cells(options.grid))
+    from concurrent.futures import ThreadPoolExecutor
+
     from .texture_png import png_bytes, png_bytes_unfiltered as png
 
-    albedo_tex = Texture("impostor_albedo", png(albedo), wrap="CLAMP")
-    normal_tex = Texture("impostor_normal", png(normal), wrap="CLAMP", srgb=False)
-    card_albedo, card_normal = card_textures(albedo, normal, options.grid, options.cell)
+    with ThreadPoolExecutor(1) as pool:  # zlib lets go of the GIL: one atlas on each core
+        normal_png = pool.submit(png, normal)
+        albedo_tex = Texture("impostor_albedo", png(albedo), wrap="CLAMP")
+        card_albedo, card_normal = card_textures(albedo, normal, options.grid, options.cell)
+        normal_tex = Texture("impostor_normal", normal_png.result(), wrap="CLAMP", srgb=False)
     cards_tex = Texture("impostor_cards", png_bytes(card_albedo), wrap="CLAMP")
     cards_normal = Texture("impostor_cards_normal", png_bytes(card_normal), wrap="CLAMP", srgb=False)
     prim = cards(centre, radius, options.grid)
