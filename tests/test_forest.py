@@ -1249,6 +1249,15 @@ def test_layout_preview_cli_writes_a_png_and_refuses_tree_only_flags(tmp_path):
         bad = subprocess.run([*run, "-o", str(tmp_path / "x.png"), *flag], capture_output=True, text=True)
         assert bad.returncode == 2 and f"{flag[0]}: not for a forest layout" in bad.stderr, bad.stderr
         assert "Traceback" not in bad.stderr and not (tmp_path / "x.png").exists()
+    # the row layout has a camera: --azimuth/--elevation, which frame a camera-less layout,
+    # are refused by name instead of silently ignored (given at their defaults too)
+    bad = subprocess.run(
+        [*run, "-o", str(tmp_path / "x.png"), "--azimuth", "-90", "--elevation", "30"],
+        capture_output=True,
+        text=True,
+    )
+    assert bad.returncode == 2 and "--azimuth and --elevation frame a layout without a camera" in bad.stderr
+    assert "Traceback" not in bad.stderr and not (tmp_path / "x.png").exists()
 
 
 def test_layout_impostor_distance_places_every_prototypes_impostor(tmp_path):

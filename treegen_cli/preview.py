@@ -236,7 +236,8 @@ def _size(text: str) -> tuple[int, int]:
     default=DEFAULTS.azimuth,
     show_default=True,
     help="Camera bearing, degrees counter-clockwise from +X seen from above "
-    "(Z-up tree space); -90 looks along +Y, so the default wind blows left → right.",
+    "(Z-up tree space); -90 looks along +Y, so the default wind blows left → right. "
+    "A layout with a camera is seen from that camera instead.",
 )
 @click.option(
     "--elevation",
@@ -323,8 +324,11 @@ def preview_command(
     if Path(input_path).suffix.lower() == ".json":  # a forest layout: seen from its camera
         from .preview_forest import bearing, forest_view
 
+        from .commands.flags import given
+
         _layout_only(animate, lod, seed)
-        scene, camera, forest = forest_view(input_path, azimuth, elevation, width / height)
+        framing = [f"--{k}" for k in given(dict(azimuth=azimuth, elevation=elevation))]
+        scene, camera, forest = forest_view(input_path, azimuth, elevation, width / height, framing=framing)
         options = replace(options, azimuth=bearing(camera))  # the default sun turns with it
     else:
         scene = load_scene(input_path, options)

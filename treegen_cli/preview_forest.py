@@ -28,13 +28,23 @@ NEAR_M = 0.1  # near plane of a layout's camera, metres
 MAX_TRIANGLES = 30_000_000
 
 
-def forest_view(path, azimuth: float, elevation: float, aspect: float, workers: int | None = None):
+def forest_view(
+    path, azimuth: float, elevation: float, aspect: float, workers: int | None = None, framing=()
+):
     """(Drawable, Camera, summary) of the layout at `path`: every tree at the LOD its camera
-    (the layout's, else one framing the forest from `azimuth`/`elevation`) needs."""
+    (the layout's, else one framing the forest from `azimuth`/`elevation`) needs. `framing`:
+    the flags the user gave for the framed camera, refused when the layout has its own."""
     from .forest import build_scene, load_layout
     from .forest.build import camera_lods
 
     layout = load_layout(path)
+    if layout.camera is not None and framing:
+        two = len(framing) > 1
+        raise TreegenError(
+            f"{path}: {' and '.join(framing)} frame{'' if two else 's'} a layout without a camera; "
+            "this one sets 'camera' (its position and target give the view): leave "
+            f"{'them' if two else 'it'} out, or remove 'camera' from the layout"
+        )
     forest = build_scene(layout, all_lods=True, workers=workers, progress=None)
     inst = forest.instances
     pos = np.array([i.position for i in inst], float).reshape(-1, 3)
