@@ -627,6 +627,22 @@ def test_impostor_distance_places_the_impostor_beyond_the_last_lod(tmp_path):
     with pytest.raises(TreegenError, match=r"^entries\[0\]\.impostor_distance 40: .*used from 60 m"):
         entry = {"species": str(species_path("rush")), "lod_distances": [0, 15, 60], "impostor_distance": 40}
         parse_catalogue({"entries": [entry]}, tmp_path / "c.json")
+    # one place setting both is a mistake; an entry turning off what the defaults set is not
+    rush = str(species_path("rush"))
+    both = {"impostor_distance": 400, "impostor": False}
+    for data, where in (
+        ({"entries": [{"species": rush, **both}]}, r"entries\[0\]"),
+        ({"defaults": both, "entries": [{"species": rush}]}, "defaults"),
+    ):
+        with pytest.raises(
+            TreegenError, match=rf"^{where}\.impostor_distance: has no effect, {where}\.impostor false builds"
+        ):
+            parse_catalogue(data, tmp_path / "c.json")
+    off = parse_catalogue(
+        {"defaults": {"impostor_distance": 400}, "entries": [{"species": rush, "impostor": False}]},
+        tmp_path / "c.json",
+    )
+    assert off.resolved[off.jobs[0].task].options.impostor is None  # built without one
 
 
 @needs_gl

@@ -208,7 +208,7 @@ def _static(output) -> bool:
     return output is not None and Path(output).suffix.lower() in STATIC
 
 
-def _check_no_effect(options: dict, label: Callable[[str], str], output) -> None:
+def check_no_effect(options: dict, label: Callable[[str], str], output) -> None:
     """Refuse an option the user gave that the rest of the request makes void (called before
     a profile fills its own: those are defaults, not requests). A flag counts when set, a
     value when given at all (0 included)."""
@@ -255,7 +255,7 @@ def resolve(
     options = _joints_alias(options, label)
     label = typed  # the joint budget's messages name the spelling the user gave
     if void_check:  # (a catalogue's grids and defaults combine options on purpose)
-        _check_no_effect(options, label, output)
+        check_no_effect(options, label, output)
     options = apply_profile(options, label) if options.get("profile") is not None else options
     v = {k: _scalar(k, options.get(k, d), label) for k, d in DEFAULTS.items()}
     v["joint_levels"] = _number_list("joint_levels", v["joint_levels"], int, label)

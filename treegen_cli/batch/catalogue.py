@@ -14,7 +14,7 @@ from importlib import resources
 from pathlib import Path, PurePosixPath
 
 from ..build_id import build_id
-from ..options import MAX_SEED
+from ..options import MAX_SEED, check_no_effect
 from ..errors import TreegenError
 from ..forest.schema import check_schema, read_json_file, show_value
 from ..generate import check_trunk
@@ -217,6 +217,7 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
     check_schema(data, schema, schema)
     base = path.parent
     defaults = data.get("defaults", {})
+    _contradictions(defaults, "defaults", api.DEFAULTS)
     loaded: dict = {}
     jobs: list[Job] = []
     resolved: dict = {}
@@ -226,6 +227,7 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
     for i, entry in enumerate(data["entries"]):
         where = f"entries[{i}]"
         sp, digest = _species(base, entry["species"], f"{where}.species", loaded)
+        _contradictions(entry, where, api.DEFAULTS)
 
         def pick(key, fallback):
             if key in entry:
@@ -350,6 +352,13 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
         resolved=resolved,
         labels=labels,
     )
+
+
+def _contradictions(scope: dict, where: str, known: dict) -> None:
+    """Refuse an option that another one set in the same place makes void (`impostor:
+    false` with `impostor_distance` in one entry): a mistake there, while an entry that
+    turns off what the defaults configure, or a grid point, combines them on purpose."""
+    check_no_effect({k: v for k, v in scope.items() if k in known}, lambda k: f"{where}.{k}", None)
 
 
 def _artist_images(job, base: Path, label, seen: dict):
