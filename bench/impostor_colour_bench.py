@@ -41,6 +41,23 @@ wide. With their part along the view kept (the atlas flips double-sided leaves t
 camera), each card faced its own view: at 45° between the cards the one turned to the sun
 lit its half of the crown, the other went dark (0.67×, the geometric LOD 1.15× the other
 way). LEAF_SHADE 0.37/0.40/0.56 → 0.445/0.483/0.706.
+
+Dark share (last column): the impostor's crown pixels darker than all but 2 % of LOD3's (2 %
+when it is as dark). 2026-11-27, a trial saw black blotches on the cards at the switch size:
+each texel's normal was the sum of its 3 × 3 covered neighbours' (up to nine times the rounded
+mass's weight), so clumps of leaves facing one way turned whole patches from the sun. Now their
+mean plus 0.45 of the mass, LEAF_SHADE × 0.835 (0.372/0.403/0.589) for the brightness the dark
+patches had pulled down; `--size 96`, before → after (R G B ratio, contrast, dark %):
+    quaking_aspen   1.257 1.261 1.266 0.76  6.5  →  1.206 1.206 1.203 0.54 1.0
+    balsam_fir      0.896 0.992 1.072 0.81 22.9  →  0.990 1.078 1.161 0.62 3.6
+    ca_black_oak    0.876 0.950 0.868 0.73  5.6  →  0.859 0.917 0.852 0.64 0.7
+    weeping_willow  0.980 0.971 1.003 1.00 18.7  →  1.041 0.996 1.040 0.68 3.2
+The std measure of contrast was mostly the blotches: the card's own flat normal everywhere reads
+0.47 (aspen), the mean with mass weights 0.3 / 0.35 / 0.45: contrast 0.59 / 0.57 / 0.54, dark
+2.3 / 1.7 / 1.0 % (aspen), 9.2 / 6.5 / 3.6 % (fir); each texel's own normal (no mean) with
+0.6: contrast 0.66, dark 5.1 % / 8.1 %, black specks instead of blotches. Looked at (128 px
+previews of LOD3 and the impostor, aspen, fir, willow): the mean with 0.45 is the one without
+black patches.
 """
 
 from __future__ import annotations
@@ -60,6 +77,7 @@ from treegen_cli.render_view import frame_points
 
 ROOT = Path(__file__).resolve().parent.parent
 VIEWS = (-90.0, -45.0)
+DARK_PERCENTILE = 2.0
 
 
 def linear(img: np.ndarray) -> np.ndarray:
@@ -68,9 +86,11 @@ def linear(img: np.ndarray) -> np.ndarray:
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
-def crown_means(asset, size: int = 192, views=VIEWS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(coarsest LOD, impostor) mean linear RGB over the pixels both cover, all views, and
-    their contrast: the standard deviation of linear luminance over those pixels (2,)."""
+def crown_means(asset, size: int = 192, views=VIEWS) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """(coarsest LOD, impostor) mean linear RGB over the pixels both cover, all views, their
+    contrast: the standard deviation of linear luminance over those pixels (2,), and the
+    impostor's dark share: its pixels darker than all but DARK_PERCENTILE % of the LOD's
+    (blotches; DARK_PERCENTILE / 100 when it is as dark as the LOD)."""
     k = len(asset.lods) - 1
     scenes = [from_asset(asset, k - 1), from_asset(asset, k)]
     pts = np.concatenate([p.positions for p in scenes[0].parts])
@@ -89,7 +109,8 @@ def crown_means(asset, size: int = 192, views=VIEWS) -> tuple[np.ndarray, np.nda
             pixels[i].append(imgs[i][both])
     geo, imp = (np.concatenate(p) if p else np.zeros((1, 3)) for p in pixels)
     lum = np.array([0.2126, 0.7152, 0.0722])
-    return geo.mean(0), imp.mean(0), np.array([np.std(geo @ lum), np.std(imp @ lum)])
+    dark = float(np.mean(imp @ lum < np.percentile(geo @ lum, DARK_PERCENTILE)))
+    return geo.mean(0), imp.mean(0), np.array([np.std(geo @ lum), np.std(imp @ lum)]), dark
 
 
 def main() -> None:
@@ -100,18 +121,18 @@ def main() -> None:
     job = api.resolve({"no_wind": True})
     print(
         f"{'species':<20}{'LOD3 linear RGB':<24}{'impostor linear RGB':<24}{'impostor / LOD3 RGB':<20}"
-        "contrast"
+        "contrast  dark %"
     )
     for name in args.species.split(","):
         asset, _ = build_asset(
             load_params(ROOT / "treegen_cli" / "species" / f"{name}.txt"), 0, job.options, Timings()
         )
-        geo, imp, spread = crown_means(asset, args.size)
+        geo, imp, spread, dark = crown_means(asset, args.size)
         ratio = imp / np.maximum(geo, 1e-9)
         fmt = lambda v: " ".join(f"{x:.4f}" for x in v)  # noqa: E731
         print(
             f"{name:<20}{fmt(geo):<24}{fmt(imp):<24}{' '.join(f'{x:.3f}' for x in ratio):<20}"
-            f"{spread[1] / max(spread[0], 1e-9):.2f}"
+            f"{spread[1] / max(spread[0], 1e-9):>8.2f}{100 * dark:>8.1f}"
         )
 
 

@@ -447,11 +447,31 @@ def _switch_pixels(asset) -> tuple[np.ndarray, np.ndarray]:
 @needs_gl
 def test_the_impostor_keeps_the_crowns_light_and_shade():
     """At the switch (_switch_pixels) the spread of luminance over the crown's pixels (std /
-    mean) on the cards is at least 0.5 × the LOD's (0.54). Lit by one bent normal per
-    corner, the cards read flat: 0.45 ×."""
+    mean) on the cards is at least 0.42 × the LOD's: the normal map shades them (0.45 ×; a
+    flat one, the card's own normal everywhere, 0.39 ×). The LOD's leaf-by-leaf speckle is
+    finer than the cards' 3 × 3-texel normals can follow, and the blotches that raised the
+    spread to 0.54 × are gone (the next test)."""
     geo, cards = (x @ np.array([0.2126, 0.7152, 0.0722]) for x in _switch_pixels(_asset("quaking_aspen")))
     spread = (np.std(cards) / np.mean(cards)) / (np.std(geo) / np.mean(geo))
-    assert spread >= 0.5, spread
+    assert spread >= 0.42, spread
+
+
+# cards' crown pixels darker than all but 2 % of the coarsest LOD's, at most (measured now /
+# with each texel's 3 × 3 neighbours' normals summed: black blotches several pixels wide)
+DARK_SHARE = {"quaking_aspen": 0.02, "balsam_fir": 0.07, "weeping_willow": 0.06}  # 0.8/3.8 %,
+# 5.0/26 %, 3.0/17 %
+
+
+@needs_gl
+@pytest.mark.parametrize("species", sorted(DARK_SHARE))
+def test_the_impostor_shows_no_dark_blotches(species):
+    """At the switch (_switch_pixels), few of the cards' crown pixels are darker than the
+    coarsest LOD's darkest 2 % (DARK_SHARE): clumps of leaves facing one way no longer turn
+    whole patches of a card from the sun."""
+    lum = np.array([0.2126, 0.7152, 0.0722])
+    geo, cards = (x @ lum for x in _switch_pixels(_asset(species)))
+    dark = float(np.mean(cards < np.percentile(geo, 2.0)))
+    assert dark <= DARK_SHARE[species], dark
 
 
 @needs_gl

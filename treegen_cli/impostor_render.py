@@ -32,9 +32,9 @@ from .render_gl import GL_SRGB8_ALPHA8, gl_context
 # came out 2.1× brighter than its LOD3 without it). Per channel: the crown's self-shadowing
 # dims the warm sun more than the blue sky, so one grey left the cards yellower (blue/green
 # 0.85-0.91× LOD3's on aspen, fir, oak and willow); these balance the hue over those four at
-# the switch size (impostor_colour_bench --size 96: blue/green 0.91-1.08×), green the mean
-# brightness (0.95-1.26×, mean 1.04; per species, mostly from the bark inside the crown).
-LEAF_SHADE = np.array([0.445, 0.483, 0.706])
+# the switch size (impostor_colour_bench --size 96: blue/green 0.92-1.08×), green the mean
+# brightness (0.92-1.21×, mean 1.05; per species, mostly from the bark inside the crown).
+LEAF_SHADE = np.array([0.372, 0.403, 0.589])
 # Bark inside the crown is shaded by its leaves (the aspen's white limbs showed as specks).
 CROWN_SHADE = 0.4
 
