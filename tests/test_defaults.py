@@ -91,8 +91,8 @@ def test_lod_flags_are_checked_once_in_lod_options_and_worded_as_typed():
         str(stage.value)
         == str(cli_msg.value)
         == (
-            "--lod-screen 0.5,0.6: give descending fractions of the screen height, each in "
-            "(0, 100], e.g. 0.5,0.25,0.1"
+            "--lod-screen 0.5,0.6: give descending fractions of the screen height (not "
+            "percentages), each in (0, 4], e.g. 0.5,0.25,0.1"
         )
     )
     assert str(catalogue.value).startswith("entries[0].lod_screen 0.5,0.6: give descending")

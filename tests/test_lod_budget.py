@@ -166,11 +166,26 @@ def test_untextured_or_artist_leaves_keep_cards_in_every_lod(tmp_path):
 
 
 def test_triangles_never_rise_whatever_the_options():
-    """--sides below the LOD table and budgets that rise: counts still fall LOD by LOD."""
-    asset = _asset("quaking_aspen", sides="5,3", lod_triangles="0.6,0.8,0.05")
+    """--sides below the LOD table: counts still fall LOD by LOD. Budgets that rise, percentages
+    typed for fractions or an empty value are refused by name (--lod-triangles 0.5,0.6 wrote
+    a LOD2 of 23,347 triangles, --lod-screen 50,25,10 put LOD3 at 2.9 m)."""
+    from treegen_cli.errors import TreegenError
+
+    asset = _asset("quaking_aspen", sides="5,3", lod_triangles="0.6,0.3,0.05")
     tris = [_tris(lod) for lod in asset.lods]
     assert tris == sorted(tris, reverse=True) and tris[1] <= 0.6 * tris[0], tris
     assert capped_sides((8, 6, 4, 3), (5, 3)) == (5, 3, 3, 3)
+    refused = {
+        "lod_triangles": ("0.5,0.6", "none above the one before"),
+        "lod_screen": ("50,25,10", r"\(not percentages\), each in \(0, 4\]"),
+    }
+    for key, (value, message) in refused.items():
+        flag = "--" + key.replace("_", "-")
+        with pytest.raises(TreegenError, match=rf"^{flag} '?{value}'?: .*{message}"):
+            resolve({key: value})
+    for key in ("lod_screen", "lod_triangles", "lod_distances", "sides"):
+        with pytest.raises(TreegenError, match=r"'0\.5,,0\.1': expected comma-separated"):
+            resolve({key: "0.5,,0.1"})
 
 
 def test_more_distances_than_budgets_step_on_by_the_last_ratio():

@@ -24,6 +24,8 @@ from dataclasses import dataclass
 from .errors import OptionError, TreegenError
 
 SCHEDULES = ("bounded", "bounded-step", "paper")
+MAX_SCREEN = 4.0  # a LOD switch at most this many screen heights tall: beyond, the camera is
+# inside the tree (--lod-screen 50,25,10, percentages typed for fractions, put LOD3 at 2.9 m)
 
 
 @dataclass(frozen=True)
@@ -63,14 +65,15 @@ class LodOptions:
         s = self.screen
         if (
             (d is None and not s)
-            or any(not (math.isfinite(x) and 0.0 < x <= 100.0) for x in s)
+            or any(not (math.isfinite(x) and 0.0 < x <= MAX_SCREEN) for x in s)
             or list(s) != sorted(s, reverse=True)
             or len(set(s)) != len(s)
         ):
             raise OptionError(
                 "screen",
                 ",".join(f"{x:g}" for x in s) or "(none)",
-                "give descending fractions of the screen height, each in (0, 100], e.g. 0.5,0.25,0.1",
+                f"give descending fractions of the screen height (not percentages), each in "
+                f"(0, {MAX_SCREEN:g}], e.g. 0.5,0.25,0.1",
                 "--lod-screen",
             )
         if not 0.0 < self.fov_deg < 180.0:

@@ -144,8 +144,8 @@ def _number_list(key: str, value, kind: type, label: Callable[[str], str]) -> tu
     if value is None:
         return None
     if isinstance(value, str):
-        try:
-            values = tuple(kind(v) for v in value.split(",") if v.strip() != "")
+        try:  # an empty value between commas ("0.5,,0.1") is refused too
+            values = tuple(kind(v) for v in value.split(",")) if value.strip() else ()
         except ValueError:
             what, example = LIST_EXAMPLES[key]
             raise TreegenError(
@@ -266,10 +266,10 @@ def resolve(
 
     if not v["no_lod"]:
         t = v["lod_triangles"]
-        if not t or any(not (math.isfinite(x) and 0.0 < x <= 1.0) for x in t):
+        if not t or any(not (math.isfinite(x) and 0 < x <= 1) for x in t) or list(t) != sorted(t)[::-1]:
             raise TreegenError(
-                f"{label('lod_triangles')} '{_text(t)}': give LOD1, LOD2, … "
-                "triangles as fractions of LOD0's, each in (0, 1], e.g. 0.5,0.15,0.05"
+                f"{label('lod_triangles')} '{_text(t)}': give LOD1, LOD2, … triangles as fractions of "
+                "LOD0's, each in (0, 1] and none above the one before, e.g. 0.5,0.15,0.05"
             )
     if v["triangles"] is not None and not 1 <= v["triangles"] <= 100_000_000:
         raise TreegenError(
