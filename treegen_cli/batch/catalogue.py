@@ -217,7 +217,9 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
     check_schema(data, schema, schema)
     base = path.parent
     defaults = data.get("defaults", {})
-    _contradictions(defaults, "defaults", api.DEFAULTS)
+    # an option another one in the same place makes void is a mistake (impostor false with
+    # impostor_distance); an entry turning off what the defaults set, or a grid, is on purpose
+    check_no_effect({k: v for k, v in defaults.items() if k in api.DEFAULTS}, "defaults.{}".format, None)
     loaded: dict = {}
     jobs: list[Job] = []
     resolved: dict = {}
@@ -227,7 +229,7 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
     for i, entry in enumerate(data["entries"]):
         where = f"entries[{i}]"
         sp, digest = _species(base, entry["species"], f"{where}.species", loaded)
-        _contradictions(entry, where, api.DEFAULTS)
+        check_no_effect({k: v for k, v in entry.items() if k in api.DEFAULTS}, f"{where}.{{}}".format, None)
 
         def pick(key, fallback):
             if key in entry:
@@ -352,13 +354,6 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
         resolved=resolved,
         labels=labels,
     )
-
-
-def _contradictions(scope: dict, where: str, known: dict) -> None:
-    """Refuse an option that another one set in the same place makes void (`impostor:
-    false` with `impostor_distance` in one entry): a mistake there, while an entry that
-    turns off what the defaults configure, or a grid point, combines them on purpose."""
-    check_no_effect({k: v for k, v in scope.items() if k in known}, lambda k: f"{where}.{k}", None)
 
 
 def _artist_images(job, base: Path, label, seen: dict):
