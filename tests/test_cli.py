@@ -62,6 +62,7 @@ def test_make_writes_a_valid_glb_and_the_same_bytes_twice(tmp_path):
         proc = treegen("make", ASPEN, "-o", out, "--duration", "1", "--fps", "10")
         assert proc.returncode == 0, proc.stderr
         assert "joints" in proc.stdout and "vertices" in proc.stdout
+        assert "; impostor from " in proc.stdout and "1 joint" in proc.stdout  # the last LOD, named
     assert a.read_bytes() == b.read_bytes()
     issues = validate_gltf(a)["issues"]
     assert issues["numErrors"] == 0 and issues["numWarnings"] == 0

@@ -625,6 +625,7 @@ def test_impostor_distance_places_the_impostor_beyond_the_last_lod(tmp_path):
     s = api.make(species_path("rush"), out, impostor_distance=200, **clip)
     assert [lod["distance_m"] for lod in s["lods"]] == [0, 15, 60, 200]
     assert s["lods"][-1]["triangles"] <= 8  # the cards
+    assert [r["impostor"] for r in s["lods"]] == [False, False, False, True]  # as make prints it
     refused = {
         "40": ({"impostor_distance": 40}, r"--impostor-distance 40: .*after the last LOD, used from 60 m"),
         "0": ({"impostor_distance": 0}, r"^--impostor-distance 0: the distance must be > 0 metres$"),

@@ -156,6 +156,7 @@ def make_summary(asset, tree, written, stages: dict, seconds: float) -> dict:
             "keys": keys,
             "joint_keys": joint_keys,
             "decimated": clip is not None and clip.keys is not None,
+            "impostor": lod.impostor is not None,
         }
 
     lods = [lod_row(lod) for lod in asset.lods]

@@ -55,9 +55,10 @@ def make(species, output, as_json, **options):
         click.echo(
             "  LODs: "
             + "; ".join(
-                f"{r['distance_m']:.1f} m: {r['triangles']:,} tris, {_joints(r['joints'])}"
-                + (f", {r['joint_keys']:,} keys" if r["decimated"] else "")
-                for r in s["lods"]
+                ("impostor from " if r["impostor"] else "")
+                + f"{r['distance_m']:.1f} m: {r['triangles']:,} tris, {_joints(r['joints'])}"
+                + (f", {r['joint_keys']:,} keys" if k > 0 and r["joint_keys"] else "")
+                for k, r in enumerate(s["lods"])
             )
         )
     stages = ", ".join(f"{k} {v:.2f}" for k, v in timings.stages.items())
