@@ -667,6 +667,24 @@ def test_impostor_distance_places_the_impostor_beyond_the_last_lod(tmp_path):
 
 
 @needs_gl
+def test_a_small_atlas_keeps_the_trunk_under_the_crown():
+    """At the `mobile` profile's 32 px views the aspen's trunk (0.4 m) is under a texel (0.66
+    m) and fell to the alpha test: the cards' crown floated over a stub. Drawn at least 1.5
+    texels wide under the crown, every row of each card from the crown's top to the ground
+    has an opaque texel."""
+    from treegen_cli.api import resolve
+
+    job = resolve({"profile": "mobile", "no_wind": True})
+    asset, _ = build_asset(load_params(species_path("quaking_aspen")), 0, job.options, tree=None)
+    card = [m for m in asset.materials if m.name == "impostor"][0].base_texture
+    alpha = decode_image(card.png, 4, "cards")[..., 3] > 0
+    cell = alpha.shape[0]
+    for k in range(alpha.shape[1] // cell):
+        rows = np.flatnonzero(alpha[:, k * cell : (k + 1) * cell].any(axis=1))
+        assert rows.size and np.array_equal(rows, np.arange(rows[0], rows[-1] + 1)), (k, rows)
+
+
+@needs_gl
 def test_a_smaller_atlas_is_written_smaller_and_says_so(tmp_path):
     """At --impostor-size 512 the PNGs are 512² with 32 px views, the extras and the sidecar
     say so, and the atlas takes at most a third of the default's bytes."""

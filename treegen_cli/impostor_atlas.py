@@ -70,6 +70,36 @@ def _widest_bark(prim: Primitive, cap: int) -> Primitive:
     return replace(prim, indices=tri[keep].ravel().astype(np.uint32))
 
 
+MIN_BARK_TEXELS = 1.5  # stems are drawn at least this many atlas texels wide
+
+
+def _bark_at_least(prim: Primitive, width: float, below: float) -> Primitive:
+    """Bark whose tubes are at least `width` metres wide below height `below` (the bole under
+    the crown; the crown's leaves hide its limbs): each vertex pushed out along its (radial)
+    normal by what its tube lacks. A tube's radius is read from each edge between
+    vertices whose normals differ by more than 20° (around a ring, not along the tube): chord
+    / (2 sin(θ/2)) for normals θ apart, the least over the vertex's edges (a diagonal to the
+    next ring reads longer). A trunk thinner than a texel fell to the alpha test in small
+    atlases: the `mobile` profile's aspen cards showed its crown floating."""
+    if prim.material != "bark" or not len(prim.indices):
+        return prim
+    p = np.asarray(prim.positions, np.float64)
+    n = np.asarray(prim.normals, np.float64)
+    tri = np.asarray(prim.indices, np.int64).reshape(-1, 3)
+    a, b = tri.ravel(), np.roll(tri, -1, axis=1).ravel()  # every triangle edge
+    cos = np.einsum("ij,ij->i", n[a], n[b])
+    around = cos < math.cos(math.radians(20.0))
+    half_sin = np.sqrt(np.clip(0.5 * (1.0 - cos[around]), 1e-12, None))
+    r = np.linalg.norm(p[a[around]] - p[b[around]], axis=1) / (2.0 * half_sin)
+    radius = np.full(len(p), np.inf)
+    np.minimum.at(radius, a[around], r)
+    np.minimum.at(radius, b[around], r)
+    push = np.where(np.isfinite(radius) & (p[:, 2] < below), np.clip(0.5 * width - radius, 0.0, None), 0.0)
+    if not push.any():
+        return prim
+    return replace(prim, positions=(p + push[:, None] * n).astype(np.float32))
+
+
 def _dilate(rgba: np.ndarray, grid: int, cell: int) -> np.ndarray:
     """Transparent texels take their cell's mean visible colour (alpha stays 0), so clients'
     mipmaps and bilinear filtering do not darken the cut-out's edges. The renderer clears to
@@ -145,7 +175,15 @@ def render_views(
     from .impostor_render import AtlasRenderer
     from .lod_cover import solve_factor
 
-    prims = [_widest_bark(p, options.max_bark_triangles) for p in lod.primitives]
+    texel = 2.0 * radius / options.cell  # a cell holds the bounding sphere
+    leaves = [
+        np.asarray(p.positions)[:, 2] for p in lod.primitives if p.material != "bark" and len(p.positions)
+    ]
+    crown = min((float(z.min()) for z in leaves), default=-math.inf)
+    prims = [
+        _bark_at_least(_widest_bark(p, options.max_bark_triangles), MIN_BARK_TEXELS * texel, crown)
+        for p in lod.primitives
+    ]
     thin = [_fewer_leaves(p, options.max_leaf_cards) for p in prims]
     decoded: dict[int, np.ndarray] = {}  # the leaf atlas is decoded once for both part lists
     parts = _atlas_parts(thin, materials, decoded)
