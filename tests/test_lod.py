@@ -307,6 +307,20 @@ def test_cli_info_lod_json():
     assert res.exit_code != 0
 
 
+def test_info_lod_builds_what_make_builds_with_its_options(tmp_path):
+    """`info --lod` takes make's LOD build options (a profile, --lod-triangles, --max-joints,
+    the impostor's): its rows are the LODs `make` writes with them (they were refused)."""
+    from treegen_cli import api
+
+    opts = dict(profile="mobile", lod_triangles="0.4,0.1,0.04", max_joints=48, impostor=False)
+    info = api.info(SPECIES_DIR / "quaking_aspen.txt", lod=True, **opts)
+    made = api.make(SPECIES_DIR / "quaking_aspen.txt", tmp_path / "a.glb", **opts)
+    assert [(r["distance_m"], r["triangles"], r["joints"]) for r in info["lods"]] == [
+        (r["distance_m"], r["triangles"], r["joints"]) for r in made["lods"]
+    ]
+    assert len(made["lods"]) == 3 and made["lods"][0]["joints"] <= 48
+
+
 def _skinned(lod, rotations: np.ndarray) -> np.ndarray:
     """Every vertex of the LOD under linear blend skinning for each frame: (K, V, 3)."""
     from treegen_cli.skeleton import pose_world

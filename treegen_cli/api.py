@@ -36,9 +36,9 @@ from .lod_report import PAPER_DISTANCES, lod_table_row, schedule_rows
 from .mesh import MESH_DEFAULTS
 
 # re-exported: api is the one door (api.DEFAULTS, api.resolve, ...)
-from .options import DEFAULTS, GROUPS, UNSET_FREE, Resolved, cli_name, resolve  # noqa: F401
+from .options import DEFAULTS, GROUPS, INFO_LOD_BUILD, UNSET_FREE, Resolved, cli_name, resolve  # noqa: F401
 from .params import Params, load_params
-from .pipeline import MakeOptions, Timings, build_asset
+from .pipeline import Timings, build_asset
 from .prepare import split_lods
 from .progress import current_reporter
 from .rig import build_rig
@@ -204,17 +204,17 @@ def info(
     stats = tree_stats(tree) | {"generate_s": round(seconds, 4), "file": str(path)}
     stats["triangles"] = _triangle_rows(path, params, seed, tree, triangles, generate_options)
     if lod:
-        lod_options = resolve(given("lod")).options.lod
-        assert lod_options is not None  # no_lod is not an info option
-        from .impostor import IMPOSTOR_DEFAULTS
         from .render_gl import egl_available  # lazy: GL only when the impostor is drawn
 
-        make_options = MakeOptions(
-            generate=generate_options,
-            lod=lod_options,  # as `make` builds it
-            impostor=IMPOSTOR_DEFAULTS if egl_available() else None,
-        )
-        asset, _tree = in_file(path, build_asset, params, seed, make_options, Timings(), tree)
+        build = given("lod") | {k: v for k, v in options.items() if k in INFO_LOD_BUILD}
+        if triangles is not None:
+            build["triangles"] = triangles
+        job = resolve(given("generate") | build)  # the LODs `make` builds with these options
+        lod_options = job.options.lod
+        assert lod_options is not None  # no_lod is not an info option
+        make_options = replace(job.options, impostor=job.options.impostor if egl_available() else None)
+        reuse = tree if make_options.budget.triangles is None else None  # a budget regrows it
+        asset, _tree = in_file(path, build_asset, params, seed, make_options, Timings(), reuse)
         stats["lods"] = [lod_table_row(level, lod_options) for level in asset.lods]
         stats["schedules"] = schedule_rows(asset.lods[0], PAPER_DISTANCES, lod_options)
     if wind:

@@ -83,6 +83,16 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "lod": ("lod_screen", "lod_distances", "fov", "width", "error_px", "schedule"),
     "wind": ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "stiffness"),
 }
+# What else `info --lod` builds the LODs with, as `make` would (a profile's LODs and impostor)
+INFO_LOD_BUILD = (
+    "lod_triangles",
+    "max_joints",
+    "joints",
+    "impostor",
+    "impostor_size",
+    "impostor_distance",
+    "profile",
+)
 INTS = ("seed", "max_stems", "max_leaves", "max_joints", "width", "max_vertices", "max_keys", "texture_size")
 # None: no budget; --max-joints decides; 2 × --texture-size (impostor.atlas_side)
 OPTIONAL_INTS = ("triangles", "joints", "impostor_size")

@@ -21,7 +21,7 @@ from . import flags
     help="Also build the LODs and print, per LOD distance, keys kept, max error, leaf-"
     "vertex updates per frame vs all leaf vertices, joints, triangles.",
 )
-@flags.use(*api.GROUPS["lod"])
+@flags.use(*api.GROUPS["lod"], *api.INFO_LOD_BUILD)
 @click.option(
     "--wind",
     "with_wind",
