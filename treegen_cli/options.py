@@ -83,16 +83,6 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "lod": ("lod_screen", "lod_distances", "fov", "width", "error_px", "schedule"),
     "wind": ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "stiffness"),
 }
-# What else `info --lod` builds the LODs with, as `make` would (a profile's LODs and impostor)
-INFO_LOD_BUILD = (
-    "lod_triangles",
-    "max_joints",
-    "joints",
-    "impostor",
-    "impostor_size",
-    "impostor_distance",
-    "profile",
-)
 INTS = ("seed", "max_stems", "max_leaves", "max_joints", "width", "max_vertices", "max_keys", "texture_size")
 # None: no budget; --max-joints decides; 2 × --texture-size (impostor.atlas_side)
 OPTIONAL_INTS = ("triangles", "joints", "impostor_size")
@@ -105,6 +95,8 @@ PATHS = ("leaf_texture", "bark_texture")
 # --no-lod or --no-impostor or for a static format they would be silently ignored
 WIND_ONLY = ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "stiffness")
 IMPOSTOR_ONLY = ("impostor_size", "impostor_distance")
+# What else `info --lod` builds the LODs with, as `make` would (a profile's LODs and impostor)
+INFO_LOD_BUILD = ("lod_triangles", "max_joints", "joints", "profile", "impostor", *IMPOSTOR_ONLY)
 LOD_ONLY = ("lod_screen", "lod_distances", "lod_triangles", "lod_files", "schedule", *IMPOSTOR_ONLY)
 FLOATS = ("max_size", "fov", "error_px", *WIND_ONLY)
 FLAGS = ("no_wind", "no_lod", "lod_files", "no_textures", "impostor")
