@@ -292,6 +292,7 @@ def test_sample_track_hits_keys_and_holds_ends():
         (["preview", "{d}/palm.glb", "-o", "{d}/x.png", "--lod", "7"], "out of range"),
         (["preview", "{d}/broken.glb", "-o", "{d}/x.png"], "not a readable glTF"),
         (["preview", str(SMALL), "-o", "{d}/x.png", "--sun", "nan"], "--sun nan: give a bearing"),
+        (["preview", "{d}/palm.glb", "-o", "{d}/x.png", "--seed", "3"], "is a written tree"),
     ],
 )
 def test_bad_input_is_one_line_exit_2(argv, needle, written, capsys):
@@ -352,6 +353,15 @@ def test_preview_of_a_forest_is_refused_in_one_line(forest_files, name, tmp_path
     # other readers of a forest GLB still get its first tree (test_forest relies on it)
     if name == "f.glb":
         assert scene_from_gltf(forest_files / name).parts
+
+
+def test_a_species_preview_reaches_the_impostor_as_make_writes_it():
+    """`preview SPECIES --lod K` builds the LODs as `make` does: the last is the impostor
+    (its cards, 8 triangles), as in the written file (it was refused: no impostor)."""
+    from treegen_cli.preview import PreviewOptions, load_scene
+
+    scene = load_scene("quaking_aspen", PreviewOptions(lod=4))
+    assert sum(len(p.indices) // 3 for p in scene.parts) == 8
 
 
 def test_lod_out_of_range_raises_treegen_error(written):

@@ -27,7 +27,8 @@ from .drawable import Drawable, Part, from_asset
 from .bundled import LIST_HINT, bundled_species, not_found
 from .errors import TreegenError
 from .params import load_params
-from .pipeline import MakeOptions, build_asset
+from .options import resolve
+from .pipeline import build_asset
 from .render_view import frame_points, skin_points
 
 
@@ -58,10 +59,14 @@ def load_scene(path: str | os.PathLike, options: PreviewOptions = DEFAULTS) -> D
     exchange) as a Drawable."""
     path = exchange.check_input(resolve_input(path))
     if not exchange.is_species(path):
+        if options.seed != 0:
+            raise TreegenError(f"--seed {options.seed}: {path} is a written tree, grown with its own seed")
         return exchange.read_drawable(path, options.lod, refuse_forest=True)
     params = load_params(path)
-    # LOD 0 alone needs no LOD chain: skip building (and cutting leaves for) the others
-    make = replace(MakeOptions(), lod=None) if options.lod == 0 else MakeOptions()
+    # LOD 0 alone needs no LOD chain: skip building (and cutting leaves for) the others; the
+    # others as `make` builds them, the impostor last
+    make = resolve({}).options
+    make = replace(make, lod=None, impostor=None) if options.lod == 0 else make
     try:
         asset, _ = build_asset(params, options.seed, make)
     except TreegenError as e:

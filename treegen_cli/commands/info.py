@@ -96,15 +96,15 @@ def _lod_table(stats: dict, o: dict) -> None:
     )
     for k, r in enumerate(stats["lods"]):
         click.echo(
-            f"    {k:<4}{r['distance_m']:>8g}{r['keys_kept']:>9,} {r['keys_kept_pct']:>5.1f}%"
+            f"    {k:<4}{r['distance_m']:>8.1f}{r['keys_kept']:>9,} {r['keys_kept_pct']:>5.1f}%"
             f"{r['max_error_px']:>11.3f}{r['leaf_vertex_updates_per_frame']:>15,.0f}"
             f"{r['leaf_vertices']:>12,}{r['joints']:>8}{r['triangles']:>11,}"
         )
         if "impostor" in r:
             i = r["impostor"]
             click.echo(
-                f"    LOD {k} is the impostor: from {r['distance_m']:g} m, two crossed "
-                f"cards {i['card_m']:g} m square cut from {i['grid']}×{i['grid']} views "
+                f"    LOD {k} is the impostor: from {r['distance_m']:.1f} m, two crossed "
+                f"cards {i['card_m']:.1f} m square cut from {i['grid']}×{i['grid']} views "
                 f"of {i['cell_px']} px ({i['atlas_px']}² atlas, "
                 f"{i['atlas_bytes'] / 1e3:,.0f} KB of PNG)"
             )
