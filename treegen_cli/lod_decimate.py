@@ -102,15 +102,17 @@ def _refine(
     limit: float,
     interpolation: str,
     max_iterations: int,
-) -> tuple[np.ndarray, int, int]:
+    half: Playback | None = None,
+) -> tuple[np.ndarray, int, int, Playback]:
     """Add keys to `kept` (bool (K, J), modified) until every corner on every frame is within
     `limit` metres of the dense pose: each round, every failing frame blames the ancestor whose
     own rotation error moves the failing joint's corners most, and per blamed joint only the
     worst frame between two of its kept keys gets a key (Douglas–Peucker; under LINEAR one key
-    fixes its neighbours too). Returns (squared errors (K, J), rounds, joint-frames checked)."""
+    fixes its neighbours too). Returns (squared errors (K, J), rounds, joint-frames checked,
+    the final playback); `half`: the playback of every other frame, if known (Playback)."""
     K, J = kept.shape
     limit2 = (limit * (1.0 - 1e-9)) ** 2
-    play = Playback(m, rot, kept, interpolation, dense_world)
+    play = Playback(m, rot, kept, interpolation, dense_world, half=half)
     rounds = 0
     while (play.err2 > limit2).any():
         if rounds >= max_iterations:  # give up gracefully: key the frames fully
@@ -141,7 +143,7 @@ def _refine(
             kept[nk, nj] = True
             play.update(nk, nj, prev, nxt)
         rounds += 1
-    return play.err2, rounds, play.work
+    return play.err2, rounds, play.work, play
 
 
 def _bounded(
@@ -151,7 +153,7 @@ def _bounded(
     limit: float,
     interpolation: str,
     max_iterations: int,
-) -> tuple[np.ndarray, np.ndarray, int, int]:
+) -> tuple[np.ndarray, np.ndarray, int, int, Playback]:
     """Kept keys (K, J) whose playback keeps every corner within `limit` metres, coarse to fine:
     the keys found on every other frame seed the check on all frames, recursively, so each
     level needs a few rounds and the total cost is about twice one pass over the clip — linear
@@ -160,14 +162,16 @@ def _bounded(
     kept = np.zeros((K, J), dtype=bool)
     kept[0] = kept[-1] = True
     rounds = work = 0
+    half = None
     if K > 33:
         sub = np.unique(np.r_[np.arange(0, K, 2), K - 1])
-        sub_kept, _, rounds, work = _bounded(
+        sub_kept, _, rounds, work, sub_play = _bounded(
             m, rot[sub], dense_world[sub], limit, interpolation, max_iterations
         )
         kept[sub] = sub_kept
-    err2, r, w = _refine(m, rot, dense_world, kept, limit, interpolation, max_iterations)
-    return kept, err2, rounds + r, work + w
+        half = sub_play if K % 2 else None  # odd K: the sub-clip is exactly every other frame
+    err2, r, w, play = _refine(m, rot, dense_world, kept, limit, interpolation, max_iterations, half)
+    return kept, err2, rounds + r, work + w, play
 
 
 def _view_radius(primitives: list[Primitive], world: np.ndarray, hom: np.ndarray) -> float:
@@ -228,7 +232,7 @@ def decimate(
         threshold = options.error_px * near
         if threshold <= 0.0:
             return dense_clip(radius)
-        kept, err2, rounds, work = _bounded(m, rot, dense_world, threshold, interp, options.max_iterations)
+        kept, err2, rounds, work, _ = _bounded(m, rot, dense_world, threshold, interp, options.max_iterations)
     keys = [np.flatnonzero(kept[:, j]) for j in range(J)]
     clip = replace(dense, name=name, interpolation=interp, keys=keys)
     error = float(np.sqrt(err2.max()) / near) if near > 0 else math.inf
@@ -282,5 +286,5 @@ def keys_within(
     every frame (`model`'s box-corner probes, composed through the hierarchy): the "bounded"
     schedule with a bound in metres rather than pixels (compressed files' LOD0, key_plan.py,
     which calls it several times on one clip and so builds the model and pose once)."""
-    kept, _, _, _ = _bounded(model, rotations, dense_world, limit, "LINEAR", LOD_DEFAULTS.max_iterations)
+    kept, _, _, _, _ = _bounded(model, rotations, dense_world, limit, "LINEAR", LOD_DEFAULTS.max_iterations)
     return kept

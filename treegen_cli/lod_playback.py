@@ -72,11 +72,22 @@ class Playback:
         interpolation: str,
         dense_world: np.ndarray,
         work: int = 0,
+        half: Playback | None = None,
     ):
+        """`half`: this clip's every other frame (rows 0, 2, …, K − 1 of an odd K) already
+        played with the same keys there: its poses are taken, not recomputed (a key at 2i
+        between keys at 2p and 2n slerps by (i − p) / (n − p), to the bit)."""
         self.m, self.rot, self.kept, self.interp, self.dense_world = m, rot, kept, interpolation, dense_world
         self.rec = play_keys(rot, kept, interpolation)
-        self.world = pose_world(m.skeleton, self.rec)
-        self.err2 = corner_errors(self.world, dense_world, m.hom)
+        if half is None:
+            self.world = pose_world(m.skeleton, self.rec)
+            self.err2 = corner_errors(self.world, dense_world, m.hom)
+        else:
+            self.world = np.empty_like(dense_world)
+            self.err2 = np.empty(rot.shape[:2])
+            self.world[::2], self.err2[::2] = half.world, half.err2
+            self.world[1::2] = pose_world(m.skeleton, self.rec[1::2])
+            self.err2[1::2] = corner_errors(self.world[1::2], dense_world[1::2], m.hom)
         self.work = work + self.err2.size
 
     def update(self, nk: np.ndarray, nj: np.ndarray, prev: np.ndarray, nxt: np.ndarray) -> None:
