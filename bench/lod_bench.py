@@ -15,6 +15,13 @@ texture thread, llvmpipe's for the impostor), LOD stage seconds and its share, L
 clip second (flat = linear in clip length), switch distances (from the tree's height on screen)
 and triangles per LOD; medians of `--repeat` runs after one warm-up make. Seconds are measured
 on a shared box: read ratios, not absolutes.
+
+Measured 2026-11-27 (table 2, the aspen's default make, 10 s clip, `--repeat 7`, each checkout
+by PYTHONPATH; load about 1): cd1e81e 1.36 s wall / 1.67 CPU-s → 1.14 s / 1.27 CPU-s after the
+cover estimator's faster binning, one BLAS thread in build_asset (idle OpenBLAS threads spun),
+the PNG on a second thread and the decimation reusing every other frame's poses. An in-process
+A/B of 18 makes each, alternating checkouts (load 0.5-1.6): 1.13-1.25 → 1.03-1.05 s wall
+(paired 0.85-0.90×), 1.43-1.56 → 1.14-1.17 CPU-s. Still above the issue's 1.0 s.
 """
 
 from __future__ import annotations
