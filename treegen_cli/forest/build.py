@@ -222,7 +222,13 @@ def build_scene(
     index = {k: i for i, k in enumerate(keys)}
     options = make_options(layout, error_px, impostor)
     report: dict = {}
-    prototypes = build_prototypes(keys, options, workers, progress, layout.params, scheduler, report)
+    try:
+        prototypes = build_prototypes(keys, options, workers, progress, layout.params, scheduler, report)
+    except TreegenError as e:  # a layout key refused on one tree: the layout's error, tree named
+        species, sep, rest = str(e).partition(": ")
+        if not sep or not rest.startswith(("defaults.", "instances[", "scatter[")):
+            raise
+        raise TreegenError(f"{layout.path}: {rest} (on {species})") from None
     t1 = time.perf_counter()
     placements = layout.placements
     proto = np.array([index[(p.species, p.seed)] for p in placements], int)
