@@ -622,3 +622,34 @@ def test_storms_lean_downwind_without_a_trunk_kink(paper_trees, species):
         theta = wind_angles(tree, rig, opts, seed=0)
         kink = np.degrees(np.linalg.norm(theta[trunk] - theta[parent[trunk]], axis=2))
         assert kink.max() <= 6.0, (speed, kink.max())
+
+
+def test_one_blas_thread_holds_while_any_overlapping_call_is_inside():
+    """The BLAS limit is the process's: with builds overlapping in threads, each used to
+    restore what it found on entry, so the first to finish put the other's solve back on
+    every core (other bytes) and the last left one thread for good. Now the first call in
+    sets it, the last out restores it."""
+    import threading
+    import time
+
+    from treegen_cli.wind import _BLAS, one_blas_thread
+
+    def threads() -> list[int]:
+        return [i["num_threads"] for i in _BLAS.info() if i["user_api"] == "blas"]
+
+    before, seen = threads(), {}
+
+    @one_blas_thread
+    def build(name: str, seconds: float) -> None:
+        time.sleep(seconds)
+        seen[name] = threads()
+
+    first = threading.Thread(target=build, args=("first", 0.2))
+    second = threading.Thread(target=build, args=("second", 0.6))
+    first.start()
+    time.sleep(0.05)
+    second.start()
+    first.join()
+    second.join()
+    assert all(n == 1 for n in seen["first"] + seen["second"]), seen
+    assert threads() == before

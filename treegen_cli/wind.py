@@ -49,6 +49,7 @@ bounds and bakes, and reports what an artist tunes with.
 from __future__ import annotations
 
 import functools
+import threading
 from dataclasses import replace
 
 import numpy as np
@@ -143,15 +144,30 @@ SWAY_FPS = 4.0  # its frames per second (sways are well under 2 Hz)
 _BLAS = ThreadpoolController()
 
 
+_LIMIT_LOCK = threading.Lock()
+_limit: dict = {"inside": 0, "limiter": None}  # calls inside one_blas_thread, and their limit
+
+
 def one_blas_thread(fn):
     """Run `fn` with single-threaded BLAS/LAPACK: a threaded reduction sums in another order,
     so the same tree would bake to different bytes under `treegen make` (all cores) and a Dask
-    worker; at these sizes (J <= 256) one thread is also faster."""
+    worker; at these sizes (J <= 256) one thread is also faster. The limit is the process's:
+    the first call in sets it and the last one out restores it, so builds overlapping in
+    threads (the API, a multi-threaded Dask worker) all run inside it."""
 
     @functools.wraps(fn)
     def run(*args, **kwargs):
-        with _BLAS.limit(limits=1, user_api="blas"):
+        with _LIMIT_LOCK:
+            if _limit["inside"] == 0:
+                _limit["limiter"] = _BLAS.limit(limits=1, user_api="blas")
+            _limit["inside"] += 1
+        try:
             return fn(*args, **kwargs)
+        finally:
+            with _LIMIT_LOCK:
+                _limit["inside"] -= 1
+                if _limit["inside"] == 0:
+                    _limit["limiter"].restore_original_limits()
 
     return run
 
