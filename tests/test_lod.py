@@ -312,11 +312,11 @@ def test_info_lod_builds_what_make_builds_with_its_options(tmp_path):
     the impostor's): its rows are the LODs `make` writes with them (they were refused)."""
     from treegen_cli import api
 
-    opts = dict(profile="mobile", lod_triangles="0.4,0.1,0.04", max_joints=48, impostor=False)
+    opts = dict(profile="mobile", lod_triangles="0.4,0.1,0.04", max_joints=48, impostor=False, wind_speed=10)
     info = api.info(SPECIES_DIR / "quaking_aspen.txt", lod=True, **opts)
     made = api.make(SPECIES_DIR / "quaking_aspen.txt", tmp_path / "a.glb", **opts)
-    assert [(r["distance_m"], r["triangles"], r["joints"]) for r in info["lods"]] == [
-        (r["distance_m"], r["triangles"], r["joints"]) for r in made["lods"]
+    assert [(r["distance_m"], r["triangles"], r["joints"], r["keys_kept"]) for r in info["lods"]] == [
+        (r["distance_m"], r["triangles"], r["joints"], r["joint_keys"]) for r in made["lods"]
     ]
     assert len(made["lods"]) == 3 and made["lods"][0]["joints"] <= 48
 

@@ -206,7 +206,7 @@ def info(
     if lod:
         from .render_gl import egl_available  # lazy: GL only when the impostor is drawn
 
-        build = given("lod") | {k: v for k, v in options.items() if k in INFO_LOD_BUILD}
+        build = given("lod") | given("wind") | {k: v for k, v in options.items() if k in INFO_LOD_BUILD}
         if triangles is not None:
             build["triangles"] = triangles
         job = resolve(given("generate") | build)  # the LODs `make` builds with these options
