@@ -83,7 +83,7 @@ def _bark_at_least(prim: Primitive, width: float, below: float) -> Primitive:
     atlases: the `mobile` profile's aspen cards showed its crown floating."""
     if prim.material != "bark" or not len(prim.indices):
         return prim
-    p = np.asarray(prim.positions, np.float64)
+    p = np.array(prim.positions, np.float64)  # a copy: moved below
     n = np.asarray(prim.normals, np.float64)
     tri = np.asarray(prim.indices, np.int64).reshape(-1, 3)
     a, b = tri.ravel(), np.roll(tri, -1, axis=1).ravel()  # every triangle edge
@@ -95,9 +95,11 @@ def _bark_at_least(prim: Primitive, width: float, below: float) -> Primitive:
     np.minimum.at(radius, a[around], r)
     np.minimum.at(radius, b[around], r)
     push = np.where(np.isfinite(radius) & (p[:, 2] < below), np.clip(0.5 * width - radius, 0.0, None), 0.0)
-    if not push.any():
+    moved = push > 0
+    if not moved.any():
         return prim
-    return replace(prim, positions=(p + push[:, None] * n).astype(np.float32))
+    p[moved] += push[moved, None] * n[moved]
+    return replace(prim, positions=p.astype(np.float32))
 
 
 def _dilate(rgba: np.ndarray, grid: int, cell: int) -> np.ndarray:

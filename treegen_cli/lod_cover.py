@@ -231,8 +231,8 @@ def _cell_index(grid: Grid, u: np.ndarray, w: np.ndarray) -> np.ndarray:
     """The flat cell index (u · nw + w, clipped to the grid) of samples at (u, w) in cells
     from the view's origin (overwritten)."""
     nu, nw = grid.shape
-    iu = np.clip(np.floor(u, out=u), 0, nu - 1, out=u).astype(np.int64)
-    iw = np.clip(np.floor(w, out=w), 0, nw - 1, out=w).astype(np.int64)
+    iu = np.clip(np.floor(u, out=u).astype(np.int64), 0, nu - 1)  # (NaN: the border cell)
+    iw = np.clip(np.floor(w, out=w).astype(np.int64), 0, nw - 1)
     iu *= nw
     iu += iw
     return iu

@@ -88,7 +88,7 @@ class Playback:
             self.world[::2], self.err2[::2] = half.world, half.err2
             self.world[1::2] = pose_world(m.skeleton, self.rec[1::2])
             self.err2[1::2] = corner_errors(self.world[1::2], dense_world[1::2], m.hom)
-        self.work = work + self.err2.size
+        self.work = work + (self.err2.size if half is None else self.err2[1::2].size)  # checked here
 
     def update(self, nk: np.ndarray, nj: np.ndarray, prev: np.ndarray, nxt: np.ndarray) -> None:
         """New kept keys at frames nk of joints nj (already set in `kept`), each between kept
