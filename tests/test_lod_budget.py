@@ -184,7 +184,7 @@ def test_triangles_never_rise_whatever_the_options():
         with pytest.raises(TreegenError, match=rf"^{flag} '?{value}'?: .*{message}"):
             resolve({key: value})
     for key in ("lod_screen", "lod_triangles", "lod_distances", "sides"):
-        with pytest.raises(TreegenError, match=r"'0\.5,,0\.1': expected comma-separated"):
+        with pytest.raises(TreegenError, match=r"'0\.5,,0\.1': an empty value between commas; expected"):
             resolve({key: "0.5,,0.1"})
 
 

@@ -150,8 +150,9 @@ def _number_list(key: str, value, kind: type, label: Callable[[str], str]) -> tu
             values = tuple(kind(v) for v in value.split(",")) if value.strip() else ()
         except ValueError:
             what, example = LIST_EXAMPLES[key]
+            empty = "an empty value between commas; " if "" in (v.strip() for v in value.split(",")) else ""
             raise TreegenError(
-                f"{label(key)} '{value}': expected comma-separated {what}, e.g. {example}"
+                f"{label(key)} '{value}': {empty}expected comma-separated {what}, e.g. {example}"
             ) from None
     elif isinstance(value, (list, tuple)) and all(
         isinstance(v, (int, float)) and not isinstance(v, bool) and (kind is float or float(v).is_integer())
