@@ -58,14 +58,18 @@ def _enlarged(part, area: float, corners: int):
     return replace(part, positions=pos)
 
 
+def _edges(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """(T, 3) lengths of each triangle's edges, edge i from corner i to corner i + 1."""
+    return np.linalg.norm(p[tri] - p[np.roll(tri, -1, axis=1)], axis=2)
+
+
 def _widest_bark(prim: Primitive, cap: int) -> Primitive:
     """The `cap` bark triangles with the longest shortest edge (a tube's is its side width):
     trunk and limbs; twigs far below an atlas pixel are left out."""
     tri = np.asarray(prim.indices, np.int64).reshape(-1, 3)
     if len(tri) <= cap or prim.material != "bark":
         return prim
-    p = np.asarray(prim.positions, np.float64)
-    edge = np.stack([np.linalg.norm(p[tri[:, i]] - p[tri[:, (i + 1) % 3]], axis=1) for i in range(3)], 1)
+    edge = _edges(np.asarray(prim.positions, np.float64), tri)
     keep = np.sort(np.argsort(-edge.min(1), kind="stable")[:cap])
     return replace(prim, indices=tri[keep].ravel().astype(np.uint32))
 
@@ -86,11 +90,11 @@ def _bark_at_least(prim: Primitive, width: float, below: float) -> Primitive:
     p = np.array(prim.positions, np.float64)  # a copy: moved below
     n = np.asarray(prim.normals, np.float64)
     tri = np.asarray(prim.indices, np.int64).reshape(-1, 3)
-    a, b = tri.ravel(), np.roll(tri, -1, axis=1).ravel()  # every triangle edge
+    a, b = tri.ravel(), np.roll(tri, -1, axis=1).ravel()  # every triangle edge, as _edges
     cos = np.einsum("ij,ij->i", n[a], n[b])
     around = cos < math.cos(math.radians(20.0))
     half_sin = np.sqrt(np.clip(0.5 * (1.0 - cos[around]), 1e-12, None))
-    r = np.linalg.norm(p[a[around]] - p[b[around]], axis=1) / (2.0 * half_sin)
+    r = _edges(p, tri).ravel()[around] / (2.0 * half_sin)
     radius = np.full(len(p), np.inf)
     np.minimum.at(radius, a[around], r)
     np.minimum.at(radius, b[around], r)
