@@ -146,11 +146,12 @@ def _number_list(key: str, value, kind: type, label: Callable[[str], str]) -> tu
     if value is None:
         return None
     if isinstance(value, str):
+        items = value.split(",") if value.strip() else []
         try:  # an empty value between commas ("0.5,,0.1") is refused too
-            values = tuple(kind(v) for v in value.split(",")) if value.strip() else ()
+            values = tuple(kind(v) for v in items)
         except ValueError:
             what, example = LIST_EXAMPLES[key]
-            empty = "an empty value between commas; " if "" in (v.strip() for v in value.split(",")) else ""
+            empty = "an empty value between commas; " if any(not v.strip() for v in items) else ""
             raise TreegenError(
                 f"{label(key)} '{value}': {empty}expected comma-separated {what}, e.g. {example}"
             ) from None
