@@ -156,6 +156,7 @@ def make_summary(asset, tree, written, stages: dict, seconds: float) -> dict:
             "keys": keys,
             "joint_keys": joint_keys,
             "decimated": clip is not None and clip.keys is not None,
+            "max_error_px": None if clip is None or clip.error_px is None else round(clip.error_px, 3),
             "impostor": lod.impostor is not None,
         }
 

@@ -101,6 +101,9 @@ class Clip:
     # track (formats with one time list per animation)
     plan: KeyPlan | None = None  # a compressed file's keys, bits and float32 joints
     # (key_plan.with_key_plans; None: every kept key as it is)
+    error_px: float | None = None  # decimated: the kept keys' worst on-screen error, pixels
+    # from the LOD's distance (lod_decimate: the joints' box corners, an upper bound on every
+    # vertex; the "bounded" schedules keep it ≤ error_px, the paper's walk does not)
 
 
 # meshopt's EXPONENTIAL filter: bits of mantissa kept for a KeyPlan's float32 (`wide`) joints

@@ -234,8 +234,8 @@ def decimate(
             return dense_clip(radius)
         kept, err2, rounds, work, _ = _bounded(m, rot, dense_world, threshold, interp, options.max_iterations)
     keys = [np.flatnonzero(kept[:, j]) for j in range(J)]
-    clip = replace(dense, name=name, interpolation=interp, keys=keys)
     error = float(np.sqrt(err2.max()) / near) if near > 0 else math.inf
+    clip = replace(dense, name=name, interpolation=interp, keys=keys, error_px=error)
     return clip, DecimationReport(
         distance,
         threshold,

@@ -58,6 +58,7 @@ def make(species, output, as_json, **options):
                 ("impostor from " if r["impostor"] else "")
                 + f"{r['distance_m']:.1f} m: {r['triangles']:,} tris, {_joints(r['joints'])}"
                 + (f", {r['joint_keys']:,} keys" if k > 0 and r["joint_keys"] else "")
+                + (f" (error {r['max_error_px']:.2f} px)" if r["max_error_px"] is not None else "")
                 for k, r in enumerate(s["lods"])
             )
         )
