@@ -293,6 +293,8 @@ def test_sample_track_hits_keys_and_holds_ends():
         (["preview", "{d}/broken.glb", "-o", "{d}/x.png"], "not a readable glTF"),
         (["preview", str(SMALL), "-o", "{d}/x.png", "--sun", "nan"], "--sun nan: give a bearing"),
         (["preview", "{d}/palm.glb", "-o", "{d}/x.png", "--seed", "3"], "is a written tree"),
+        (["preview", "{d}/palm.glb", "-o", "{d}/x.png", "--seed", "0"], "is a written tree"),
+        (["preview", str(SMALL), "-o", "{d}/x.png", "--seed", "-1"], "--seed -1: allowed range 0.."),
     ],
 )
 def test_bad_input_is_one_line_exit_2(argv, needle, written, capsys):

@@ -42,7 +42,7 @@ class PreviewOptions:
     width: int = 512
     height: int = 512
     lod: int = 0
-    seed: int = 0  # species input only
+    seed: int | None = None  # species input only (None: 0, and a written tree is fine)
     fps: float = 15.0  # GIF frames per second of the wind loop
     sun_azimuth: float | None = None  # None: 50° left of the camera
     sun_elevation: float = 50.0
@@ -59,16 +59,16 @@ def load_scene(path: str | os.PathLike, options: PreviewOptions = DEFAULTS) -> D
     exchange) as a Drawable."""
     path = exchange.check_input(resolve_input(path))
     if not exchange.is_species(path):
-        if options.seed != 0:
+        if options.seed is not None:  # even 0: the tree was grown with its own seed
             raise TreegenError(f"--seed {options.seed}: {path} is a written tree, grown with its own seed")
         return exchange.read_drawable(path, options.lod, refuse_forest=True)
     params = load_params(path)
     # LOD 0 alone needs no LOD chain: skip building (and cutting leaves for) the others; the
     # others as `make` builds them, the impostor last
-    make = resolve({}).options
-    make = replace(make, lod=None, impostor=None) if options.lod == 0 else make
+    job = resolve({"seed": options.seed or 0})
+    make = replace(job.options, lod=None, impostor=None) if options.lod == 0 else job.options
     try:
-        asset, _ = build_asset(params, options.seed, make)
+        asset, _ = build_asset(params, job.seed, make)
     except TreegenError as e:
         raise TreegenError(f"{path}: {e}") from None
     return from_asset(asset, options.lod, label=str(path))
@@ -199,10 +199,14 @@ def render_loop(scene: Drawable, options: PreviewOptions = DEFAULTS, renderer=No
 # ------------------------------------------------------------------------------ command
 
 
-def _layout_only(animate, lod: int, seed: int) -> None:
+def _layout_only(animate, lod: int, seed: int | None) -> None:
     """What a layout's preview does not take: it draws a still, each tree at the LOD its
     camera needs, with the layout's seeds."""
-    for given, flag in ((animate is not None, "--animate"), (lod != 0, "--lod"), (seed != 0, "--seed")):
+    for given, flag in (
+        (animate is not None, "--animate"),
+        (lod != 0, "--lod"),
+        (seed is not None, "--seed"),
+    ):
         if given:
             raise TreegenError(
                 f"{flag}: not for a forest layout (its preview is a still, each tree at the LOD "
@@ -270,7 +274,7 @@ def _size(text: str) -> tuple[int, int]:
     help="Image size in pixels (square N, or width x height).",
 )
 @click.option("--lod", type=int, default=0, show_default=True, help="Which LOD to render (0 = full detail).")
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed when INPUT is a species file.")
+@click.option("--seed", type=int, help="Seed when INPUT is a species file (default 0).")
 @click.option(
     "--fps",
     type=float,
@@ -311,6 +315,8 @@ def preview_command(
         raise TreegenError(f"--fps {fps:g}: allowed range 0.5..60 frames per second")
     if lod < 0:
         raise TreegenError(f"--lod {lod}: must be 0 or more")
+    if seed is not None:
+        resolve({"seed": seed})  # its range, as make's (a negative seed crashed the generator)
     width, height = _size(size)
     if sun is not None and not math.isfinite(sun):
         raise TreegenError(f"--sun {sun:g}: give a bearing in degrees, e.g. -140")
