@@ -188,6 +188,48 @@ def test_triangles_never_rise_whatever_the_options():
             resolve({key: "0.5,,0.1"})
 
 
+def test_tiny_budgets_keep_blades_within_the_crown_and_say_they_are_exceeded(tmp_path):
+    """--lod-triangles 0.9,0.0001 (8 triangles for LOD2) drew LOD2 as the trunk and one leaf
+    grown to stand for the crown: a card 883 m wide. A budget the trunk fills keeps no leaf; a
+    budget of a few dozen leaves grows none past MAX_BLADE_SHARE of the crown; make's summary
+    gives each LOD's budget and prints the LODs over theirs."""
+    from click.testing import CliRunner
+
+    from treegen_cli.cli import cli
+    from treegen_cli.lod_budget import MAX_BLADE_SHARE
+
+    crown = None
+    for table, leafless in (("0.9,0.0001", (2, 3)), ("0.9,0.002", (3,))):
+        asset = _asset("quaking_aspen", lod_triangles=table, impostor=False)
+        leaves0 = np.concatenate([p.positions for p in asset.lods[0].primitives if p.name == "leaves"])
+        crown = float(np.ptp(leaves0, axis=0).max())
+        for k, lod in enumerate(asset.lods[1:], 1):
+            leaves = [p for p in lod.primitives if p.name == "leaves" and len(p.indices)]
+            assert bool(leaves) == (k not in leafless), (table, k)
+            for p in leaves:  # a blade's corners are at most its length + width apart
+                tri = np.asarray(p.positions)[np.asarray(p.indices).reshape(-1, 3)]
+                span = np.linalg.norm(tri[:, :, None] - tri[:, None, :], axis=-1).max()
+                assert span <= 2.0 * MAX_BLADE_SHARE * crown * 1.001, (table, k, span, crown)
+    species = str(species_path("quaking_aspen"))
+    res = CliRunner().invoke(
+        cli, ["make", species, "-o", str(tmp_path / "a.glb"), "--lod-triangles", "0.9,0.0001", "--json"]
+    )
+    assert res.exit_code == 0, res.output
+    import json
+
+    rows = json.loads(res.output)["lods"]
+    assert [r.get("budget") for r in rows[:3]] == [
+        None,
+        int(0.9 * rows[0]["triangles"]),
+        int(1e-4 * rows[0]["triangles"]),
+    ]
+    assert rows[2]["triangles"] > rows[2]["budget"] and rows[-1]["impostor"] and rows[-1]["budget"] is None
+    res = CliRunner().invoke(
+        cli, ["make", species, "-o", str(tmp_path / "b.glb"), "--lod-triangles", "0.9,0.0001"]
+    )
+    assert f"over its budget of {rows[2]['budget']:,}: a LOD draws at least its trunk" in res.output
+
+
 def test_more_distances_than_budgets_step_on_by_the_last_ratio():
     """Five distances and the default 0.5, 0.15, 0.05: LOD4 gets a third of LOD3's budget (the
     last value repeated made it a copy of LOD3, 4,176 triangles each on the aspen)."""
@@ -353,12 +395,12 @@ def test_far_lods_keep_the_stems_their_leaves_hang_from(monkeypatch):
         assert np.array_equal(t.node_stem[t.leaf_node], t.leaf_stem)
         stubs.append(_pointed(t))
     assert stubs[1] > 0 and stubs[2] > 0  # LOD2 and LOD3 draw petioles as cones
-    # a budget too tight for them keeps leaves instead: LOD3 at 0.5 % of the triangles
+    # a budget its trunk fills gets no stubs, nor leaves: LOD3 at 0.5 % of the triangles
     built.clear()
     tight = resolve(dict(no_wind=True, texture_size=128, impostor=False, lod_triangles=(0.5, 0.05, 0.005)))
     asset, _ = build_asset(load_params(species_path("fan_palm")), 0, tight.options, tree=grown("fan_palm"))
-    assert _pointed(built[-1][1]) == 0
-    assert sum(len(p.indices) // 3 for p in asset.lods[3].primitives if p.name == "leaves") > 0
+    assert _pointed(built[-1][1]) == 0 and built[-1][1].n_leaves == 0
+    assert sum(len(p.indices) // 3 for p in asset.lods[3].primitives if p.name == "leaves") == 0
 
 
 def _pointed(tree) -> int:

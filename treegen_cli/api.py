@@ -72,7 +72,8 @@ def write(asset, tree, output, timings, t0: float, job: Resolved | None = None) 
         if values["lod_files"]
         else timings.run("write", export, asset, output, gltf)
     )
-    return make_summary(asset, tree, written, timings.stages, time.perf_counter() - t0)
+    lod_options = job.options.lod if job is not None else None
+    return make_summary(asset, tree, written, timings.stages, time.perf_counter() - t0, lod_options)
 
 
 # ------------------------------------------------------------------------------------- make
@@ -135,9 +136,11 @@ def make(species: str | os.PathLike, output: str | os.PathLike, **options) -> di
     return run_make(plan_make(species, output, options))
 
 
-def make_summary(asset, tree, written, stages: dict, seconds: float) -> dict:
+def make_summary(asset, tree, written, stages: dict, seconds: float, lod_options=None) -> dict:
     """`treegen make --json`: what was written and how big, per LOD, and seconds per stage
-    (a static file has no skin: no joints)."""
+    (a static file has no skin: no joints). With `lod_options`, each geometric LOD below LOD0
+    has its triangle budget (lod_budget.lod_budget): a LOD never draws less than its trunks,
+    so a tiny `--lod-triangles` fraction is exceeded, and the summary says so."""
     static = Path(written[0]).suffix.lower() in STATIC
 
     def lod_row(lod):
@@ -161,6 +164,14 @@ def make_summary(asset, tree, written, stages: dict, seconds: float) -> dict:
         }
 
     lods = [lod_row(lod) for lod in asset.lods]
+    if lod_options is not None and not static:
+        from .lod_budget import triangle_fraction
+
+        for k, r in enumerate(lods[1:], 1):
+            frac = min(triangle_fraction(lod_options.triangles, i) for i in range(k + 1))
+            r["budget"] = (
+                None if r["impostor"] else int(min(frac * lods[0]["triangles"], lods[k - 1]["triangles"]))
+            )
     return {
         "file": str(written[0]),
         "files": [str(p) for p in written],

@@ -65,6 +65,8 @@ TRIANGLE_CARD_PX = 3.0  # a LOD from TRIANGLE_CARDS_FROM on whose switch shows L
 # (leafshapes.TRIANGLE_CARD, one triangle a leaf): the outline is not legible, the cover is,
 # and twice the leaves fit the budget. Only over the generated atlas, whose alpha is the
 # LeafShape outline triangle_share measures (not an artist's image, nor untextured cards)
+MAX_BLADE_SHARE = 0.7  # a kept blade grows to at most this share of the crown's extent in
+# length or width (the bundled species' far LODs reach 0.67: the fan palm's 1.5 m fronds)
 TRIANGLE_CARDS_FROM = 2  # LOD index: LOD1 keeps cards, so leaves thin about evenly LOD by LOD
 # (LOD1 in triangle cards held every leaf, and all the thinning fell on the next switch)
 
@@ -164,12 +166,16 @@ def plan_lod(
     if leaf0:  # leaves far out on a dropped stem would float: the stem stays, as a cone
         coarse, per_stem, keep = _stubs(coarse, per_stem, keep, mesh, px, budget)
     pruned = prune_stems(coarse, keep)
-    n_keep = int(min(L, max(1, math.floor((budget - per_stem[keep].sum()) / per_leaf)))) if L else 0
+    # a budget its kept bark fills keeps no leaf (one leaf grown to stand for the crown was a
+    # card hundreds of metres wide: --lod-triangles 0.9,0.0001)
+    n_keep = int(min(L, max(0, math.floor((budget - per_stem[keep].sum()) / per_leaf)))) if L else 0
     thin = thin_leaves(pruned, n_keep, 1.0)
     if triangle:
         thin = triangle_blades(thin)
     sides = (stem_sides(full, mesh0 or mesh), stem_sides(thin, mesh))
     leaf, radius = cover_factors(full, thin, px, sides, triangle, girth(thin, mesh, sides[1]))
+    if thin.n_leaves:
+        leaf = capped_growth(thin, leaf, MAX_BLADE_SHARE * float(np.ptp(full.leaf_pos, axis=0).max()))
     mesh_thin = mesh
     if radius != 1.0:  # thicker stems draw the same rings; sides cut to the bark table's
         thin = thicken(thin, radius)
@@ -238,6 +244,8 @@ def cover_factors(
     kept branches instead."""
     grid = Grid.around(full, px)
     target = grid.cover(tree_area(full, grid, sides[0]))
+    if full.n_leaves and not thin.n_leaves:
+        return 1.0, 1.0  # the budget holds no leaf: nothing to grow, and no branch stands in
     if thin.n_leaves and full.n_leaves:
         drawn = triangle_share(int(thin.params.leaf_shape))[0] if triangle else 1.0
         local = regional_factors(full, thin, REGION_PX * px, drawn)
@@ -252,6 +260,20 @@ def cover_factors(
         32.0,
     )
     return 1.0, r
+
+
+def capped_growth(tree: Tree, factor, cap: float):
+    """`factor` (scalar or (L,)), each blade's area growth, cut where it would draw the blade's
+    length or width past `cap` metres (past its own, where that is longer already): a LOD whose
+    budget holds a handful of leaves would grow each to stand for a part of the crown.
+    `factor` itself where no blade reaches the cap."""
+    f = np.broadcast_to(np.asarray(factor, dtype=np.float64), (tree.n_leaves,))
+    size = np.maximum(tree.leaf_size, 1e-12)
+    most = np.minimum(
+        (np.maximum(cap, size[:, 0]) / size[:, 0]) ** (1.0 / LENGTH_SHARE),
+        (np.maximum(cap, size[:, 1]) / size[:, 1]) ** (1.0 / (1.0 - LENGTH_SHARE)),
+    )
+    return factor if np.all(f <= most) else np.minimum(f, most)
 
 
 def thicken(tree: Tree, factor: float) -> Tree:

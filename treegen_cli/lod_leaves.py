@@ -26,6 +26,7 @@ from .tree import Tree
 LENGTH_SHARE = 0.25  # of a kept leaf's growth in area (log), the share taken in length:
 # blades widen more than they lengthen, so the crown's reach stays
 GRID = 24  # cells per side of the stratification grid over the leaves' bounds
+LEAF_FIELDS = ("leaf_stem", "leaf_node", "leaf_pos", "leaf_frame", "leaf_size")  # per leaf (L, ...)
 
 
 def stem_closure(tree: Tree, keep: np.ndarray) -> np.ndarray:
@@ -122,15 +123,10 @@ def thin_leaves(tree: Tree, n_keep: int, area_factor, seed: int = 0) -> Tree:
     factor, or one per kept leaf; see grow_leaves)."""
     if tree.n_leaves == 0:
         return tree
+    if n_keep <= 0:
+        return replace(tree, **{k: getattr(tree, k)[:0] for k in LEAF_FIELDS})
     pick = stratified_pick(tree.leaf_pos, n_keep, tree.seed if seed == 0 else seed)
-    kept = replace(
-        tree,
-        leaf_stem=tree.leaf_stem[pick],
-        leaf_node=tree.leaf_node[pick],
-        leaf_pos=tree.leaf_pos[pick],
-        leaf_frame=tree.leaf_frame[pick],
-        leaf_size=tree.leaf_size[pick],
-    )
+    kept = replace(tree, **{k: getattr(tree, k)[pick] for k in LEAF_FIELDS})
     if pick.size < tree.n_leaves:
         kept = gather_leaves(tree, kept, pick)
     return grow_leaves(kept, area_factor)

@@ -59,6 +59,11 @@ def make(species, output, as_json, **options):
                 + f"{r['distance_m']:.1f} m: {r['triangles']:,} tris, {_joints(r['joints'])}"
                 + (f", {r['joint_keys']:,} keys" if k > 0 and r["joint_keys"] else "")
                 + (f" (error {r['max_error_px']:.2f} px)" if r["max_error_px"] is not None else "")
+                + (
+                    f" (over its budget of {r['budget']:,}: a LOD draws at least its trunk)"
+                    if r.get("budget") is not None and r["triangles"] > r["budget"]
+                    else ""
+                )
                 for k, r in enumerate(s["lods"])
             )
         )
