@@ -5,6 +5,7 @@ sidecar, preview at the impostor's distance)."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 from dataclasses import replace
 from functools import lru_cache
 
@@ -712,6 +713,35 @@ def test_a_smaller_atlas_is_written_smaller_and_says_so(tmp_path):
 
 
 @needs_gl
+def _usd_parts_share_their_textures(tmp_path):
+    """USD `--lod-files` parts name their textures after the whole output (`p_usdc_leaf.png`,
+    as the single file does) and write each once: every part wrote its own copies of the bark
+    and leaf PNGs (a_LOD0_usdc_leaf.png … a_LOD3_usdc_leaf.png). Every path a part's shaders
+    name is there, and each part validates."""
+    from pxr import Sdf, Usd, UsdShade
+
+    from treegen_cli import api
+    from treegen_cli.exchange.validate import validate_usd
+
+    s = api.make(species_path("rush"), tmp_path / "p.usdc", duration=1.0, fps=10.0, lod_files=True)
+    pngs = sorted(p.rsplit("/", 1)[-1] for p in s["files"] if p.endswith(".png"))
+    assert pngs and all(p.startswith("p_usdc_") for p in pngs), pngs
+    assert len(pngs) == len(set(pngs)) == 7, pngs  # bark, its normals, leaf; the impostor's four
+    used = set()
+    for k in range(5):
+        stage = Usd.Stage.Open(str(tmp_path / f"p_LOD{k}.usdc"))
+        for prim in stage.Traverse():
+            shader = UsdShade.Shader(prim)
+            if shader and shader.GetInput("file"):
+                asset = shader.GetInput("file").Get()
+                assert isinstance(asset, Sdf.AssetPath) and (tmp_path / asset.path).is_file(), (k, asset)
+                used.add(Path(asset.path).name)
+    assert {"p_usdc_leaf.png", "p_usdc_bark.png", "p_usdc_impostor_cards.png"} <= used, used
+    assert validate_usd(tmp_path / "p_LOD1.usdc") == []
+    meta = json.loads((tmp_path / "p_LOD4.usdc.impostor.json").read_text())
+    assert meta["images"]["albedo"] == "p_usdc_impostor_albedo.png"
+
+
 def test_lod_files_and_usd_carry_the_impostor(tmp_path):
     from treegen_cli import api
 
@@ -731,6 +761,7 @@ def test_lod_files_and_usd_carry_the_impostor(tmp_path):
         assert len(g["images"]) == (4 if k == 4 else 3), (
             k
         )  # cards, their normals, atlas + normals; bark, its normals, leaf
+    _usd_parts_share_their_textures(tmp_path)
     s = api.make(species_path("rush"), tmp_path / "u.usda", duration=1.0, fps=10.0, impostor=True)
     meta = json.loads((tmp_path / "u.usda.impostor.json").read_text())
     assert meta["axes"]["up"] == [0.0, 0.0, 1.0]

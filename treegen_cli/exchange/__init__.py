@@ -31,10 +31,10 @@ from .forest_gltf import write_forest_gltf
 from .staging import staged, sweep, written  # noqa: F401  (re-exported)
 
 
-def _usd(asset: Asset, path: Path) -> None:
+def _usd(asset: Asset, path: Path, textures=None) -> None:
     from .usd import write_usd  # lazy: pxr takes ~0.5 s to import; most runs write glTF
 
-    write_usd(with_bounds(asset), path)  # UsdSkel stores animated extents; only USD pays for them
+    write_usd(with_bounds(asset), path, textures)  # UsdSkel stores animated extents; only USD pays for them
 
 
 def _forest_usd(forest: Forest, path: Path) -> None:
@@ -187,6 +187,13 @@ def export_parts(
     path = check_suffix(path, WRITERS)
     writer = _writer(path, options)
     targets = lod_file_paths(path, len(parts))
+    if path.suffix.lower() in (".usda", ".usdc"):  # the parts share one set of textures beside
+        from .texture_files import TextureFiles
+
+        names = TextureFiles(path)  # NAME_usdc_leaf.png, as the single file's
+
+        def writer(part: Asset, target: Path) -> None:
+            _usd(part, target, names.shared())
 
     def write_all(tmp: Path) -> None:
         for part, target in zip(parts, targets):  # a handful of LODs

@@ -35,8 +35,18 @@ class TextureFiles:
         self.packaged = path.suffix.lower() == ".usdz" if packaged is None else packaged
         # the whole output name with its dot made `_` (its stem alone if it has no extension)
         self.prefix = path.stem + path.suffix.replace(".", "_", 1)
-        self.files: dict[str, bytes] = {}
+        self.files: dict[str, bytes] = {}  # what this file uses
+        self._all: dict[str, bytes] = {}  # every name given (shared views: all files')
         self._names: dict[Texture, str] = {}
+
+    def shared(self) -> TextureFiles:
+        """Names for one more file written beside the same textures (`--lod-files` parts): a
+        texture keeps the name it has in every file that uses it, and `files` holds only
+        what that file uses (each part writes the same bytes under the same names, once)."""
+        view = TextureFiles.__new__(TextureFiles)
+        view.packaged, view.prefix = self.packaged, self.prefix
+        view.files, view._all, view._names = {}, self._all, self._names
+        return view
 
     def name(self, texture: Texture, prefix: str = "") -> str:
         """The file's name relative to the main file ("textures/leaf.png", "tree_usdc_leaf.png")."""
@@ -44,8 +54,10 @@ class TextureFiles:
             base = safe_name(prefix + texture.name)
             base = f"textures/{base}" if self.packaged else f"{self.prefix}_{base}"
             name, k = base, 1
-            while name + ".png" in self.files:
+            while name + ".png" in self._all:
                 name, k = f"{base}_{k}", k + 1
-            self.files[name + ".png"] = texture.png
+            self._all[name + ".png"] = texture.png
             self._names[texture] = name + ".png"
-        return self._names[texture]
+        name = self._names[texture]
+        self.files[name] = self._all[name]
+        return name

@@ -47,9 +47,10 @@ from .usd_stage import (
 )
 
 
-def write_usd(asset: Asset, path) -> None:
+def write_usd(asset: Asset, path, textures: TextureFiles | None = None) -> None:
     """Write `asset` to exactly `path` (plus its texture files); the suffix picks text, crate
-    or a usdz package.
+    or a usdz package. `textures`: names shared with other files written beside (a
+    TextureFiles.shared view; default: named after `path`).
 
     The caller (exchange.export) stages it; a temp name with the right suffix works for all
     three formats.
@@ -57,7 +58,7 @@ def write_usd(asset: Asset, path) -> None:
     path = Path(path)
     suffix = check_suffix(path)  # before the stage is built
     up = up_axis(asset.up_axis, suffix)
-    textures = TextureFiles(path)
+    textures = TextureFiles(path) if textures is None else textures
     stage = build_stage(asset, up, textures, lod_schemas=suffix != ".usdz")
     k = impostor_lod(asset)
     meta = None
