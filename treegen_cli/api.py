@@ -165,12 +165,11 @@ def make_summary(asset, tree, written, stages: dict, seconds: float, lod_options
 
     lods = [lod_row(lod) for lod in asset.lods]
     if lod_options is not None and not static:
-        from .lod_budget import triangle_fraction
+        from .lod_budget import lod_budget
 
         for k, r in enumerate(lods[1:], 1):
-            frac = min(triangle_fraction(lod_options.triangles, i) for i in range(k + 1))
             r["budget"] = (
-                None if r["impostor"] else int(min(frac * lods[0]["triangles"], lods[k - 1]["triangles"]))
+                None if r["impostor"] else int(lod_budget(k, asset.lods[0], asset.lods[k - 1], lod_options))
             )
     return {
         "file": str(written[0]),

@@ -242,10 +242,10 @@ def cover_factors(
     times one factor solved so the whole covers as `full` does (`triangle`: `thin`'s blades
     are drawn as triangle cards; `widen`: `thin`'s mesh.girth). A leafless tree thickens its
     kept branches instead."""
-    grid = Grid.around(full, px)
-    target = grid.cover(tree_area(full, grid, sides[0]))
     if full.n_leaves and not thin.n_leaves:
         return 1.0, 1.0  # the budget holds no leaf: nothing to grow, and no branch stands in
+    grid = Grid.around(full, px)
+    target = grid.cover(tree_area(full, grid, sides[0]))
     if thin.n_leaves and full.n_leaves:
         drawn = triangle_share(int(thin.params.leaf_shape))[0] if triangle else 1.0
         local = regional_factors(full, thin, REGION_PX * px, drawn)
