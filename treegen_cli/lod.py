@@ -63,6 +63,14 @@ class LodOptions:
             if len(set(d)) != len(d):
                 raise OptionError("distances", shown, "distances repeat", "--lod-distances")
         s = self.screen
+        if d is None and s and min(s) * self.width / self.aspect < 1.0:
+            raise OptionError(
+                "screen",
+                ",".join(f"{x:g}" for x in s),
+                f"a tree under one pixel tall ({self.aspect / self.width:.3g} of the "
+                f"{self.width / self.aspect:.0f} px screen height) shows no LOD; give fractions of at least that",
+                "--lod-screen",
+            )
         if (
             (d is None and not s)
             or any(not (math.isfinite(x) and 0.0 < x <= MAX_SCREEN) for x in s)
@@ -130,8 +138,27 @@ def switch_distances(height: float, options: LodOptions = LOD_DEFAULTS) -> tuple
 
     Result (height 13 m, fov 60°, 16:9, screen 0.5/0.25/0.1): (0, 40.0, 80.1, 200.1) m."""
     if options.distances is not None:
+        check_visible(options.distances, height, options, "distances", "--lod-distances")
         return tuple(float(x) for x in options.distances)
     return (0.0,) + tuple(screen_distance(height, s, options) for s in options.screen)
+
+
+def pixel_distance(height: float, options: LodOptions = LOD_DEFAULTS) -> float:
+    """Metres from which a tree `height` metres tall is under one pixel tall on the screen."""
+    return screen_distance(height, 1.0, options, of=options.width / options.aspect)
+
+
+def check_visible(distances, height: float, options: LodOptions, field: str, flag: str) -> None:
+    """Refuse switch distances from which the tree is under a pixel tall: nothing is drawn
+    there to switch to (1e308 m crashed the cover estimator)."""
+    far = pixel_distance(height, options)
+    if any(float(x) > far for x in distances):
+        raise OptionError(
+            field,
+            ",".join(f"{float(x):g}" for x in distances),
+            f"this {height:.3g} m tree is under a pixel tall from {far:,.0f} m on; give distances up to that",
+            flag,
+        )
 
 
 def screen_distance(
