@@ -14,7 +14,7 @@ from typing import Callable
 
 from .budget import BudgetOptions
 from .errors import OptionError, TreegenError
-from .exchange import COMPRESS, GLTF_DEFAULTS, STATIC, GltfOptions, check_compress
+from .exchange import COMPRESS, FIXED_UP_AXIS, GLTF_DEFAULTS, STATIC, GltfOptions, check_compress
 from .generate import DEFAULTS as GENERATE_DEFAULTS, GenerateOptions
 from .impostor import IMPOSTOR_SIZES, atlas_side, placed
 from .limits import LIMITS_DEFAULTS, Limits
@@ -260,7 +260,14 @@ def resolve(
     label = typed  # the joint budget's messages name the spelling the user gave
     if void_check:  # (a catalogue's grids and defaults combine options on purpose)
         check_no_effect(options, label, output)
+    given = options
     options = apply_profile(options, label) if options.get("profile") is not None else options
+    if (
+        given.get("compress") is None
+        and output is not None
+        and Path(output).suffix.lower() not in FIXED_UP_AXIS
+    ):
+        options = {**options, "compress": "none"}  # a profile's glTF encoding: not for USD, OBJ
     v = {k: _scalar(k, options.get(k, d), label) for k, d in DEFAULTS.items()}
     v["joint_levels"] = _number_list("joint_levels", v["joint_levels"], int, label)
     v["sides"] = _number_list("sides", v["sides"], int, label)
