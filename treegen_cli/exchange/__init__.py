@@ -29,6 +29,7 @@ from . import gltf, image, read_gltf
 from .compress import COMPRESS, GLTF_DEFAULTS, GltfOptions, check_encoder  # noqa: F401  (re-exported)
 from .forest_gltf import write_forest_gltf
 from .staging import staged, sweep, written  # noqa: F401  (re-exported)
+from .stale import remove_stale
 
 
 def _usd(asset: Asset, path: Path, textures=None) -> None:
@@ -169,7 +170,9 @@ def export(asset: Asset, path: str | os.PathLike, options: GltfOptions = GLTF_DE
     path = check_suffix(path, WRITERS)
     check_up_axis(path, asset.up_axis)
     writer = _writer(path, options)
-    return _write(lambda tmp: writer(asset, tmp), path)
+    out = _write(lambda tmp: writer(asset, tmp), path)
+    remove_stale(path, out)  # an earlier write's sidecar or atlas this one has not
+    return out
 
 
 def lod_file_paths(path: str | os.PathLike, count: int) -> list[Path]:
@@ -199,7 +202,9 @@ def export_parts(
         for part, target in zip(parts, targets):  # a handful of LODs
             writer(part, tmp.parent / target.name)
 
-    return _write(write_all, targets[0])
+    out = _write(write_all, targets[0])
+    remove_stale(path, out, len(parts))  # an earlier write's parts beyond these, and extras
+    return out
 
 
 def export_forest(
