@@ -205,6 +205,21 @@ def test_explicit_options_win_over_the_profile(tmp_path):
     assert (v["triangles"], v["max_joints"], v["fps"]) == (30_000, 256, 24.0)
 
 
+def test_a_profiles_gltf_compression_stays_with_gltf():
+    """--profile web sets meshopt, a glTF encoding: a USD or OBJ output takes the rest of the
+    profile and no compression (it was refused for a --compress nobody typed); typed, it is
+    still refused for USD."""
+    from treegen_cli import api
+    from treegen_cli.errors import TreegenError
+
+    for out in ("palm.usdz", "palm.usdc", "palm.obj"):
+        v = api.resolve({"profile": "web"}, output=out).values
+        assert (v["compress"], v["fps"]) == ("none", 24.0), out
+    assert api.resolve({"profile": "web"}, output="palm.glb").values["compress"] == "meshopt"
+    with pytest.raises(TreegenError, match=r"--compress meshopt is for .glb/.gltf only"):
+        api.resolve({"profile": "web", "compress": "meshopt"}, output="palm.usdz")
+
+
 def test_joints_is_max_joints():
     from treegen_cli import api
     from treegen_cli.errors import TreegenError

@@ -321,6 +321,33 @@ def test_info_lod_builds_what_make_builds_with_its_options(tmp_path):
     assert len(made["lods"]) == 3 and made["lods"][0]["joints"] <= 48
 
 
+def test_switches_where_the_tree_is_under_a_pixel_are_refused(tmp_path):
+    """A LOD or impostor distance from which the tree is under a pixel tall draws nothing to
+    switch to: refused by name with that distance, exit 2, nothing written (0,1e308 crashed
+    the cover estimator with a traceback); so is a screen fraction under one pixel."""
+    from treegen_cli.cli import cli
+    from treegen_cli.errors import OptionError
+
+    o = LodOptions(distances=(0.0, 10.0, 1e308))
+    far = 18.6 * 1080 / (2 * np.tan(np.radians(30.0)) / (16 / 9) * 16 / 9)  # 1 px tall, 16:9
+    with pytest.raises(
+        OptionError, match=r"^--lod-distances 0,10,1e\+308: this 18\.6 m tree is under a pixel"
+    ):
+        switch_distances(18.6, o)
+    assert switch_distances(18.6, LodOptions(distances=(0.0, 0.99 * far)))[1] == pytest.approx(0.99 * far)
+    with pytest.raises(OptionError, match=r"^--lod-screen 1e-05: a tree under one pixel tall"):
+        LodOptions(screen=(1e-5,))
+    species = str(SPECIES_DIR / "quaking_aspen.txt")
+    for flag, value in (
+        ("--lod-distances", "0,1e308"),
+        ("--impostor-distance", "1e12"),
+        ("--lod-screen", "1e-300"),
+    ):
+        res = CliRunner().invoke(cli, ["make", species, "-o", str(tmp_path / "a.glb"), flag, value])
+        assert isinstance(res.exception, TreegenError) and flag in str(res.exception), res.output
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_make_reports_each_lods_measured_error(tmp_path):
     """`make --schedule paper` prints each decimated LOD's measured on-screen error: the paper's
     walk's own, over the 1 px the bounded schedule keeps (the issue's 4.7-10 px at i = 1), and
