@@ -70,6 +70,11 @@ def _asset(name: str, **options):
     return asset
 
 
+def _bounds(lod) -> np.ndarray:
+    """The rest-pose max corner of a LOD's geometry."""
+    return np.concatenate([np.asarray(p.positions) for p in lod.primitives if len(p.positions)]).max(0)
+
+
 def _tris(lod, name=None) -> int:
     return sum(len(p.indices) // 3 for p in lod.primitives if name is None or p.name == name)
 
@@ -210,6 +215,15 @@ def test_tiny_budgets_keep_blades_within_the_crown_and_say_they_are_exceeded(tmp
                 tri = np.asarray(p.positions)[np.asarray(p.indices).reshape(-1, 3)]
                 span = np.linalg.norm(tri[:, :, None] - tri[:, None, :], axis=-1).max()
                 assert span <= 2.0 * MAX_BLADE_SHARE * crown * 1.001, (table, k, span, crown)
+    # the impostor is drawn from the last LOD with leaves (LOD1 here), not from a bare trunk
+    from treegen_cli.render_gl import egl_available
+
+    if not egl_available():
+        pytest.fail("no headless OpenGL (EGL) context: the impostor cannot be rendered here")
+    tiny = _asset("quaking_aspen", lod_triangles="0.9,0.0001").lods[-1].impostor
+    assert tiny is not None and np.allclose(
+        tiny.bounds[1], _bounds(_asset("quaking_aspen", lod_triangles="0.9,0.0001").lods[1])
+    )
     species = str(species_path("quaking_aspen"))
     res = CliRunner().invoke(
         cli, ["make", species, "-o", str(tmp_path / "a.glb"), "--lod-triangles", "0.9,0.0001", "--json"]

@@ -137,14 +137,21 @@ def build_lods(params: Params, tree: Tree, options: MakeOptions, seed: int, timi
     return lods
 
 
+def _leafy(lod: Lod) -> bool:
+    return any(p.name == "leaves" and len(p.indices) for p in lod.primitives)
+
+
 def add_impostor(
     lods: list[Lod], materials: list, tree: Tree, options: MakeOptions
 ) -> tuple[list[Lod], list]:
-    """The impostor appended after the last geometric LOD (rendered from it), which now hands
-    over at the impostor's distance."""
+    """The impostor appended after the last geometric LOD, which now hands over at the
+    impostor's distance; rendered from it, or from the last LOD that still draws leaves where
+    a tiny budget (or many LODs stepping down) left the last ones bare trunks: a pole of an
+    impostor would replace a crown."""
     lo, height = options.lod, tree_height(tree)
     distance = switch_distance(height, lods[-1].distance, lo, options.impostor)
-    imp, material = build_impostor(lods[-1], materials, lo, distance, clip_name(len(lods)), options.impostor)
+    source = next((lod for lod in reversed(lods) if _leafy(lod)), lods[-1]) if _leafy(lods[0]) else lods[-1]
+    imp, material = build_impostor(source, materials, lo, distance, clip_name(len(lods)), options.impostor)
     last = replace(lods[-1], screen_coverage=screen_coverage(height, distance, lo))
     return [*lods[:-1], last, imp], [*materials, material]
 
