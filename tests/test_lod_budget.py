@@ -70,6 +70,25 @@ def _asset(name: str, **options):
     return asset
 
 
+def _within_lod0(asset, tol: float = 1e-3) -> None:
+    """Every geometric LOD's leaves inside LOD0's box: enlarged blades fitted into it, so a
+    LOD never grows the tree's outline at its switch (the fan palm's fronds reached 0.3 m,
+    about 19 px, past LOD0's; a tiny budget's leaves poked metres out of the crown)."""
+    box = np.concatenate([np.asarray(p.positions) for p in asset.lods[0].primitives if len(p.positions)])
+    lo, hi = box.min(0) - tol, box.max(0) + tol
+    for k, lod in enumerate(asset.lods[1:], 1):
+        if lod.impostor is not None:
+            continue
+        for p in lod.primitives:
+            if p.name == "leaves" and len(p.positions):
+                x = np.asarray(p.positions)
+                assert (x >= lo).all() and (x <= hi).all(), (k, x.min(0) - lo, hi - x.max(0))
+
+
+def test_far_lods_stay_inside_lod0s_box():
+    _within_lod0(_asset("fan_palm"))
+
+
 def _bounds(lod) -> np.ndarray:
     """The rest-pose max corner of a LOD's geometry."""
     return np.concatenate([np.asarray(p.positions) for p in lod.primitives if len(p.positions)]).max(0)
@@ -215,6 +234,7 @@ def test_tiny_budgets_keep_blades_within_the_crown_and_say_they_are_exceeded(tmp
                 tri = np.asarray(p.positions)[np.asarray(p.indices).reshape(-1, 3)]
                 span = np.linalg.norm(tri[:, :, None] - tri[:, None, :], axis=-1).max()
                 assert span <= 2.0 * MAX_BLADE_SHARE * crown * 1.001, (table, k, span, crown)
+        _within_lod0(asset)
     # the impostor is drawn from the last LOD with leaves (LOD1 here), not from a bare trunk
     from treegen_cli.render_gl import egl_available
 

@@ -43,7 +43,15 @@ from .limits import bark_triangles
 from .leafshapes import triangle_share
 from .lod_cover import Blades, Grid, solve_factor, stem_area, tree_area
 from .lod_nodes import coarsen_nodes, point_tips, stub_stems, twig_keys
-from .lod_leaves import LENGTH_SHARE, grow_leaves, prune_stems, stem_closure, thin_leaves
+from .lod_leaves import (
+    LENGTH_SHARE,
+    fit_blades,
+    grow_leaves,
+    prune_stems,
+    stem_closure,
+    thin_leaves,
+    tree_box,
+)
 from .mesh import MeshOptions, girth, stem_sides
 from .mesh.options import FULL_CARD_CELL
 from .tree import Tree
@@ -181,9 +189,8 @@ def plan_lod(
         thin = thicken(thin, radius)
         mesh_thin = replace(mesh, thin_radius=mesh.thin_radius * radius)
     bark = int(bark_triangles(thin, mesh_thin).sum())
-    return LodPlan(
-        grow_leaves(thin, leaf), bark, int(round(n_keep * per_leaf)), float(np.mean(leaf)), mesh_thin
-    )
+    grown = fit_blades(grow_leaves(thin, leaf), *tree_box(full))
+    return LodPlan(grown, bark, int(round(n_keep * per_leaf)), float(np.mean(leaf)), mesh_thin)
 
 
 def _stubs(tree: Tree, per_stem: np.ndarray, keep: np.ndarray, mesh: MeshOptions, px: float, budget: float):

@@ -167,3 +167,39 @@ def grow_leaves(tree: Tree, area_factor, length_share: float = LENGTH_SHARE) -> 
     # grown about the blade's middle, not its base: the leaf stays where it was
     pos = tree.leaf_pos - (0.5 * (grow[:, 0] - 1.0) * size[:, 0])[:, None] * frame[:, :, 1]
     return replace(tree, leaf_pos=pos, leaf_size=size * grow)
+
+
+def tree_box(tree: Tree) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) corners of the box around `tree`'s stems (nodes ± radius) and blades."""
+    pts = [tree.node_pos - tree.node_radius[:, None], tree.node_pos + tree.node_radius[:, None]]
+    if tree.n_leaves:
+        L, W, F = tree.leaf_size[:, 0], tree.leaf_size[:, 1], tree.leaf_frame
+        for s, t in ((0.0, -0.5), (0.0, 0.5), (1.0, -0.5), (1.0, 0.5)):
+            pts.append(tree.leaf_pos + (s * L)[:, None] * F[:, :, 1] + (t * W)[:, None] * F[:, :, 0])
+    allp = np.concatenate(pts)
+    return allp.min(0), allp.max(0)
+
+
+def fit_blades(tree: Tree, lo: np.ndarray, hi: np.ndarray) -> Tree:
+    """`tree` with each blade that reaches out of the box (lo, hi) shrunk about its middle
+    until it fits (LOD0's box: a LOD's enlarged leaves must not make the tree bigger than it
+    is, or the silhouette grows at the switch and a tiny budget's few leaves poke out of it)."""
+    if not tree.n_leaves:
+        return tree
+    mid, F = tree.leaf_middle, tree.leaf_frame
+    reach = np.abs(0.5 * tree.leaf_size[:, 0, None] * F[:, :, 1]) + np.abs(
+        0.5 * tree.leaf_size[:, 1, None] * F[:, :, 0]
+    )
+    room = np.minimum(hi - mid, mid - lo)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.where(reach > 0, np.maximum(room, 0.0) / reach, np.inf).min(axis=1)
+    s = np.clip(s, 0.0, 1.0)
+    if np.all(s >= 1.0):
+        return tree
+    size = tree.leaf_size * s[:, None]
+    pos = mid - (0.5 * size[:, 0])[:, None] * F[:, :, 1]
+    return replace(
+        tree,
+        leaf_pos=np.where((s < 1.0)[:, None], pos, tree.leaf_pos),
+        leaf_size=np.where((s < 1.0)[:, None], size, tree.leaf_size),
+    )
