@@ -137,11 +137,12 @@ HELP: dict[str, tuple[str | None, str, str | None]] = {
     ),
     "lod_triangles": (
         None,
-        "Triangles of LOD1, LOD2, … as fractions of LOD0's (the last "
-        "repeats); a LOD never has more than the one before it. Each is cut from "
+        "Triangles of LOD1, LOD2, … as fractions of LOD0's (further LODs step on by "
+        "the ratio of the last two, LOD0 counting as 1: 0.3 gives 0.3, 0.09, 0.027); a LOD never has more "
+        "than the one before it, and never less than its trunk. Each is cut from "
         "LOD0's tree: fewer sides, stems thinner than half a pixel at its distance "
         "dropped, fewer leaves spread over the whole crown and scaled to cover what "
-        "all of them covered.",
+        "all of them cover.",
         "0.5,0.15,0.05",
     ),
     "no_lod": (None, "Write one LOD with the dense clip.", None),
