@@ -181,6 +181,15 @@ CASES = [
     ),
     (["make", "rush", "-o", "x.glb", "--no-lod", "--lod-files"], ["--lod-files: has no effect, --no-lod"]),
     (
+        ["make", "rush", "-o", "x.glb", "--no-wind", "--schedule", "paper"],
+        ["--schedule: has no effect, --no-wind"],
+    ),
+    (
+        ["make", "rush", "-o", "x.glb", "--no-wind", "--error-px", "3"],
+        ["--error-px: has no effect, --no-wind"],
+    ),
+    (["make", "rush", "-o", "x.glb", "--no-lod", "--error-px", "3"], ["--error-px: has no effect, --no-lod"]),
+    (
         ["make", "rush", "-o", "x.obj", "--wind-speed", "9"],
         ["--wind-speed: has no effect, a .obj file", "static"],
     ),

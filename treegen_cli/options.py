@@ -97,7 +97,8 @@ WIND_ONLY = ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", 
 IMPOSTOR_ONLY = ("impostor_size", "impostor_distance")
 # What else `info --lod` builds the LODs with, as `make` would (a profile's LODs and impostor)
 INFO_LOD_BUILD = ("lod_triangles", "max_joints", "joints", "profile", "impostor", *IMPOSTOR_ONLY)
-LOD_ONLY = ("lod_screen", "lod_distances", "lod_triangles", "lod_files", "schedule", *IMPOSTOR_ONLY)
+KEYS_ONLY = ("schedule", "error_px")  # the LODs' key schedule: void without a clip
+LOD_ONLY = ("lod_screen", "lod_distances", "lod_triangles", "lod_files", *KEYS_ONLY, *IMPOSTOR_ONLY)
 FLOATS = ("max_size", "fov", "error_px", *WIND_ONLY)
 FLAGS = ("no_wind", "no_lod", "lod_files", "no_textures", "impostor")
 CHOICES = {
@@ -221,7 +222,7 @@ def check_no_effect(options: dict, label: Callable[[str], str], output) -> None:
     for k in given:
         if static:
             why = f"a {Path(output).suffix.lower()} file holds no wind or LODs (static format)"
-        elif k in WIND_ONLY and options.get("no_wind"):
+        elif (k in WIND_ONLY or k in KEYS_ONLY) and options.get("no_wind"):
             why = f"{label('no_wind')} builds no clip"
         elif k in LOD_ONLY and options.get("no_lod"):
             why = f"{label('no_lod')} builds one LOD"
