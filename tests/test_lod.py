@@ -319,6 +319,11 @@ def test_info_lod_builds_what_make_builds_with_its_options(tmp_path):
         (r["distance_m"], r["triangles"], r["joints"], r["joint_keys"]) for r in made["lods"]
     ]
     assert len(made["lods"]) == 3 and made["lods"][0]["joints"] <= 48
+    # the profile's LOD0 budget is reported as --triangles' is: the LOD rows' tree explained
+    budget = info["triangles"]["budget"]
+    assert budget["target"] == 20_000 and budget["triangles"] == info["lods"][0]["triangles"]
+    plain = api.info(SPECIES_DIR / "quaking_aspen.txt", profile="mobile")  # without --lod too
+    assert plain["triangles"]["budget"] == budget
 
 
 def test_switches_where_the_tree_is_under_a_pixel_are_refused(tmp_path):

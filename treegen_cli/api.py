@@ -40,6 +40,7 @@ from .options import DEFAULTS, GROUPS, INFO_LOD_BUILD, UNSET_FREE, Resolved, cli
 from .params import Params, load_params
 from .pipeline import Timings, build_asset
 from .prepare import split_lods
+from .profiles import apply_profile
 from .progress import current_reporter
 from .rig import build_rig
 from .tree import tree_stats
@@ -200,6 +201,9 @@ def info(
     def given(group: str) -> dict:
         return {k: v for k, v in options.items() if k in GROUPS[group]}
 
+    if triangles is None and options.get("profile") is not None:  # its LOD0 budget, as make's
+        triangles = apply_profile({"profile": options["profile"]}).get("triangles")
+
     unknown = {k: v for k, v in options.items() if k not in DEFAULTS}
     generate_job = resolve(given("generate") | unknown)
     generate_options, seed = generate_job.options.generate, generate_job.seed
@@ -250,6 +254,7 @@ def _triangle_rows(species, params, seed, tree, triangles, generate_options) -> 
             generate_options,
         )
         out["budget"] = {
+            "target": triangles,
             "triangles": plan.triangles,
             "bark": plan.bark,
             "leaves": plan.leaves,

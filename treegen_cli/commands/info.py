@@ -74,8 +74,12 @@ def info(species, as_json, with_lod, with_wind, triangles, **options):
     ]
     if "budget" in stats["triangles"]:
         b = stats["triangles"]["budget"]
+        whose = "" if triangles is not None else f" (the {o['profile']} profile's)"
         rows.append(
-            ("budget", f"--triangles {triangles:,}: {b['plan']}; the fewest it reaches: {b['minimum']:,}")
+            (
+                "budget",
+                f"--triangles {b['target']:,}{whose}: {b['plan']}; the fewest it reaches: {b['minimum']:,}",
+            )
         )
     for name, value in rows:
         click.echo(f"  {name:<13}{value}")
