@@ -56,7 +56,7 @@ def make(species, output, as_json, **options):
             "  LODs: "
             + "; ".join(
                 ("impostor from " if r["impostor"] else "")
-                + f"{r['distance_m']:.1f} m: {r['triangles']:,} tris, {_joints(r['joints'])}"
+                + f"{_metres(r['distance_m'])} m: {r['triangles']:,} tris, {_joints(r['joints'])}"
                 + (f", {r['joint_keys']:,} keys" if k > 0 and r["joint_keys"] else "")
                 + (f" (error {r['max_error_px']:.2f} px)" if r["max_error_px"] is not None else "")
                 + (
@@ -69,6 +69,12 @@ def make(species, output, as_json, **options):
         )
     stages = ", ".join(f"{k} {v:.2f}" for k, v in timings.stages.items())
     click.echo(f"  {time.perf_counter() - t0:.2f} s  ({stages})")
+
+
+def _metres(d: float) -> str:
+    """A switch distance: decimetres, centimetres under 10 m (--lod-screen 4,3.9,3.8 printed
+    two LODs "from 1.4 m")."""
+    return f"{d:.1f}" if d >= 10.0 or d == 0.0 else f"{d:.2f}"
 
 
 def _joints(n: int) -> str:

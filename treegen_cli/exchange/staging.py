@@ -100,5 +100,8 @@ def staged(path: str | os.PathLike) -> Iterator[Path]:
 def written(tmp: Path, path: Path) -> list[Path]:
     """Where the files a writer put beside `tmp` (in its staging folder) land: `path`'s
     folder, main file first (a .gltf also writes its .bin)."""
-    names = sorted(os.listdir(tmp.parent), key=lambda n: (n != path.name, n))
+    names = sorted(  # main file first; a part's files together, its main one first
+        os.listdir(tmp.parent),
+        key=lambda n: (n != path.name, n.split(".")[0], not n.endswith(path.suffix), n),
+    )
     return [path.parent / n for n in names]
