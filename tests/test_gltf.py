@@ -390,17 +390,23 @@ def test_atomic_write_leaves_no_temp_files(tmp_path, monkeypatch):
 def test_a_new_write_removes_what_an_earlier_write_to_the_same_output_left(tmp_path):
     """Engines import `--lod-files` parts by name: a run with fewer LODs left NAME_LOD2.glb
     beside the new parts, and a run without an impostor left its sidecar and atlas PNGs.
-    A write removes its own output's leftovers, never the other form's (the single file and
-    the parts are separate outputs; USD parts share the single file's texture names)."""
+    A write removes exactly its own output's leftovers: never the other form's (the single
+    file and the parts are separate outputs), another format's (.bin of .gltf parts), nor
+    another output's whose name merely starts the same (`a_usdc.usdc`'s textures)."""
     from treegen_cli.exchange import export_parts
     from treegen_cli.exchange.stale import stale_files
     from treegen_cli.prepare import split_lods
 
     export_parts(split_lods(prepare(synthetic_asset(3))), tmp_path / "p.glb")
     export(synthetic_asset(1), tmp_path / "p.glb")  # the single file beside the parts
-    (tmp_path / "p_LOD2.glb.impostor.json").write_text("{}")
-    (tmp_path / "p.glb.impostor.json").write_text("{}")
-    (tmp_path / "other_LOD5.glb").write_text("not ours")
+    for n in (
+        "p_LOD2.glb.impostor.json",
+        "p.glb.impostor.json",
+        "other_LOD5.glb",
+        "p_LOD7.bin",
+        "p_LOD7.gltf",
+    ):
+        (tmp_path / n).write_text("not this output's" if "other" in n or "LOD7" in n else "{}")
     export_parts(split_lods(prepare(synthetic_asset(2))), tmp_path / "p.glb")
     assert sorted(os.listdir(tmp_path)) == [
         "other_LOD5.glb",
@@ -408,24 +414,27 @@ def test_a_new_write_removes_what_an_earlier_write_to_the_same_output_left(tmp_p
         "p.glb.impostor.json",
         "p_LOD0.glb",
         "p_LOD1.glb",
+        "p_LOD7.bin",
+        "p_LOD7.gltf",
     ]
     export(synthetic_asset(1), tmp_path / "p.glb")  # no impostor now: its sidecar goes
-    assert sorted(os.listdir(tmp_path)) == ["other_LOD5.glb", "p.glb", "p_LOD0.glb", "p_LOD1.glb"]
-    # textures named after the output: kept while the other form may use them
+    assert "p.glb.impostor.json" not in os.listdir(tmp_path)
     names = ["a.usdc", "a_usdc_leaf.png", "a_usdc_impostor_albedo.png", "a.usdc.impostor.json"]
-    names += ["a_LOD0.usdc", "a_LOD1.usdc", "a_LOD1.usdc.impostor.json", "a_LOD0_usdc_leaf.png"]
+    names += ["a_LOD0.usdc", "a_LOD1.usdc", "a_LOD1.usdc.impostor.json", "a_LOD_usdc_impostor_cards.png"]
+    names += ["a_usdc_usdc_impostor_albedo.png", "a_usdc.usdc", "a_LOD_usdc_leaf.png"]
     for n in names:
         (tmp_path / n).write_text("")
     wrote = [tmp_path / n for n in ("a.usdc", "a_usdc_leaf.png")]
-    assert stale_files(tmp_path / "a.usdc", wrote) == [tmp_path / "a.usdc.impostor.json"]
-    wrote = [tmp_path / n for n in ("a_LOD0.usdc", "a_usdc_leaf.png")]
+    assert [p.name for p in stale_files(tmp_path / "a.usdc", wrote)] == [
+        "a.usdc.impostor.json",
+        "a_usdc_impostor_albedo.png",
+    ]
+    wrote = [tmp_path / n for n in ("a_LOD0.usdc", "a_LOD_usdc_leaf.png")]
     assert [p.name for p in stale_files(tmp_path / "a.usdc", wrote, parts=1)] == [
-        "a_LOD0_usdc_leaf.png",
         "a_LOD1.usdc",
         "a_LOD1.usdc.impostor.json",
+        "a_LOD_usdc_impostor_cards.png",
     ]
-    (tmp_path / "a.usdc").unlink()  # no single file: the parts' write owns the textures
-    assert "a_usdc_impostor_albedo.png" in [p.name for p in stale_files(tmp_path / "a.usdc", wrote, parts=1)]
 
 
 @pytest.mark.parametrize("suffix", [".obj", ".ply"])

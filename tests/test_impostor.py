@@ -714,10 +714,10 @@ def test_a_smaller_atlas_is_written_smaller_and_says_so(tmp_path):
 
 @needs_gl
 def _usd_parts_share_their_textures(tmp_path):
-    """USD `--lod-files` parts name their textures after the whole output (`p_usdc_leaf.png`,
-    as the single file does) and write each once: every part wrote its own copies of the bark
-    and leaf PNGs (a_LOD0_usdc_leaf.png … a_LOD3_usdc_leaf.png). Every path a part's shaders
-    name is there, and each part validates."""
+    """USD `--lod-files` parts share one set of textures (`p_LOD_usdc_leaf.png`: not the single
+    file's `p_usdc_leaf.png`, which a write of it would overwrite) and write each once: every
+    part wrote its own copies of the bark and leaf PNGs (a_LOD0_usdc_leaf.png …). Every path a
+    part's shaders name is there, and each part validates."""
     from pxr import Sdf, Usd, UsdShade
 
     from treegen_cli import api
@@ -725,7 +725,7 @@ def _usd_parts_share_their_textures(tmp_path):
 
     s = api.make(species_path("rush"), tmp_path / "p.usdc", duration=1.0, fps=10.0, lod_files=True)
     pngs = sorted(p.rsplit("/", 1)[-1] for p in s["files"] if p.endswith(".png"))
-    assert pngs and all(p.startswith("p_usdc_") for p in pngs), pngs
+    assert pngs and all(p.startswith("p_LOD_usdc_") for p in pngs), pngs
     assert len(pngs) == len(set(pngs)) == 7, pngs  # bark, its normals, leaf; the impostor's four
     used = set()
     for k in range(5):
@@ -736,10 +736,10 @@ def _usd_parts_share_their_textures(tmp_path):
                 asset = shader.GetInput("file").Get()
                 assert isinstance(asset, Sdf.AssetPath) and (tmp_path / asset.path).is_file(), (k, asset)
                 used.add(Path(asset.path).name)
-    assert {"p_usdc_leaf.png", "p_usdc_bark.png", "p_usdc_impostor_cards.png"} <= used, used
+    assert {"p_LOD_usdc_leaf.png", "p_LOD_usdc_bark.png", "p_LOD_usdc_impostor_cards.png"} <= used, used
     assert validate_usd(tmp_path / "p_LOD1.usdc") == []
     meta = json.loads((tmp_path / "p_LOD4.usdc.impostor.json").read_text())
-    assert meta["images"]["albedo"] == "p_usdc_impostor_albedo.png"
+    assert meta["images"]["albedo"] == "p_LOD_usdc_impostor_albedo.png"
 
 
 def test_lod_files_and_usd_carry_the_impostor(tmp_path):

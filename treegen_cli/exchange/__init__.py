@@ -29,7 +29,7 @@ from . import gltf, image, read_gltf
 from .compress import COMPRESS, GLTF_DEFAULTS, GltfOptions, check_encoder  # noqa: F401  (re-exported)
 from .forest_gltf import write_forest_gltf
 from .staging import staged, sweep, written  # noqa: F401  (re-exported)
-from .stale import remove_stale
+from .stale import PARTS_TAG, remove_stale
 
 
 def _usd(asset: Asset, path: Path, textures=None) -> None:
@@ -193,7 +193,8 @@ def export_parts(
     if path.suffix.lower() in (".usda", ".usdc"):  # the parts share one set of textures beside
         from .texture_files import TextureFiles
 
-        names = TextureFiles(path)  # NAME_usdc_leaf.png, as the single file's
+        # NAME_LOD_usdc_leaf.png: not the single file's names, which it may overwrite with its own
+        names = TextureFiles(path.with_name(f"{path.stem}{PARTS_TAG}{path.suffix}"))
 
         def writer(part: Asset, target: Path) -> None:
             _usd(part, target, names.shared())
