@@ -373,6 +373,19 @@ def test_make_reports_each_lods_measured_error(tmp_path):
     assert max(shown) > 1.5, res.output
     for s, m in zip(shown, measured):
         assert 0.0 < m <= s + 0.005, (shown, measured)
+    # a camera that can be inside the tree: the paper's walk has no bound there; --json says
+    # null (it printed Infinity, which strict JSON parsers refuse), the text says why
+    near = api.make(
+        SPECIES_DIR / "rush.txt",
+        tmp_path / "r.glb",
+        schedule="paper",
+        impostor=False,
+        lod_screen="4,3.9,3.8",
+        duration=1,
+        fps=10,
+    )
+    json.dumps(near, allow_nan=False)
+    assert [(r["decimated"], r["max_error_px"]) for r in near["lods"][1:]] == [(True, None)] * 3
 
 
 def _skinned(lod, rotations: np.ndarray) -> np.ndarray:

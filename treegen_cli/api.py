@@ -20,6 +20,7 @@ options always writes the same bytes whichever door it came in by.
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from dataclasses import dataclass, replace
@@ -160,7 +161,11 @@ def make_summary(asset, tree, written, stages: dict, seconds: float, lod_options
             "keys": keys,
             "joint_keys": joint_keys,
             "decimated": clip is not None and clip.keys is not None,
-            "max_error_px": None if clip is None or clip.error_px is None else round(clip.error_px, 3),
+            # None where unbounded too (the paper's walk with a camera that can be inside the
+            # tree): JSON has no Infinity
+            "max_error_px": None
+            if clip is None or clip.error_px is None or not math.isfinite(clip.error_px)
+            else round(clip.error_px, 3),
             "impostor": lod.impostor is not None,
         }
 

@@ -58,7 +58,13 @@ def make(species, output, as_json, **options):
                 ("impostor from " if r["impostor"] else "")
                 + f"{_metres(r['distance_m'])} m: {r['triangles']:,} tris, {_joints(r['joints'])}"
                 + (f", {r['joint_keys']:,} keys" if k > 0 and r["joint_keys"] else "")
-                + (f" (error {r['max_error_px']:.2f} px)" if r["max_error_px"] is not None else "")
+                + (
+                    f" (error {r['max_error_px']:.2f} px)"
+                    if r["max_error_px"] is not None
+                    else " (error unbounded: a camera there can be inside the tree)"
+                    if k > 0 and r["decimated"]
+                    else ""
+                )
                 + (
                     f" (over its budget of {r['budget']:,}: a LOD draws at least its trunk)"
                     if r.get("budget") is not None and r["triangles"] > r["budget"]
