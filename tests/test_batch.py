@@ -531,7 +531,7 @@ def test_a_file_where_an_output_folder_goes_is_refused_before_anything_runs(work
         ),
         (
             {"defaults": {"lod_screen": [0.5, 200]}, "entries": [{"species": "species/rush.txt"}]},
-            ["defaults.lod_screen[1]: 200 is out of range; allowed (0, 4]"],
+            ["defaults.lod_screen[1]: 200 is out of range; allowed [0.0001, 4]"],
         ),
         (
             {"entries": [{"species": "species/rush.txt", "joint_levels": [0, True]}]},

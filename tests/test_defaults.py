@@ -92,7 +92,7 @@ def test_lod_flags_are_checked_once_in_lod_options_and_worded_as_typed():
         == str(cli_msg.value)
         == (
             "--lod-screen 0.5,0.6: give descending fractions of the screen height (not "
-            "percentages), each in (0, 4], e.g. 0.5,0.25,0.1"
+            "percentages), each in [0.0001, 4], e.g. 0.5,0.25,0.1"
         )
     )
     assert str(catalogue.value).startswith("entries[0].lod_screen 0.5,0.6: give descending")

@@ -326,23 +326,23 @@ def test_info_lod_builds_what_make_builds_with_its_options(tmp_path):
     assert plain["triangles"]["budget"] == budget
 
 
-def test_switches_where_the_tree_is_under_a_pixel_are_refused(tmp_path):
-    """A LOD or impostor distance from which the tree is under a pixel tall draws nothing to
-    switch to: refused by name with that distance, exit 2, nothing written (0,1e308 crashed
-    the cover estimator with a traceback); so is a screen fraction under one pixel."""
+def test_absurd_switch_distances_are_refused(tmp_path):
+    """Switch distances past MAX_DISTANCE (every tree is under a pixel long before) and screen
+    fractions under MIN_SCREEN are refused by name with the range, nothing written:
+    --lod-distances 0,1e308 crashed the cover estimator with a traceback, --lod-screen 1e-300
+    put a LOD 10^300 m away, --impostor-distance 1e12 was taken. A forest's or catalogue's
+    shared distances stay valid for a small tree that is under a pixel at the far ones."""
     from treegen_cli.cli import cli
     from treegen_cli.errors import OptionError
+    from treegen_cli.lod import MAX_DISTANCE, MIN_SCREEN
 
-    o = LodOptions(distances=(0.0, 10.0, 1e308))
-    far = 18.6 * 1080 / (2 * np.tan(np.radians(30.0)) / (16 / 9) * 16 / 9)  # 1 px tall, 16:9
-    with pytest.raises(
-        OptionError, match=r"^--lod-distances 0,10,1e\+308: this 18\.6 m tree is under a pixel"
-    ):
-        switch_distances(18.6, o)
-    assert switch_distances(18.6, LodOptions(distances=(0.0, 0.99 * far)))[1] == pytest.approx(0.99 * far)
-    with pytest.raises(OptionError, match=r"^--lod-screen 1e-05: a tree under one pixel tall"):
+    with pytest.raises(OptionError, match=r"^--lod-distances 0,10,1e\+308: each at most 1,000,000 m"):
+        LodOptions(distances=(0.0, 10.0, 1e308))
+    assert LodOptions(distances=(0.0, MAX_DISTANCE)).distances[-1] == MAX_DISTANCE
+    with pytest.raises(OptionError, match=r"^--lod-screen 1e-05: .*each in \[0\.0001, 4\]"):
         LodOptions(screen=(1e-5,))
-    species = str(SPECIES_DIR / "quaking_aspen.txt")
+    assert LodOptions(screen=(MIN_SCREEN,), width=16).screen == (MIN_SCREEN,)  # any screen width
+    species = str(SPECIES_DIR / "rush.txt")
     for flag, value in (
         ("--lod-distances", "0,1e308"),
         ("--impostor-distance", "1e12"),
@@ -351,6 +351,13 @@ def test_switches_where_the_tree_is_under_a_pixel_are_refused(tmp_path):
         res = CliRunner().invoke(cli, ["make", species, "-o", str(tmp_path / "a.glb"), flag, value])
         assert isinstance(res.exception, TreegenError) and flag in str(res.exception), res.output
     assert list(tmp_path.iterdir()) == []
+    # a 0.6 m rush is under a pixel from about 1 km: distances beyond still build
+    from treegen_cli import api
+
+    made = api.make(
+        species, tmp_path / "r.glb", lod_distances="0,10,3000", impostor=False, duration=1, fps=10
+    )
+    assert [r["distance_m"] for r in made["lods"]] == [0.0, 10.0, 3000.0]
 
 
 def test_make_reports_each_lods_measured_error(tmp_path):

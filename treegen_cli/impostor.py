@@ -37,7 +37,7 @@ import numpy as np
 from .asset import Clip, Impostor, Lod, Material, Primitive, Skeleton, Texture
 from .errors import TreegenError
 from .impostor_atlas import render_views
-from .lod import LodOptions, check_visible, screen_distance
+from .lod import MAX_DISTANCE, LodOptions, screen_distance
 from .lod_decimate import decimate
 from .quat import mul as quat_mul, unit as unit_quat
 
@@ -65,6 +65,11 @@ class ImpostorOptions:
     flag: str = "--impostor-distance"
 
     def __post_init__(self) -> None:
+        if self.distance is not None and not self.distance <= MAX_DISTANCE:  # (NaN too)
+            raise TreegenError(
+                f"{self.flag} {self.distance:g}: at most {MAX_DISTANCE:,.0f} m (any tree is under a pixel "
+                "long before)"
+            )
         if not 2 <= self.grid <= 64 or not 8 <= self.cell <= 512 or self.grid * self.cell > 8192:
             raise TreegenError(
                 f"impostor atlas {self.grid}×{self.grid} views of {self.cell} px: "
@@ -330,7 +335,6 @@ def switch_distance(height: float, last: float, lod_options: LodOptions, options
     or the user's `distance`, which must lie beyond the last LOD's."""
     if options.distance is not None:
         check_beyond(options, last)
-        check_visible((options.distance,), height, lod_options, "distance", options.flag)
         return float(options.distance)
     d = screen_distance(height, options.switch_px, lod_options, of=lod_options.width / lod_options.aspect)
     return float(max(d, options.min_factor * last, 1e-3))

@@ -24,6 +24,10 @@ from dataclasses import dataclass
 from .errors import OptionError, TreegenError
 
 SCHEDULES = ("bounded", "bounded-step", "paper")
+MIN_SCREEN = 1e-4  # a LOD switch at least this many screen heights tall (a tenth of a pixel
+# on a 1080 px screen): --lod-screen 1e-300 put a LOD 10^300 m away
+MAX_DISTANCE = 1e6  # metres, a switch distance at most (--lod-distances 0,1e308 crashed the
+# cover estimator; a 100 m tree is under a pixel from 170 km on)
 MAX_SCREEN = 4.0  # a LOD switch at most this many screen heights tall: beyond, the camera is
 # inside the tree (--lod-screen 50,25,10, percentages typed for fractions, put LOD3 at 2.9 m)
 
@@ -60,20 +64,19 @@ class LodOptions:
                     "give one or more ascending distances in metres, each >= 0",
                     "--lod-distances",
                 )
+            if max(d) > MAX_DISTANCE:
+                raise OptionError(
+                    "distances",
+                    shown,
+                    f"each at most {MAX_DISTANCE:,.0f} m (any tree is under a pixel long before)",
+                    "--lod-distances",
+                )
             if len(set(d)) != len(d):
                 raise OptionError("distances", shown, "distances repeat", "--lod-distances")
         s = self.screen
-        if d is None and s and min(s) * self.width / self.aspect < 1.0:
-            raise OptionError(
-                "screen",
-                ",".join(f"{x:g}" for x in s),
-                f"a tree under one pixel tall ({self.aspect / self.width:.3g} of the "
-                f"{self.width / self.aspect:.0f} px screen height) shows no LOD; give fractions of at least that",
-                "--lod-screen",
-            )
         if (
             (d is None and not s)
-            or any(not (math.isfinite(x) and 0.0 < x <= MAX_SCREEN) for x in s)
+            or any(not (math.isfinite(x) and MIN_SCREEN <= x <= MAX_SCREEN) for x in s)
             or list(s) != sorted(s, reverse=True)
             or len(set(s)) != len(s)
         ):
@@ -81,7 +84,7 @@ class LodOptions:
                 "screen",
                 ",".join(f"{x:g}" for x in s) or "(none)",
                 f"give descending fractions of the screen height (not percentages), each in "
-                f"(0, {MAX_SCREEN:g}], e.g. 0.5,0.25,0.1",
+                f"[{MIN_SCREEN:g}, {MAX_SCREEN:g}], e.g. 0.5,0.25,0.1",
                 "--lod-screen",
             )
         if not 0.0 < self.fov_deg < 180.0:
@@ -138,27 +141,8 @@ def switch_distances(height: float, options: LodOptions = LOD_DEFAULTS) -> tuple
 
     Result (height 13 m, fov 60°, 16:9, screen 0.5/0.25/0.1): (0, 40.0, 80.1, 200.1) m."""
     if options.distances is not None:
-        check_visible(options.distances, height, options, "distances", "--lod-distances")
         return tuple(float(x) for x in options.distances)
     return (0.0,) + tuple(screen_distance(height, s, options) for s in options.screen)
-
-
-def pixel_distance(height: float, options: LodOptions = LOD_DEFAULTS) -> float:
-    """Metres from which a tree `height` metres tall is under one pixel tall on the screen."""
-    return screen_distance(height, 1.0, options, of=options.width / options.aspect)
-
-
-def check_visible(distances, height: float, options: LodOptions, field: str, flag: str) -> None:
-    """Refuse switch distances from which the tree is under a pixel tall: nothing is drawn
-    there to switch to (1e308 m crashed the cover estimator)."""
-    far = pixel_distance(height, options)
-    if any(float(x) > far for x in distances):
-        raise OptionError(
-            field,
-            ",".join(f"{float(x):g}" for x in distances),
-            f"this {height:.3g} m tree is under a pixel tall from {far:,.0f} m on; give distances up to that",
-            flag,
-        )
 
 
 def screen_distance(
