@@ -220,6 +220,31 @@ def test_a_profiles_gltf_compression_stays_with_gltf():
         api.resolve({"profile": "web", "compress": "meshopt"}, output="palm.usdz")
 
 
+def test_a_catalogues_profile_compresses_its_gltf_files_only(tmp_path):
+    """A catalogue with the web profile and formats glb + usdc: the GLB is meshopt-compressed,
+    the USD written plainly (it was refused: "entries[0].compress: meshopt is for glb/gltf
+    only", a key nobody wrote); a typed compress is still refused for USD."""
+    import json
+
+    from click.testing import CliRunner
+
+    from treegen_cli.cli import cli
+    from treegen_cli.exchange.gltf_container import read_gltf
+
+    cat = tmp_path / "c.json"
+    defaults = {"profile": "web", "formats": ["glb", "usdc"], "duration": 1, "fps": 10}
+    cat.write_text(json.dumps({"defaults": defaults, "entries": [{"species": str(species_path("rush"))}]}))
+    res = CliRunner().invoke(cli, ["batch", str(cat), "-o", str(tmp_path / "out")])
+    assert res.exit_code == 0, res.output
+    g, _ = read_gltf(tmp_path / "out" / "rush_0.glb")
+    assert "EXT_meshopt_compression" in g["extensionsUsed"] and (tmp_path / "out" / "rush_0.usdc").is_file()
+    cat.write_text(
+        json.dumps({"defaults": {**defaults, "compress": "meshopt"}, "entries": [{"species": "rush"}]})
+    )
+    res = CliRunner().invoke(cli, ["batch", str(cat), "-o", str(tmp_path / "out2"), "--dry-run"])
+    assert res.exit_code != 0 and "defaults.compress: meshopt is for glb/gltf only" in str(res.exception)
+
+
 def test_joints_is_max_joints():
     from treegen_cli import api
     from treegen_cli.errors import TreegenError

@@ -29,7 +29,7 @@ from pathlib import Path
 from .budget import BudgetOptions, plan_budget
 from .bundled import resolve_species
 from .errors import TreegenError, in_file
-from .exchange import GLTF_DEFAULTS, STATIC, check_suffix, check_up_axis, export, export_parts
+from .exchange import FIXED_UP_AXIS, GLTF_DEFAULTS, STATIC, check_suffix, check_up_axis, export, export_parts
 from .forest import run_forest, schema_text as forest_schema_text  # noqa: F401  (the forest door)
 from .generate import generate
 from .limits import MAX_TREES, estimate_triangles  # noqa: F401  (MAX_TREES: forest's default)
@@ -68,6 +68,8 @@ def write(asset, tree, output, timings, t0: float, job: Resolved | None = None) 
     `make --json` summary."""
     values = job.values if job is not None else DEFAULTS
     gltf = job.options.gltf if job is not None else GLTF_DEFAULTS
+    if Path(output).suffix.lower() not in FIXED_UP_AXIS:  # a profile's glTF encoding: not USD's
+        gltf = GLTF_DEFAULTS  # (a typed --compress was refused for it before anything was built)
     asset = replace(asset, up_axis=values["up_axis"])
     written = (
         timings.run("write", export_parts, split_lods(asset), output, gltf)

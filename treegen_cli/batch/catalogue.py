@@ -281,7 +281,7 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
                 from ..exchange.compress import check_encoder
 
                 check_encoder()
-            if base_job.values["compress"] != "none":
+            if opts.get("compress") not in (None, "none"):  # typed (a profile's is for glTF only)
                 for k, f in enumerate(formats):
                     if f not in ("glb", "gltf"):
                         raise TreegenError(
