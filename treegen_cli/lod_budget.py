@@ -174,9 +174,12 @@ def plan_lod(
     if leaf0:  # leaves far out on a dropped stem would float: the stem stays, as a cone
         coarse, per_stem, keep = _stubs(coarse, per_stem, keep, mesh, px, budget)
     pruned = prune_stems(coarse, keep)
-    # a budget its kept bark fills keeps no leaf (one leaf grown to stand for the crown was a
-    # card hundreds of metres wide: --lod-triangles 0.9,0.0001)
-    n_keep = int(min(L, max(0, math.floor((budget - per_stem[keep].sum()) / per_leaf)))) if L else 0
+    room = math.floor((budget - per_stem[keep].sum()) / per_leaf) if L else 0
+    if L and room < 1:  # trunks alone over the budget: the leaves keep their share of it (one
+        # leaf grown to stand for the crown was a card 883 m wide; none, the crown vanished
+        # for a LOD and came back at the impostor: the rush's LOD3 under --profile web)
+        room = math.floor((1.0 - share) * budget / per_leaf)
+    n_keep = int(min(L, max(0, room)))
     thin = thin_leaves(pruned, n_keep, 1.0)
     if triangle:
         thin = triangle_blades(thin)

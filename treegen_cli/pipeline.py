@@ -137,20 +137,32 @@ def build_lods(params: Params, tree: Tree, options: MakeOptions, seed: int, timi
     return lods
 
 
-def _leafy(lod: Lod) -> bool:
-    return any(p.name == "leaves" and len(p.indices) for p in lod.primitives)
+CROWN_SHARE = 0.1  # the impostor's source draws at least this share of LOD0's leaf area (the
+# bundled species' coarsest LODs draw 0.18 to 14 of it: the fan palm's leaflets overlap where
+# they converge, so fewer cover as much; a desert bush's leaves stand in for its dropped twigs)
+
+
+def _leaf_area(lod: Lod) -> float:
+    """Summed area (m²) of the LOD's leaf triangles."""
+    total = 0.0
+    for p in lod.primitives:
+        if p.name == "leaves" and len(p.indices):
+            t = np.asarray(p.positions, np.float64)[np.asarray(p.indices).reshape(-1, 3)]
+            total += 0.5 * float(np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1).sum())
+    return total
 
 
 def add_impostor(
     lods: list[Lod], materials: list, tree: Tree, options: MakeOptions
 ) -> tuple[list[Lod], list]:
     """The impostor appended after the last geometric LOD, which now hands over at the
-    impostor's distance; rendered from it, or from the last LOD that still draws leaves where
-    a tiny budget (or many LODs stepping down) left the last ones bare trunks: a pole of an
-    impostor would replace a crown."""
+    impostor's distance; rendered from it, or from the last LOD that still draws CROWN_SHARE of
+    LOD0's leaf area where a tiny budget (or many LODs stepping down) left the last ones bare
+    trunks or a few leaves: a pole of an impostor would replace a crown."""
     lo, height = options.lod, tree_height(tree)
     distance = switch_distance(height, lods[-1].distance, lo, options.impostor)
-    source = next((lod for lod in reversed(lods) if _leafy(lod)), lods[-1]) if _leafy(lods[0]) else lods[-1]
+    crown = CROWN_SHARE * _leaf_area(lods[0])
+    source = next((lod for lod in reversed(lods) if _leaf_area(lod) >= crown), lods[-1])
     imp, material = build_impostor(source, materials, lo, distance, clip_name(len(lods)), options.impostor)
     last = replace(lods[-1], screen_coverage=screen_coverage(height, distance, lo))
     return [*lods[:-1], last, imp], [*materials, material]

@@ -66,7 +66,7 @@ def make(species, output, as_json, **options):
                     else ""
                 )
                 + (
-                    f" (over its budget of {r['budget']:,}: a LOD draws at least its trunk)"
+                    f" (over its budget of {r['budget']:,}: its trunks alone take more)"
                     if r.get("budget") is not None and r["triangles"] > r["budget"]
                     else ""
                 )
