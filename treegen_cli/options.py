@@ -14,7 +14,7 @@ from typing import Callable
 
 from .budget import BudgetOptions
 from .errors import OptionError, TreegenError
-from .exchange import COMPRESS, FIXED_UP_AXIS, GLTF_DEFAULTS, STATIC, GltfOptions, check_compress
+from .exchange import COMPRESS, FIXED_UP_AXIS, GLTF_DEFAULTS, GltfOptions, check_compress
 from .generate import DEFAULTS as GENERATE_DEFAULTS, GenerateOptions
 from .impostor import IMPOSTOR_SIZES, atlas_side, placed
 from .limits import LIMITS_DEFAULTS, Limits
@@ -26,6 +26,7 @@ from .pipeline import MakeOptions
 from .profiles import NAMES as PROFILE_NAMES, apply_profile
 from .rig import MAX_JOINTS, RIG_DEFAULTS, RigOptions
 from .wind import DEFAULTS as WIND_DEFAULTS, WindOptions
+from .void_options import IMPOSTOR_ONLY, WIND_ONLY, check_no_effect, static_format
 
 
 def _text(value) -> str:
@@ -91,14 +92,8 @@ OPTIONAL_INTS = ("triangles", "joints", "impostor_size")
 UNSET_FREE = ("triangles", "joints", "profile", "impostor_size", "impostor_distance")
 OPTIONAL_FLOATS = ("impostor_distance",)
 PATHS = ("leaf_texture", "bark_texture")
-# options that shape only the clip, only the LODs, only the impostor: given with --no-wind,
-# --no-lod or --no-impostor or for a static format they would be silently ignored
-WIND_ONLY = ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "stiffness")
-IMPOSTOR_ONLY = ("impostor_size", "impostor_distance")
 # What else `info --lod` builds the LODs with, as `make` would (a profile's LODs and impostor)
 INFO_LOD_BUILD = ("lod_triangles", "max_joints", "joints", "profile", "impostor", *IMPOSTOR_ONLY)
-KEYS_ONLY = ("schedule", "error_px")  # the LODs' key schedule: void without a clip
-LOD_ONLY = ("lod_screen", "lod_distances", "lod_triangles", "lod_files", *KEYS_ONLY, *IMPOSTOR_ONLY)
 FLOATS = ("max_size", "fov", "error_px", *WIND_ONLY)
 FLAGS = ("no_wind", "no_lod", "lod_files", "no_textures", "impostor")
 CHOICES = {
@@ -208,38 +203,6 @@ def _power_of_two(flag: str, n: int, bounds: tuple[int, int], rule: str) -> None
 MAX_SEED = 2**63 - 1  # every seed (make, batch, forest layouts): numpy's int64
 
 
-def _static(output) -> bool:
-    """Whether `output` is a static format (.obj .ply): no wind or LODs."""
-    return output is not None and Path(output).suffix.lower() in STATIC
-
-
-def check_no_effect(options: dict, label: Callable[[str], str], output) -> None:
-    """Refuse an option the user gave that the rest of the request makes void (called before
-    a profile fills its own: those are defaults, not requests). A flag counts when set, a
-    value when given at all (0 included)."""
-    static = _static(output)
-    given = [k for k in (*WIND_ONLY, *LOD_ONLY) if options.get(k) is not None and options.get(k) is not False]
-    for k in given:
-        if static:
-            why = f"a {Path(output).suffix.lower()} file holds no wind or LODs (static format)"
-        elif (k in WIND_ONLY or k in KEYS_ONLY) and options.get("no_wind"):
-            why = f"{label('no_wind')} builds no clip"
-        elif k in LOD_ONLY and options.get("no_lod"):
-            why = f"{label('no_lod')} builds one LOD"
-        elif k in IMPOSTOR_ONLY and options.get("impostor") is False:
-            off = (
-                "--no-impostor" if label("impostor") == cli_name("impostor") else f"{label('impostor')} false"
-            )
-            why = f"{off} builds no impostor"
-        else:
-            continue
-        raise TreegenError(f"{label(k)}: has no effect, {why}; leave it out")
-    if options.get("lod_distances") is not None and options.get("lod_screen") is not None:
-        raise TreegenError(
-            f"{label('lod_screen')}: has no effect, {label('lod_distances')} replaces it; give one of them"
-        )
-
-
 def resolve(
     options: dict,
     label: Callable[[str], str] = cli_name,
@@ -323,7 +286,7 @@ def resolve(
             IMPOSTOR_SIZES,
             "the atlas side must be a power of two in [{lo}, {hi}] px",
         )
-    static = _static(output)
+    static = static_format(output)
     if output is not None:
         check_compress(output, v["compress"], label("compress"))
     try:  # a stage's range check names its own field: say what the user typed instead

@@ -14,7 +14,8 @@ from importlib import resources
 from pathlib import Path, PurePosixPath
 
 from ..build_id import build_id
-from ..options import MAX_SEED, check_no_effect
+from ..options import MAX_SEED
+from ..void_options import check_no_effect
 from ..errors import TreegenError
 from ..forest.schema import check_schema, read_json_file, show_value
 from ..generate import check_trunk

@@ -1,0 +1,52 @@
+"""Options the rest of a `make` request makes void (`--wind-speed` with `--no-wind`, an
+impostor size with `--no-impostor`, LOD options for a static format): refused by name, not
+silently ignored. Called before a profile fills its own values: those are defaults, not
+requests.
+
+    check_no_effect({"no_wind": True, "error_px": 3}, cli_name, "a.glb")
+    # Result: TreegenError "--error-px: has no effect, --no-wind builds no clip; leave it out"
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Callable
+
+from .errors import TreegenError
+from .exchange import STATIC
+
+# options that shape only the clip, only the LODs, only the impostor
+WIND_ONLY = ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "stiffness")
+IMPOSTOR_ONLY = ("impostor_size", "impostor_distance")
+KEYS_ONLY = ("schedule", "error_px")  # the LODs' key schedule: void without a clip
+LOD_ONLY = ("lod_screen", "lod_distances", "lod_triangles", "lod_files", *KEYS_ONLY, *IMPOSTOR_ONLY)
+
+
+def static_format(output) -> bool:
+    """Whether `output` is a static format (.obj .ply): no wind or LODs."""
+    return output is not None and Path(output).suffix.lower() in STATIC
+
+
+def check_no_effect(options: dict, label: Callable[[str], str], output) -> None:
+    """Refuse an option the user gave that the rest of the request makes void (called before
+    a profile fills its own: those are defaults, not requests). A flag counts when set, a
+    value when given at all (0 included)."""
+    static = static_format(output)
+    given = [k for k in (*WIND_ONLY, *LOD_ONLY) if options.get(k) is not None and options.get(k) is not False]
+    for k in given:
+        if static:
+            why = f"a {Path(output).suffix.lower()} file holds no wind or LODs (static format)"
+        elif (k in WIND_ONLY or k in KEYS_ONLY) and options.get("no_wind"):
+            why = f"{label('no_wind')} builds no clip"
+        elif k in LOD_ONLY and options.get("no_lod"):
+            why = f"{label('no_lod')} builds one LOD"
+        elif k in IMPOSTOR_ONLY and options.get("impostor") is False:
+            off = "--no-impostor" if label("impostor") == "--impostor" else f"{label('impostor')} false"
+            why = f"{off} builds no impostor"
+        else:
+            continue
+        raise TreegenError(f"{label(k)}: has no effect, {why}; leave it out")
+    if options.get("lod_distances") is not None and options.get("lod_screen") is not None:
+        raise TreegenError(
+            f"{label('lod_screen')}: has no effect, {label('lod_distances')} replaces it; give one of them"
+        )
