@@ -641,7 +641,7 @@ def test_impostor_distance_places_the_impostor_beyond_the_last_lod(tmp_path):
             api.make(species_path("rush"), bad, **{**clip, **options})
         assert not bad.exists()
     with pytest.raises(
-        TreegenError, match=r"^entries\[0\]\.impostor_distance: 0 is out of range; allowed \(0, inf\)$"
+        TreegenError, match=r"^entries\[0\]\.impostor_distance: 0 is out of range; allowed \(0, 1000000\]$"
     ):
         entry = {"species": str(species_path("rush")), "impostor_distance": 0}
         parse_catalogue({"entries": [entry]}, tmp_path / "c.json")
