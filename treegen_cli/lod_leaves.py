@@ -123,11 +123,9 @@ def thin_leaves(tree: Tree, n_keep: int, area_factor, seed: int = 0) -> Tree:
     factor, or one per kept leaf; see grow_leaves)."""
     if tree.n_leaves == 0:
         return tree
-    if n_keep <= 0:
-        return replace(tree, **{k: getattr(tree, k)[:0] for k in LEAF_FIELDS})
     pick = stratified_pick(tree.leaf_pos, n_keep, tree.seed if seed == 0 else seed)
     kept = replace(tree, **{k: getattr(tree, k)[pick] for k in LEAF_FIELDS})
-    if pick.size < tree.n_leaves:
+    if 0 < pick.size < tree.n_leaves:  # (none kept: nothing to gather to)
         kept = gather_leaves(tree, kept, pick)
     return grow_leaves(kept, area_factor)
 
