@@ -177,6 +177,30 @@ def test_mobile_profile_on_the_paper_species(tmp_path, name):
     assert all(r["joints"] <= 64 for r in s["lods"])
 
 
+def test_a_profiles_budget_never_makes_a_species_heavier(tmp_path):
+    """A profile's triangles are a ceiling: the fan palm (8,360 as it is) and shave grass
+    (13,520) stay as their files say under mobile's 20,000, where a typed --triangles 20000
+    is a target and grows them into [18,000, 20,000]; make, info and a catalogue agree."""
+    from treegen_cli import api
+    from treegen_cli.batch import parse_catalogue
+    from treegen_cli.limits import estimate_triangles
+    from treegen_cli.mesh import MESH_DEFAULTS
+
+    for name in ("fan_palm", "shave_grass"):
+        own = sum(estimate_triangles(grown(name), MESH_DEFAULTS))
+        assert own < 20_000
+        s = api.make(species_path(name), tmp_path / f"{name}.glb", profile="mobile", no_wind=True)
+        assert s["lods"][0]["triangles"] == own, (name, s["lods"][0])
+        budget = api.info(species_path(name), profile="mobile")["triangles"]["budget"]
+        assert budget["as_is"] and budget["triangles"] == own and budget["minimum"] is None
+    typed = api.make(species_path("fan_palm"), tmp_path / "t.glb", profile="mobile", triangles=20_000)
+    assert 18_000 <= typed["lods"][0]["triangles"] <= 20_000
+    assert not api.info(species_path("fan_palm"), triangles=20_000)["triangles"]["budget"]["as_is"]
+    data = {"defaults": {"profile": "mobile"}, "entries": [{"species": str(species_path("fan_palm"))}]}
+    (r,) = parse_catalogue(data, tmp_path / "c.json").resolved.values()
+    assert r.options.budget.ceiling and r.options.budget.triangles == 20_000
+
+
 def test_explicit_options_win_over_the_profile(tmp_path):
     """--fps 30 is the click default, yet typed it beats the profile's 15 (parameter source)."""
     s = _make_json(

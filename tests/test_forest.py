@@ -1005,11 +1005,13 @@ def test_a_profile_budgets_every_prototype(tmp_path):
     data["defaults"] = {**FAST, "profile": "mobile"}
     mobile = make_options(load_layout(write_layout(tmp_path, data)))
     assert mobile.budget.triangles == 20_000 and mobile.materials.texture_size == 256
+    assert mobile.budget.ceiling  # a profile's budget brings heavier species down only
     assert mobile.rig.max_joints == FAST["max_joints"] and mobile.lod.distances == tuple(
         FAST["lod_distances"]
     )
     data["defaults"]["triangles"] = 9000
-    assert make_options(load_layout(write_layout(tmp_path, data))).budget.triangles == 9000
+    typed = make_options(load_layout(write_layout(tmp_path, data))).budget
+    assert typed.triangles == 9000 and not typed.ceiling  # a typed budget is a target
     data["defaults"].update(profile="web", triangles=None)  # --profile wins over the layout's
     del data["defaults"]["triangles"]
     write_layout(tmp_path, data)

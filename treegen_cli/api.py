@@ -208,7 +208,8 @@ def info(
     def given(group: str) -> dict:
         return {k: v for k, v in options.items() if k in GROUPS[group]}
 
-    if triangles is None and options.get("profile") is not None:  # its LOD0 budget, as make's
+    typed = triangles is not None
+    if not typed and options.get("profile") is not None:  # its LOD0 budget (a ceiling), as make's
         triangles = apply_profile({"profile": options["profile"]}).get("triangles")
 
     unknown = {k: v for k, v in options.items() if k not in DEFAULTS}
@@ -224,12 +225,12 @@ def info(
         f"{tree.n_nodes:,} nodes, {tree.n_leaves:,} leaves)"
     )
     stats = tree_stats(tree) | {"generate_s": round(seconds, 4), "file": str(path)}
-    stats["triangles"] = _triangle_rows(path, params, seed, tree, triangles, generate_options)
+    stats["triangles"] = _triangle_rows(path, params, seed, tree, triangles, generate_options, not typed)
     if lod:
         from .render_gl import egl_available  # lazy: GL only when the impostor is drawn
 
         build = given("lod") | given("wind") | {k: v for k, v in options.items() if k in INFO_LOD_BUILD}
-        if triangles is not None:
+        if typed:  # (a profile's budget comes with "profile", as a ceiling)
             build["triangles"] = triangles
         job = resolve(given("generate") | build)  # the LODs `make` builds with these options
         lod_options = job.options.lod
@@ -245,9 +246,10 @@ def info(
     return stats
 
 
-def _triangle_rows(species, params, seed, tree, triangles, generate_options) -> dict:
+def _triangle_rows(species, params, seed, tree, triangles, generate_options, ceiling=False) -> dict:
     """LOD0 triangles as `make` builds the grown tree (exact, from its stems and leaves), and
-    with a budget the plan `make --triangles` would build."""
+    with a budget the plan `make --triangles` would build (`ceiling`: a profile's, which a
+    species already under it keeps as it is)."""
     bark, leaves = estimate_triangles(tree, MESH_DEFAULTS)
     out: dict = {"lod0": bark + leaves, "bark": bark, "leaves": leaves}
     if triangles is not None:
@@ -257,7 +259,7 @@ def _triangle_rows(species, params, seed, tree, triangles, generate_options) -> 
             params,
             seed,
             MESH_DEFAULTS,
-            BudgetOptions(triangles=triangles),
+            BudgetOptions(triangles=triangles, ceiling=ceiling),
             generate_options,
         )
         out["budget"] = {
@@ -270,8 +272,9 @@ def _triangle_rows(species, params, seed, tree, triangles, generate_options) -> 
             "sides": list(plan.mesh.sides),
             "rings_per_segment": list(plan.mesh.rings_per_segment),
             "leaf_quality_factor": round(plan.leaf_factor, 6),
-            "minimum": plan.minimum,
-            "maximum": plan.maximum,
+            "minimum": None if plan.under is not None else plan.minimum,  # (none searched)
+            "maximum": None if plan.under is not None else plan.maximum,
+            "as_is": plan.under is not None,  # a profile's ceiling the species was under
             "plan": plan.describe(),
         }
     return out

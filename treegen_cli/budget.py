@@ -58,9 +58,12 @@ class BudgetOptions:
     `fixed_sides`: the user gave --sides, keep them. rings: rings per segment per level
     (MeshOptions.rings_per_segment), finest first. min_levels: never fewer stem levels (as the
     LOD planner). bark_share: the species' own bark fraction of its triangles, clamped to this
-    range, is the bark's share of the budget."""
+    range, is the bark's share of the budget. `ceiling`: the budget came from a --profile,
+    which only brings a heavier species down to it: one already under it is built as its file
+    says (a phone's profile made a 1.2 m grass clump 1.45× and a fan palm 2.3× heavier)."""
 
     triangles: int | None = None
+    ceiling: bool = False
     tolerance: float = 0.10  # LOD0 lands in [(1 − tolerance)·triangles, triangles]
     leaf_quality: tuple[float, float] = (1.0 / 256.0, 4.0)
     side_scales: tuple[float, ...] = (2.0, 1.75, 1.5, 1.25, 1.0, 0.85, 0.7, 0.6, 0.5, 0.4, 0.3, 0.0)
@@ -96,8 +99,14 @@ class Plan:
     curve_scale: float  # × every branch level's CurveRes
     minimum: int  # fewest triangles any candidate reaches
     maximum: int  # most triangles among the candidates searched
+    under: int | None = None  # a profile's ceiling the species was already under (as it is)
 
     def describe(self) -> str:
+        if self.under is not None:
+            return (
+                f"{self.triangles:,} triangles ({self.bark:,} bark, {self.leaves:,} leaves): the "
+                "species as it is (a profile's budget only brings a heavier species down)"
+            )
         sides = ",".join(str(s) for s in self.mesh.sides)
         return (
             f"{self.triangles:,} triangles ({self.bark:,} bark, {self.leaves:,} leaves): "
@@ -215,6 +224,11 @@ def plan_budget(
     T = options.triangles
     if T is None:
         raise ValueError("plan_budget needs options.triangles")
+    if options.ceiling:
+        bark, leaves = estimate_triangles(generate(params, seed, generate_options), mesh)
+        if bark + leaves <= T:
+            n = bark + leaves
+            return Plan(params, mesh, n, bark, leaves, params.levels, 1.0, 1.0, n, n, under=T)
     fmin, fmax = options.leaf_quality
     first = generate(replace(params, leaf_quality=params.leaf_quality * fmin), seed, generate_options)
     tri_per_leaf = len(leaf_outline(first, mesh).triangles) if mesh.leaves else 0

@@ -340,7 +340,11 @@ def resolve(
             leaf_texture=v["leaf_texture"],
             bark_texture=v["bark_texture"],
         ),
-        budget=BudgetOptions(triangles=v["triangles"], fixed_sides=v["sides"] is not None),
+        budget=BudgetOptions(
+            triangles=v["triangles"],
+            fixed_sides=v["sides"] is not None,
+            ceiling=given.get("triangles") is None,  # a profile's budget: a ceiling
+        ),
         gltf=GltfOptions(
             compress=v["compress"],
             pixel_size=pixel_size(1.0, lod) if lod is not None and v["compress"] == "meshopt" else 0.0,

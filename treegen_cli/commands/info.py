@@ -78,7 +78,8 @@ def info(species, as_json, with_lod, with_wind, triangles, **options):
         rows.append(
             (
                 "budget",
-                f"--triangles {b['target']:,}{whose}: {b['plan']}; the fewest it reaches: {b['minimum']:,}",
+                f"--triangles {b['target']:,}{whose}: {b['plan']}"
+                + ("" if b["as_is"] else f"; the fewest it reaches: {b['minimum']:,}"),
             )
         )
     for name, value in rows:

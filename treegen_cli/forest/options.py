@@ -78,7 +78,7 @@ def make_options(layout: Layout, error_px: float | None = None, impostor: bool =
     flag = "defaults.triangles" if d.triangles is not None else f"defaults.profile '{d.profile}': triangles"
     return replace(
         options,
-        budget=replace(made.budget, flag=flag),
+        budget=replace(made.budget, flag=flag, ceiling=d.triangles is None),
         materials=made.materials,
         lod=lod if made.lod is None else replace(lod, triangles=made.lod.triangles),
         impostor=replace(options.impostor, cell=made.impostor.cell)  # the profile's atlas size
