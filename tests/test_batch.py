@@ -591,6 +591,18 @@ def test_a_file_where_an_output_folder_goes_is_refused_before_anything_runs(work
             },
             ["entries[0].leaf_texture", "cannot be combined with entries[0].no_textures"],
         ),
+        # make refuses --lod-files for a static format: a batch must not write LOD parts of it
+        (
+            {"entries": [{"species": "species/rush.txt", "formats": ["glb", "obj"], "lod_files": True}]},
+            ["entries[0].lod_files: has no effect on entries[0].formats[1]", "static format"],
+        ),
+        (
+            {
+                "defaults": {"lod_files": True},
+                "entries": [{"species": "species/rush.txt", "formats": ["ply"]}],
+            },
+            ["defaults.lod_files: has no effect on entries[0].formats[0]"],
+        ),
     ],
 )
 def test_catalogue_errors_name_the_json_path_exit_2_and_write_nothing(workspace, change, needles):
@@ -605,6 +617,25 @@ def test_catalogue_errors_name_the_json_path_exit_2_and_write_nothing(workspace,
     for n in needles:
         assert n in lines[0], lines[0]
     assert not out.exists()
+
+
+def test_a_static_format_beside_others_is_what_make_writes(workspace):
+    """An entry with glb and obj shares one build; the .obj and its manifest row are make's
+    static file (LOD0's rest pose: one LOD, no joints, no keys), not the LODs the glb has."""
+    cat = workspace / "static.json"
+    entry = {"species": "species/rush.txt", "formats": ["glb", "obj"], "seeds": [2]}
+    cat.write_text(json.dumps({"defaults": CLIP, "entries": [entry]}))
+    proc = treegen("batch", cat, "-o", workspace / "st", "--workers", "1", "-q")
+    assert proc.returncode == 0, proc.stderr
+    rows = {a["format"]: a for a in json.loads((workspace / "st" / "manifest.json").read_text())["assets"]}
+    assert len(rows["glb"]["triangles"]) > 1 and rows["glb"]["keys"][0] > 0
+    obj = rows["obj"]
+    assert (obj["triangles"], obj["joints"], obj["keys"]) == ([rows["glb"]["triangles"][0]], [0], [0])
+    assert sorted(p.name for p in (workspace / "st").glob("rush_2*.obj")) == ["rush_2.obj"]
+    (workspace / "m").mkdir()
+    made = treegen("make", "species/rush.txt", "-o", workspace / "m" / "rush_2.obj", "--seed", "2", "-q")
+    assert made.returncode == 0, made.stderr
+    assert (workspace / "m" / "rush_2.obj").read_bytes() == (workspace / "st" / "rush_2.obj").read_bytes()
 
 
 def test_seeds_grid_and_names_expand_as_documented(workspace):

@@ -71,9 +71,13 @@ def write(asset, tree, output, timings, t0: float, job: Resolved | None = None) 
     if Path(output).suffix.lower() not in FIXED_UP_AXIS:  # a profile's glTF encoding: not USD's
         gltf = GLTF_DEFAULTS  # (a typed --compress was refused for it before anything was built)
     asset = replace(asset, up_axis=values["up_axis"])
+    static = Path(output).suffix.lower() in STATIC
+    if static:  # what the file holds, and its summary: LOD0's rest pose (a batch task's job
+        # has the LODs and clips its other formats take)
+        asset = replace(asset, lods=[replace(asset.lods[0], clips=[])])
     written = (
         timings.run("write", export_parts, split_lods(asset), output, gltf)
-        if values["lod_files"]
+        if values["lod_files"] and not static
         else timings.run("write", export, asset, output, gltf)
     )
     lod_options = job.options.lod if job is not None else None

@@ -50,3 +50,23 @@ def check_no_effect(options: dict, label: Callable[[str], str], output) -> None:
         raise TreegenError(
             f"{label('lod_screen')}: has no effect, {label('lod_distances')} replaces it; give one of them"
         )
+
+
+def check_formats(options: dict, formats: list, label: Callable[[str], str], where: str) -> None:
+    """Refuse, for a catalogue entry written as `formats` (its JSON path `where`), an option
+    typed in it that one of those formats cannot take: `compress` on a non-glTF format (a
+    profile's is for glTF only, and dropped there), `lod_files` on a static one, which holds
+    LOD0 alone (make refuses both; a batch must not write what make would not)."""
+    import json
+
+    for k, f in enumerate(formats):
+        if options.get("compress") not in (None, "none") and f not in ("glb", "gltf"):
+            raise TreegenError(
+                f"{label('compress')}: {options['compress']} is for glb/gltf only, but "
+                f"{where}[{k}] is {json.dumps(f)} (USD has no such encoding)"
+            )
+        if options.get("lod_files") and static_format(f"x.{f}"):
+            raise TreegenError(
+                f"{label('lod_files')}: has no effect on {where}[{k}] {json.dumps(f)}, a static format "
+                "holds no wind or LODs; give that format an entry of its own"
+            )

@@ -15,7 +15,7 @@ from pathlib import Path, PurePosixPath
 
 from ..build_id import build_id
 from ..options import MAX_SEED
-from ..void_options import check_no_effect
+from ..void_options import check_formats, check_no_effect
 from ..errors import TreegenError
 from ..forest.schema import check_schema, read_json_file, show_value
 from ..generate import check_trunk
@@ -282,13 +282,7 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
                 from ..exchange.compress import check_encoder
 
                 check_encoder()
-            if opts.get("compress") not in (None, "none"):  # typed (a profile's is for glTF only)
-                for k, f in enumerate(formats):
-                    if f not in ("glb", "gltf"):
-                        raise TreegenError(
-                            f"{label('compress')}: {base_job.values['compress']} is for glb/gltf "
-                            f"only, but {fwhere}[{k}] is {json.dumps(f)} (USD has no such encoding)"
-                        )
+            check_formats(opts, formats, label, fwhere)  # typed options a format cannot take
             try:  # an implausible Scale is a typo: refused now, not by a worker mid-run
                 check_trunk(loaded[sp][0], base_job.options.generate)
             except TreegenError as e:
