@@ -733,12 +733,15 @@ def test_reword_names_only_what_the_catalogue_set(workspace):
 
 def test_dry_run_prints_the_table_and_an_estimate_and_writes_nothing(workspace):
     out = workspace / "dry"
-    proc = treegen("batch", workspace / "catalogue.json", "-o", out, "--dry-run", "--workers", "2")
+    proc = treegen("batch", workspace / "catalogue.json", "-o", out, "--dry-run", "--workers", "2", "-v")
     assert proc.returncode == 0, proc.stderr
     lines = proc.stdout.splitlines()
     assert len(lines) == 14 and "est MB" in lines[0] and "rush_8.glb" in lines[12]
     assert "12 jobs: 12 to build (10 trees)" in lines[-1] and "on 2 worker(s)" in lines[-1]
     assert not out.exists()  # (--json: test_dry_run_plans_what_the_run_builds_…)
+    # -v: a line per tree as it is planned (a large catalogue's dry run was silent for minutes)
+    planned = [line for line in proc.stderr.splitlines() if "planned" in line]
+    assert len(planned) == 10 and planned[-1].startswith("  planned 10/10: entries[2] seed 8")
 
 
 def test_estimate_counts_the_planning_it_measured_and_the_budget_a_job_grows_to(tmp_path):
@@ -810,6 +813,30 @@ def test_dry_run_plans_what_the_run_builds_with_budgets_and_profiles(workspace):
         assert row["status"] == "built"
         for key in ("triangles", "joints", "lod_distances_m"):
             assert job[key] == row[key], (path, key)
+
+
+def test_a_catalogue_over_the_job_limit_is_refused_unless_raised(tmp_path):
+    """ "1-100000" typed for "1-10": refused before anything runs, naming --max-jobs (default
+    MAX_JOBS); raised, the same catalogue expands."""
+    from treegen_cli.batch import MAX_JOBS, parse_catalogue
+    from treegen_cli.errors import TreegenError
+
+    rush = str(ROOT / "species" / "rush.txt")
+    data = {"entries": [{"species": rush, "seeds": f"1-{MAX_JOBS + 1}"}]}
+    with pytest.raises(
+        TreegenError, match=rf"over the limit of {MAX_JOBS:,} jobs; raise it with --max-jobs N"
+    ):
+        parse_catalogue(data, tmp_path / "c.json")
+    assert len(parse_catalogue(data, tmp_path / "c.json", MAX_JOBS + 1).jobs) == MAX_JOBS + 1
+    data = {"entries": [{"species": rush, "seeds": "1-6000", "formats": ["glb", "usdc"]}]}
+    with pytest.raises(
+        TreegenError, match=rf"more than {MAX_JOBS:,} jobs; raise the limit with --max-jobs N"
+    ):
+        parse_catalogue(data, tmp_path / "c.json")
+    (tmp_path / "c.json").write_text(json.dumps({"entries": [{"species": rush, "seeds": "1-5"}]}))
+    proc = treegen("batch", tmp_path / "c.json", "-o", tmp_path / "o", "--max-jobs", "3", "--dry-run")
+    assert proc.returncode == 2 and "gives 5 seeds, over the limit of 3 jobs" in proc.stderr, proc.stderr
+    assert not (tmp_path / "o").exists()
 
 
 def test_seeds_name_the_bad_item_and_the_whole_seed_range():

@@ -24,7 +24,8 @@ from ..rig import check_joint_levels
 SCHEMA_NAME = "catalogue.schema.json"
 DEFAULT_NAME = "{species}_{seed}.{ext}"
 FORMATS = ("glb", "gltf", "usda", "usdc", "usdz", "obj", "ply")
-MAX_JOBS = 100_000  # jobs one catalogue may expand to (seed ranges × grid × formats)
+MAX_JOBS = 10_000  # jobs one catalogue may expand to (seed ranges × grid × formats) unless
+# `treegen batch --max-jobs` raises it: "1-100000" typed for "1-10" is days of builds
 _SEEDS = re.compile(r"^\s*(\d+)\s*(?:-\s*(\d+)\s*)?$")
 
 
@@ -115,7 +116,7 @@ def parse_seeds(value, where: str, max_jobs: int = MAX_JOBS) -> list[int]:
             if hi - lo + 1 > max_jobs:
                 raise TreegenError(
                     f"{where}: range '{part.strip()}' gives {hi - lo + 1:,} seeds, "
-                    f"over the limit of {max_jobs:,} jobs"
+                    f"over the limit of {max_jobs:,} jobs; raise it with --max-jobs N"
                 )
             values.extend(range(lo, hi + 1))
         at = [where] * len(values)
@@ -339,7 +340,7 @@ def parse_catalogue(data, path: Path, max_jobs: int = MAX_JOBS) -> Catalogue:
                     if len(jobs) > max_jobs:
                         raise TreegenError(
                             f"{where}: the catalogue expands to more than "
-                            f"{max_jobs:,} jobs; split it into several files"
+                            f"{max_jobs:,} jobs; raise the limit with --max-jobs N"
                         )
     return Catalogue(
         path=path,

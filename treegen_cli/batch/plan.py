@@ -42,27 +42,35 @@ def plan_jobs(cat: Catalogue, out_dir: str | os.PathLike, force: bool = False) -
 
 
 def plan_trees(
-    cat: Catalogue, jobs: list[Job], seconds: dict[str, float] | None = None
+    cat: Catalogue, jobs: list[Job], seconds: dict[str, float] | None = None, reporter=None
 ) -> dict[str, list[dict] | str]:
     """Per task of `jobs`: what its build will have per LOD (pipeline.plan_asset: triangles,
     vertices, joints, switch distance; budgets, profiles and joint limits applied as the build
     applies them), or the one-line error the build would fail with. Grown here, one tree at a
     time, without wind, textures or the impostor atlas; `seconds`, if given, gets each task's
-    CPU seconds of that (the build repeats them: estimate() counts them)."""
+    CPU seconds of that (the build repeats them: estimate() counts them); `reporter` (a
+    progress.Reporter) shows a bar over the trees and, verbose, a line per tree."""
     from ..pipeline import plan_asset
 
     out: dict[str, list[dict] | str] = {}
+    total = len({job.task for job in jobs})
     for job in jobs:
         if job.task in out:
             continue
         r = cat.resolved[job.task]
+        if reporter is not None:
+            reporter.stage_started("planning", total)
         t0 = time.process_time()
         try:
             out[job.task] = plan_asset(cat.params[job.species], r.seed, r.options)
         except TreegenError as e:
             out[job.task] = cat.reword(job, str(e))
+        spent = time.process_time() - t0
         if seconds is not None:
-            seconds[job.task] = time.process_time() - t0
+            seconds[job.task] = spent
+        if reporter is not None:
+            reporter.stage_done("planning", spent)
+            reporter.detail(f"  planned {len(out)}/{total}: {job.source} seed {r.seed} ({spent:.2f} s)")
     return out
 
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import click
 
-from ..batch import estimate, load_catalogue, plan_jobs, plan_trees, run_jobs, schema_text
+from ..batch import MAX_JOBS, estimate, load_catalogue, plan_jobs, plan_trees, run_jobs, schema_text
 from ..errors import TreegenError
 from ..executor import default_workers, scheduler_address
 from ..progress import current_reporter
@@ -46,9 +46,16 @@ from . import flags
     help="Print the job table with each tree's plan (LODs, triangles, joints, as the build "
     "will make them) and a size/time estimate; build and write nothing.",
 )
+@click.option(
+    "--max-jobs",
+    type=click.IntRange(min=1),
+    default=MAX_JOBS,
+    show_default=True,
+    help="Refuse catalogues that expand to more jobs than this (checked before building).",
+)
 @click.option("--schema", is_flag=True, help="Print the catalogue's JSON Schema and exit.")
 @flags.json_flag("One JSON line per finished job, then a summary line.")
-def batch(catalogue, out_dir, workers, scheduler, force, dry_run, schema, as_json):
+def batch(catalogue, out_dir, workers, scheduler, force, dry_run, max_jobs, schema, as_json):
     """Build every asset CATALOGUE (JSON; see --schema) lists — species × seeds × grid ×
     formats — in parallel on Dask, into DIR with a manifest. Reruns skip what is up to date."""
     if schema:
@@ -64,7 +71,7 @@ def batch(catalogue, out_dir, workers, scheduler, force, dry_run, schema, as_jso
     if not base.is_dir() or not os.access(base, os.W_OK | os.X_OK):
         raise TreegenError(f"-o {out_dir}: cannot write into '{base}'")
     flags.check_cluster(workers, scheduler)
-    cat = load_catalogue(catalogue)
+    cat = load_catalogue(catalogue, max_jobs)
     plan = plan_jobs(cat, out_dir, force)
     if dry_run:
         _dry_run(cat, plan, workers, scheduler, as_json)
@@ -76,7 +83,8 @@ def _dry_run(cat, plan, workers, scheduler, as_json) -> None:
     """The job table with each tree's plan (LODs, triangles and joints per LOD, as the build
     will make them) and a size/time estimate; exit 1 when a job would fail, as the run would."""
     spent: dict[str, float] = {}
-    shapes = plan_trees(cat, plan.build, spent)
+    with current_reporter().live():  # a tree a second or so: a large catalogue shows progress
+        shapes = plan_trees(cat, plan.build, spent, current_reporter())
     for j in plan.skip:  # up to date: what the manifest recorded when it was built
         row = plan.previous[j.output]
         shapes.setdefault(
