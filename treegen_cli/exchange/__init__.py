@@ -29,7 +29,7 @@ from . import gltf, image, read_gltf
 from .compress import COMPRESS, GLTF_DEFAULTS, GltfOptions, check_encoder  # noqa: F401  (re-exported)
 from .forest_gltf import write_forest_gltf
 from .staging import staged, sweep, written  # noqa: F401  (re-exported)
-from .stale import PARTS_TAG, remove_stale
+from .stale import PARTS_TAG, earlier_textures, remove_stale
 
 
 def _usd(asset: Asset, path: Path, textures=None) -> None:
@@ -170,8 +170,9 @@ def export(asset: Asset, path: str | os.PathLike, options: GltfOptions = GLTF_DE
     path = check_suffix(path, WRITERS)
     check_up_axis(path, asset.up_axis)
     writer = _writer(path, options)
+    earlier = earlier_textures(path)
     out = _write(lambda tmp: writer(asset, tmp), path)
-    remove_stale(path, out)  # an earlier write's sidecar or atlas this one has not
+    remove_stale(path, out, earlier=earlier)  # an earlier write's sidecar, atlas or textures
     return out
 
 
@@ -203,8 +204,9 @@ def export_parts(
         for part, target in zip(parts, targets):  # a handful of LODs
             writer(part, tmp.parent / target.name)
 
+    earlier = earlier_textures(path, len(parts))
     out = _write(write_all, targets[0])
-    remove_stale(path, out, len(parts))  # an earlier write's parts beyond these, and extras
+    remove_stale(path, out, len(parts), earlier)  # an earlier write's parts beyond these, extras
     return out
 
 
@@ -215,9 +217,13 @@ def export_forest(
     path = check_suffix(path, FOREST_WRITERS)
     check_compress(path, options.compress)
     writer = FOREST_WRITERS[path.suffix.lower()]
+    earlier = earlier_textures(path)
     if options != GLTF_DEFAULTS:
-        return _write(lambda tmp: write_forest_gltf(forest, tmp, options=options), path)
-    return _write(lambda tmp: writer(forest, tmp), path)
+        out = _write(lambda tmp: write_forest_gltf(forest, tmp, options=options), path)
+    else:
+        out = _write(lambda tmp: writer(forest, tmp), path)
+    remove_stale(path, out, earlier=earlier)  # an earlier forest's prototypes' textures
+    return out
 
 
 def check_input(path: str | os.PathLike) -> Path:
