@@ -61,6 +61,13 @@ INPUTS = {
     "scale1300.txt": edited(Scale=1300),
     "tall.txt": edited(Scale=130),  # trunk ≤ 133 m, branches reach ~155 m
     "wide.txt": edited(Scale=50, _1Length=2, _1DownAngle=90, _1DownAngleV=0),
+    # slips the size bound blames on the key typed (with its line), before anything grows:
+    # 1e300 overflowed the wind's matrices (a traceback), Ratio 15 drew a 280 m wide aspen
+    "ratio_e300.txt": edited(Ratio="1e300"),
+    "ratio15.txt": edited(Ratio=15),
+    "leafx.txt": edited(LeafScaleX=1000),
+    "lengthv0.txt": edited(_0LengthV=20),
+    "lengthv2.txt": edited(_2LengthV=30),  # fits before growing; the grown crown does not
     "catalogue_fov.json": json.dumps({"entries": [{"species": "rush", "fov": 100, "schedule": "paper"}]}),
     "catalogue_tex.json": json.dumps({"entries": [{"species": "rush", "texture_size": 100}]}),
     "catalogue_size.json": json.dumps({"entries": [{"species": "scale1300.txt"}]}),
@@ -130,9 +137,17 @@ CASES = [
     # plausibility bound on the tree's size
     (
         ["make", "scale1300.txt", "-o", "x.glb"],
-        ["scale1300.txt: Scale = 1300", "1,303 m", "bound of 150 m", "--max-size"],
+        ["scale1300.txt:", ": Scale = 1300 makes a trunk", "1,303 m", "bound of 150 m", "--max-size"],
     ),
     (["info", "tall.txt"], ["Scale = 130 grows a tree", "m tall", "bound of 150 m", "--max-size"]),
+    (
+        ["make", "ratio_e300.txt", "-o", "x.glb"],
+        ["ratio_e300.txt:21: Ratio = 1e+300 makes a trunk", "lower Ratio"],
+    ),
+    (["info", "ratio15.txt"], ["ratio15.txt:21: Ratio = 15 makes a trunk 821 m across at its base", "150 m"]),
+    (["info", "leafx.txt"], ["leafx.txt:33: LeafScaleX = 1000 makes leaves 170 m", "lower LeafScaleX"]),
+    (["info", "lengthv0.txt"], [": 0LengthV = 20 makes a trunk up to 336 m long", "lower 0LengthV"]),
+    (["info", "lengthv2.txt"], [": 2LengthV = 30 grows a crown", "m wide (seed 0)", "lower 2LengthV"]),
     (["make", "wide.txt", "-o", "x.glb"], ["1Length = 2 grows a crown", "m wide", "bound of 150 m"]),
     (["make", "rush", "-o", "x.glb", "--max-size", "0"], ["--max-size 0: the bound must be > 0"]),
     (["batch", "catalogue_size.json", "-o", "out", "--dry-run"], ["entries[0].species", "Scale = 1300"]),

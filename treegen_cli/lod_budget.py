@@ -50,11 +50,10 @@ from .lod_leaves import (
     prune_stems,
     stem_closure,
     thin_leaves,
-    tree_box,
 )
 from .mesh import MeshOptions, girth, stem_sides
 from .mesh.options import FULL_CARD_CELL
-from .tree import Tree
+from .tree import Tree, tree_box
 
 
 REGION_PX = 4.0  # cells (pixels at the switch) over which a LOD keeps LOD0's area

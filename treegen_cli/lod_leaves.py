@@ -167,17 +167,6 @@ def grow_leaves(tree: Tree, area_factor, length_share: float = LENGTH_SHARE) -> 
     return replace(tree, leaf_pos=pos, leaf_size=size * grow)
 
 
-def tree_box(tree: Tree) -> tuple[np.ndarray, np.ndarray]:
-    """(lo, hi) corners of the box around `tree`'s stems (nodes ± radius) and blades."""
-    pts = [tree.node_pos - tree.node_radius[:, None], tree.node_pos + tree.node_radius[:, None]]
-    if tree.n_leaves:
-        L, W, F = tree.leaf_size[:, 0], tree.leaf_size[:, 1], tree.leaf_frame
-        for s, t in ((0.0, -0.5), (0.0, 0.5), (1.0, -0.5), (1.0, 0.5)):
-            pts.append(tree.leaf_pos + (s * L)[:, None] * F[:, :, 1] + (t * W)[:, None] * F[:, :, 0])
-    allp = np.concatenate(pts)
-    return allp.min(0), allp.max(0)
-
-
 def fit_blades(tree: Tree, lo: np.ndarray, hi: np.ndarray) -> Tree:
     """`tree` with each blade that reaches out of the box (lo, hi) shrunk about its middle
     until it fits (LOD0's box: a LOD's enlarged leaves must not make the tree bigger than it

@@ -94,6 +94,17 @@ def tree_height(tree: Tree) -> float:
     return float(top)
 
 
+def tree_box(tree: Tree) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) corners of the box around `tree`'s stems (nodes ± radius) and blades."""
+    pts = [tree.node_pos - tree.node_radius[:, None], tree.node_pos + tree.node_radius[:, None]]
+    if tree.n_leaves:
+        L, W, F = tree.leaf_size[:, 0], tree.leaf_size[:, 1], tree.leaf_frame
+        for s, t in ((0.0, -0.5), (0.0, 0.5), (1.0, -0.5), (1.0, 0.5)):
+            pts.append(tree.leaf_pos + (s * L)[:, None] * F[:, :, 1] + (t * W)[:, None] * F[:, :, 0])
+    allp = np.concatenate(pts)
+    return allp.min(0), allp.max(0)
+
+
 def tree_stats(tree: Tree) -> dict:
     """The figures `treegen info` reports: counts per level, leaf area, height, crown width."""
     levels = np.bincount(tree.stem_level.astype(np.int64), minlength=1) if tree.n_stems else []

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import TreegenError
 from ..params import MAX_LEVELS, Params
-from ..tree import Tree
+from ..tree import Tree, tree_box
 
 
 @dataclass(frozen=True)
@@ -179,50 +179,118 @@ def _max_fit(fits, value: float) -> float | None:
 
 
 def _num(v: float) -> str:
+    if not abs(v) < 1e9:  # (a slipped exponent: 1e+300, not 301 digits)
+        return f"{v:.6g}"
     return str(int(v)) if float(v).is_integer() else f"{v:.10g}"
 
 
 def _floor_text(x: float) -> str:
     """`x` rounded down for the message, so the value it names does fit."""
+    if not x < 1e9:
+        return f"{x:.3g}"
     if x >= 10:
         return f"{math.floor(x):,}"
     return _num(math.floor(x * 100) / 100)
 
 
+def _value(p: Params, key: str) -> float:
+    """A size key's value by its file name ("Ratio", "2LengthV", "0ScaleV")."""
+    top = {
+        "Scale": p.scale, "ScaleV": p.scale_v, "Ratio": p.ratio, "0Scale": p.scale0,
+        "0ScaleV": p.scale0_v, "Flare": p.flare, "LobeDepth": p.lobe_depth,
+        "LeafScale": p.leaf_scale, "LeafScaleX": p.leaf_scale_x, "LeafQuality": p.leaf_quality,
+    }  # fmt: skip
+    if key in top:
+        return top[key]
+    level = p.level[int(key[0])]
+    return level.length_v if key.endswith("V") else level.length
+
+
+def _slipped(p: Params, typical: dict[str, float]) -> str:
+    """The key farthest past its typical largest value (`typical`: key → value): the one a
+    slip most likely hit (LeafQuality counts inversely: a tiny one grows big leaves)."""
+
+    def past(key: str) -> float:
+        v = _value(p, key)
+        v = 1.0 / math.sqrt(v) if key == "LeafQuality" and v > 0 else v
+        return v / typical[key] if v > 0 else 0.0
+
+    return max(typical, key=past)
+
+
+def _refuse_size(p: Params, key: str, what: str, max_size: float) -> TreegenError:
+    return TreegenError(
+        f"{key} = {_num(_value(p, key))} {what}, over the plausibility bound of {max_size:g} m; "
+        f"lower {key}, or raise the bound with --max-size METRES",
+        line=p.line_of(key),
+    )
+
+
 def check_trunk(p: Params, options: GenerateOptions = DEFAULTS) -> None:
-    """Before growing: a trunk longer than the size bound makes an implausible tree (and
-    astronomically large Scale values would overflow the geometry)."""
+    """Before growing, from the parameters alone: the trunk, each branch level's longest stem,
+    the trunk's base (flare and lobes included) and a leaf all within --max-size. Each refusal
+    names the key a slip most likely hit, with its line; astronomically large values never
+    reach the geometry (they overflowed the wind's matrices)."""
     lp0 = p.level[0]
-    trunk = (p.scale + p.scale_v) * (lp0.length + lp0.length_v)
+    bound = options.max_size
+    longest = trunk = (p.scale + p.scale_v) * (lp0.length + lp0.length_v)
     if not trunk <= options.max_size:
-        raise TreegenError(
-            f"Scale = {p.scale:g} (ScaleV {p.scale_v:g}, 0Length {lp0.length:g}) makes a trunk up "
-            f"to {trunk:,.0f} m long, over the plausibility bound of {options.max_size:g} m; "
-            f"lower Scale, or raise the bound with --max-size METRES"
-        )
+        key = _slipped(p, {"Scale": 30.0, "ScaleV": 10.0, "0Length": 1.0, "0LengthV": 0.5})
+        raise _refuse_size(p, key, f"makes a trunk up to {_floor_text(trunk)} m long", bound)
+    for lev in range(1, min(max(p.levels, 1), len(p.level))):
+        lp = p.level[lev]
+        longest *= max(lp.length + lp.length_v, 0.0)
+        if not longest <= options.max_size:
+            key = _slipped(p, {f"{lev}Length": 1.0, f"{lev}LengthV": 0.5})
+            raise _refuse_size(
+                p, key, f"makes level-{lev} branches up to {_floor_text(longest)} m long", bound
+            )
+    base = 2.0 * trunk * p.ratio * (p.scale0 + p.scale0_v) * (1.0 + max(p.flare, 0.0)) * (1.0 + p.lobe_depth)
+    if not base <= options.max_size:
+        typical = {"Ratio": 0.05, "0Scale": 2.0, "0ScaleV": 1.0, "Flare": 1.5, "LobeDepth": 0.5}
+        what = f"makes a trunk {_floor_text(base)} m across at its base"
+        raise _refuse_size(p, _slipped(p, typical), what, bound)
+    if p.leaves != 0 and p.levels >= 1:
+        length = p.leaf_scale / math.sqrt(max(p.leaf_quality, 1e-300))
+        if not max(length, length * p.leaf_scale_x) <= options.max_size:
+            key = (
+                _slipped(p, {"LeafScale": 0.5, "LeafQuality": 3.0})
+                if not length <= options.max_size
+                else "LeafScaleX"
+            )
+            what = f"makes leaves {_floor_text(max(length, length * p.leaf_scale_x))} m long or wide"
+            raise _refuse_size(p, key, what, bound)
 
 
 def check_size(tree: Tree, max_size: float) -> None:
-    """After growing: the tree's height and crown width within `max_size` metres, else a
-    one-line refusal naming the keys that scale them (every length is ∝ Scale)."""
-    p = tree.params
-    pts = np.concatenate([tree.node_pos, tree.leaf_pos]) if tree.n_leaves else tree.node_pos
-    if not len(pts):
+    """After growing: the tree's height and crown width (stems with their radii, leaves with
+    their blades) within `max_size` metres, else a one-line refusal naming, of the keys that
+    scale what reaches farthest (Scale, the trunk's and each branch level's nLength up to the
+    farthest stem's, LeafScale when a blade reaches farthest), the one farthest past its
+    typical value (every length is ∝ Scale: a big tree blames Scale, a slipped 1Length 1Length)."""
+    if not tree.n_nodes:
         return
-    height = float(pts[:, 2].max())
-    width = float(np.max(np.ptp(pts[:, :2], axis=0)))
-    fix = "; lower {}, or raise the bound with --max-size METRES"
-    if not height <= max_size:
-        raise TreegenError(
-            f"Scale = {p.scale:g} grows a tree {height:,.1f} m tall (seed {tree.seed}), over the "
-            f"plausibility bound of {max_size:g} m" + fix.format("Scale or 0Length")
-        )
-    if not width <= max_size:
-        raise TreegenError(
-            f"Scale = {p.scale:g} with 1Length = {p.level[1].length:g} grows a crown {width:,.1f} m "
-            f"wide (seed {tree.seed}), over the plausibility bound of {max_size:g} m"
-            + fix.format("Scale or 1Length")
-        )
+    lo, hi = tree_box(tree)
+    height, width = float(hi[2]), float(np.max(hi[:2] - lo[:2]))
+    if height <= max_size and width <= max_size:
+        return
+    p, axis = tree.params, 2 if not height <= max_size else int(np.argmax(hi[:2] - lo[:2]))
+    reach = np.abs(tree.node_pos[:, axis]) + tree.node_radius  # (the trunk's base: the origin)
+    level = int(tree.stem_level[tree.node_stem[int(np.argmax(reach))]])
+    typical = {"Scale": 30.0, "ScaleV": 10.0}
+    for lev in range(level + 1):
+        typical |= {f"{lev}Length": 1.0, f"{lev}LengthV": 0.5}
+    if tree.n_leaves and float(np.abs(tree.leaf_pos[:, axis]).max() + tree.leaf_size.max()) > float(
+        reach.max()
+    ):
+        typical["LeafScale"] = 0.5
+    key = _slipped(p, typical)
+    what = f"a tree {height:,.1f} m tall" if not height <= max_size else f"a crown {width:,.1f} m wide"
+    raise TreegenError(
+        f"{key} = {_num(_value(p, key))} grows {what} (seed {tree.seed}), over the plausibility "
+        f"bound of {max_size:g} m; lower {key}, or raise the bound with --max-size METRES",
+        line=p.line_of(key),
+    )
 
 
 def apply_options(p: Params, options: GenerateOptions) -> tuple[Params, int]:
@@ -230,10 +298,10 @@ def apply_options(p: Params, options: GenerateOptions) -> tuple[Params, int]:
     if options.leaf_quality is not None:
         p = replace(p, leaf_quality=options.leaf_quality)
     n_levels = p.levels if options.levels is None else max(0, min(options.levels, p.levels))
+    check_trunk(p, options)  # first: a size slip is named as such, not as a count
     est_stems, est_leaves = estimate_counts(p, levels=n_levels)
     if est_stems > options.max_stems:
         refuse("stems", est_stems, p, options)
     if est_leaves > options.max_leaves:
         refuse("leaves", est_leaves, p, options)
-    check_trunk(p, options)
     return p, n_levels
