@@ -387,6 +387,16 @@ def test_atomic_write_leaves_no_temp_files(tmp_path, monkeypatch):
     assert (tmp_path / "t.glb").read_bytes() == old  # the previous file is untouched
 
 
+def test_a_folder_where_a_side_file_goes_is_named_and_nothing_lands(tmp_path):
+    """A .gltf writes its .bin beside it: a folder of that name is refused by its own path,
+    before any file is moved into place (it was blamed on the .gltf, and the files moved
+    before it stayed)."""
+    (tmp_path / "t.bin").mkdir()
+    with pytest.raises(TreegenError, match=r"t\.bin: is a folder, where .*t\.gltf writes a file"):
+        export(synthetic_asset(), tmp_path / "t.gltf")
+    assert sorted(os.listdir(tmp_path)) == ["t.bin"] and not os.listdir(tmp_path / "t.bin")
+
+
 def test_a_new_write_removes_what_an_earlier_write_to_the_same_output_left(tmp_path):
     """Engines import `--lod-files` parts by name: a run with fewer LODs left NAME_LOD2.glb
     beside the new parts, and a run without an impostor left its sidecar and atlas PNGs.

@@ -89,6 +89,9 @@ def staged(path: str | os.PathLike) -> Iterator[Path]:
         produced = sorted(os.listdir(tmpdir), key=lambda n: (n == path.name, n))
         if path.name not in produced:
             raise RuntimeError(f"writer for {path.suffix} did not write {path.name}")
+        for name in produced:  # every target checked before any moves: all or nothing
+            if (folder / name).is_dir():
+                raise TreegenError(f"{folder / name}: is a folder, where {path} writes a file; move it away")
         for name in produced:
             os.replace(tmpdir / name, folder / name)
     except OSError as e:
