@@ -156,6 +156,9 @@ CASES = [
     (["make", "rush", "-o", "x.glb", "--wind-dir", "400"], ["--wind-dir 400: allowed range -360..360"]),
     (["make", "rush", "-o", "x.glb", "--fps", "0"], ["--fps 0: must be > 0; allowed range (0, 240]"]),
     (["make", "rush", "-o", "x.glb", "--stiffness", "0"], ["--stiffness 0: must be > 0"]),
+    (["make", "rush", "-o", "x.glb", "--stiffness", "-1"], ["--stiffness -1: allowed range (0, 1000]"]),
+    # a loop under two frames is a still pose (it was written, 2 equal keys, exit 0)
+    (["make", "rush", "-o", "x.glb", "--duration", "0.01"], ["--duration 0.01: under 2 frames at 30 fps"]),
     (["make", "rush", "-o", "x.glb", "--fov", "200"], ["--fov 200: ", "(0, 180) degrees"]),
     (["make", "rush", "-o", "x.glb", "--max-joints", "70000"], ["--max-joints 70000", "1..65535"]),
     (["make", "rush", "-o", "x.glb", "--seed", "-1"], ["--seed -1: allowed range 0.."]),

@@ -6,6 +6,8 @@ share one set of defaults without importing the bake.
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -56,34 +58,39 @@ class WindOptions:
     def __post_init__(self) -> None:
         for name, (lo, hi, unit) in _RANGES.items():
             value = getattr(self, name)
+            positive = name in _POSITIVE  # one range text whichever side a value misses
+            allowed = (
+                f"allowed range (0, {hi:g}] {unit}" if positive else f"allowed range {lo:g}..{hi:g} {unit}"
+            )
             if not (np.isfinite(value) and lo <= value <= hi):
-                raise OptionError(
-                    name, value, f"allowed range {lo:g}..{hi:g} {unit}".rstrip(), f"WindOptions.{name}"
-                )
-        for name in (
-            "duration",
-            "fps",
-            "elastic_modulus",
-            "stiffness",
-            "working_stress",
-            "anchorage",
-            "max_angle_deg",
-            "max_bend_deg",
-            "gust_length",
-            "turbulence_length",
-        ):
-            if getattr(self, name) <= 0:
-                lo, hi, unit = _RANGES.get(name, (0.0, np.inf, ""))
-                raise OptionError(
-                    name,
-                    getattr(self, name),
-                    f"must be > 0; allowed range (0, {hi:g}] {unit}".rstrip(),
-                    f"WindOptions.{name}",
-                )
+                raise OptionError(name, value, allowed.rstrip(), f"WindOptions.{name}")
+            if positive and value <= 0:
+                raise OptionError(name, value, f"must be > 0; {allowed}".rstrip(), f"WindOptions.{name}")
+        if self.duration * self.fps < MIN_FRAMES:  # a loop of one key is a still pose
+            raise OptionError(
+                "duration",
+                self.duration,
+                f"under {MIN_FRAMES} frames at {self.fps:g} fps, the loop would stand still; "
+                f"at least {math.ceil(1000 * MIN_FRAMES / self.fps) / 1000:g} s",
+                "WindOptions.duration",
+            )
         if len(self.origin) != 3 or not np.all(np.isfinite(self.origin)):
             raise TreegenError(f"wind option 'origin' must be three finite numbers, got {self.origin!r}")
 
 
+MIN_FRAMES = 2  # frames a loop needs to move (duration × fps): one frame is a still pose
+_POSITIVE = (  # must be > 0, not only ≥ the range's 0
+    "duration",
+    "fps",
+    "elastic_modulus",
+    "stiffness",
+    "working_stress",
+    "anchorage",
+    "max_angle_deg",
+    "max_bend_deg",
+    "gust_length",
+    "turbulence_length",
+)
 _RANGES = {
     "speed": (0.0, 100.0, "m/s"),
     "direction_deg": (-360.0, 360.0, "degrees"),
