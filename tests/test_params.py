@@ -184,6 +184,37 @@ def test_utf8_bom_and_xml_with_leading_whitespace():
     assert parse_params_bytes(xml.encode()).levels == 1
 
 
+def test_other_encodings_and_line_ends_read_or_say_what_to_do():
+    """Notepad's "Unicode" (UTF-16 with a byte-order mark) and classic Mac CR line ends read
+    as the UTF-8 file does; UTF-16 without a mark says to save as UTF-8 (it read as binary
+    data; CR alone as an empty file)."""
+    text = "Levels 2\nScale = 3\nRatio 0.02\n"
+    plain = parse_params_bytes(text.encode(), partial=True)
+    assert parse_params_bytes(text.encode("utf-16"), partial=True) == plain
+    assert parse_params_bytes(text.replace("\n", "\r").encode(), partial=True) == plain
+    xml = "<arbaro><species name='t'><param name='Levels' value='1'/></species></arbaro>"
+    assert parse_params_bytes(xml.encode("utf-16")).levels == 1
+    expect_error(text.encode("utf-16-le"), "x.txt:1: UTF-16 text without a byte-order mark; save it as UTF-8")
+
+
+@pytest.mark.parametrize(
+    "line, parts",
+    [
+        ("Scale 13_0", ["Scale = '13_0' is not a number"]),  # float() took it as 130
+        ("Scale \uff11\uff13", ["is not a number"]),  # full-width digits, read as 13
+        ("1Curve \u221240", ["type the minus sign as '-'"]),  # pasted from a PDF
+        ("Scale: 13", ["'Scale: 13': write Scale 13 or Scale = 13"]),  # was "did you mean Scale?"
+        ("Scale inf", ["is not a finite number"]),
+    ],
+)
+def test_numbers_are_ascii_as_arbaro_writes_them(line, parts):
+    expect_error(f"Levels 2\n{line}\n", "x.txt:2: ", *parts)
+
+
+def test_name_and_species_are_named_as_one_key_when_both_are_given():
+    expect_error("Name oak\nLevels 2\nSpecies elm\n", "duplicate key Species (first set on line 1 as Name")
+
+
 # ------------------------------------------------------------------------------ defaults
 
 

@@ -7,6 +7,7 @@ entries are checked at once, after reading, so both formats share one set of rul
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -14,6 +15,10 @@ from ..errors import TreegenError
 from .colors import COLOR_FORMAT, srgb_hex_to_linear
 from .keys import LEAF_SHAPES, KeySpec, lookup, required_keys, suggest
 from .record import LEVEL_SLOTS, MAX_LEVELS, LevelParams, Params, arbaro_level_defaults, default_params
+
+# A number as Arbaro and the paper write one (ASCII digits, optional sign, fraction and
+# exponent); nan and inf are read so that the message says they are not finite
+NUMBER = re.compile(r"^[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?$|^(?i:[+-]?(?:nan|inf|infinity))$", re.ASCII)
 
 
 @dataclass
@@ -42,6 +47,7 @@ class Builder:
         self.source = source
         self.name: str | None = None
         self.name_line: int | None = None
+        self.name_key = "Name"
         self.entries: list[Entry] = []
 
     def where(self, line: int | None) -> str:
@@ -53,14 +59,17 @@ class Builder:
     def set_name(self, value: str, line: int | None, key: str = "Name") -> None:
         value = value.strip()
         if self.name is not None:
-            raise self.fail(line, f"duplicate key {key} (first set on line {self.name_line})")
+            same = (
+                "" if self.name_key == key else f" as {self.name_key}: {key} and {self.name_key} are one key"
+            )
+            raise self.fail(line, f"duplicate key {key} (first set on line {self.name_line}{same})")
         if not value or not value.isprintable() or "#" in value:
             raise self.fail(
                 line,
                 f"{key} = {clip(value)!r} must be a non-empty one-line name "
                 f"without '#' (the text format's comment sign)",
             )
-        self.name, self.name_line = value, line
+        self.name, self.name_line, self.name_key = value, line, key
 
     def add(self, key: str, value: str, line: int | None) -> None:
         if key.lower() in ("name", "species"):
@@ -80,8 +89,15 @@ class Builder:
             return LEAF_SHAPES[raw.lower()]
         rng = spec.range_text()
         try:
+            if not NUMBER.match(raw):  # float() also takes 13_0, full-width digits, "infinity"
+                raise ValueError(raw)
             v = float(raw)
         except ValueError:
+            if "\u2212" in raw or "\u2013" in raw:
+                raise self.fail(
+                    e.line,
+                    f"{canon} = {shown!r} is not a number: type the minus sign as '-' (allowed range {rng})",
+                ) from None
             if spec.field == "leaf_shape":
                 allowed = ", ".join(sorted(set(LEAF_SHAPES) - {f"disc{i}" for i in range(4, 10)}))
                 raise self.fail(

@@ -17,8 +17,18 @@ def _looks_xml(text: str) -> bool:
 def parse_params_bytes(data: bytes, source: str = "<string>", partial: bool = False) -> Params:
     """Parse a species file's raw bytes: Arbaro XML if it starts with '<', else text (which
     must list every parameter unless `partial`; Arbaro XML is partial by design)."""
+    if data[:2] in (b"\xff\xfe", b"\xfe\xff"):  # UTF-16 with its byte-order mark (Notepad's
+        # "Unicode"): expat reads such XML itself; text is decoded here
+        if data.decode("utf-16").lstrip("\ufeff \t\r\n").startswith("<"):
+            return parse_params_xml(data, source)
+        data = data.decode("utf-16").encode("utf-8")
     if b"\x00" in data:
         line = data.count(b"\n", 0, data.index(b"\x00")) + 1
+        head = data[:64]
+        if len(head) > 8 and (
+            head[1::2].count(0) > 0.8 * len(head[1::2]) or head[::2].count(0) > 0.8 * len(head[::2])
+        ):
+            raise TreegenError(f"{source}:{line}: UTF-16 text without a byte-order mark; save it as UTF-8")
         raise TreegenError(f"{source}:{line}: binary data (NUL byte): not a species file")
     try:
         text = data.decode("utf-8-sig")
@@ -34,6 +44,8 @@ def parse_params_bytes(data: bytes, source: str = "<string>", partial: bool = Fa
         raise TreegenError(f"{source}:1: empty species file: no parameters found")
     if _looks_xml(text):
         return parse_params_xml(data, source)
+    if "\r" in text and "\n" not in text:  # classic Mac line ends: lines end in CR alone
+        text = text.replace("\r", "\n")
     return parse_params_text(text, source, partial)
 
 

@@ -38,6 +38,11 @@ def parse_params_text(text: str, source: str = "<string>", partial: bool = False
             b.set_name(value, lineno, key)
             continue
         found = lookup(key)
+        if found is None and key.endswith(":") and lookup(key[:-1]) is not None:
+            raise b.fail(
+                lineno,
+                f"'{clip(key)} {clip(value)}': write {key[:-1]} {clip(value)} or {key[:-1]} = {clip(value)}",
+            )
         if found is None:
             raise b.fail(lineno, f"unknown key {clip(key)}{suggest(key)}")
         if not value:
