@@ -290,7 +290,9 @@ def test_sample_track_hits_keys_and_holds_ends():
         (["preview", str(SMALL), "-o", "{d}/x.png", "--size", "big"], "--size"),
         (["preview", str(SMALL), "-o", "{d}/x.png", "--lod", "99"], "out of range"),
         (["preview", "{d}/palm.glb", "-o", "{d}/x.png", "--lod", "7"], "out of range"),
-        (["preview", "{d}/broken.glb", "-o", "{d}/x.png"], "not a readable glTF"),
+        (["preview", "{d}/broken.glb", "-o", "{d}/x.png"], "not a whole GLB file (its header says"),
+        (["preview", "{d}/broken2.glb", "-o", "{d}/x.png"], "not a readable glTF"),
+        (["preview", "{d}/oak.species", "-o", "{d}/x.png"], "oak.species:1: unknown key"),  # read
         (["preview", str(SMALL), "-o", "{d}/x.png", "--sun", "nan"], "--sun nan: give a bearing"),
         (["preview", "{d}/palm.glb", "-o", "{d}/x.png", "--seed", "3"], "is a written tree"),
         (["preview", "{d}/palm.glb", "-o", "{d}/x.png", "--seed", "0"], "is a written tree"),
@@ -300,6 +302,8 @@ def test_sample_track_hits_keys_and_holds_ends():
 def test_bad_input_is_one_line_exit_2(argv, needle, written, capsys):
     (written / "tree.obj").write_text("v 0 0 0\n")
     (written / "broken.glb").write_bytes(b"glTF\x02\x00\x00\x00garbage")
+    (written / "broken2.glb").write_bytes(b"glTF\x02\x00\x00\x00\x20\x00\x00\x00" + b"\x00" * 20)
+    (written / "oak.species").write_text("Lvels 2\n")  # any name: read as make reads it
     code, out, err = run([a.format(d=written) for a in argv], capsys)
     assert code == 2
     assert err.count("\n") == 1 and err.startswith("treegen: error:") and needle in err

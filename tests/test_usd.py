@@ -312,6 +312,8 @@ def test_accented_names_become_ascii_prim_names(tmp_path):
     write_usd(replace(synthetic_asset(lods=1), name="palmé"), path)
     assert validate_usd(path) == []
     assert Usd.Stage.Open(str(path)).GetDefaultPrim().GetName() == "palme"
+    write_usd(replace(synthetic_asset(lods=1), name="123tree"), path)  # a leading digit: kept
+    assert Usd.Stage.Open(str(path)).GetDefaultPrim().GetName() == "_123tree"  # (was _23tree)
 
 
 def test_no_clip_writes_a_static_skinned_tree(tmp_path):

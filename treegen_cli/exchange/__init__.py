@@ -230,6 +230,8 @@ def check_input(path: str | os.PathLike) -> Path:
     """A species file or a written tree that exists, or the one-line error saying what is read."""
     path = Path(path)
     suffix = path.suffix.lower()
+    if suffix not in READERS and suffix not in (*WRITERS, *STILLS, *LOOPS) and path.is_file():
+        return path  # a species file whatever its name (myoak.species): make reads it so
     if suffix not in SPECIES and suffix not in READERS:
         raise TreegenError(
             f"{path}: unknown input extension '{suffix or '(none)'}'; expected a "
@@ -242,7 +244,8 @@ def check_input(path: str | os.PathLike) -> Path:
 
 
 def is_species(path: Path) -> bool:
-    return path.suffix.lower() in SPECIES
+    """Not a written tree's format: a species file (.txt, .xml, or any name check_input takes)."""
+    return path.suffix.lower() not in READERS
 
 
 def read_drawable(path: str | os.PathLike, lod: int = 0, refuse_forest: bool = False):

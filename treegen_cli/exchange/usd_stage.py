@@ -151,13 +151,17 @@ def gf_vec3f(v):
 def identifier(name: str) -> str:
     """A prim name every USD reader takes: ASCII (accents dropped, `palmé` → `palme`, where
     Tf.MakeValidIdentifier alone makes `palm__` of its two UTF-8 bytes; readers before USD
-    24.03 refuse UTF-8 names), other characters as underscores."""
+    24.03 refuse UTF-8 names), other characters as underscores, a leading digit kept behind
+    one (`123tree` → `_123tree`)."""
     import unicodedata
 
     from pxr import Tf
 
     plain = unicodedata.normalize("NFKD", name or "").encode("ascii", "ignore").decode("ascii")
-    return Tf.MakeValidIdentifier(plain or name or "tree")
+    plain = plain or name or "tree"
+    if plain[0].isdigit():  # (MakeValidIdentifier replaces the digit: 123tree → _23tree)
+        plain = "_" + plain
+    return Tf.MakeValidIdentifier(plain)
 
 
 def unique(name: str, used: set[str]) -> str:
