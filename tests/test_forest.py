@@ -117,6 +117,14 @@ BAD = [
     ({"defaults": {"lod_distances": [0, 30, 30]}}, "defaults.lod_distances: must increase"),
     ({"instances": [], "scatter": []}, "instances: the layout places no trees"),
     ({"instances": [{"species": POPLAR}]}, "instances[0].position: required"),
+    (  # a misspelt required key is named as typed (it was "required" alone)
+        {"instances": [{"species": POPLAR, "postion": [0, 0]}]},
+        'instances[0].position: required (given as "postion": misspelt?)',
+    ),
+    (  # every count 0 placed no tree and wrote an empty file
+        {"instances": [], "scatter": [{**layout_dict()["scatter"][0], "count": 0}]},
+        "scatter: the layout places no trees (every count is 0)",
+    ),
     (
         {"instances": [{"species": POPLAR, "position": [0, 0]}, {"species": "nope.txt", "position": [1, 1]}]},
         "instances[1].species: species file 'nope.txt' not found",
@@ -212,6 +220,22 @@ def test_bad_layouts_name_the_json_path(tmp_path, change, message):
     assert message in str(e.value)
 
 
+def test_a_species_over_the_layouts_size_bound_names_the_layout_key(tmp_path):
+    """defaults.max_size is the bound a prototype's size refusal tells to raise (it said
+    `--max-size`, a flag `treegen forest` does not have)."""
+    from treegen_cli.forest.options import make_options
+    from treegen_cli.generate import generate
+    from treegen_cli.params import load_params
+
+    data = layout_dict(scatter=[], instances=[{"species": PALM, "position": [0, 0]}])
+    data["defaults"] = {**FAST, "max_size": 5}
+    options = make_options(load_layout(write_layout(tmp_path, data)))
+    with pytest.raises(
+        TreegenError, match=r"over the plausibility bound of 5 m; .*raise the bound with defaults\.max_size$"
+    ):
+        generate(load_params(PALM), 0, options.generate)
+
+
 def test_bad_json_and_nan(tmp_path):
     p = tmp_path / "l.json"
     p.write_text('{"camera": ')
@@ -220,6 +244,9 @@ def test_bad_json_and_nan(tmp_path):
     p.write_text(json.dumps(layout_dict()).replace('"fov_deg": 60', '"fov_deg": NaN'))
     with pytest.raises(TreegenError, match=r"camera.fov_deg: expected a number \(finite\), got NaN"):
         load_layout(p)
+    p.write_text(json.dumps(layout_dict()).replace('"seed": 3', '"seed": 3, "seed": 4'))
+    with pytest.raises(TreegenError, match=r'l.json: key "seed" appears twice in one object'):
+        load_layout(p)  # (json keeps the last silently)
 
 
 def test_cli_bad_layout_exits_2_and_writes_nothing(tmp_path):

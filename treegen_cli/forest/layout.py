@@ -137,6 +137,8 @@ def parse_layout(data, path: Path, max_trees: int = MAX_TREES) -> Layout:
             f"instances: the layout places {len(placements):,} trees, over the "
             f"limit of {max_trees:,}; raise it with --max-trees N"
         )
+    if not placements:  # (every scatter's count 0: an empty file written with exit 0)
+        raise TreegenError("scatter: the layout places no trees (every count is 0)")
     return Layout(
         name=str(data.get("name") or path.stem),
         path=path,

@@ -57,7 +57,7 @@ def make_options(layout: Layout, error_px: float | None = None, impostor: bool =
         distances=d.lod_distances or LOD_DEFAULTS.distances,
     )
     options = MakeOptions(
-        generate=replace(GENERATE_DEFAULTS, max_size=d.max_size),
+        generate=replace(GENERATE_DEFAULTS, max_size=d.max_size, max_size_flag="defaults.max_size"),
         rig=RigOptions(max_joints=d.max_joints),
         wind=wind,
         lod=lod,

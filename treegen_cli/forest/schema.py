@@ -83,9 +83,30 @@ def read_json_file(path: Path, kind: str):
     except (OSError, UnicodeDecodeError) as e:
         raise TreegenError(f"{path}: cannot read the {kind} ({e})") from None
     try:
-        return json.loads(text, parse_constant=lambda c: float("nan"))
+        return json.loads(text, parse_constant=lambda c: float("nan"), object_pairs_hook=_no_duplicates)
     except json.JSONDecodeError as e:
         raise TreegenError(f"{path}: line {e.lineno} column {e.colno}: invalid JSON ({e.msg})") from None
+    except _Duplicate as e:
+        raise TreegenError(
+            f"{path}: key {json.dumps(e.key)} appears twice in one object (JSON keeps only the last: "
+            "give it once)"
+        ) from None
+
+
+class _Duplicate(ValueError):
+    def __init__(self, key: str):
+        super().__init__(key)
+        self.key = key
+
+
+def _no_duplicates(pairs: list) -> dict:
+    """A JSON object, refusing a key given twice (json keeps the last silently)."""
+    out: dict = {}
+    for key, value in pairs:
+        if key in out:
+            raise _Duplicate(key)
+        out[key] = value
+    return out
 
 
 def _json_default(value):
@@ -250,7 +271,13 @@ def check_schema(value, schema: dict, root: dict, path: str = "") -> None:
         props = schema.get("properties", {})
         for key in schema.get("required", []):
             if key not in value:
-                raise TreegenError(f"{_join(path, key)}: required")
+                typo = [
+                    k
+                    for k in value
+                    if k not in props and difflib.get_close_matches(str(k).lower(), [key.lower()], 1, 0.6)
+                ]
+                hint = f" (given as {json.dumps(typo[0])}: misspelt?)" if typo else ""
+                raise TreegenError(f"{_join(path, key)}: required{hint}")
         for key, item in value.items():
             if key in props:
                 check_schema(item, props[key], root, _join(path, key))

@@ -28,6 +28,7 @@ class GenerateOptions:
     prune_steps: int = 7  # bisection steps when fitting a stem into the envelope
     max_size: float = 150.0  # metres of height or crown width (plausibility bound: the
     # tallest living tree is ~116 m, the widest crowns ~80 m)
+    max_size_flag: str = "--max-size METRES"  # how messages name the bound (a forest's key)
 
 
 DEFAULTS = GenerateOptions()
@@ -218,10 +219,10 @@ def _slipped(p: Params, typical: dict[str, float]) -> str:
     return max(typical, key=past)
 
 
-def _refuse_size(p: Params, key: str, what: str, max_size: float) -> TreegenError:
+def _refuse_size(p: Params, key: str, what: str, options: GenerateOptions) -> TreegenError:
     return TreegenError(
-        f"{key} = {_num(_value(p, key))} {what}, over the plausibility bound of {max_size:g} m; "
-        f"lower {key}, or raise the bound with --max-size METRES",
+        f"{key} = {_num(_value(p, key))} {what}, over the plausibility bound of {options.max_size:g} m; "
+        f"lower {key}, or raise the bound with {options.max_size_flag}",
         line=p.line_of(key),
     )
 
@@ -232,7 +233,7 @@ def check_trunk(p: Params, options: GenerateOptions = DEFAULTS) -> None:
     names the key a slip most likely hit, with its line; astronomically large values never
     reach the geometry (they overflowed the wind's matrices)."""
     lp0 = p.level[0]
-    bound = options.max_size
+    bound = options
     longest = trunk = (p.scale + p.scale_v) * (lp0.length + lp0.length_v)
     if not trunk <= options.max_size:
         key = _slipped(p, {"Scale": 30.0, "ScaleV": 10.0, "0Length": 1.0, "0LengthV": 0.5})
@@ -262,7 +263,7 @@ def check_trunk(p: Params, options: GenerateOptions = DEFAULTS) -> None:
             raise _refuse_size(p, key, what, bound)
 
 
-def check_size(tree: Tree, max_size: float) -> None:
+def check_size(tree: Tree, max_size: float, flag: str = DEFAULTS.max_size_flag) -> None:
     """After growing: the tree's height and crown width (stems with their radii, leaves with
     their blades) within `max_size` metres, else a one-line refusal naming, of the keys that
     scale what reaches farthest (Scale, the trunk's and each branch level's nLength up to the
@@ -288,7 +289,7 @@ def check_size(tree: Tree, max_size: float) -> None:
     what = f"a tree {height:,.1f} m tall" if not height <= max_size else f"a crown {width:,.1f} m wide"
     raise TreegenError(
         f"{key} = {_num(_value(p, key))} grows {what} (seed {tree.seed}), over the plausibility "
-        f"bound of {max_size:g} m; lower {key}, or raise the bound with --max-size METRES",
+        f"bound of {max_size:g} m; lower {key}, or raise the bound with {flag}",
         line=p.line_of(key),
     )
 

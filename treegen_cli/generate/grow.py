@@ -144,7 +144,7 @@ def generate(p: Params, seed: int = 0, options: GenerateOptions = DEFAULTS) -> T
         node_z=out.cat("node_z", np.float64),
         **leaf_fields(leaves),
     )
-    check_size(tree, options.max_size)
+    check_size(tree, options.max_size, options.max_size_flag)
     return tree
 
 
