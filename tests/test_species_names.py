@@ -76,6 +76,8 @@ def test_unknown_names_and_directories_are_one_line_refusals(tmp_path):
         resolve_species(str(tmp_path))
     with pytest.raises(TreegenError, match="not found"):
         resolve_species("some/dir/quaking_aspen")  # a path with folders is never a name
+    with pytest.raises(TreegenError, match="species 'palm.xml' not found"):
+        resolve_species("palm.xml")  # the user's own XML file, missing: not the bundled palm.txt
 
 
 def test_make_by_name_from_another_folder_writes_the_same_bytes(tmp_path):

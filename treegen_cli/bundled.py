@@ -51,9 +51,13 @@ def bundled_species(name: str) -> Path | None:
     """The bundled file `name` (a bare name, suffix optional) stands for, or None."""
     if not name or "/" in name or os.sep in name or (os.altsep and os.altsep in name):
         return None
-    stem = name[: -len(Path(name).suffix)] if Path(name).suffix.lower() in SUFFIXES else name
+    suffix = Path(name).suffix.lower()
+    stem = name[: -len(suffix)] if suffix in SUFFIXES else name
     by_key = {_key(n): p for n, p in bundled_names().items()}
-    return by_key.get(_key(stem))
+    hit = by_key.get(_key(stem))
+    if hit is not None and suffix in SUFFIXES and suffix != hit.suffix.lower():
+        return None  # `palm.xml` is the user's own XML file, missing here: not palm.txt
+    return hit
 
 
 def close_matches(name: str, n: int = 3) -> list[str]:
