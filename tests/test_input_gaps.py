@@ -207,6 +207,19 @@ CASES = [
         ["--error-px: has no effect, --no-wind"],
     ),
     (["make", "rush", "-o", "x.glb", "--no-lod", "--error-px", "3"], ["--error-px: has no effect, --no-lod"]),
+    # a static file has no skin, a .ply no textures, --no-textures no texture size (all ignored)
+    (
+        ["make", "rush", "-o", "x.obj", "--max-joints", "10"],
+        ["--max-joints: has no effect, a .obj file holds no skin"],
+    ),
+    (
+        ["make", "rush", "-o", "x.ply", "--texture-size", "256"],
+        ["--texture-size: has no effect, a .ply file"],
+    ),
+    (
+        ["make", "rush", "-o", "x.glb", "--no-textures", "--texture-size", "256"],
+        ["--texture-size: has no effect, --no-textures writes no textures"],
+    ),
     (
         ["make", "rush", "-o", "x.obj", "--wind-speed", "9"],
         ["--wind-speed: has no effect, a .obj file", "static"],

@@ -19,6 +19,8 @@ from .exchange import STATIC
 WIND_ONLY = ("wind_speed", "wind_dir", "gust", "turbulence", "duration", "fps", "stiffness")
 IMPOSTOR_ONLY = ("impostor_size", "impostor_distance")
 KEYS_ONLY = ("schedule", "error_px")  # the LODs' key schedule: void without a clip
+SKIN_ONLY = ("max_joints", "joints", "joint_levels")  # the rig: void for a static format
+TEXTURE_ONLY = ("texture_size", "leaf_texture", "bark_texture")  # void where nothing is textured
 LOD_ONLY = ("lod_screen", "lod_distances", "lod_triangles", "lod_files", *KEYS_ONLY, *IMPOSTOR_ONLY)
 
 
@@ -43,6 +45,19 @@ def check_no_effect(options: dict, label: Callable[[str], str], output) -> None:
         elif k in IMPOSTOR_ONLY and options.get("impostor") is False:
             off = "--no-impostor" if label("impostor") == "--impostor" else f"{label('impostor')} false"
             why = f"{off} builds no impostor"
+        else:
+            continue
+        raise TreegenError(f"{label(k)}: has no effect, {why}; leave it out")
+    suffix = Path(output).suffix.lower() if output is not None else ""
+    for k in (*SKIN_ONLY, *TEXTURE_ONLY):
+        if options.get(k) is None:
+            continue
+        if static and k in SKIN_ONLY:
+            why = f"a {suffix} file holds no skin (static format)"
+        elif suffix == ".ply" and k in TEXTURE_ONLY:
+            why = "a .ply file holds no textures (one mesh, no materials)"
+        elif k == "texture_size" and options.get("no_textures"):
+            why = f"{label('no_textures')} writes no textures"
         else:
             continue
         raise TreegenError(f"{label(k)}: has no effect, {why}; leave it out")
