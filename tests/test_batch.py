@@ -83,7 +83,9 @@ def workspace(tmp_path_factory) -> Path:
 def _png(path: Path, rgba: tuple) -> None:
     from PIL import Image
 
-    Image.new("RGBA", (8, 8), rgba).save(path)
+    img = Image.new("RGBA", (8, 8), rgba)
+    img.putpixel((0, 0), (0, 0, 0, 0))  # a leaf's cut-out (an opaque leaf image is refused)
+    img.save(path)
 
 
 @pytest.fixture(scope="module")

@@ -65,7 +65,8 @@ MEASURED = {
 
 @lru_cache(maxsize=None)
 def _asset(name: str, **options):
-    job = resolve(dict(no_wind=True, texture_size=128, **options))
+    size = {} if options.get("no_textures") else {"texture_size": 128}  # (void without textures)
+    job = resolve(dict(no_wind=True, **size, **options))
     asset, _ = build_asset(load_params(species_path(name)), 0, job.options)
     return asset
 
@@ -180,7 +181,9 @@ def test_untextured_or_artist_leaves_keep_cards_in_every_lod(tmp_path):
     from PIL import Image
 
     png = tmp_path / "leaf.png"
-    Image.new("RGBA", (32, 32), (40, 120, 30, 255)).save(png)
+    img = Image.new("RGBA", (32, 32), (40, 120, 30, 255))
+    img.putpixel((0, 0), (0, 0, 0, 0))  # (an opaque leaf image is refused)
+    img.save(png)
     for options in (dict(no_textures=True), dict(leaf_texture=str(png))):
         asset = _asset("quaking_aspen", **options)
         for lod in asset.lods:

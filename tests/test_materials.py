@@ -43,7 +43,10 @@ def image(texture) -> np.ndarray:
 
 
 def write_png(path, size=(32, 64), mode="RGBA") -> Path:
-    Image.new(mode, size, (200, 120, 40, 255)[: len(mode)]).save(path)
+    img = Image.new(mode, size, (200, 120, 40, 255)[: len(mode)])
+    if "A" in mode:  # a leaf's cut-out: a transparent corner (an opaque leaf image is refused)
+        img.putpixel((0, 0), (0,) * len(mode))
+    img.save(path)
     return path
 
 
@@ -271,11 +274,18 @@ def test_cli_texture_flags(tmp_path):
     "args, needles",
     [
         (["--leaf-texture", "nope.png"], ["--leaf-texture nope.png", "no such file"]),
+        (
+            ["--leaf-texture", "{opaque}"],
+            ["opaque.png: no transparent texels (the lowest alpha is 255", "RGBA"],
+        ),
         (["--bark-texture", "species/fan_palm.txt"], ["--bark-texture species/fan_palm.txt", "not a PNG"]),
         (["--texture-size", "300"], ["--texture-size 300", "power of two in [64, 2048]"]),
     ],
 )
-def test_cli_bad_texture_flags_exit_2_and_write_nothing(tmp_path, args, needles):
+def test_cli_bad_texture_flags_exit_2_and_write_nothing(tmp_path_factory, tmp_path, args, needles):
+    opaque = tmp_path_factory.mktemp("images") / "opaque.png"  # an RGBA leaf with no cut-out
+    Image.new("RGBA", (8, 8), (40, 160, 40, 255)).save(opaque)
+    args = [a.format(opaque=opaque) for a in args]
     out = tmp_path / "x.glb"
     proc = treegen("make", PALM, "-o", out, "--no-wind", "--no-lod", *args)
     assert proc.returncode == 2, proc.stderr

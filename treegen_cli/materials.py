@@ -113,9 +113,11 @@ def check_options(options: MaterialOptions) -> None:
 _OBJECT_REPR = re.compile(r"\s*<[^<>]* at 0x[0-9a-fA-F]+>")
 
 
-def read_png(path: Path, flag: str) -> bytes:
+def read_png(path: Path, flag: str, cut_out: bool = False) -> bytes:
     """An artist's image as PNG bytes, checked to decode fully; else a one-line TreegenError
-    naming the flag and the file (glTF and USD embed PNG, so no other format is taken)."""
+    naming the flag and the file (glTF and USD embed PNG, so no other format is taken).
+    `cut_out` (a leaf image): it must have texels under ALPHA_CUTOFF, or every leaf is drawn
+    as an opaque rectangle (an RGB PNG was embedded so, without a word)."""
     from PIL import Image
 
     where = f"{flag} {path}"
@@ -133,6 +135,7 @@ def read_png(path: Path, flag: str) -> bytes:
         with Image.open(io.BytesIO(data)) as img:
             img.load()  # decodes every row: truncation shows here
             w, h = img.size
+            alpha = img.convert("RGBA").getchannel("A").getextrema()[0] if cut_out else 0
     except Image.UnidentifiedImageError:  # PIL's text is "cannot identify image file <BytesIO at 0x…>"
         raise TreegenError(
             f"{where}: not a readable PNG image (PNG signature, but no image PIL can decode after it)"
@@ -142,6 +145,12 @@ def read_png(path: Path, flag: str) -> bytes:
         raise TreegenError(f"{where}: not a readable PNG image ({msg})") from None
     if w < 1 or h < 1:
         raise TreegenError(f"{where}: empty image")
+    if alpha >= ALPHA_CUTOFF * 255:
+        raise TreegenError(
+            f"{where}: no transparent texels (the lowest alpha is {alpha} of 255): leaves are cut out "
+            f"where alpha < {round(ALPHA_CUTOFF * 255)}, so each would draw as an opaque rectangle; "
+            "save it as RGBA with a transparent background"
+        )
     return data
 
 
@@ -180,7 +189,9 @@ def build_materials(params: Params, options: MaterialOptions = MATERIAL_DEFAULTS
     if not options.textures:
         bark = Material("bark", base_color=(*bark_rgb, 1.0), roughness=BARK_ROUGHNESS)
         return Materials(FULL_CARD_CELL, lambda: [bark, colour_leaf])
-    leaf_png = read_png(options.leaf_texture, "--leaf-texture") if options.leaf_texture else None
+    leaf_png = (
+        read_png(options.leaf_texture, "--leaf-texture", cut_out=True) if options.leaf_texture else None
+    )
     bark_png = read_png(options.bark_texture, "--bark-texture") if options.bark_texture else None
     leafy = has_leaves(params)
     cells: Cells = FULL_CARD_CELL  # an artist's image is one leaf; leafless: no atlas
