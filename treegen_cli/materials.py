@@ -135,7 +135,8 @@ def read_png(path: Path, flag: str, cut_out: bool = False) -> bytes:
         with Image.open(io.BytesIO(data)) as img:
             img.load()  # decodes every row: truncation shows here
             w, h = img.size
-            alpha = img.convert("RGBA").getchannel("A").getextrema()[0] if cut_out else 0
+            low = img.convert("RGBA").getchannel("A").getextrema()[0] if cut_out else 0
+            alpha = int(low) if isinstance(low, (int, float)) else 0  # (one band: (min, max))
     except Image.UnidentifiedImageError:  # PIL's text is "cannot identify image file <BytesIO at 0x…>"
         raise TreegenError(
             f"{where}: not a readable PNG image (PNG signature, but no image PIL can decode after it)"
