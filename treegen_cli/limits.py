@@ -34,14 +34,10 @@ LIMITS_DEFAULTS = Limits()
 
 def _rings_sides(tree, options) -> tuple[np.ndarray, np.ndarray]:
     """Rings each stem's bark tube emits and its sides (S,), as mesh.bark makes them."""
-    from .mesh.options import per_level, pointed_tips, stem_sides
+    from .mesh.bark import ring_counts
+    from .mesh.options import pointed_tips, stem_sides
 
-    level = tree.stem_level.astype(np.int64)
-    segments = np.maximum(tree.stem_node_count.astype(np.int64) - 1, 0)
-    rings = segments * per_level(options.rings_per_segment, level) + 1
-    p = tree.params
-    if p.flare > 0 and options.flare_rings > 0:
-        rings = rings + np.where((level == 0) & ~tree.stem_clone.astype(bool), options.flare_rings, 0)
+    rings = ring_counts(tree, options)  # flare rings included, less those on a node's ring
     rings = rings - pointed_tips(tree, options)  # a pointed tip closes on its apex, no ring
     return rings, stem_sides(tree, options)
 
@@ -57,7 +53,8 @@ def leaf_outline(tree, options):
 
 def estimate_vertices(tree, options) -> tuple[int, int]:
     """(bark, leaf) vertex counts mesh.build_mesh will emit for `tree` with MeshOptions
-    `options`: exact, or slightly over where flare rings merge with node rings. Bark: rings × (sides + 1) per stem plus one apex; leaves: outline points each."""
+    `options`: exact (flare rings that land on a node's ring merged, as mesh.bark merges them).
+    Bark: rings × (sides + 1) per stem plus one apex; leaves: outline points each."""
     rings, sides = _rings_sides(tree, options)
     bark = int(np.sum(rings * (sides + 1)) + tree.n_stems)
     leaves = 0

@@ -52,6 +52,29 @@ def merge_influences(joints: np.ndarray, weights: np.ndarray):
     return J.astype(np.uint16), W.astype(np.float32)
 
 
+def _flare_rings(tree, options: MeshOptions) -> list[tuple[int, np.ndarray]]:
+    """(trunk, u of its extra flare rings) per trunk: Flare grows as 100^(1 − 8Z), so rings
+    are packed toward the base (quadratic spacing in the lowest 1/8)."""
+    if not (tree.params.flare > 0 and options.flare_rings > 0):
+        return []
+    cnt = tree.stem_node_count.astype(np.int64)
+    Zs = (np.arange(1, options.flare_rings + 1) / (options.flare_rings + 1)) ** 2 / 8.0
+    out = []
+    for s in np.flatnonzero((tree.stem_level == 0) & ~tree.stem_clone):  # a handful at most
+        seg = cnt[s] - 1
+        nz = tree.node_z[tree.stem_node_start[s] : tree.stem_node_start[s] + cnt[s]]
+        z = nz[0] + Zs * tree.stem_length[s]
+        a = np.clip(np.searchsorted(nz, z, side="right") - 1, 0, seg - 1)
+        out.append((int(s), a + (z - nz[a]) / np.maximum(nz[a + 1] - nz[a], 1e-12)))
+    return out
+
+
+def _distinct(u: np.ndarray) -> np.ndarray:
+    """Sorted ring positions with those within 1e-4 of the one before merged into it."""
+    u = np.sort(u)
+    return u[np.r_[True, np.diff(u) > 1e-4]]
+
+
 def ring_params(tree, options: MeshOptions):
     """Rings of every stem as (stem, u), u = segment index + fraction, sorted base to tip."""
     cnt = tree.stem_node_count.astype(np.int64)
@@ -61,26 +84,27 @@ def ring_params(tree, options: MeshOptions):
     stem = np.repeat(np.arange(tree.n_stems), n_rings)
     k = np.arange(stem.size) - np.repeat(np.cumsum(n_rings) - n_rings, n_rings)
     u = k / m[stem]
-    flare = tree.params.flare
-    trunks = np.flatnonzero((tree.stem_level == 0) & ~tree.stem_clone)
-    if flare > 0 and options.flare_rings > 0 and trunks.size:
-        # Flare grows as 100^(1 − 8Z): rings packed toward the base (quadratic spacing).
-        Zs = (np.arange(1, options.flare_rings + 1) / (options.flare_rings + 1)) ** 2 / 8.0
-        extra_s, extra_u = [], []
-        for s in trunks:  # a handful of trunks at most
-            nz = tree.node_z[tree.stem_node_start[s] : tree.stem_node_start[s] + cnt[s]]
-            z = nz[0] + Zs * tree.stem_length[s]
-            a = np.clip(np.searchsorted(nz, z, side="right") - 1, 0, seg[s] - 1)
-            extra_u.append(a + (z - nz[a]) / np.maximum(nz[a + 1] - nz[a], 1e-12))
-            extra_s.append(np.full(len(z), s))
-        stem = np.concatenate([stem, *extra_s])
-        u = np.concatenate([u, *extra_u])
+    flare = _flare_rings(tree, options)
+    if flare:
+        stem = np.concatenate([stem, *(np.full(len(x), s) for s, x in flare)])
+        u = np.concatenate([u, *(x for _, x in flare)])
         order = np.lexsort((u, stem))
         stem, u = stem[order], u[order]
         keep = np.ones(stem.size, dtype=bool)
         keep[1:] = (stem[1:] != stem[:-1]) | (u[1:] - u[:-1] > 1e-4)
         stem, u = stem[keep], u[keep]
     return stem, u
+
+
+def ring_counts(tree, options: MeshOptions) -> np.ndarray:
+    """Rings per stem (S,) as ring_params places them, without placing every stem's: a fine
+    CurveRes puts flare rings on node rings, which merge (limits counted them twice)."""
+    seg = tree.stem_node_count.astype(np.int64) - 1
+    m = per_level(options.rings_per_segment, tree.stem_level.astype(np.int64)).astype(np.int64)
+    rings = seg * m + 1
+    for s, x in _flare_rings(tree, options):
+        rings[s] = len(_distinct(np.concatenate([np.arange(rings[s]) / m[s], x])))
+    return rings
 
 
 def bark_offsets(tree) -> np.ndarray:
