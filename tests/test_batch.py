@@ -640,6 +640,33 @@ def test_a_static_format_beside_others_is_what_make_writes(workspace):
     assert (workspace / "m" / "rush_2.obj").read_bytes() == (workspace / "st" / "rush_2.obj").read_bytes()
 
 
+def test_a_rerun_removes_the_files_of_assets_the_catalogue_no_longer_lists(workspace):
+    """Seeds or formats edited away: their files (as the earlier manifest recorded them) go,
+    the dry run says so first; a file the manifest never recorded stays."""
+    cat = workspace / "edited.json"
+    out = workspace / "ed"
+
+    def run(entry, *extra):
+        cat.write_text(json.dumps({"defaults": CLIP, "entries": [entry]}))
+        return treegen("batch", cat, "-o", out, "--workers", "1", *extra)
+
+    assert run({"species": "species/rush.txt", "seeds": [1, 2], "formats": ["glb", "obj"]}).returncode == 0
+    (out / "rush_2_notes.txt").write_text("the user's")
+    dry = run({"species": "species/rush.txt", "seeds": [1]}, "--dry-run")
+    assert "would remove 12 file(s) of assets the catalogue no longer lists" in dry.stdout, dry.stdout
+    again = run({"species": "species/rush.txt", "seeds": [1]})
+    assert again.returncode == 0 and "removed 12 file(s)" in again.stdout, again.stdout
+    left = sorted(p.name for p in out.iterdir())
+    assert left == [
+        "manifest.csv",
+        "manifest.json",
+        "rush_1.glb",
+        "rush_1.glb.impostor.json",
+        "rush_2_notes.txt",
+    ]
+    assert json.loads((out / "manifest.json").read_text())["removed"] == 12
+
+
 def test_seeds_grid_and_names_expand_as_documented(workspace):
     from treegen_cli.batch import parse_catalogue
 

@@ -155,9 +155,40 @@ def run_jobs(
                 "tasks": len(tasks),
                 "seconds": round(time.perf_counter() - t0, 3),
                 "cluster": where,
+                "removed": remove_unlisted(out_dir, cat, plan, ordered),
             }
             write_manifest(out_dir, cat, ordered, totals)
     return totals
+
+
+def unlisted_files(out_dir: Path, cat: Catalogue, plan: Plan, rows: list[dict] = ()) -> list[str]:
+    """Files an earlier run into `out_dir` recorded for assets the catalogue no longer lists
+    (an entry, seed or format edited away) and no asset of this run writes: an engine that
+    imports the folder would take them. Only names the earlier manifest recorded, inside the
+    folder."""
+    listed = {job.output for job in cat.jobs}
+    keep = {f for row in rows for f in row.get("files", [row.get("path")])} | listed
+    root = out_dir.resolve()
+    out = set()
+    for path, row in plan.previous.items():
+        if path in listed:
+            continue
+        for f in row.get("files", [path]):
+            target = (out_dir / str(f)).resolve()
+            if f not in keep and target.is_relative_to(root) and target.is_file():
+                out.add(str(f))
+    return sorted(out)
+
+
+def remove_unlisted(out_dir: Path, cat: Catalogue, plan: Plan, rows: list[dict]) -> int:
+    """Remove unlisted_files (and folders they leave empty); returns how many went."""
+    gone = 0
+    for f in unlisted_files(out_dir, cat, plan, rows):
+        with contextlib.suppress(OSError):
+            (out_dir / f).unlink()
+            gone += 1
+            remove_empty([p for p in (out_dir / f).parents if p != out_dir and out_dir in p.parents])
+    return gone
 
 
 def _journaled(plan: Plan, out_dir: Path, offset: int, rows: dict, on_event) -> None:

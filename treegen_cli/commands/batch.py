@@ -17,6 +17,7 @@ from pathlib import Path
 import click
 
 from ..batch import MAX_JOBS, estimate, load_catalogue, plan_jobs, plan_trees, run_jobs, schema_text
+from ..batch.run import unlisted_files
 from ..errors import TreegenError
 from ..executor import default_workers, scheduler_address
 from ..progress import current_reporter
@@ -74,12 +75,12 @@ def batch(catalogue, out_dir, workers, scheduler, force, dry_run, max_jobs, sche
     cat = load_catalogue(catalogue, max_jobs)
     plan = plan_jobs(cat, out_dir, force)
     if dry_run:
-        _dry_run(cat, plan, workers, scheduler, as_json)
+        _dry_run(cat, plan, out_dir, workers, scheduler, as_json)
         return
     _run(cat, plan, out_dir, workers, scheduler, as_json)
 
 
-def _dry_run(cat, plan, workers, scheduler, as_json) -> None:
+def _dry_run(cat, plan, out_dir, workers, scheduler, as_json) -> None:
     """The job table with each tree's plan (LODs, triangles and joints per LOD, as the build
     will make them) and a size/time estimate; exit 1 when a job would fail, as the run would."""
     spent: dict[str, float] = {}
@@ -132,6 +133,7 @@ def _dry_run(cat, plan, workers, scheduler, as_json) -> None:
                     "workers": n,
                     "estimate": "+".join(how),
                     "failing": len(failing),
+                    "would_remove": unlisted_files(Path(out_dir), cat, plan),
                 },
                 indent=1,
             )
@@ -154,6 +156,12 @@ def _dry_run(cat, plan, workers, scheduler, as_json) -> None:
         click.echo(
             f"{j.index:>4}  {j.source:<12}{j.seed:>6}  {j.fmt:<7}{j.output:<{width}}  "
             f"{'build' if j.output in todo else 'skip':<7}{lods}{b / 1e6:>8.1f}{s:>8.2f}"
+        )
+    unlisted = unlisted_files(Path(out_dir), cat, plan)
+    if unlisted:
+        click.echo(
+            f"would remove {len(unlisted)} file(s) of assets the catalogue no longer lists: {', '.join(unlisted[:5])}"
+            + (" …" if len(unlisted) > 5 else "")
         )
     if not plan.build:
         click.echo(f"{len(cat.jobs)} jobs, all up to date: nothing to build")
@@ -239,10 +247,15 @@ def _run(cat, plan, out_dir, workers, scheduler, as_json) -> None:
         click.echo(json.dumps({"event": "done", **totals, "manifest": str(manifest)}))
     else:
         where = f" on {totals['cluster']}" if totals["cluster"] else ""
+        gone = (
+            f"; removed {totals['removed']} file(s) of assets the catalogue no longer lists"
+            if totals["removed"]
+            else ""
+        )
         click.echo(
             f"built {totals['built']}, skipped {totals['skipped']}, failed "
             f"{totals['failed']} of {totals['jobs']} assets in {totals['seconds']:.1f} s"
-            f"{where}; manifest: {manifest}"
+            f"{where}{gone}; manifest: {manifest}"
         )
     if totals["failed"]:
         sys.exit(1)  # some jobs failed (each reported above); the rest are built
