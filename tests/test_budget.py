@@ -213,6 +213,19 @@ def test_a_profiles_budget_never_makes_a_species_heavier(tmp_path):
     assert r.options.budget.ceiling and r.options.budget.triangles == 20_000
 
 
+def test_a_budget_probes_past_a_tight_size_bound_and_texture_size_sizes_the_impostor(tmp_path):
+    """The budget's candidates at LeafQuality × 1/256 grow leaves 16× longer: probes, never
+    written, so --max-size does not refuse them (the fan palm, 8.4 m, with --max-size 20 and
+    --triangles 3000 was refused for 24 m leaves it would not build). And --texture-size with
+    --no-textures is not void: it sizes the impostor's atlas (2 × it, 16 px views at 128)."""
+    from treegen_cli import api
+
+    s = api.make(species_path("fan_palm"), tmp_path / "p.glb", max_size=20, triangles=3000, no_wind=True)
+    assert 2700 <= s["lods"][0]["triangles"] <= 3000
+    api.make(species_path("rush"), tmp_path / "r.glb", no_textures=True, texture_size=128, no_wind=True)
+    assert json.loads((tmp_path / "r.glb.impostor.json").read_text())["cell_px"] == 16
+
+
 def test_explicit_options_win_over_the_profile(tmp_path):
     """--fps 30 is the click default, yet typed it beats the profile's 15 (parameter source)."""
     s = _make_json(

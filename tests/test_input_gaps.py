@@ -158,7 +158,11 @@ CASES = [
     (["make", "rush", "-o", "x.glb", "--stiffness", "0"], ["--stiffness 0: must be > 0"]),
     (["make", "rush", "-o", "x.glb", "--stiffness", "-1"], ["--stiffness -1: allowed range (0, 1000]"]),
     # a loop under two frames is a still pose (it was written, 2 equal keys, exit 0)
-    (["make", "rush", "-o", "x.glb", "--duration", "0.01"], ["--duration 0.01: under 2 frames at 30 fps"]),
+    (["make", "rush", "-o", "x.glb", "--duration", "0.01"], ["--duration 0.01: under 2 frames with 30 fps"]),
+    (
+        ["make", "rush", "-o", "x.glb", "--fps", "0.1"],
+        ["--fps 0.1: under 2 frames with a 10 s loop", "0.2 fps"],
+    ),
     (["make", "rush", "-o", "x.glb", "--fov", "200"], ["--fov 200: ", "(0, 180) degrees"]),
     (["make", "rush", "-o", "x.glb", "--max-joints", "70000"], ["--max-joints 70000", "1..65535"]),
     (["make", "rush", "-o", "x.glb", "--seed", "-1"], ["--seed -1: allowed range 0.."]),
@@ -207,7 +211,7 @@ CASES = [
         ["--error-px: has no effect, --no-wind"],
     ),
     (["make", "rush", "-o", "x.glb", "--no-lod", "--error-px", "3"], ["--error-px: has no effect, --no-lod"]),
-    # a static file has no skin, a .ply no textures, --no-textures no texture size (all ignored)
+    # a static file has no skin, a .ply no textures (both were ignored)
     (
         ["make", "rush", "-o", "x.obj", "--max-joints", "10"],
         ["--max-joints: has no effect, a .obj file holds no skin"],
@@ -216,10 +220,7 @@ CASES = [
         ["make", "rush", "-o", "x.ply", "--texture-size", "256"],
         ["--texture-size: has no effect, a .ply file"],
     ),
-    (
-        ["make", "rush", "-o", "x.glb", "--no-textures", "--texture-size", "256"],
-        ["--texture-size: has no effect, --no-textures writes no textures"],
-    ),
+    # (--texture-size with --no-textures still sizes the impostor's atlas: not void)
     (
         ["make", "rush", "-o", "x.obj", "--wind-speed", "9"],
         ["--wind-speed: has no effect, a .obj file", "static"],

@@ -65,8 +65,7 @@ MEASURED = {
 
 @lru_cache(maxsize=None)
 def _asset(name: str, **options):
-    size = {} if options.get("no_textures") else {"texture_size": 128}  # (void without textures)
-    job = resolve(dict(no_wind=True, **size, **options))
+    job = resolve(dict(no_wind=True, texture_size=128, **options))
     asset, _ = build_asset(load_params(species_path(name)), 0, job.options)
     return asset
 

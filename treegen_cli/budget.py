@@ -230,6 +230,10 @@ def plan_budget(
             n = bark + leaves
             return Plan(params, mesh, n, bark, leaves, params.levels, 1.0, 1.0, n, n, under=T)
     fmin, fmax = options.leaf_quality
+    # The candidates are probes, never written: LeafQuality × 1/256 grows leaves 16× longer, over
+    # a tight --max-size where the tree the plan picks is not; that tree is grown (and held to
+    # the bound) by the caller.
+    generate_options = replace(generate_options, max_size=math.inf)
     first = generate(replace(params, leaf_quality=params.leaf_quality * fmin), seed, generate_options)
     tri_per_leaf = len(leaf_outline(first, mesh).triangles) if mesh.leaves else 0
     bark0 = estimate_triangles(first, mesh)[0]

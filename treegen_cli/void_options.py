@@ -56,8 +56,6 @@ def check_no_effect(options: dict, label: Callable[[str], str], output) -> None:
             why = f"a {suffix} file holds no skin (static format)"
         elif suffix == ".ply" and k in TEXTURE_ONLY:
             why = "a .ply file holds no textures (one mesh, no materials)"
-        elif k == "texture_size" and options.get("no_textures"):
-            why = f"{label('no_textures')} writes no textures"
         else:
             continue
         raise TreegenError(f"{label(k)}: has no effect, {why}; leave it out")
@@ -78,7 +76,7 @@ def check_formats(options: dict, formats: list, label: Callable[[str], str], whe
         if options.get("compress") not in (None, "none") and f not in ("glb", "gltf"):
             raise TreegenError(
                 f"{label('compress')}: {options['compress']} is for glb/gltf only, but "
-                f"{where}[{k}] is {json.dumps(f)} (USD has no such encoding)"
+                f"{where}[{k}] is {json.dumps(f)} (no other format has such an encoding)"
             )
         if options.get("lod_files") and static_format(f"x.{f}"):
             raise TreegenError(

@@ -199,7 +199,7 @@ def _value(p: Params, key: str) -> float:
     top = {
         "Scale": p.scale, "ScaleV": p.scale_v, "Ratio": p.ratio, "0Scale": p.scale0,
         "0ScaleV": p.scale0_v, "Flare": p.flare, "LobeDepth": p.lobe_depth,
-        "LeafScale": p.leaf_scale, "LeafScaleX": p.leaf_scale_x, "LeafQuality": p.leaf_quality,
+        "LeafScale": p.leaf_scale, "LeafScaleX": p.leaf_scale_x,
     }  # fmt: skip
     if key in top:
         return top[key]
@@ -209,11 +209,10 @@ def _value(p: Params, key: str) -> float:
 
 def _slipped(p: Params, typical: dict[str, float]) -> str:
     """The key farthest past its typical largest value (`typical`: key → value): the one a
-    slip most likely hit (LeafQuality counts inversely: a tiny one grows big leaves)."""
+    slip most likely hit."""
 
     def past(key: str) -> float:
         v = _value(p, key)
-        v = 1.0 / math.sqrt(v) if key == "LeafQuality" and v > 0 else v
         return v / typical[key] if v > 0 else 0.0
 
     return max(typical, key=past)
@@ -251,16 +250,12 @@ def check_trunk(p: Params, options: GenerateOptions = DEFAULTS) -> None:
         typical = {"Ratio": 0.05, "0Scale": 2.0, "0ScaleV": 1.0, "Flare": 1.5, "LobeDepth": 0.5}
         what = f"makes a trunk {_floor_text(base)} m across at its base"
         raise _refuse_size(p, _slipped(p, typical), what, bound)
-    if p.leaves != 0 and p.levels >= 1:
-        length = p.leaf_scale / math.sqrt(max(p.leaf_quality, 1e-300))
-        if not max(length, length * p.leaf_scale_x) <= options.max_size:
-            key = (
-                _slipped(p, {"LeafScale": 0.5, "LeafQuality": 3.0})
-                if not length <= options.max_size
-                else "LeafScaleX"
-            )
-            what = f"makes leaves {_floor_text(max(length, length * p.leaf_scale_x))} m long or wide"
-            raise _refuse_size(p, key, what, bound)
+    if p.leaves != 0 and p.levels >= 1:  # the file's leaf (LeafQuality's trade of count for
+        # size is the budget's lever: its candidates at ×1/256 grow leaves 16× longer)
+        biggest = max(p.leaf_scale, p.leaf_scale * p.leaf_scale_x)
+        if not biggest <= options.max_size:
+            key = "LeafScale" if not p.leaf_scale <= options.max_size else "LeafScaleX"
+            raise _refuse_size(p, key, f"makes leaves {_floor_text(biggest)} m long or wide", bound)
 
 
 def check_size(tree: Tree, max_size: float, flag: str = DEFAULTS.max_size_flag) -> None:
