@@ -195,6 +195,9 @@ def test_other_encodings_and_line_ends_read_or_say_what_to_do():
     xml = "<arbaro><species name='t'><param name='Levels' value='1'/></species></arbaro>"
     assert parse_params_bytes(xml.encode("utf-16")).levels == 1
     expect_error(text.encode("utf-16-le"), "x.txt:1: UTF-16 text without a byte-order mark; save it as UTF-8")
+    expect_error(text.encode("utf-16") + b"\x00", "x.txt: not valid UTF-16 text")  # (a traceback)
+    expect_error(b"\xff\xfeS\x00c\x00\x00\xd8", "not valid UTF-16 text")
+    expect_error(text.encode("utf-32"), "x.txt:1: UTF-32 text; save it as UTF-8")
 
 
 @pytest.mark.parametrize(

@@ -17,11 +17,19 @@ def _looks_xml(text: str) -> bool:
 def parse_params_bytes(data: bytes, source: str = "<string>", partial: bool = False) -> Params:
     """Parse a species file's raw bytes: Arbaro XML if it starts with '<', else text (which
     must list every parameter unless `partial`; Arbaro XML is partial by design)."""
+    if data[:4] in (b"\xff\xfe\x00\x00", b"\x00\x00\xfe\xff"):
+        raise TreegenError(f"{source}:1: UTF-32 text; save it as UTF-8")
     if data[:2] in (b"\xff\xfe", b"\xfe\xff"):  # UTF-16 with its byte-order mark (Notepad's
         # "Unicode"): expat reads such XML itself; text is decoded here
-        if data.decode("utf-16").lstrip("\ufeff \t\r\n").startswith("<"):
+        try:
+            text = data.decode("utf-16")
+        except UnicodeDecodeError as exc:
+            raise TreegenError(
+                f"{source}: not valid UTF-16 text (at byte {exc.start}; cut short?); save it as UTF-8"
+            ) from None
+        if text.lstrip("\ufeff \t\r\n").startswith("<"):
             return parse_params_xml(data, source)
-        data = data.decode("utf-16").encode("utf-8")
+        data = text.encode("utf-8")
     if b"\x00" in data:
         line = data.count(b"\n", 0, data.index(b"\x00")) + 1
         head = data[:64]
