@@ -627,12 +627,18 @@ def test_a_static_format_beside_others_is_what_make_writes(workspace):
     cat = workspace / "static.json"
     entry = {"species": "species/rush.txt", "formats": ["glb", "obj"], "seeds": [2]}
     cat.write_text(json.dumps({"defaults": CLIP, "entries": [entry]}))
+    dry = treegen("batch", cat, "-o", workspace / "st", "--dry-run", "--json")
+    planned = {j["format"]: j for j in json.loads(dry.stdout)["jobs"]}  # the dry run says so too
+    assert (len(planned["obj"]["triangles"]), planned["obj"]["joints"]) == (1, [0]), planned["obj"]
     proc = treegen("batch", cat, "-o", workspace / "st", "--workers", "1", "-q")
     assert proc.returncode == 0, proc.stderr
     rows = {a["format"]: a for a in json.loads((workspace / "st" / "manifest.json").read_text())["assets"]}
     assert len(rows["glb"]["triangles"]) > 1 and rows["glb"]["keys"][0] > 0
     obj = rows["obj"]
     assert (obj["triangles"], obj["joints"], obj["keys"]) == ([rows["glb"]["triangles"][0]], [0], [0])
+    assert planned["obj"]["triangles"] == obj["triangles"]
+    # every LOD as built (the plan lacked the atlas's leaf cells: LOD2 planned 9,067, built 5,417)
+    assert planned["glb"]["triangles"] == rows["glb"]["triangles"]
     assert sorted(p.name for p in (workspace / "st").glob("rush_2*.obj")) == ["rush_2.obj"]
     (workspace / "m").mkdir()
     made = treegen("make", "species/rush.txt", "-o", workspace / "m" / "rush_2.obj", "--seed", "2", "-q")

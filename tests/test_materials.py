@@ -296,6 +296,19 @@ def test_cli_bad_texture_flags_exit_2_and_write_nothing(tmp_path_factory, tmp_pa
     assert not out.exists() and not list(tmp_path.iterdir())
 
 
+def test_an_opaque_leaf_image_is_fine_for_shaped_leaves(tmp_path):
+    """--leaf-geometry shape draws the outline as polygons: an image with no cut-out is what
+    the artist wants there (refused for cards, where each leaf would be a rectangle)."""
+    from treegen_cli import api
+
+    opaque = tmp_path / "opaque.png"
+    Image.new("RGB", (16, 16), (40, 160, 40)).save(opaque)
+    fast = dict(no_wind=True, no_lod=True, leaf_texture=str(opaque))
+    api.make(PALM, tmp_path / "shape.glb", leaf_geometry="shape", **fast)
+    with pytest.raises(TreegenError, match="no transparent texels"):
+        api.make(PALM, tmp_path / "card.glb", **fast)
+
+
 def test_defaults_are_documented_beside_the_options():
     assert MATERIAL_DEFAULTS == MaterialOptions()
     assert MATERIAL_DEFAULTS.textures and MATERIAL_DEFAULTS.texture_size == 512

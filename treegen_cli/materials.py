@@ -61,6 +61,8 @@ class MaterialOptions:
     # (bark is noise that tiles around every stem anyway)
     leaf_texture: Path | None = None  # an artist's PNG, used as is (one cell: the whole card)
     bark_texture: Path | None = None  # an artist's PNG bark albedo, used as is, REPEAT
+    cut_out: bool = True  # leaves are cards cut out by the image's alpha (not --leaf-geometry
+    # shape, whose polygons are the outline): an artist's leaf image needs transparent texels
 
 
 MATERIAL_DEFAULTS = MaterialOptions()
@@ -180,6 +182,19 @@ def has_leaves(params: Params) -> bool:
     return params.levels >= 1 and params.leaves != 0
 
 
+def leaf_cells(params: Params, options: MaterialOptions = MATERIAL_DEFAULTS) -> Cells:
+    """The atlas cells mesh/leaves.py maps leaf cards into (no pixels needed): the generated
+    atlas's variants, or the whole card (an artist's image is one leaf; untextured or
+    leafless: no atlas). The LOD planner keys triangle cards on it, so a plan without the
+    textures (batch --dry-run) must use it too."""
+    if not options.textures or options.leaf_texture is not None or not has_leaves(params):
+        return FULL_CARD_CELL
+    return tuple(
+        (float(u0), float(v0), float(u1), float(v1))
+        for u0, v0, u1, v1 in atlas_rects(LEAF_VARIANTS, options.texture_size)
+    )
+
+
 def build_materials(params: Params, options: MaterialOptions = MATERIAL_DEFAULTS) -> Materials:
     """The [bark, leaf] materials of a species and the leaf cells mesh/leaves.py maps cards into.
     Options and an artist's files are checked here, before anything is grown; generated
@@ -191,16 +206,11 @@ def build_materials(params: Params, options: MaterialOptions = MATERIAL_DEFAULTS
         bark = Material("bark", base_color=(*bark_rgb, 1.0), roughness=BARK_ROUGHNESS)
         return Materials(FULL_CARD_CELL, lambda: [bark, colour_leaf])
     leaf_png = (
-        read_png(options.leaf_texture, "--leaf-texture", cut_out=True) if options.leaf_texture else None
+        read_png(options.leaf_texture, "--leaf-texture", options.cut_out) if options.leaf_texture else None
     )
     bark_png = read_png(options.bark_texture, "--bark-texture") if options.bark_texture else None
     leafy = has_leaves(params)
-    cells: Cells = FULL_CARD_CELL  # an artist's image is one leaf; leafless: no atlas
-    if leaf_png is None and leafy:
-        cells = tuple(
-            (float(u0), float(v0), float(u1), float(v1))
-            for u0, v0, u1, v1 in atlas_rects(LEAF_VARIANTS, options.texture_size)
-        )
+    cells = leaf_cells(params, options)
 
     def make() -> list[Material]:
         png = leaf_png

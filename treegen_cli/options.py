@@ -339,6 +339,7 @@ def resolve(
             texture_size=v["texture_size"],
             leaf_texture=v["leaf_texture"],
             bark_texture=v["bark_texture"],
+            cut_out=v["leaf_geometry"] != "shape",
         ),
         budget=BudgetOptions(
             triangles=v["triangles"],

@@ -21,7 +21,7 @@ from .limits import LIMITS_DEFAULTS, Limits, check_keys, check_mesh
 from .lod import LOD_DEFAULTS, LodOptions, screen_coverage, switch_distances
 from .lod_budget import lod_tree
 from .lod_decimate import decimate
-from .materials import MATERIAL_DEFAULTS, MaterialOptions, build_materials
+from .materials import MATERIAL_DEFAULTS, MaterialOptions, build_materials, leaf_cells
 from .mesh import MESH_DEFAULTS, MeshOptions, build_mesh
 from .params import Params
 from .prepare import prepare
@@ -216,7 +216,8 @@ def plan_asset(params: Params, seed: int = 0, options: MakeOptions = MakeOptions
     and meshes (exactly the counts the build gets), no wind (it changes no count), textures or
     impostor atlas (the impostor's cards and one joint are counted, not rendered). For
     `treegen batch --dry-run`."""
-    plain = replace(options, wind=None)
+    plain = replace(options, wind=None)  # the leaf cells the build's mesh maps leaves into
+    plain = replace(plain, mesh=replace(plain.mesh, leaf_cells=leaf_cells(params, plain.materials)))
     if plain.budget.triangles is not None:
         plan = plan_budget(params, seed, plain.mesh, plain.budget, plain.generate)
         params, plain = plan.params, replace(plain, mesh=plan.mesh)

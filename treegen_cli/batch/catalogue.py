@@ -369,7 +369,8 @@ def _artist_images(job, base: Path, label, seen: dict):
             continue
         path = (base / given).resolve()  # (an absolute `given` stays as it is)
         if path not in seen:
-            seen[path] = hashlib.sha256(read_png(path, label(key), key == "leaf_texture")).hexdigest()[:16]
+            cut = key == "leaf_texture" and mats.cut_out
+            seen[path] = hashlib.sha256(read_png(path, label(key), cut)).hexdigest()[:16]
         fixed[key], images[key] = path, seen[path]
     if not fixed:
         return job, images

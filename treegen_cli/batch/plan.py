@@ -74,6 +74,14 @@ def plan_trees(
     return out
 
 
+def for_format(fmt: str, shape):
+    """A task's planned LODs (plan_trees) as the file of format `fmt` holds them: a static one
+    (.obj .ply) LOD0's rest pose alone, no joints (the manifest's row for it says so)."""
+    if isinstance(shape, list) and fmt in ("obj", "ply"):
+        return [{**shape[0], "joints": 0, "distance_m": 0.0}]
+    return shape
+
+
 # bytes per vertex (float32 position, normal, UV; joints, weights, tangents on bark) and per
 # triangle (indices), and the share of that --compress keeps (README: ~60 %, ~a fifth)
 _VERTEX_BYTES, _TRIANGLE_BYTES = 48, 8
@@ -112,7 +120,7 @@ def estimate(
             out[job.output] = (sum(b for b, _ in m) / len(m), sum(s for _, s in m) / len(m), "measured")
             continue
         frames = 0 if r.options.wind is None else r.options.wind.duration * r.options.wind.fps + 1
-        shape = shapes.get(job.task) if shapes is not None else None
+        shape = for_format(job.fmt, shapes.get(job.task)) if shapes is not None else None
         if isinstance(shape, list):
             lods = len(shape)
             joints = sum(row["joints"] for row in shape)

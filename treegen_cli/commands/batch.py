@@ -17,6 +17,7 @@ from pathlib import Path
 import click
 
 from ..batch import MAX_JOBS, estimate, load_catalogue, plan_jobs, plan_trees, run_jobs, schema_text
+from ..batch.plan import for_format
 from ..batch.run import unlisted_files
 from ..errors import TreegenError
 from ..executor import default_workers, scheduler_address
@@ -121,7 +122,7 @@ def _dry_run(cat, plan, out_dir, workers, scheduler, as_json) -> None:
                             "action": "build" if j.output in todo else "skip",
                             "estimated_bytes": round(est[j.output][0]),
                             "estimated_seconds": round(est[j.output][1], 3),
-                            **_shape(shapes[j.task]),
+                            **_shape(for_format(j.fmt, shapes[j.task])),
                         }
                         for j in cat.jobs
                     ],
@@ -147,7 +148,7 @@ def _dry_run(cat, plan, out_dir, workers, scheduler, as_json) -> None:
     )
     for j in cat.jobs:
         b, s, _ = est[j.output]
-        shape = shapes[j.task]
+        shape = for_format(j.fmt, shapes[j.task])
         lods = (
             f"{len(shape):>5}{shape[0]['triangles']:>11,}{shape[0]['joints']:>8}"
             if isinstance(shape, list)
