@@ -123,7 +123,7 @@ BAD = [
     ),
     (  # every count 0 placed no tree and wrote an empty file
         {"instances": [], "scatter": [{**layout_dict()["scatter"][0], "count": 0}]},
-        "scatter: the layout places no trees (every count is 0)",
+        "scatter: the layout places no trees (every scatter's count or density gives 0)",
     ),
     (
         {"instances": [{"species": POPLAR, "position": [0, 0]}, {"species": "nope.txt", "position": [1, 1]}]},

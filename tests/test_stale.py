@@ -23,9 +23,10 @@ def _pngs(folder) -> set[str]:
 
 @pytest.mark.parametrize("suffix", [".usda", ".obj"])
 def test_a_rerun_without_textures_removes_the_textures_the_old_file_named(tmp_path, suffix):
-    out = tmp_path / f"t{suffix}"
+    stem = "my t" if suffix == ".obj" else "t"  # (an .mtl's map lines are read whole: spaces)
+    out = tmp_path / f"{stem}{suffix}"
     first = api.make(species_path("rush"), out, **({} if suffix == ".obj" else FAST))
-    tag = f"t_{suffix[1:]}_"
+    tag = f"{stem}_{suffix[1:]}_"
     textures = {n for n in _pngs(tmp_path) if not n.startswith(tag + "impostor")}
     assert {tag + "leaf.png", tag + "bark.png"} <= textures, first["files"]
     mine = tmp_path / (tag + "mine.png")  # the user's own, named like ours but not the file's

@@ -66,13 +66,19 @@ class WindOptions:
                 raise OptionError(name, value, allowed.rstrip(), f"WindOptions.{name}")
             if positive and value <= 0:
                 raise OptionError(name, value, f"must be > 0; {allowed}".rstrip(), f"WindOptions.{name}")
-        if self.duration * self.fps < MIN_FRAMES:  # a loop of one key is a still pose
+        if self.duration * self.fps < MIN_FRAMES:  # a loop of one key is a still pose; blamed on
+            # the one farther below its default (--fps 0.1 is the slip, not the 10 s duration)
+            if self.fps / 30.0 < self.duration / 10.0:
+                least = f"at least {math.ceil(1000 * MIN_FRAMES / self.duration) / 1000:g} fps"
+                name, value, other = "fps", self.fps, f"a {self.duration:g} s loop"
+            else:
+                least = f"at least {math.ceil(1000 * MIN_FRAMES / self.fps) / 1000:g} s"
+                name, value, other = "duration", self.duration, f"{self.fps:g} fps"
             raise OptionError(
-                "duration",
-                self.duration,
-                f"under {MIN_FRAMES} frames at {self.fps:g} fps, the loop would stand still; "
-                f"at least {math.ceil(1000 * MIN_FRAMES / self.fps) / 1000:g} s",
-                "WindOptions.duration",
+                name,
+                value,
+                f"under {MIN_FRAMES} frames with {other}, the loop would stand still; {least}",
+                f"WindOptions.{name}",
             )
         if len(self.origin) != 3 or not np.all(np.isfinite(self.origin)):
             raise TreegenError(f"wind option 'origin' must be three finite numbers, got {self.origin!r}")

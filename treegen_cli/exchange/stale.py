@@ -22,6 +22,9 @@ import re
 from pathlib import Path
 
 IMPOSTOR_PNGS = ("impostor_albedo", "impostor_normal", "impostor_cards", "impostor_cards_normal")
+# a material library's texture line: the name is the rest of the line after the options
+# (`map_Bump -bm 1.000000 my tree_obj_bark_normal.png`: names may hold spaces)
+_MAP = re.compile(r"^(?:map_\w+|bump)\s+(?:-\w+\s+\S+\s+)*(.+?)\s*$")
 PARTS_TAG = "_LOD"  # the parts' shared textures: NAME_LOD_usdc_leaf.png (texture_files)
 
 
@@ -36,7 +39,7 @@ def _named_textures(file: Path) -> list[str]:
             _, assets, _ = UsdUtils.ExtractExternalReferences(str(file))
         elif suffix == ".obj":
             mtl = file.with_suffix(".mtl").read_text(encoding="utf-8", errors="replace")
-            assets = [line.split()[-1] for line in mtl.splitlines() if line.startswith(("map_", "bump"))]
+            assets = [m[1] for m in map(_MAP.match, mtl.splitlines()) if m]
         else:
             return []
     except Exception:  # (not treegen's, unreadable: nothing it names is ours to remove)

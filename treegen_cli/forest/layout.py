@@ -138,7 +138,7 @@ def parse_layout(data, path: Path, max_trees: int = MAX_TREES) -> Layout:
             f"limit of {max_trees:,}; raise it with --max-trees N"
         )
     if not placements:  # (every scatter's count 0: an empty file written with exit 0)
-        raise TreegenError("scatter: the layout places no trees (every count is 0)")
+        raise TreegenError("scatter: the layout places no trees (every scatter's count or density gives 0)")
     return Layout(
         name=str(data.get("name") or path.stem),
         path=path,
