@@ -41,8 +41,8 @@ from .catalogue import (
     schema_text,
 )
 from .manifest import CSV_COLUMNS, JOURNAL, MANIFEST, MANIFEST_CSV, write_manifest
-from .plan import Plan, estimate, plan_jobs, plan_trees
-from .run import build_task, clean_staging, run_jobs
+from .plan import Plan, estimate, for_format, plan_jobs, plan_trees
+from .run import build_task, clean_staging, run_jobs, unlisted_files
 
 __all__ = [
     "CSV_COLUMNS",
@@ -59,6 +59,7 @@ __all__ = [
     "build_task",
     "clean_staging",
     "estimate",
+    "for_format",
     "load_catalogue",
     "name_value",
     "parse_catalogue",
@@ -67,6 +68,7 @@ __all__ = [
     "plan_trees",
     "render_name",
     "run_jobs",
+    "unlisted_files",
     "schema_text",
     "write_manifest",
 ]

@@ -16,9 +16,17 @@ from pathlib import Path
 
 import click
 
-from ..batch import MAX_JOBS, estimate, load_catalogue, plan_jobs, plan_trees, run_jobs, schema_text
-from ..batch.plan import for_format
-from ..batch.run import unlisted_files
+from ..batch import (
+    MAX_JOBS,
+    estimate,
+    for_format,
+    load_catalogue,
+    plan_jobs,
+    plan_trees,
+    run_jobs,
+    schema_text,
+    unlisted_files,
+)
 from ..errors import TreegenError
 from ..executor import default_workers, scheduler_address
 from ..progress import current_reporter
