@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import TreegenError
+from ..exchange import STATIC
 from .catalogue import Catalogue, Job, options_sha, species_sha
 from .manifest import journal_rows
 
@@ -77,7 +78,7 @@ def plan_trees(
 def for_format(fmt: str, shape):
     """A task's planned LODs (plan_trees) as the file of format `fmt` holds them: a static one
     (.obj .ply) LOD0's rest pose alone, no joints (the manifest's row for it says so)."""
-    if isinstance(shape, list) and fmt in ("obj", "ply"):
+    if isinstance(shape, list) and f".{fmt}" in STATIC:
         return [{**shape[0], "joints": 0, "distance_m": 0.0}]
     return shape
 

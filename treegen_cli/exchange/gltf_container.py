@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import TreegenError
+
 from .gltf_buffer import BYTE, FLOAT, SHORT, UNSIGNED_BYTE, UNSIGNED_INT, UNSIGNED_SHORT, Buffer
 
 
@@ -82,6 +84,11 @@ def read_gltf(path: str | os.PathLike) -> tuple[dict, bytes]:
     data = path.read_bytes()
     if data[:4] == b"glTF":
         _, _, total = struct.unpack_from("<4sII", data, 0)
+        if total > len(data):
+            raise TreegenError(
+                f"{path}: not a whole GLB file (its header says {total:,} bytes, the file has "
+                f"{len(data):,}: cut short in a copy or download?)"
+            )
         jlen, _ = struct.unpack_from("<I4s", data, 12)
         gltf = json.loads(data[20 : 20 + jlen])
         blob = b""

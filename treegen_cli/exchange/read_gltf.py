@@ -69,15 +69,6 @@ def read_drawable(path: Path, lod: int = 0, refuse_forest: bool = False) -> Draw
     mesh root of the scene, so a forest reads as its first tree, or with `refuse_forest` raises
     the one line saying it is a forest."""
     try:
-        with open(path, "rb") as f:
-            head = f.read(12)
-        size = Path(path).stat().st_size
-        if head[:4] == b"glTF" and len(head) == 12 and struct.unpack_from("<I", head, 8)[0] > size:
-            total = struct.unpack_from("<I", head, 8)[0]
-            raise TreegenError(
-                f"{path}: not a whole GLB file (its header says {total:,} bytes, the file has "
-                f"{size:,}: cut short in a copy or download?)"
-            )
         gltf, blob = read_gltf(path)
         trees = forest_instances(gltf)
         if refuse_forest and trees:

@@ -232,30 +232,29 @@ def check_trunk(p: Params, options: GenerateOptions = DEFAULTS) -> None:
     names the key a slip most likely hit, with its line; astronomically large values never
     reach the geometry (they overflowed the wind's matrices)."""
     lp0 = p.level[0]
-    bound = options
     longest = trunk = (p.scale + p.scale_v) * (lp0.length + lp0.length_v)
     if not trunk <= options.max_size:
         key = _slipped(p, {"Scale": 30.0, "ScaleV": 10.0, "0Length": 1.0, "0LengthV": 0.5})
-        raise _refuse_size(p, key, f"makes a trunk up to {_floor_text(trunk)} m long", bound)
+        raise _refuse_size(p, key, f"makes a trunk up to {_floor_text(trunk)} m long", options)
     for lev in range(1, min(max(p.levels, 1), len(p.level))):
         lp = p.level[lev]
         longest *= max(lp.length + lp.length_v, 0.0)
         if not longest <= options.max_size:
             key = _slipped(p, {f"{lev}Length": 1.0, f"{lev}LengthV": 0.5})
             raise _refuse_size(
-                p, key, f"makes level-{lev} branches up to {_floor_text(longest)} m long", bound
+                p, key, f"makes level-{lev} branches up to {_floor_text(longest)} m long", options
             )
     base = 2.0 * trunk * p.ratio * (p.scale0 + p.scale0_v) * (1.0 + max(p.flare, 0.0)) * (1.0 + p.lobe_depth)
     if not base <= options.max_size:
         typical = {"Ratio": 0.05, "0Scale": 2.0, "0ScaleV": 1.0, "Flare": 1.5, "LobeDepth": 0.5}
         what = f"makes a trunk {_floor_text(base)} m across at its base"
-        raise _refuse_size(p, _slipped(p, typical), what, bound)
+        raise _refuse_size(p, _slipped(p, typical), what, options)
     if p.leaves != 0 and p.levels >= 1:  # the file's leaf (LeafQuality's trade of count for
         # size is the budget's lever: its candidates at ×1/256 grow leaves 16× longer)
         biggest = max(p.leaf_scale, p.leaf_scale * p.leaf_scale_x)
         if not biggest <= options.max_size:
             key = "LeafScale" if not p.leaf_scale <= options.max_size else "LeafScaleX"
-            raise _refuse_size(p, key, f"makes leaves {_floor_text(biggest)} m long or wide", bound)
+            raise _refuse_size(p, key, f"makes leaves {_floor_text(biggest)} m long or wide", options)
 
 
 def check_size(tree: Tree, max_size: float, flag: str = DEFAULTS.max_size_flag) -> None:
