@@ -40,24 +40,24 @@ def _hull_vertices(points: np.ndarray) -> np.ndarray:
 
 def _box_corners(x: np.ndarray, owner: np.ndarray, J: int) -> tuple[np.ndarray, np.ndarray]:
     """Per joint, the 8 corners of a box around its points, aligned with their principal axes
-    (a tight box for a branch's elongated cloud). Returns (joint (P,), corner positions (P, 3))."""
+    (a tight box for a branch's elongated cloud). Returns (joint (P,), corner positions (P, 3)).
+    All joints at once: segment sums and extremes over the points sorted by joint, one
+    batched 3 × 3 eigensolve."""
     order = np.argsort(owner.astype(np.uint16), kind="stable")  # radix sort: joints < 65536
-    bounds = np.searchsorted(owner[order], np.arange(J + 1))
-    xs = x[order]
+    count = np.bincount(owner, minlength=J)
+    has = np.flatnonzero(count)  # joints with points, ascending
+    start = np.cumsum(count[has]) - count[has]
+    group = np.repeat(np.arange(has.size), count[has])  # (P,) each sorted point's joint slot
+    xs = x[order].astype(np.float64)
+    mean = np.add.reduceat(xs, start, axis=0) / count[has, None]
+    d = xs - mean[group]
+    cov = np.add.reduceat(d[:, :, None] * d[:, None, :], start, axis=0) + np.eye(3) * 1e-12
+    _, axes = np.linalg.eigh(cov)  # (G, 3, 3), columns: principal axes
+    u = np.einsum("pi,pik->pk", d, axes[group])
     signs = np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], dtype=bool)
-    joints, corners = [], []
-    for j in range(J):  # a few hundred joints, numpy within each
-        pts = xs[bounds[j] : bounds[j + 1]].astype(np.float64)
-        if not len(pts):
-            continue
-        mean = pts.mean(axis=0)
-        d = pts - mean
-        _, axes = np.linalg.eigh(d.T @ d + np.eye(3) * 1e-12)  # columns: principal axes
-        u = d @ axes
-        ext = np.where(signs, u.max(axis=0), u.min(axis=0))  # (8, 3)
-        joints.append(np.full(8, j))
-        corners.append(mean + ext @ axes.T)
-    return np.concatenate(joints), np.concatenate(corners)
+    ext = np.where(signs, np.maximum.reduceat(u, start)[:, None], np.minimum.reduceat(u, start)[:, None])
+    corners = mean[:, None] + np.einsum("gck,gik->gci", ext, axes)  # (G, 8, 3)
+    return np.repeat(has, 8), corners.reshape(-1, 3)
 
 
 def probes(skeleton: Skeleton, primitives: list[Primitive], exact: bool = False) -> Probes:

@@ -95,14 +95,17 @@ def tree_height(tree: Tree) -> float:
 
 
 def tree_box(tree: Tree) -> tuple[np.ndarray, np.ndarray]:
-    """(lo, hi) corners of the box around `tree`'s stems (nodes ± radius) and blades."""
-    pts = [tree.node_pos - tree.node_radius[:, None], tree.node_pos + tree.node_radius[:, None]]
+    """(lo, hi) corners of the box around `tree`'s stems (nodes ± radius) and blades: a
+    blade's card is its middle ± half its length and width along its frame's axes, so per
+    axis it reaches the middle ± the sum of their absolute components (no corner arrays)."""
+    r = tree.node_radius[:, None]
+    lo, hi = (tree.node_pos - r).min(0), (tree.node_pos + r).max(0)
     if tree.n_leaves:
-        L, W, F = tree.leaf_size[:, 0], tree.leaf_size[:, 1], tree.leaf_frame
-        for s, t in ((0.0, -0.5), (0.0, 0.5), (1.0, -0.5), (1.0, 0.5)):
-            pts.append(tree.leaf_pos + (s * L)[:, None] * F[:, :, 1] + (t * W)[:, None] * F[:, :, 0])
-    allp = np.concatenate(pts)
-    return allp.min(0), allp.max(0)
+        along = (0.5 * tree.leaf_size[:, 0])[:, None] * tree.leaf_frame[:, :, 1]
+        reach = np.abs(along) + np.abs((0.5 * tree.leaf_size[:, 1])[:, None] * tree.leaf_frame[:, :, 0])
+        mid = tree.leaf_pos + along
+        lo, hi = np.minimum(lo, (mid - reach).min(0)), np.maximum(hi, (mid + reach).max(0))
+    return lo, hi
 
 
 def tree_stats(tree: Tree) -> dict:
