@@ -156,8 +156,13 @@ def test_three_and_babylon_load_and_play(web, files, species):
     three, babylon = web[str(files[species][0])]
     _web_checks(three)
     _web_checks(babylon)
-    # Babylon honours MSFT_lod: every level loads; three.js shows LOD0 only
-    assert babylon["msft_lod_levels_loaded"] == [0, 1, 2, 3, 4]  # the impostor is level 4
+    # Babylon reads MSFT_lod as progressive loading, not distance switching: every level
+    # loads, coarsest (the impostor, level 4) first, and each finer one replaces the one
+    # before, so once loading completes LOD0 alone is left (the README says so); three.js
+    # reads LOD0 only
+    assert babylon["msft_lod_levels_loaded"] == [0, 1, 2, 3, 4]
+    assert {m["name"].split("_primitive")[0] for m in babylon["meshes"]} == {f"{species}_LOD0"}
+    assert [s["name"] for s in babylon["skeletons"] if s["meshes"]] == [f"{species}_LOD0_skin"]
 
 
 def test_lod_files_load_in_three_and_babylon(web, files):
