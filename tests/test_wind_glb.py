@@ -199,6 +199,26 @@ def test_zero_wind_is_the_rest_pose(tmp_path):
     assert np.all(dot >= 1.0 - 1e-6)
 
 
+def test_zero_wind_writes_a_still_loop_and_says_what_it_wrote(tmp_path):
+    """`--wind-speed 0`: every LOD's clip is written, as one still track on the root (engines
+    that play `wind_loop` by name find it), and make's summary counts the keys the file holds."""
+    from treegen_cli import api
+
+    out = tmp_path / "calm.glb"
+    summary = api.make("rush", out, wind_speed=0.0, duration=2.0, fps=10.0)
+    gltf, blob = read_gltf(out)
+    anims = gltf["animations"]
+    assert [a["name"] for a in anims] == ["wind_loop"] + [f"wind_lod{k}_loop" for k in range(1, len(anims))]
+    roots = [gltf["skins"][k]["joints"][0] for k in range(len(anims))]
+    for a, root, row in zip(anims, roots, summary["lods"]):
+        assert [c["target"]["node"] for c in a["channels"]] == [root]
+        keys = sum(gltf["accessors"][a["samplers"][c["sampler"]]["input"]]["count"] for c in a["channels"])
+        assert keys == row["joint_keys"], (a["name"], keys, row)
+        values = read_accessor(gltf, blob, a["samplers"][0]["output"])
+        assert np.allclose(values, values[:1], atol=1e-7)  # still: rest at every key
+    assert summary["joint_keys"] == summary["keys"] == 21  # LOD0: the root's 21 frames
+
+
 def test_jointless_stems_stay_on_their_parents_bark(gale):
     """12 m/s, the aspen's written file: the base ring of every stem without joints of its own,
     skinned by the file's weights and animation, keeps its centre within the parent's radius of

@@ -118,9 +118,7 @@ def _build(asset: Asset, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, Bu
         }
         for clip in lod.clips:
             plan = clip.plan if options.quantized else None  # key_plan.with_key_plans
-            anim = animation_dict(buf, clip, sk, joint_nodes, options.quantized, plan)
-            if anim is not None:
-                animations.append(anim)
+            animations.append(animation_dict(buf, clip, sk, joint_nodes, options.quantized, plan))
 
     gltf: dict = {
         "asset": {"version": "2.0", "generator": f"treegen {__version__}"},

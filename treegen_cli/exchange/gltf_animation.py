@@ -75,15 +75,16 @@ def animation_dict(
     joint_nodes: np.ndarray,
     quantized: bool = False,
     plan: KeyPlan | None = None,
-) -> dict | None:
+) -> dict:
     """The clip as one glTF animation: a rotation channel per moving joint, on its node in
-    `joint_nodes`; None when no joint moves. `plan`: a compressed LOD0's keys, bits and
-    float32 joints (key_plan.py)."""
+    `joint_nodes`; when no joint moves (`--wind-speed 0`), the root's track, a still loop, as
+    USD keys its timeline: engines that play `wind_loop` by name find it. `plan`: a compressed
+    LOD0's keys, bits and float32 joints (key_plan.py)."""
     if plan is not None:  # (its clip may leave still tracks out: key_plan.still)
         clip = plan.clip
     joints = moving_joints(clip)
     if len(joints) == 0:
-        return None
+        joints = np.zeros(1, np.int64)
     wide, bits = (plan.wide, plan.bits) if plan is not None else (None, None)
     samplers, channels = [], []
     for j, sampler in rotation_samplers(buf, clip, joints, {}, quantized, wide, bits):
