@@ -370,6 +370,21 @@ def test_existing_folder_that_refuses_files_is_not_called_missing():
     assert "does not exist" not in msg
 
 
+def test_gltf_buffer_uri_is_percent_encoded(tmp_path):
+    """A .gltf's buffer is referenced by a URI: a name with a space or '#' is percent-encoded,
+    or a URL-based loader (three.js in a browser) reads '#1.bin' as a fragment."""
+    from urllib.parse import urljoin
+
+    path = tmp_path / "my tree#1.gltf"
+    export(synthetic_asset(), path)
+    gltf, blob = read_gltf(path)
+    uri = gltf["buffers"][0]["uri"]
+    assert uri == "my%20tree%231.bin" and len(blob) == gltf["buffers"][0]["byteLength"]
+    # as a browser resolves it against the .gltf's URL: the .bin beside it, no fragment
+    resolved = urljoin(path.as_uri(), uri)
+    assert "#" not in resolved and resolved == (tmp_path / "my tree#1.bin").as_uri()
+
+
 def test_atomic_write_leaves_no_temp_files(tmp_path, monkeypatch):
     export(synthetic_asset(), tmp_path / "t.gltf")
     export(synthetic_asset(), tmp_path / "t.glb")

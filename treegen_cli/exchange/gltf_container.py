@@ -9,6 +9,7 @@ import json
 import os
 import struct
 from pathlib import Path
+from urllib.parse import quote, unquote
 
 import numpy as np
 
@@ -60,7 +61,7 @@ def write_document(gltf: dict, buf: Buffer, path: Path, binary: bool) -> None:
                 buf.write_to(f)
         return
     bin_path = path.with_suffix(".bin")
-    gltf["buffers"][0]["uri"] = bin_path.name
+    gltf["buffers"][0]["uri"] = quote(bin_path.name)  # a URI: "my tree#1.bin" → my%20tree%231.bin
     with open(bin_path, "wb") as f:
         buf.write_to(f)
     path.write_bytes(dumps(gltf))
@@ -98,7 +99,7 @@ def read_gltf(path: str | os.PathLike) -> tuple[dict, bytes]:
         return gltf, blob
     gltf = json.loads(data)
     uri = gltf["buffers"][0].get("uri") if gltf.get("buffers") else None
-    return gltf, (path.parent / uri).read_bytes() if uri else b""
+    return gltf, (path.parent / unquote(uri)).read_bytes() if uri else b""
 
 
 def read_accessor(gltf: dict, blob: bytes, index: int) -> np.ndarray:
