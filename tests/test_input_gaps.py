@@ -191,6 +191,16 @@ CASES = [
     (["make", "rush", "-o", "x.glb", "--max-stems", "0"], ["--max-stems 0: the limit must be at least 1"]),
     (["info", "rush", "--seed", "-1"], ["--seed -1: allowed range 0.."]),
     (["info", "rush", "--wind", "--wind-speed", "300"], ["--wind-speed 300: allowed range 0..100"]),
+    # info refuses what no report it prints uses, as make refuses void options
+    (
+        ["info", "rush", "--stiffness", "4"],
+        ["--stiffness: has no effect without --wind or --lod", "add --wind"],
+    ),
+    (
+        ["info", "rush", "--wind", "--schedule", "paper"],
+        ["--schedule: has no effect without --lod", "add --lod"],
+    ),
+    (["info", "rush", "--impostor-size", "512"], ["--impostor-size: has no effect without --lod"]),
     (["batch", "catalogue_fov.json", "-o", "out", "--dry-run"], ["entries[0].fov 100: ", "fov < 90"]),
     (
         ["batch", "catalogue_tex.json", "-o", "out", "--dry-run"],

@@ -212,10 +212,18 @@ def info(
     """`treegen info --json`: grow `species` and report stems, leaves, sizes and LOD0
     triangles; with `triangles` the budget plan `make --triangles` would build; with `lod` a
     row per LOD and the paper's Table 3 side by side; with `wind` the wind model's numbers.
-    Only the options a report uses are validated (a LOD option without `lod` is ignored)."""
+    An option no requested report uses is refused by name, as `make` refuses void ones."""
 
     def given(group: str) -> dict:
         return {k: v for k, v in options.items() if k in GROUPS[group]}
+
+    for k in options:  # ("profile" also sets the budget the plain report plans)
+        if not lod and k != "profile" and (k in GROUPS["lod"] or k in INFO_LOD_BUILD):
+            raise TreegenError(f"{cli_name(k)}: has no effect without --lod (it shapes the LODs); add --lod")
+        if not (lod or wind) and k in GROUPS["wind"]:
+            raise TreegenError(
+                f"{cli_name(k)}: has no effect without --wind or --lod (it shapes the wind); add --wind"
+            )
 
     typed = triangles is not None
     if not typed and options.get("profile") is not None:  # its LOD0 budget (a ceiling), as make's
