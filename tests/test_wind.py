@@ -397,6 +397,19 @@ def test_modes_are_mass_normalised_and_sorted(tree_rig):
     assert np.all(np.diff(dyn.omega) >= 0.0) and np.all(dyn.damping >= WindOptions().damping_ratio)
 
 
+def test_stiffness_scales_every_spring_root_plate_included(tree_rig):
+    """--stiffness 4 about doubles every natural frequency (the root plate's rocking mode too:
+    with the wood alone scaled it moved 0.56 → 0.70 Hz on the aspen) and quarters the lean;
+    gravity's share keeps it from exactly 2 and 1/4."""
+    from treegen_cli.wind import wind_report
+
+    tree, rig = tree_rig
+    one, four = (wind_report(tree, rig, WindOptions(stiffness=s), 0) for s in (1.0, 4.0))
+    ratio = np.array([b["hz"] for b in four["modes"]]) / np.array([a["hz"] for a in one["modes"]])
+    assert np.all((ratio > 1.85) & (ratio < 2.2)), ratio
+    assert 0.15 < four["top_lean_m"] / one["top_lean_m"] < 0.35
+
+
 def test_thin_branch_deflects_more_per_length_than_thick(tree_rig):
     tree, rig = tree_rig
     theta = wind_angles(tree, rig, WindOptions(speed=6.0, **FAST), seed=7)

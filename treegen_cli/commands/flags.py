@@ -124,8 +124,8 @@ HELP: dict[str, tuple[str | None, str, str | None]] = {
     "fps": (None, "Keys per second.", None),
     "stiffness": (
         None,
-        "Multiplier on every joint's stiffness: 4 doubles the sway frequencies "
-        "and roughly quarters the motion (see `treegen info --wind`).",
+        "Multiplier on every joint's stiffness and the root plate's: 4 about doubles the "
+        "natural frequencies and quarters the lean (see `treegen info --wind`).",
         None,
     ),
     "no_wind": (None, "Write no animation (rest pose only).", None),
