@@ -307,6 +307,34 @@ def test_a_run_killed_mid_write_leaves_the_previous_file_intact(tmp_path, suffix
     assert out.read_bytes() != before
 
 
+def test_ctrl_c_while_files_move_lands_after_the_whole_set(tmp_path, monkeypatch):
+    """A SIGINT between two of one asset's moves (its --lod-files parts, sidecars) is acted on
+    after the last: the folder holds the new set whole, never old parts beside new ones."""
+    from treegen_cli.exchange import staging
+
+    names = ["t_LOD0.glb", "t_LOD1.glb", "t_LOD2.glb"]
+    for n in names:
+        (tmp_path / n).write_bytes(b"old")
+    moved = []
+    real = os.replace
+
+    def replace_then_interrupt(src, dst):
+        real(src, dst)
+        moved.append(Path(dst).name)
+        if len(moved) == 1:
+            os.kill(os.getpid(), signal.SIGINT)  # Ctrl-C right after the first move
+            time.sleep(0.05)  # (delivered by now, were it not held)
+
+    monkeypatch.setattr(staging.os, "replace", replace_then_interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        with staging.staged(tmp_path / names[0]) as tmp:
+            for n in names:
+                (tmp.parent / n).write_bytes(b"new")
+    assert sorted(moved) == names
+    assert all((tmp_path / n).read_bytes() == b"new" for n in names)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # handler restored
+
+
 def test_a_run_killed_mid_write_leaves_nothing_when_there_was_no_file(tmp_path):
     out = tmp_path / "fresh.glb"
     left = _kill_mid_write(SPECIES / "black_tupelo.txt", out)

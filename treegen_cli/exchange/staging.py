@@ -10,8 +10,10 @@ from __future__ import annotations
 import os
 import re
 import shutil
+import signal
 import socket
 import tempfile
+import threading
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
@@ -62,6 +64,28 @@ def sweep(folder: Path) -> list[Path]:
 
 
 @contextmanager
+def _signals_held() -> Iterator[None]:
+    """SIGINT and SIGTERM that arrive inside are acted on once it is left: the moves of one
+    asset's files (its --lod-files parts, sidecars) land together, all new, then the run
+    stops. Only the main thread can hold them (Python runs handlers there); SIGKILL cannot be."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    held = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        if signal.getsignal(sig) is not None:  # (None: a handler Python did not install)
+            held[sig] = signal.signal(sig, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        for sig, handler in held.items():
+            signal.signal(sig, handler)
+        for signum in dict.fromkeys(caught):
+            signal.raise_signal(signum)  # to the handler it was meant for, now
+
+
+@contextmanager
 def staged(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a path named like `path` inside a fresh staging folder next to it; on success move
     everything written there into place (main file last), on failure leave nothing behind."""
@@ -92,8 +116,9 @@ def staged(path: str | os.PathLike) -> Iterator[Path]:
         for name in produced:  # every target checked before any moves: all or nothing
             if (folder / name).is_dir():
                 raise TreegenError(f"{folder / name}: is a folder, where {path} writes a file; move it away")
-        for name in produced:
-            os.replace(tmpdir / name, folder / name)
+        with _signals_held():  # a Ctrl-C between two moves would leave old and new files mixed
+            for name in produced:
+                os.replace(tmpdir / name, folder / name)
     except OSError as e:
         raise TreegenError(f"{path}: cannot write ({e.strerror or e})") from None
     finally:
