@@ -373,7 +373,7 @@ def test_make_reports_each_lods_measured_error(tmp_path):
     opts = ["--schedule", "paper", "--no-impostor", "--duration", "4"]
     res = CliRunner().invoke(cli, ["make", str(aspen), "-o", str(tmp_path / "a.glb"), *opts])
     assert res.exit_code == 0, res.output
-    shown = [float(x) for x in re.findall(r"keys \(error ([0-9.]+) px\)", res.output)]
+    shown = [float(x) for x in re.findall(r"keys \(error ≤ ([0-9.]+) px on joint boxes\)", res.output)]
     info = api.info(aspen, lod=True, schedule="paper", impostor=False, duration=4)
     measured = [r["max_error_px"] for r in info["lods"][1:]]
     assert len(shown) == len(measured) == 3, res.output

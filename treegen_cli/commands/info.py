@@ -93,7 +93,8 @@ def info(species, as_json, with_lod, with_wind, triangles, **options):
 def _lod_table(stats: dict, o: dict) -> None:
     click.echo(
         f"  LODs (fov {o['fov']:g}°, {o['width']} px, error {o['error_px']:g} px, "
-        f"{o['schedule']}): leaf-vertex updates per frame, LOD method vs all-GPU"
+        f"{o['schedule']}): max err measured on every joint's hull corners (make prints the "
+        "bound on its boxes, a little higher); leaf-vertex updates per frame, LOD method vs all-GPU"
     )
     click.echo(
         f"    {'LOD':<4}{'dist m':>8}{'keys kept':>16}{'max err px':>11}"

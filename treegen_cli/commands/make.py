@@ -59,7 +59,7 @@ def make(species, output, as_json, **options):
                 + f"{_metres(r['distance_m'])} m: {r['triangles']:,} tris, {_joints(r['joints'])}"
                 + (f", {r['joint_keys']:,} keys" if k > 0 and r["joint_keys"] else "")
                 + (
-                    f" (error {r['max_error_px']:.2f} px)"
+                    f" (error ≤ {r['max_error_px']:.2f} px on joint boxes)"  # info --lod: on hulls
                     if r["max_error_px"] is not None
                     else " (error unbounded: a camera there can be inside the tree)"
                     if k > 0 and r["decimated"]
