@@ -190,6 +190,10 @@ CASES = [
     (["make", "rush", "-o", "x.glb", "--joint-levels", "12"], ["--joint-levels '12'", "0..9"]),
     (["make", "rush", "-o", "x.glb", "--max-stems", "0"], ["--max-stems 0: the limit must be at least 1"]),
     (["info", "rush", "--seed", "-1"], ["--seed -1: allowed range 0.."]),
+    (
+        ["make", "catalogue_fov.json", "-o", "x.glb"],
+        ["catalogue_fov.json' is a JSON file, not a species file", "treegen forest", "treegen batch"],
+    ),
     (["info", "rush", "--wind", "--wind-speed", "300"], ["--wind-speed 300: allowed range 0..100"]),
     # info refuses what no report it prints uses, as make refuses void options
     (

@@ -102,6 +102,11 @@ def resolve_species(value: str | os.PathLike, base: Path | None = None, subject:
             f"Weber–Penn .txt or Arbaro .xml file or a bundled name ({LIST_HINT}); "
             f"`treegen preview {text} -o tree.png` renders a written tree"
         )
+    if is_file and path.suffix.lower() == ".json":
+        raise TreegenError(
+            f"{subject} is a JSON file, not a species file: a forest layout is built with "
+            f"`treegen forest {text} -o forest.glb`, a catalogue with `treegen batch {text} -o DIR`"
+        )
     if is_file:
         return path
     hit = bundled_species(text)
