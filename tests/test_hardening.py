@@ -335,6 +335,23 @@ def test_ctrl_c_while_files_move_lands_after_the_whole_set(tmp_path, monkeypatch
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # handler restored
 
 
+def test_ctrl_c_while_the_cli_loads_is_one_line_and_exit_130():
+    """The console script (treegen_cli.entry): a Ctrl-C in the second the CLI's modules take
+    to load ends with "treegen: aborted" and exit 130, as during a run, not a traceback."""
+    code = (
+        "import sys\n"
+        "class Stop:\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        "        if name == 'treegen_cli.cli':\n"
+        "            raise KeyboardInterrupt\n"
+        "sys.meta_path.insert(0, Stop())\n"
+        "from treegen_cli.entry import main\n"
+        "main()\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 130 and proc.stderr == "treegen: aborted\n", proc.stderr
+
+
 def test_a_run_killed_mid_write_leaves_nothing_when_there_was_no_file(tmp_path):
     out = tmp_path / "fresh.glb"
     left = _kill_mid_write(SPECIES / "black_tupelo.txt", out)

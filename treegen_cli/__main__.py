@@ -1,5 +1,5 @@
 """`python -m treegen_cli` runs the CLI (used by the benchmarks and tests)."""
 
-from .cli import main
+from .entry import main
 
 main()
