@@ -253,9 +253,10 @@ def plan_budget(
             minimum = min(minimum, bark + tri_per_leaf * _leaf_count(per_unit, fmin))
             maximum = max(maximum, bark + tri_per_leaf * _leaf_count(per_unit, fmax))
             factor = 1.0
-            if per_unit:
-                factor = (aim - bark) / (tri_per_leaf * per_unit)
-                factor = min(max(factor, fmin), fmax)
+            if per_unit:  # bark past the aim: the leaves fill what is left up to T, not
+                # none (wheat at 20,000: 7 grains 16× their size where 298 fit)
+                room = aim - bark if bark < aim else T - bark
+                factor = min(max(room / (tri_per_leaf * per_unit), fmin), fmax)
             n = _leaf_count(per_unit, factor)
             cost = drop * options.drop_cost + math.log2(1.0 / c) * options.curve_cost
             found.append(_Candidate(i, cost, m, bark, factor, n, bark + tri_per_leaf * n))
