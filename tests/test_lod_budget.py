@@ -267,6 +267,28 @@ def test_tiny_budgets_keep_blades_within_the_crown_and_say_they_are_exceeded(tmp
     assert f"over its budget of {rows[2]['budget']:,}: its trunks alone take more" in res.output
 
 
+def test_trunks_under_a_pixel_coarsen_as_branches_do():
+    """A grass's stalks are trunks (Arbaro's wheat: 49 of them, 2.8 mm): under a pixel wide at a
+    far switch their nodes are dropped within the chord tolerance, as a branch's are; kept
+    whole, LOD3 (10.8 m) drew 7,962 triangles for a budget of 2,361. Wider trunks keep every
+    node (LOD2, 4.3 m, where they span a pixel)."""
+    from pathlib import Path
+
+    from treegen_cli.generate import generate
+    from treegen_cli.lod_budget import THIN_TRUNK_PX
+
+    params = load_params(Path(__file__).parent / "fixtures" / "arbaro" / "wheat.xml")
+    job = resolve(dict(no_wind=True, impostor=False, texture_size=128))
+    tree = generate(params, 0)
+    asset, _ = build_asset(params, 0, job.options, tree=tree)
+    tris = [sum(len(p.indices) // 3 for p in lod.primitives) for lod in asset.lods]
+    trunk = 2.0 * float(tree.stem_radius[tree.stem_level == 0].max())
+    opts = job.options.lod
+    assert trunk >= THIN_TRUNK_PX * pixel_size(asset.lods[2].distance, opts)  # LOD2: trunks whole
+    assert trunk < THIN_TRUNK_PX * pixel_size(asset.lods[3].distance, opts)  # LOD3: coarsened
+    assert tris[3] <= 1.25 * FRACTIONS[3] * tris[0], tris  # near its 5 % (was 17 %)
+
+
 def test_more_distances_than_budgets_step_on_by_the_last_ratio():
     """Five distances and the default 0.5, 0.15, 0.05: LOD4 gets a third of LOD3's budget (the
     last value repeated made it a copy of LOD3, 4,176 triangles each on the aspen)."""

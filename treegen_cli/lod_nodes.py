@@ -9,7 +9,8 @@ A node goes when the chord between its kept neighbours passes within `tol` metre
 original node it replaces (and their radii within `tol` of the interpolated ones), so the
 coarse branch stays within `tol` of the full one; every other node at most per pass, so a
 curve is never flattened by removing neighbours together. Trunks keep their nodes (their flare and
-bends carry the silhouette) unless `trunks` (a leafless tree's: its budget goes to its twigs).
+bends carry the silhouette) unless `trunks` says (per stem, or all: a leafless tree's, whose
+budget goes to its twigs; a trunk under a pixel wide, a grass's stalk, draws as a twig does).
 Leaves and child stems on a dropped node move to the kept node below it, where the skin binds
 them; their positions do not change.
 
@@ -28,7 +29,7 @@ from .tree import Tree
 PASSES = 3  # halving passes, at most: a stem keeps at least 1/8 of its interior nodes' spans
 
 
-def _droppable(tree: Tree, keep: np.ndarray, tol: float, trunks: bool = False) -> np.ndarray:
+def _droppable(tree: Tree, keep: np.ndarray, tol: float, trunks=False) -> np.ndarray:
     """Nodes (N,) that one pass may drop: interior kept nodes of branches at odd places among
     their stem's kept nodes, where the chord between their kept neighbours passes within `tol`
     of every original node between those neighbours (radii likewise), so the error does not
@@ -39,7 +40,8 @@ def _droppable(tree: Tree, keep: np.ndarray, tol: float, trunks: bool = False) -
     tail = np.r_[stem[1:] != stem[:-1], True]
     start = np.maximum.accumulate(np.where(head, np.arange(idx.size), 0))
     rank = np.arange(idx.size) - start
-    j = np.flatnonzero(~head & ~tail & (rank % 2 == 1) & ((tree.stem_level[stem] > 0) | trunks))
+    coarse = (tree.stem_level > 0) | np.broadcast_to(np.asarray(trunks, dtype=bool), (tree.n_stems,))
+    j = np.flatnonzero(~head & ~tail & (rank % 2 == 1) & coarse[stem])
     a, c = idx[j - 1], idx[j + 1]
     span = c - a - 1  # original nodes strictly between the neighbours (>= 1)
     which = np.repeat(np.arange(j.size), span)
@@ -60,9 +62,10 @@ def _droppable(tree: Tree, keep: np.ndarray, tol: float, trunks: bool = False) -
 
 
 def coarsen_nodes(
-    tree: Tree, tol: float, trunks: bool = False, stems: np.ndarray | None = None, passes: int = PASSES
+    tree: Tree, tol: float, trunks=False, stems: np.ndarray | None = None, passes: int = PASSES
 ) -> Tree:
-    """`tree` with the branch nodes (and the trunks' too if `trunks`; only those of `stems`
+    """`tree` with the branch nodes (and the trunks' too where `trunks`, one bool or one per
+    stem (S,); only those of `stems`
     (S,) if given) within `tol` metres of their kept neighbours' chord dropped, in at most
     `passes` passes (see the module doc); the same tree when none is."""
     if tol <= 0 or tree.n_nodes < 3:
