@@ -13,7 +13,18 @@ from click.core import ParameterSource
 
 from ..errors import TreegenError
 from ..executor import scheduler_address
-from ..options import CHOICES, DEFAULTS, FLAGS, FLOATS, GROUPS, INTS, OPTIONAL_FLOATS, OPTIONAL_INTS, PATHS
+from ..options import (
+    CHOICES,
+    DEFAULTS,
+    MESH_DEFAULTS,
+    FLAGS,
+    FLOATS,
+    GROUPS,
+    INTS,
+    OPTIONAL_FLOATS,
+    OPTIONAL_INTS,
+    PATHS,
+)
 
 # name → (extra flag spelling or None, help, metavar or None); the type and default are not here
 HELP: dict[str, tuple[str | None, str, str | None]] = {
@@ -76,7 +87,9 @@ HELP: dict[str, tuple[str | None, str, str | None]] = {
     "joint_levels": (None, "Stem levels allowed to own joints [default: all].", "0,1,2"),
     "sides": (
         None,
-        "Cross-section sides per stem level, trunk first; the last value repeats [default: 16,8,6,4,3].",
+        "Cross-section sides per stem level, trunk first; the last value repeats; stems under "
+        f"{MESH_DEFAULTS.thin_radius * 1000:g} mm in radius get {MESH_DEFAULTS.thin_sides} "
+        "whatever their level [default: 16,8,6,4,3].",
         "16,8,6,4,3",
     ),
     "leaf_geometry": (
