@@ -125,7 +125,7 @@ def test_jointless_stem_moves_with_the_drawn_bark_of_a_coarse_chain(monkeypatch)
     tree = synthetic_tree()
     chosen = np.zeros(tree.n_nodes, dtype=bool)
     chosen[[0, 2]] = True
-    monkeypatch.setattr("treegen_cli.rig._select", lambda tree, options: chosen)
+    monkeypatch.setattr("treegen_cli.rig._select", lambda tree, options, among: chosen)
     rig = build_rig(tree)
     base = tree.stem_node_start[2]
     np.testing.assert_allclose(rig.node_weights[base], [0.5, 0.5], atol=1e-6)
@@ -255,3 +255,22 @@ def test_joints_spread_as_the_budget_grows(species):
             piece = np.nanmax(_pieces(tree, rig)[on])
             assert piece <= prev_piece.get(partial, np.inf) + 1e-9
             prev_piece[partial] = piece
+
+
+@pytest.mark.parametrize("species", ["quaking_aspen", "ca_black_oak"])
+def test_among_restricts_the_joints_and_keeps_the_budget_rules(species):
+    """`among` (a LOD's: LOD0's joint nodes) only takes joints away from the pool: all nodes
+    allowed, the rig is the unrestricted one; some, the joints are among them, and the budget
+    is spent while they last, a level coarsening as it would (every kept stem's base first)."""
+    tree = species_tree(species, seed=0)
+    base = build_rig(tree, RigOptions(max_joints=256))
+    every = build_rig(tree, RigOptions(max_joints=256), among=np.arange(tree.n_nodes))
+    assert np.array_equal(every.joint_node, base.joint_node)
+    assert every.skeleton.names == base.skeleton.names
+    for budget in (1, 16, 64, 128, 256, 400):
+        rig = build_rig(tree, RigOptions(max_joints=budget), among=base.joint_node)
+        check_rig(tree, rig, budget)
+        assert np.isin(rig.joint_node, base.joint_node).all()
+        assert len(rig.joint_node) == min(budget, len(base.joint_node))
+        based = np.isin(tree.stem_node_start[rig.joint_stem], rig.joint_node)
+        assert based[~tree.stem_clone[rig.joint_stem]].all()  # no own stem's joints without its base

@@ -45,7 +45,8 @@ def stem_closure(tree: Tree, keep: np.ndarray) -> np.ndarray:
 def prune_stems(tree: Tree, keep: np.ndarray) -> Tree:
     """The tree without the stems `keep` (S,) drops (and their descendants); leaves of dropped
     stems keep their place and frame and hang from the node where their nearest kept ancestor
-    carries the dropped branch (its `stem_parent_node`)."""
+    carries the dropped branch (its `stem_parent_node`). Kept stems and nodes remember which
+    of LOD0's they are (Tree.lod0_stems, lod0_nodes: a LOD's joints keep LOD0's names)."""
     keep = stem_closure(tree, keep)
     if keep.all():
         return tree
@@ -79,6 +80,8 @@ def prune_stems(tree: Tree, keep: np.ndarray) -> Tree:
         node_z=tree.node_z[node_keep],
         leaf_stem=new_stem[stem].astype(np.int32),
         leaf_node=new_node[node].astype(np.int32),
+        stem_lod0=tree.lod0_stems[s],
+        node_lod0=tree.lod0_nodes[node_keep],
     )
 
 

@@ -84,7 +84,8 @@ def coarsen_nodes(
 
 def drop_nodes(tree: Tree, keep: np.ndarray) -> Tree:
     """`tree` with only the nodes `keep` (N,) (every stem's first and last among them); leaves
-    and child stems on a dropped node move to the kept node below it."""
+    and child stems on a dropped node move to the kept node below it; kept nodes remember
+    which of LOD0's they are (Tree.lod0_nodes)."""
     if keep.all():
         return tree
     new_node = np.cumsum(keep) - 1  # a dropped node maps to the kept node below it
@@ -100,6 +101,7 @@ def drop_nodes(tree: Tree, keep: np.ndarray) -> Tree:
         node_radius=tree.node_radius[keep],
         node_z=tree.node_z[keep],
         leaf_node=new_node[tree.leaf_node].astype(np.int32),
+        node_lod0=tree.lod0_nodes[keep],
     )
 
 

@@ -75,16 +75,23 @@ class Sway:
     tree: Tree
     rig: Rig
     theta: np.ndarray  # (J, n, 3)
-    near: Nearest = field(default_factory=Nearest)  # LOD0's node and leaf look-ups, built once
+    near: Nearest = field(default_factory=Nearest)  # LOD0's leaf look-up, built once
 
 
 def build_lod(
-    tree: Tree, options: MakeOptions, seed: int, timings: Timings, sway: Sway | None = None
-) -> tuple[Lod, Sway | None]:
+    tree: Tree,
+    options: MakeOptions,
+    seed: int,
+    timings: Timings,
+    sway: Sway | None = None,
+    among: np.ndarray | None = None,
+) -> tuple[Lod, Sway | None, Rig]:
     """Rig, skin and animate one grown tree: its own wind, or (`sway`, a LOD cut from it)
-    LOD0's motion on its rig. Returns the LOD and the Sway the LODs below it follow."""
+    LOD0's motion on its rig, jointed `among` LOD0's joint nodes (rig.build_rig: its skeleton
+    is LOD0's with joints removed). Returns the LOD, the Sway the LODs below it follow and
+    its rig."""
     check_mesh(tree, options.mesh, options.limits)
-    rig = timings.run("rig", build_rig, tree, options.rig)
+    rig = timings.run("rig", build_rig, tree, options.rig, among)
     if options.wind is not None:
         check_keys(len(rig.skeleton.names), options.wind, options.limits)
     primitives = timings.run("mesh", build_mesh, tree, rig, options.mesh)
@@ -92,7 +99,7 @@ def build_lod(
     if options.wind is not None:
         clip, sway = timings.run("wind", _wind, tree, rig, options.wind, seed, sway)
         clips.append(replace(clip, name=clip_name(0)))
-    return Lod(primitives=primitives, skeleton=rig.skeleton, clips=clips), sway
+    return Lod(primitives=primitives, skeleton=rig.skeleton, clips=clips), sway, rig
 
 
 def _wind(tree: Tree, rig: Rig, options: WindOptions, seed: int, sway: Sway | None):
@@ -112,20 +119,22 @@ def build_lods(params: Params, tree: Tree, options: MakeOptions, seed: int, timi
     (wind_lods.lod_angles: the motion changes little at a switch) and a clip decimated for its distance
     (clip_name(k)); distances follow the tree's height on screen (lod.switch_distances).
     LOD0 is `tree`; lower LODs are cut from it within their triangle budgets
-    (lod_budget.lod_tree: thin stems dropped, leaves thinned and scaled to keep the cover)."""
+    (lod_budget.lod_tree: thin stems dropped, leaves thinned and scaled to keep the cover),
+    their joints among LOD0's, named as there (an engine's LODs of one skeleton)."""
     lo = options.lod
     height = tree_height(tree)
     distances = switch_distances(height, lo)
     at = replace(lo, distances=tuple(distances))  # lod_tree sizes stems by the switch distance
     lods: list[Lod] = []
-    sway = None
+    sway, joints0 = None, None
     for k, distance in enumerate(distances):
         t, rig, mesh = tree, options.rig, options.mesh
         if k > 0:
             t, rig, mesh = timings.run(
                 "generate", lod_tree, tree, k, lods[0], lods[-1], options.rig, options.mesh, at
             )
-        lod, sway = build_lod(t, replace(options, rig=rig, mesh=mesh), seed, timings, sway)
+        lod, sway, built = build_lod(t, replace(options, rig=rig, mesh=mesh), seed, timings, sway, joints0)
+        joints0 = built.joint_node if joints0 is None else joints0
         clips = [
             timings.run("lod", decimate, lod.skeleton, lod.primitives, c, distance, lo, clip_name(k))[0]
             for c in lod.clips

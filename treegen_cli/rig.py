@@ -13,6 +13,9 @@ not fit gets a joint at every stem's base and spends the rest of the budget alon
 a stem's share growing with its length (the longest jointless spans are split first, D'Hondt
 style), spaced evenly from base to tip; deeper levels get no joints. If even one joint per stem
 does not fit, only that level's longest stems get one (at their base).
+
+A LOD cut from LOD0's tree is rigged `among` LOD0's joints (build_rig): the same rules over the
+LOD0 joints it keeps, so its skeleton is LOD0's with joints removed, named as there.
 """
 
 from __future__ import annotations
@@ -63,8 +66,9 @@ def _chain_shares(length: np.ndarray, free: np.ndarray, extra: int) -> np.ndarra
     return np.bincount(chain_of[won], minlength=len(free))
 
 
-def _select(tree, options: RigOptions) -> np.ndarray:
-    """Bool (N,): which nodes become joints, following the budget rules in the module doc."""
+def _select(tree, options: RigOptions, among: np.ndarray | None = None) -> np.ndarray:
+    """Bool (N,): which nodes become joints, following the budget rules in the module doc;
+    only nodes whose LOD0 node (Tree.lod0_nodes) is in `among` if given (see build_rig)."""
     level = tree.stem_level.astype(np.int64)
     clone = tree.stem_clone.astype(bool)
     chain = tree.stem_node_count.astype(np.int64) - 1  # segment-start nodes per stem (tip: chain)
@@ -72,9 +76,17 @@ def _select(tree, options: RigOptions) -> np.ndarray:
     s = tree.node_stem
     p = np.arange(tree.n_nodes) - start[s]  # position along the stem
     candidate = (p < chain[s]) & ~(clone[s] & (p == 0))  # a clone's 0 is its parent's split node
+    if among is not None:
+        candidate &= np.isin(tree.lod0_nodes, among)
+    # A stem's slots: its base (a clone's is its parent's split node, never a joint) and its
+    # other candidates in order; with every node allowed, slot q is the node at position q.
+    based = ~clone & candidate[start]
+    later = np.flatnonzero(candidate & (p > 0))
+    n_later = np.bincount(s[later], minlength=tree.n_stems)
+    first_later = np.cumsum(n_later) - n_later
     jointed = np.zeros(tree.n_nodes, dtype=bool)
     budget = options.max_joints
-    roots = np.flatnonzero(tree.stem_parent < 0)
+    roots = np.flatnonzero((tree.stem_parent < 0) & based)
 
     present = np.unique(level)
     allowed = (
@@ -87,24 +99,25 @@ def _select(tree, options: RigOptions) -> np.ndarray:
         budget -= int(min(len(roots), budget))
     for lev in allowed:
         idx = np.flatnonzero(level == lev)
-        own = idx[~clone[idx]]
-        full = int(chain[idx].sum()) - (len(idx) - len(own))
-        if full <= budget:  # every segment start of the level
+        own = idx[based[idx]]
+        full = len(own) + int(n_later[idx].sum())
+        if full <= budget:  # every candidate of the level
             jointed |= candidate & (level[s] == lev)
             budget -= full
             continue
         if len(own) <= budget:
             # Every stem's base, then the rest spread along the chains (fewer than their free
-            # positions 1..chain-1, since the full chains did not fit): m extra joints on a
-            # chain at positions round(i * chain / (m + 1)), i = 1..m — distinct, as m < chain.
+            # slots 1..n-1, since the full chains did not fit): m extra joints on a chain of
+            # n slots at slots round(i * n / (m + 1)), i = 1..m — distinct, as m < n.
             jointed[start[own]] = True
-            free = chain[idx] - 1
+            free = n_later[idx]
             length = tree.node_z[start[idx] + chain[idx]] - tree.node_z[start[idx]]
             m = _chain_shares(length, free, budget - len(own))
             rep = np.repeat(np.arange(len(idx)), m)
             i = np.arange(len(rep)) - np.repeat(np.cumsum(m) - m, m) + 1
-            c, mm = chain[idx][rep], m[rep]
-            jointed[start[idx][rep] + (2 * i * c + mm + 1) // (2 * (mm + 1))] = True
+            n, mm = free[rep] + 1, m[rep]
+            slot = (2 * i * n + mm + 1) // (2 * (mm + 1))
+            jointed[later[first_later[idx][rep] + slot - 1]] = True
         else:
             # Not even one joint per stem: the longest (non-clone) stems keep a base joint.
             is_root = tree.stem_parent[own] < 0
@@ -115,18 +128,21 @@ def _select(tree, options: RigOptions) -> np.ndarray:
 
 
 def joint_names(tree, joint_node: np.ndarray, joint_stem: np.ndarray) -> list[str]:
-    """Names that say what a joint is and stay the same for every instance of a tree: "trunk_K"
-    (or "trunkS_K" with several trunks) and "bS_K" for branch stem S, K the node along the stem.
+    """Names that say what a joint is and stay the same for every instance of a tree and in
+    every LOD: "trunk_K" (or "trunkS_K" with several trunks) and "bS_K" for branch stem S, K
+    the node along the stem, both numbered as in LOD0's tree (Tree.lod0_stems, lod0_nodes: a
+    LOD drops stems and nodes), so a name is one place in every LOD, as engines matching a
+    LOD's bones to LOD0's by name need.
 
     Result: a single trunk with joints on nodes 0 and 3 and one on branch 12's node 2 →
     ["trunk_0", "trunk_3", "b12_2"]."""
-    k = joint_node - tree.stem_node_start[joint_stem]
+    nodes0 = tree.lod0_nodes
+    k = nodes0[joint_node] - nodes0[tree.stem_node_start[joint_stem]]  # a stem keeps its base
     level = tree.stem_level[joint_stem]
-    trunks = np.flatnonzero(tree.stem_level == 0)
-    single = len(trunks) <= 1
+    single = np.count_nonzero(tree.stem_level == 0) <= 1  # a LOD keeps every trunk
     return [
         (f"trunk_{kk}" if single else f"trunk{ss}_{kk}") if lv == 0 else f"b{ss}_{kk}"
-        for ss, kk, lv in zip(joint_stem.tolist(), k.tolist(), level.tolist())
+        for ss, kk, lv in zip(tree.lod0_stems[joint_stem].tolist(), k.tolist(), level.tolist())
     ]  # ≤ 256
 
 
@@ -143,14 +159,19 @@ def check_joint_levels(levels: int, options: RigOptions, flag: str = "--joint-le
     )
 
 
-def build_rig(tree, options: RigOptions = RIG_DEFAULTS) -> Rig:
-    """Joints on stem nodes under `options.max_joints`, with node and leaf skin bindings."""
+def build_rig(tree, options: RigOptions = RIG_DEFAULTS, among: np.ndarray | None = None) -> Rig:
+    """Joints on stem nodes under `options.max_joints`, with node and leaf skin bindings.
+    `among`: LOD0's joint nodes (its rig's joint_node), for a LOD cut from LOD0's tree: the
+    LOD joints only nodes of those it keeps, so its skeleton is LOD0's with joints removed
+    (same names, each joint's parent its nearest ancestor in LOD0 the LOD keeps), as an
+    engine importing the LODs of one skeletal mesh needs (Unreal: a LOD's bones are a subset
+    of LOD0's, matched by name)."""
     if not 1 <= options.max_joints <= MAX_JOINTS:
         raise TreegenError(f"--max-joints {options.max_joints}: the joint budget must be in 1..{MAX_JOINTS}")
     N = tree.n_nodes
     nid = np.arange(N)
     s = tree.node_stem
-    jointed = _select(tree, options)
+    jointed = _select(tree, options, among)
     joint_node = np.flatnonzero(jointed).astype(np.int32)
     J = len(joint_node)
     joint_of = np.cumsum(jointed) - 1  # joint index at jointed nodes

@@ -55,6 +55,12 @@ class Tree:
     # blade length axis (base to tip), column 2 = blade normal
     leaf_size: np.ndarray  # float64 (L, 2): (length, width) in metres
 
+    # A LOD cut from LOD0's tree (lod_leaves.prune_stems, lod_nodes.drop_nodes renumber stems
+    # and nodes): LOD0's index of each stem (S,) and node (N,), so the LOD's joints take LOD0's
+    # names and only LOD0's joints (rig.build_rig). None: a grown tree, each its own.
+    stem_lod0: np.ndarray | None = None
+    node_lod0: np.ndarray | None = None
+
     @property
     def n_stems(self) -> int:
         return int(self.stem_level.shape[0])
@@ -66,6 +72,16 @@ class Tree:
     @property
     def n_leaves(self) -> int:
         return int(self.leaf_pos.shape[0])
+
+    @property
+    def lod0_stems(self) -> np.ndarray:
+        """(S,) LOD0's index of each stem (`stem_lod0`, or 0..S-1 in a grown tree)."""
+        return np.arange(self.n_stems) if self.stem_lod0 is None else self.stem_lod0
+
+    @property
+    def lod0_nodes(self) -> np.ndarray:
+        """(N,) LOD0's index of each node (`node_lod0`, or 0..N-1 in a grown tree)."""
+        return np.arange(self.n_nodes) if self.node_lod0 is None else self.node_lod0
 
     @property
     def segments(self) -> np.ndarray:

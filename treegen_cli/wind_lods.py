@@ -14,9 +14,9 @@ joints a moves by Σ_a θ_a × (p − pivot_a), each θ_a a bend about the two a
 
 Leaves weigh by their area (what the eye follows), nodes by their bark's; a LOD leaf moves like
 the nearest of LOD0's (lod_leaves.gather_leaves put it among those it stands for), a node like
-itself (LOD nodes are LOD0's). Every joint is also pulled, with a weight REGULARISE of the fit's
-mean, towards the turn LOD0 gives its node: joints the sampled points hardly move (bare, near
-the trunk's base) follow that instead of wandering.
+itself (LOD nodes are LOD0's: Tree.lod0_nodes). Every joint is also pulled, with a weight
+REGULARISE of the fit's mean, towards the turn LOD0 gives its node: joints the sampled points
+hardly move (bare, near the trunk's base) follow that instead of wandering.
 """
 
 from __future__ import annotations
@@ -34,18 +34,11 @@ REGULARISE = 1e-3  # weight of the pull towards each node's own turn, × the fit
 
 
 class Nearest:
-    """LOD0's look-ups (KD-trees of its nodes and of a sample of its leaves), built on first use
-    and kept for the next LOD (the willow's: 134,000 nodes, 0.08 s a build)."""
+    """LOD0's leaf look-up (a KD-tree of a sample of its leaves), built on first use and kept
+    for the next LOD. (A LOD's nodes name their LOD0 node: Tree.lod0_nodes.)"""
 
     def __init__(self) -> None:
         self._cache: dict[str, object] = {}
-
-    def nodes(self, tree0: Tree):
-        if "nodes" not in self._cache:
-            from scipy.spatial import cKDTree
-
-            self._cache["nodes"] = cKDTree(tree0.node_pos)
-        return self._cache["nodes"]
 
     def leaves(self, tree0: Tree) -> tuple[object, np.ndarray]:
         if "leaves" not in self._cache:
@@ -73,8 +66,7 @@ def lod_angles(
     leaves = _stride(tree.n_leaves if tree0.n_leaves else 0)
     nodes = _stride(tree.n_nodes)
     # LOD nodes are LOD0's (lod_leaves.prune_stems, lod_nodes.coarsen_nodes copy them)
-    at = near.nodes(tree0).query(tree.node_pos[np.r_[nodes, rig.joint_node]])[1]
-    node0, joint_node0 = at[: len(nodes)], at[len(nodes) :]
+    node0, joint_node0 = tree.lod0_nodes[nodes], tree.lod0_nodes[rig.joint_node]
     mid = _middles(tree, leaves)
     zero = np.zeros(len(leaves), dtype=np.int64)
     leaf0 = zero
