@@ -210,9 +210,7 @@ def decimate(
     interp = options.interpolation
 
     def dense_clip(radius: float = 0.0, threshold: float = 0.0):
-        # every key kept: slerped, whatever the schedule (held, the nearest LOD would step
-        # at the clip's fps in a faster-running engine)
-        clip = replace(dense, name=name, interpolation="LINEAR", keys=None)
+        clip = replace(dense, name=name, interpolation=interp, keys=None)
         return clip, DecimationReport(
             distance, threshold, K * J, K * J, 0.0, 0, time.perf_counter() - t0, radius, options.schedule
         )
