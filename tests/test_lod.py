@@ -500,6 +500,9 @@ def test_paper_schedule_is_the_paper_rule():
         measured = measure_error_px(lod.skeleton, lod.primitives, dense, clip, d, o)
         assert 0.0 < measured <= rep.max_error_px + 1e-9
         assert clip.error_px == rep.max_error_px  # what make's summary prints
+    # LOD0 keeps every key, held too: the reference the held LODs' error is measured against
+    clip, _ = decimate(lod.skeleton, lod.primitives, dense, 0.0, o, pr=pr)
+    assert clip.keys is None and clip.interpolation == "STEP"
 
 
 def test_decimation_work_is_linear_in_clip_length():

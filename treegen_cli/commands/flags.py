@@ -61,7 +61,9 @@ HELP: dict[str, tuple[str | None, str, str | None]] = {
         "within --error-px on a perspective screen seen from any direction at the "
         "LOD's switch distance; bounded-step: the same bound with keys held; paper: "
         "the paper's accumulate-and-reset rule as written (P/d > i·tan(fov)/width, "
-        "held), unchecked.",
+        "held), unchecked. The held schedules hold LOD0's keys too, as the paper's engine "
+        "updates at the clip's rate: the near tree steps at --fps in a faster engine (raise "
+        "--fps, or use bounded).",
         None,
     ),
     "max_joints": (
