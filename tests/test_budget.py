@@ -216,8 +216,9 @@ def test_a_profiles_budget_never_makes_a_species_heavier(tmp_path):
 def test_a_budget_the_bark_nearly_fills_keeps_leaves_in_what_is_left():
     """Arbaro's wheat at the mobile profile's 20,000: its 49 stalks' bark takes 19,404 at the
     coarsest; the plan aimed the leaves at the window's middle (19,000), below the bark, and
-    kept 7 grains grown 16× (green discs around the plant). The leaves fill the room left up
-    to the budget instead: LeafQuality about ×1/6, hundreds of grains, still under 20,000."""
+    kept 7 grains grown 16× (green discs around the plant). The leaves take most of the room
+    left below the budget instead: LeafQuality about ×1/8, hundreds of grains, still under
+    20,000; and a larger budget never keeps fewer leaves (20,430 kept 7 where 20,420 kept 486)."""
     from treegen_cli.budget import BudgetOptions, plan_budget
     from treegen_cli.mesh import MESH_DEFAULTS
     from treegen_cli.params import load_params
@@ -226,6 +227,10 @@ def test_a_budget_the_bark_nearly_fills_keeps_leaves_in_what_is_left():
     plan = plan_budget(params, 0, MESH_DEFAULTS, BudgetOptions(triangles=20_000, ceiling=True))
     assert plan.bark > 19_000 and plan.triangles <= 20_000
     assert plan.leaf_factor >= 0.1 and plan.leaves >= 400, plan.describe()
+    leaves = [
+        plan_budget(params, 0, MESH_DEFAULTS, BudgetOptions(triangles=t)).leaves for t in (20_420, 20_430)
+    ]
+    assert plan.leaves < leaves[0] <= leaves[1], leaves
 
 
 def test_a_budget_probes_past_a_tight_size_bound_and_texture_size_sizes_the_impostor(tmp_path):

@@ -82,6 +82,7 @@ class BudgetOptions:
 
 
 DEFAULTS = BudgetOptions()
+LEAF_ROOM = 0.75  # share of the triangles between the bark and the budget the leaves may take
 
 
 @dataclass(frozen=True)
@@ -212,6 +213,16 @@ def candidates(
     return out
 
 
+def leaf_room(bark: int, T: int, options: BudgetOptions) -> float:
+    """Leaf triangles a candidate with `bark` aims for: up to the window's middle, and once
+    the bark nears it, LEAF_ROOM of what is left below T (continuous, growing with T; the
+    rest is rounding's margin): aiming at the middle alone left nothing past it, so Arbaro's
+    wheat at 20,000 kept 7 grains grown 16× (green discs), and a budget 10 triangles larger
+    could keep fewer leaves."""
+    aim = T * (1.0 - 0.5 * options.tolerance)
+    return max(aim - bark, LEAF_ROOM * (T - bark))
+
+
 def plan_budget(
     params: Params,
     seed: int,
@@ -253,10 +264,8 @@ def plan_budget(
             minimum = min(minimum, bark + tri_per_leaf * _leaf_count(per_unit, fmin))
             maximum = max(maximum, bark + tri_per_leaf * _leaf_count(per_unit, fmax))
             factor = 1.0
-            if per_unit:  # bark past the aim: the leaves fill what is left up to T, not
-                # none (wheat at 20,000: 7 grains 16× their size where 298 fit)
-                room = aim - bark if bark < aim else T - bark
-                factor = min(max(room / (tri_per_leaf * per_unit), fmin), fmax)
+            if per_unit:
+                factor = min(max(leaf_room(bark, T, options) / (tri_per_leaf * per_unit), fmin), fmax)
             n = _leaf_count(per_unit, factor)
             cost = drop * options.drop_cost + math.log2(1.0 / c) * options.curve_cost
             found.append(_Candidate(i, cost, m, bark, factor, n, bark + tri_per_leaf * n))
@@ -302,7 +311,7 @@ def _realise(
     if tri_per_leaf and per_unit:
         for _ in range(3):
             grown = regrow_leaves(t, replace(p, leaf_quality=params.leaf_quality * factor), generate_options)
-            want = (T * (1.0 - 0.5 * options.tolerance) - best.bark) / tri_per_leaf
+            want = leaf_room(best.bark, T, options) / tri_per_leaf
             total = best.bark + tri_per_leaf * grown.n_leaves
             if grown.n_leaves == 0 or (1.0 - options.tolerance) * T <= total <= T or not fmin < factor < fmax:
                 break
