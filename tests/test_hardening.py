@@ -334,6 +334,20 @@ def test_ctrl_c_while_files_move_lands_after_the_whole_set(tmp_path, monkeypatch
     assert all((tmp_path / n).read_bytes() == b"new" for n in names)
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # handler restored
 
+    # through export_parts: an earlier write's extra part goes before the Ctrl-C acts
+    from synthetic import synthetic_asset
+
+    from treegen_cli.exchange import export_parts
+    from treegen_cli.prepare import prepare, split_lods
+
+    monkeypatch.setattr(staging.os, "replace", real)
+    export_parts(split_lods(prepare(synthetic_asset(3))), tmp_path / "p.glb")
+    moved.clear()
+    monkeypatch.setattr(staging.os, "replace", replace_then_interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        export_parts(split_lods(prepare(synthetic_asset(2))), tmp_path / "p.glb")
+    assert sorted(p.name for p in tmp_path.glob("p_LOD*")) == ["p_LOD0.glb", "p_LOD1.glb"]
+
 
 def test_ctrl_c_while_the_cli_loads_is_one_line_and_exit_130():
     """The console script (treegen_cli.entry): a Ctrl-C in the second the CLI's modules take

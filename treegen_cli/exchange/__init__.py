@@ -158,10 +158,16 @@ def _writer(path: Path, options: GltfOptions) -> Callable[[Asset, Path], None]:
     return lambda asset, target: gltf.write_gltf(asset, target, options=options)
 
 
-def _write(writer: Callable[[Path], None], path: Path) -> list[Path]:
-    with staged(path) as tmp:
+def _write(
+    writer: Callable[[Path], None], path: Path, after: Callable[[list[Path]], object] | None = None
+) -> list[Path]:
+    """Stage, write and move into place; `after(files written)` runs once they are in place,
+    before a held Ctrl-C acts (staging.staged): an earlier write's extra parts go with it."""
+    out: list[Path] = []
+    with staged(path, None if after is None else lambda: after(out)) as tmp:
         writer(tmp)
-        return written(tmp, path)
+        out[:] = written(tmp, path)
+    return out
 
 
 def export(asset: Asset, path: str | os.PathLike, options: GltfOptions = GLTF_DEFAULTS) -> list[Path]:
@@ -171,9 +177,8 @@ def export(asset: Asset, path: str | os.PathLike, options: GltfOptions = GLTF_DE
     check_up_axis(path, asset.up_axis)
     writer = _writer(path, options)
     earlier = earlier_textures(path)
-    out = _write(lambda tmp: writer(asset, tmp), path)
-    remove_stale(path, out, earlier=earlier)  # an earlier write's sidecar, atlas or textures
-    return out
+    # an earlier write's sidecar, atlas or textures go as the new files land
+    return _write(lambda tmp: writer(asset, tmp), path, lambda out: remove_stale(path, out, earlier=earlier))
 
 
 def lod_file_paths(path: str | os.PathLike, count: int) -> list[Path]:
@@ -205,9 +210,8 @@ def export_parts(
             writer(part, tmp.parent / target.name)
 
     earlier = earlier_textures(path, len(parts))
-    out = _write(write_all, targets[0])
-    remove_stale(path, out, len(parts), earlier)  # an earlier write's parts beyond these, extras
-    return out
+    # an earlier write's parts beyond these, and their extras, go as the new parts land
+    return _write(write_all, targets[0], lambda out: remove_stale(path, out, len(parts), earlier))
 
 
 def export_forest(
@@ -218,12 +222,13 @@ def export_forest(
     check_compress(path, options.compress)
     writer = FOREST_WRITERS[path.suffix.lower()]
     earlier = earlier_textures(path)
+
+    def stale(out: list[Path]) -> None:  # an earlier forest's prototypes' textures
+        remove_stale(path, out, earlier=earlier)
+
     if options != GLTF_DEFAULTS:
-        out = _write(lambda tmp: write_forest_gltf(forest, tmp, options=options), path)
-    else:
-        out = _write(lambda tmp: writer(forest, tmp), path)
-    remove_stale(path, out, earlier=earlier)  # an earlier forest's prototypes' textures
-    return out
+        return _write(lambda tmp: write_forest_gltf(forest, tmp, options=options), path, stale)
+    return _write(lambda tmp: writer(forest, tmp), path, stale)
 
 
 def check_input(path: str | os.PathLike) -> Path:

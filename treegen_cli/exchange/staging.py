@@ -16,7 +16,7 @@ import tempfile
 import threading
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator
 
 from ..errors import TreegenError
 
@@ -81,14 +81,16 @@ def _signals_held() -> Iterator[None]:
     finally:
         for sig, handler in held.items():
             signal.signal(sig, handler)
-        for signum in dict.fromkeys(caught):
-            signal.raise_signal(signum)  # to the handler it was meant for, now
+        # to the handlers they were meant for, now; SIGTERM first (SIGINT's raises at once)
+        for signum in sorted(set(caught), key=lambda n: n != signal.SIGTERM):
+            signal.raise_signal(signum)
 
 
 @contextmanager
-def staged(path: str | os.PathLike) -> Iterator[Path]:
+def staged(path: str | os.PathLike, after: Callable[[], object] | None = None) -> Iterator[Path]:
     """Yield a path named like `path` inside a fresh staging folder next to it; on success move
-    everything written there into place (main file last), on failure leave nothing behind."""
+    everything written there into place (main file last), then run `after` (an earlier write's
+    stale files removed) with the moves' signals still held; on failure leave nothing behind."""
     path = Path(path)
     folder = path.parent
     if path.is_dir():
@@ -119,6 +121,8 @@ def staged(path: str | os.PathLike) -> Iterator[Path]:
         with _signals_held():  # a Ctrl-C between two moves would leave old and new files mixed
             for name in produced:
                 os.replace(tmpdir / name, folder / name)
+            if after is not None:
+                after()
     except OSError as e:
         raise TreegenError(f"{path}: cannot write ({e.strerror or e})") from None
     finally:
