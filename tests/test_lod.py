@@ -5,6 +5,8 @@ Short clips (1 s at 15 fps) and small joint budgets keep the whole file fast.
 
 from __future__ import annotations
 
+import dataclasses
+
 import json
 from dataclasses import replace
 from functools import lru_cache
@@ -468,6 +470,25 @@ def test_perspective_bound_on_every_vertex(name, schedule):
         assert worst > 0.05 * o.error_px  # the clip was really decimated
         measured = measure_error_px(lod.skeleton, lod.primitives, _dense(clip), clip, lod.distance, o)
         assert worst <= measured + 1e-3  # the reported error bounds what a camera sees
+
+
+def test_keys_are_counted_on_the_tracks_written():
+    """make's joint_keys and info --lod's keys_kept count one thing: the kept keys of the
+    joints that move (a still joint's track is not written), or the root's in a still clip."""
+    from synthetic import chain_skeleton
+
+    from treegen_cli.asset import Clip
+    from treegen_cli.clip import tracked_keys
+
+    sk = chain_skeleton(3)
+    rot = np.tile(np.asarray(sk.rest_rotation, float), (5, 1, 1))
+    still = Clip(name="c", times=np.linspace(0, 1, 5), rotations=rot.copy())
+    assert tracked_keys(still, sk) == 5  # the root's still loop
+    moving = rot.copy()
+    moving[2, 1] = [0.0, np.sin(0.1), 0.0, np.cos(0.1)]  # joint 1 moves, joints 0 and 2 do not
+    clip = Clip(name="c", times=still.times, rotations=moving, keys=[[0, 4], [0, 2, 4], [0, 4]])
+    assert tracked_keys(clip, sk) == 3
+    assert tracked_keys(dataclasses.replace(clip, keys=None), sk) == 5
 
 
 def test_paper_schedule_is_the_paper_rule():

@@ -26,11 +26,9 @@ import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-import numpy as np
-
 from .budget import BudgetOptions, plan_budget
 from .bundled import resolve_species
-from .clip import moving_joints
+from .clip import tracked_keys
 from .errors import TreegenError, in_file
 from .exchange import FIXED_UP_AXIS, GLTF_DEFAULTS, STATIC, check_suffix, check_up_axis, export, export_parts
 from .forest import run_forest, schema_text as forest_schema_text  # noqa: F401  (the forest door)
@@ -157,13 +155,7 @@ def make_summary(asset, tree, written, stages: dict, seconds: float, lod_options
     def lod_row(lod):
         clip = lod.clips[0] if lod.clips else None
         keys = 0 if clip is None else len(clip.times)
-        joint_keys = 0
-        if clip is not None:  # the tracks written: the moving joints' (the root's if none moves)
-            tracked = moving_joints(clip, lod.skeleton)
-            tracked = tracked if tracked.size else np.zeros(1, np.int64)
-            joint_keys = (
-                sum(len(clip.keys[j]) for j in tracked) if clip.keys is not None else keys * tracked.size
-            )
+        joint_keys = 0 if clip is None else tracked_keys(clip, lod.skeleton)
         return {
             "distance_m": lod.distance,
             "vertices": sum(len(p.positions) for p in lod.primitives),

@@ -101,6 +101,18 @@ def moving_joints(clip: Clip, skeleton: Skeleton) -> np.ndarray:
     return np.flatnonzero((dot < 1.0 - 1e-12).any(axis=0))
 
 
+def tracked_keys(clip: Clip, skeleton: Skeleton) -> int:
+    """Keys in the tracks a writer stores: the moving joints' kept keys, or the root's alone in
+    a still clip (written as a still loop). Counted as scheduled: a compressed glTF may store a
+    constant track as one key."""
+    tracked = moving_joints(clip, skeleton)
+    if not tracked.size:
+        tracked = np.zeros(1, np.int64)
+    if clip.keys is None:
+        return len(clip.times) * int(tracked.size)
+    return int(sum(len(clip.keys[j]) for j in tracked))
+
+
 def union_timeline(clip: Clip, joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(frames (U,), rotations (U, len(joints), 4)) for formats that key every joint at the same
     times (USD): the union of the kept keys of `joints` (every key when clip.keys is None; for

@@ -9,6 +9,7 @@ from dataclasses import replace
 import numpy as np
 
 from .asset import Clip, Lod
+from .clip import tracked_keys
 from .lod import LOD_DEFAULTS, LodOptions
 from .lod_decimate import decimate, measure_error_px
 from .lod_probes import probes
@@ -99,7 +100,7 @@ def lod_table_row(lod: Lod, options: LodOptions = LOD_DEFAULTS) -> dict:
     clip = lod.clips[0] if lod.clips else None
     J = len(lod.skeleton.names)
     K = len(clip.times) if clip is not None else 0
-    kept = _keys_per_joint(clip, J)
+    kept = tracked_keys(clip, lod.skeleton) if clip is not None else 0  # as make counts them
     leaf_vertices, updates = leaf_updates(lod)
     error = 0.0
     if clip is not None and clip.keys is not None:
@@ -108,9 +109,9 @@ def lod_table_row(lod: Lod, options: LodOptions = LOD_DEFAULTS) -> dict:
     row = {
         "distance_m": lod.distance,
         "clip": clip.name if clip else None,
-        "keys_kept": int(kept.sum()),
+        "keys_kept": kept,
         "keys_dense": int(K * J),
-        "keys_kept_pct": round(float(100.0 * kept.sum() / max(K * J, 1)), 2),
+        "keys_kept_pct": round(float(100.0 * kept / max(K * J, 1)), 2),
         "animation_bytes": animation_bytes(clip, J),
         "max_error_px": round(error, 4),
         "leaf_vertex_updates_per_frame": round(updates, 1),
