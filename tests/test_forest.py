@@ -529,6 +529,22 @@ def test_usd_forest_validator_clean_and_offsets(scene, tmp_path):
         assert samples[0] == -offset  # its own phase, no new data
 
 
+def test_a_still_forest_has_its_wind_loop(tmp_path):
+    """Wind speed 0: each tree's LODs get a still root track in `wind_loop`, as a single tree's
+    file does, so engines that play it by name find it (the forest had no animation)."""
+    from treegen_cli.exchange.gltf_container import read_gltf
+
+    wind = {"speed": 0.0, "duration": 1.0, "fps": 8, "seed": 3}
+    layout = write_layout(
+        tmp_path, layout_dict(scatter=[], wind=wind, defaults={**FAST, "lod_distances": [0]})
+    )
+    run_forest(layout, tmp_path / "f.glb", all_lods=False, workers=1, progress=False)
+    gltf, _ = read_gltf(tmp_path / "f.glb")
+    (anim,) = gltf["animations"]
+    roots = sorted(s["joints"][0] for s in gltf["skins"])
+    assert anim["name"] == "wind_loop" and sorted(c["target"]["node"] for c in anim["channels"]) == roots
+
+
 def test_run_forest_summary(tmp_path):
     layout = write_layout(tmp_path, layout_dict(scatter=[], defaults={**FAST, "lod_distances": [0]}))
     s = run_forest(layout, tmp_path / "f.usdz", all_lods=False, workers=1, progress=False)

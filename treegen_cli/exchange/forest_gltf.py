@@ -134,6 +134,8 @@ class _Shared:
         if (p, k) in self.scene.variants:
             clip = self.scene.variants[(p, k)][v]
             joints = moving_joints(clip)
+            if not len(joints):  # a still clip (wind speed 0): the root's track, a still loop,
+                joints = np.zeros(1, np.int64)  # so `wind_loop` is there, as in a single tree
             for j, sampler in rotation_samplers(self.buf, clip, joints, self._inputs, self.options.quantized):
                 self.samplers.append(sampler)
                 out.append((j, len(self.samplers) - 1))
