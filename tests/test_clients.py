@@ -157,9 +157,9 @@ def test_three_and_babylon_load_and_play(web, files, species):
     _web_checks(three)
     _web_checks(babylon)
     # Babylon reads MSFT_lod as progressive loading, not distance switching: every level
-    # loads, coarsest (the impostor, level 4) first, and each finer one replaces the one
-    # before, so once loading completes LOD0 alone is left (the README says so); three.js
-    # reads LOD0 only
+    # loads, coarsest first (its event 0 is the impostor, 4 is LOD0), and each finer one
+    # replaces the one before, so once loading completes LOD0 alone is left (the README
+    # says so); three.js reads LOD0 only
     assert babylon["msft_lod_levels_loaded"] == [0, 1, 2, 3, 4]
     assert {m["name"].split("_primitive")[0] for m in babylon["meshes"]} == {f"{species}_LOD0"}
     assert [s["name"] for s in babylon["skeletons"] if s["meshes"]] == [f"{species}_LOD0_skin"]

@@ -270,8 +270,8 @@ def test_tiny_budgets_keep_blades_within_the_crown_and_say_they_are_exceeded(tmp
 def test_trunks_under_a_pixel_coarsen_as_branches_do():
     """A grass's stalks are trunks (Arbaro's wheat: 49 of them, 2.8 mm): under a pixel wide at a
     far switch their nodes are dropped within the chord tolerance, as a branch's are; kept
-    whole, LOD3 (10.8 m) drew 7,962 triangles for a budget of 2,361. Wider trunks keep every
-    node (LOD2, 4.3 m, where they span a pixel)."""
+    whole, LOD3 (10.8 m) drew 7,962 triangles for a budget of 2,361. At LOD2 (4.3 m) they span
+    a pixel and keep every node, as trunks do."""
     from pathlib import Path
 
     from treegen_cli.generate import generate

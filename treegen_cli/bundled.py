@@ -105,7 +105,7 @@ def resolve_species(value: str | os.PathLike, base: Path | None = None, subject:
     if is_file and path.suffix.lower() == ".json":
         raise TreegenError(
             f"{subject} is a JSON file, not a species file: a forest layout is built with "
-            f"`treegen forest {text} -o forest.glb`, a catalogue with `treegen batch {text} -o DIR`"
+            f"`treegen forest {path} -o forest.glb`, a catalogue with `treegen batch {path} -o DIR`"
         )
     if is_file:
         return path

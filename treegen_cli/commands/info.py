@@ -32,7 +32,10 @@ from . import flags
 @flags.use(
     "wind_speed",
     "stiffness",
-    help={"stiffness": "Multiplier on every joint's stiffness (frequencies scale with its square root)."},
+    help={
+        "stiffness": "Multiplier on every joint's stiffness and the root plate's (frequencies "
+        "scale with about its square root)."
+    },
 )
 @flags.use(
     "triangles",
