@@ -84,14 +84,17 @@ def build_lod(
     seed: int,
     timings: Timings,
     sway: Sway | None = None,
-    among: np.ndarray | None = None,
+    among: Rig | None = None,
 ) -> tuple[Lod, Sway | None, Rig]:
     """Rig, skin and animate one grown tree: its own wind, or (`sway`, a LOD cut from it)
-    LOD0's motion on its rig, jointed `among` LOD0's joint nodes (rig.build_rig: its skeleton
-    is LOD0's with joints removed). Returns the LOD, the Sway the LODs below it follow and
-    its rig."""
+    LOD0's motion on its rig, jointed among LOD0's rig `among`'s joints, in their frames
+    (rig.build_rig: its skeleton is LOD0's with joints removed). Returns the LOD, the Sway
+    the LODs below it follow and its rig."""
     check_mesh(tree, options.mesh, options.limits)
-    rig = timings.run("rig", build_rig, tree, options.rig, among)
+    nodes, frames = (
+        (None, None) if among is None else (among.joint_node, among.skeleton.bind_world[:, :3, :3])
+    )
+    rig = timings.run("rig", build_rig, tree, options.rig, nodes, frames)
     if options.wind is not None:
         check_keys(len(rig.skeleton.names), options.wind, options.limits)
     primitives = timings.run("mesh", build_mesh, tree, rig, options.mesh)
@@ -126,15 +129,15 @@ def build_lods(params: Params, tree: Tree, options: MakeOptions, seed: int, timi
     distances = switch_distances(height, lo)
     at = replace(lo, distances=tuple(distances))  # lod_tree sizes stems by the switch distance
     lods: list[Lod] = []
-    sway, joints0 = None, None
+    sway, rig0 = None, None
     for k, distance in enumerate(distances):
         t, rig, mesh = tree, options.rig, options.mesh
         if k > 0:
             t, rig, mesh = timings.run(
                 "generate", lod_tree, tree, k, lods[0], lods[-1], options.rig, options.mesh, at
             )
-        lod, sway, built = build_lod(t, replace(options, rig=rig, mesh=mesh), seed, timings, sway, joints0)
-        joints0 = built.joint_node if joints0 is None else joints0
+        lod, sway, built = build_lod(t, replace(options, rig=rig, mesh=mesh), seed, timings, sway, rig0)
+        rig0 = built if rig0 is None else rig0
         clips = [
             timings.run("lod", decimate, lod.skeleton, lod.primitives, c, distance, lo, clip_name(k))[0]
             for c in lod.clips

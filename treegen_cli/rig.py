@@ -15,7 +15,8 @@ style), spaced evenly from base to tip; deeper levels get no joints. If even one
 does not fit, only that level's longest stems get one (at their base).
 
 A LOD cut from LOD0's tree is rigged `among` LOD0's joints (build_rig): the same rules over the
-LOD0 joints it keeps, so its skeleton is LOD0's with joints removed, named as there.
+LOD0 joints it keeps, in their frames, so its skeleton is LOD0's with joints removed, named
+and posed as there.
 """
 
 from __future__ import annotations
@@ -159,13 +160,20 @@ def check_joint_levels(levels: int, options: RigOptions, flag: str = "--joint-le
     )
 
 
-def build_rig(tree, options: RigOptions = RIG_DEFAULTS, among: np.ndarray | None = None) -> Rig:
+def build_rig(
+    tree,
+    options: RigOptions = RIG_DEFAULTS,
+    among: np.ndarray | None = None,
+    frames: np.ndarray | None = None,
+) -> Rig:
     """Joints on stem nodes under `options.max_joints`, with node and leaf skin bindings.
     `among`: LOD0's joint nodes (its rig's joint_node), for a LOD cut from LOD0's tree: the
     LOD joints only nodes of those it keeps, so its skeleton is LOD0's with joints removed
     (same names, each joint's parent its nearest ancestor in LOD0 the LOD keeps), as an
     engine importing the LODs of one skeletal mesh needs (Unreal: a LOD's bones are a subset
-    of LOD0's, matched by name)."""
+    of LOD0's, matched by name). `frames` (len(among), 3, 3): LOD0's joint frames there, taken
+    as the LOD's (its coarsened tree turns a kept node's frame along the new segment, up to
+    13° at LOD3): same bind pose, so LOD0's animation can drive a LOD's bones."""
     if not 1 <= options.max_joints <= MAX_JOINTS:
         raise TreegenError(f"--max-joints {options.max_joints}: the joint budget must be in 1..{MAX_JOINTS}")
     N = tree.n_nodes
@@ -273,8 +281,10 @@ def build_rig(tree, options: RigOptions = RIG_DEFAULTS, among: np.ndarray | None
     if J > 1 and not np.all(parent[1:] < np.arange(1, J)):
         raise ValueError("tree stems are not ordered parent before child")
 
-    rot = Rotation.from_matrix(tree.node_frame[joint_node])  # orthonormalised frames
-    R = rot.as_matrix()
+    if among is not None and frames is not None:  # LOD0's frames at the same nodes
+        R = np.asarray(frames, dtype=np.float64)[np.searchsorted(among, tree.lod0_nodes[joint_node])]
+    else:
+        R = Rotation.from_matrix(tree.node_frame[joint_node]).as_matrix()  # orthonormalised
     t = tree.node_pos[joint_node]
     pr = np.maximum(parent, 0)
     local_R = np.einsum("jki,jkl->jil", R[pr], R)  # R_parent^T R
