@@ -101,16 +101,20 @@ def moving_joints(clip: Clip, skeleton: Skeleton) -> np.ndarray:
     return np.flatnonzero((dot < 1.0 - 1e-12).any(axis=0))
 
 
+def tracked(moving: np.ndarray) -> np.ndarray:
+    """The joints whose tracks a writer stores, of the `moving` ones: all of them, or the root
+    alone in a still clip (wind speed 0), written as a still loop so that engines playing
+    `wind_loop` by name find it (every writer and count keys this one rule)."""
+    return moving if moving.size else np.zeros(1, np.int64)
+
+
 def tracked_keys(clip: Clip, skeleton: Skeleton) -> int:
-    """Keys in the tracks a writer stores: the moving joints' kept keys, or the root's alone in
-    a still clip (written as a still loop). Counted as scheduled: a compressed glTF may store a
-    constant track as one key."""
-    tracked = moving_joints(clip, skeleton)
-    if not tracked.size:
-        tracked = np.zeros(1, np.int64)
+    """Keys in the tracks a writer stores (tracked): counted as scheduled, a compressed glTF
+    may store a constant track as one key."""
+    joints = tracked(moving_joints(clip, skeleton))
     if clip.keys is None:
-        return len(clip.times) * int(tracked.size)
-    return int(sum(len(clip.keys[j]) for j in tracked))
+        return len(clip.times) * int(joints.size)
+    return int(sum(len(clip.keys[j]) for j in joints))
 
 
 def union_timeline(clip: Clip, joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -13,20 +13,19 @@ from dataclasses import replace
 import numpy as np
 
 from .asset import Asset, Clip, Forest, Lod, Skeleton, lod_bounds
-from .clip import moving_joints, phase_rotate, repeat_clip, union_timeline
+from .clip import moving_joints, phase_rotate, repeat_clip, tracked, union_timeline
 from .skeleton import pose_world
 
 BOUNDS_MARGIN = 0.02  # of the box size: slerp between keys can bulge slightly past the keys
 
 
 def prepare_clip(clip: Clip, skeleton: Skeleton) -> Clip:
-    """`animated` (bool (J,); an explicit one is kept) and the timeline of the animated joints (the root if none, so a
-    still clip still has one track)."""
+    """`animated` (bool (J,); an explicit one is kept) and the timeline of the tracked joints
+    (clip.tracked: the root if none moves, so a still clip still has one track)."""
     moving = moving_joints(clip, skeleton)
     animated = np.zeros(len(skeleton.names), dtype=bool)
     animated[moving] = True
-    tracked = moving if moving.size else np.zeros(1, np.int64)
-    return replace(clip, animated=animated, timeline=union_timeline(clip, tracked))
+    return replace(clip, animated=animated, timeline=union_timeline(clip, tracked(moving)))
 
 
 def animated_bounds(lod: Lod) -> tuple[np.ndarray, np.ndarray]:
@@ -69,8 +68,7 @@ def animated_bounds(lod: Lod) -> tuple[np.ndarray, np.ndarray]:
     for clip in clips:
         K = len(clip.times)
         q = np.broadcast_to(rest_q, (K, J, 4)).copy()
-        moving = moving_joints(clip, skel)
-        moving = moving if moving.size else np.zeros(1, np.int64)
+        moving = tracked(moving_joints(clip, skel))
         q[:, moving] = np.asarray(clip.rotations, np.float64)[:, moving]
         world = pose_world(skel, q)
         w_rot, w_pos = world[..., :3, :3], world[..., :3, 3]

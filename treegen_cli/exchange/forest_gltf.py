@@ -38,7 +38,7 @@ from .. import __version__
 from ..asset import Forest, Material
 from .compress import GLTF_DEFAULTS, GltfOptions, UvRange, meshopt_step, position_grid, uv_range
 from ..axes import to_y_up
-from .gltf_animation import moving_joints, rotation_samplers
+from .gltf_animation import rotation_samplers, tracked_joints
 from .gltf_buffer import Buffer, finish
 from .gltf_container import write_document
 from .gltf_material import Textures, material_dict
@@ -133,9 +133,7 @@ class _Shared:
         out: list[tuple[int, int]] = []
         if (p, k) in self.scene.variants:
             clip = self.scene.variants[(p, k)][v]
-            joints = moving_joints(clip)
-            if not len(joints):  # a still clip (wind speed 0): the root's track, a still loop,
-                joints = np.zeros(1, np.int64)  # so `wind_loop` is there, as in a single tree
+            joints = tracked_joints(clip)  # (a still clip: the root's, as in a single tree)
             for j, sampler in rotation_samplers(self.buf, clip, joints, self._inputs, self.options.quantized):
                 self.samplers.append(sampler)
                 out.append((j, len(self.samplers) - 1))

@@ -7,17 +7,19 @@ import numpy as np
 
 from ..asset import Clip, KeyPlan, Skeleton
 from ..axes import quat_to_y_up
+from ..clip import tracked
 from ..quat import continuous
 from .compress import snorm16
 from .gltf_buffer import Buffer
 from .gltf_mesh import unit
 
 
-def moving_joints(clip: Clip) -> np.ndarray:
-    """Joints that get a channel (prepared in Clip.animated)."""
+def tracked_joints(clip: Clip) -> np.ndarray:
+    """Joints that get a channel: the moving ones (prepared in Clip.animated), or the root's
+    alone in a still clip (clip.tracked)."""
     if clip.animated is None:
         raise ValueError(f"clip {clip.name!r} is not prepared (prepare.prepare before export)")
-    return np.flatnonzero(clip.animated)
+    return tracked(np.flatnonzero(clip.animated))
 
 
 def rotation_samplers(
@@ -82,9 +84,7 @@ def animation_dict(
     LOD0's keys, bits and float32 joints (key_plan.py)."""
     if plan is not None:  # (its clip may leave still tracks out: key_plan.still)
         clip = plan.clip
-    joints = moving_joints(clip)
-    if len(joints) == 0:
-        joints = np.zeros(1, np.int64)
+    joints = tracked_joints(clip)
     wide, bits = (plan.wide, plan.bits) if plan is not None else (None, None)
     samplers, channels = [], []
     for j, sampler in rotation_samplers(buf, clip, joints, {}, quantized, wide, bits):

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..asset import Asset, Clip, Lod, Material, Primitive, Skeleton
+from ..clip import tracked
 from ..errors import TreegenError
 from ..quat import continuous, to_matrix
 from .usd_stage import Axes, gf_vec3f, identifier, snap, unique
@@ -86,8 +87,7 @@ def _define_animation(stage, path, clip: Clip, skel: Skeleton, joint_paths, tcps
 
     if clip.timeline is None or clip.animated is None:
         raise ValueError(f"clip {clip.name!r} is not prepared (prepare.prepare before export)")
-    moving = np.flatnonzero(clip.animated)
-    moving = moving if moving.size else np.zeros(1, np.int64)  # the timeline's tracks
+    moving = tracked(np.flatnonzero(clip.animated))  # the timeline's tracks
     frames, rot = clip.timeline
     rot = continuous(axes.quats(rot))  # consecutive samples on one hemisphere: lerping importers are safe
     anim = UsdSkel.Animation.Define(stage, path)
