@@ -176,10 +176,7 @@ def fit_blades(tree: Tree, lo: np.ndarray, hi: np.ndarray) -> Tree:
     is, or the silhouette grows at the switch and a tiny budget's few leaves poke out of it)."""
     if not tree.n_leaves:
         return tree
-    mid, F = tree.leaf_middle, tree.leaf_frame
-    reach = np.abs(0.5 * tree.leaf_size[:, 0, None] * F[:, :, 1]) + np.abs(
-        0.5 * tree.leaf_size[:, 1, None] * F[:, :, 0]
-    )
+    mid, F, reach = tree.leaf_middle, tree.leaf_frame, tree.leaf_reach
     room = np.minimum(hi - mid, mid - lo)
     with np.errstate(divide="ignore", invalid="ignore"):
         s = np.where(reach > 0, np.maximum(room, 0.0) / reach, np.inf).min(axis=1)

@@ -101,6 +101,13 @@ class Tree:
         its area and its load sit."""
         return self.leaf_pos + (0.5 * self.leaf_size[:, 0])[:, None] * self.leaf_frame[:, :, 1]
 
+    @property
+    def leaf_reach(self) -> np.ndarray:
+        """(L, 3) how far each blade's card reaches from its middle along each axis: half its
+        length and half its width along the frame's columns 1 and 0, by absolute components."""
+        F, size = self.leaf_frame, 0.5 * self.leaf_size
+        return np.abs(size[:, 0, None] * F[:, :, 1]) + np.abs(size[:, 1, None] * F[:, :, 0])
+
 
 def tree_height(tree: Tree) -> float:
     """Top of the tree (m): the highest node or leaf."""
@@ -111,15 +118,12 @@ def tree_height(tree: Tree) -> float:
 
 
 def tree_box(tree: Tree) -> tuple[np.ndarray, np.ndarray]:
-    """(lo, hi) corners of the box around `tree`'s stems (nodes ± radius) and blades: a
-    blade's card is its middle ± half its length and width along its frame's axes, so per
-    axis it reaches the middle ± the sum of their absolute components (no corner arrays)."""
+    """(lo, hi) corners of the box around `tree`'s stems (nodes ± radius) and blades (each its
+    middle ± Tree.leaf_reach: no corner arrays)."""
     r = tree.node_radius[:, None]
     lo, hi = (tree.node_pos - r).min(0), (tree.node_pos + r).max(0)
     if tree.n_leaves:
-        along = (0.5 * tree.leaf_size[:, 0])[:, None] * tree.leaf_frame[:, :, 1]
-        reach = np.abs(along) + np.abs((0.5 * tree.leaf_size[:, 1])[:, None] * tree.leaf_frame[:, :, 0])
-        mid = tree.leaf_pos + along
+        mid, reach = tree.leaf_middle, tree.leaf_reach
         lo, hi = np.minimum(lo, (mid - reach).min(0)), np.maximum(hi, (mid + reach).max(0))
     return lo, hi
 
