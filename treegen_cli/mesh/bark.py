@@ -69,10 +69,15 @@ def _flare_rings(tree, options: MeshOptions) -> list[tuple[int, np.ndarray]]:
     return out
 
 
-def _distinct(u: np.ndarray) -> np.ndarray:
-    """Sorted ring positions with those within 1e-4 of the one before merged into it."""
-    u = np.sort(u)
-    return u[np.r_[True, np.diff(u) > 1e-4]]
+def _flared(tree, options: MeshOptions, m: np.ndarray) -> dict[int, np.ndarray]:
+    """Each flared trunk's rings (u, sorted): its node rings (`m` (S,) per segment) and its
+    flare rings, one within 1e-4 of the ring before merged into it (a fine CurveRes puts
+    flare rings on node rings)."""
+    out = {}
+    for s, x in _flare_rings(tree, options):
+        u = np.sort(np.concatenate([np.arange((tree.stem_node_count[s] - 1) * m[s] + 1) / m[s], x]))
+        out[s] = u[np.r_[True, np.diff(u) > 1e-4]]
+    return out
 
 
 def ring_params(tree, options: MeshOptions):
@@ -84,15 +89,13 @@ def ring_params(tree, options: MeshOptions):
     stem = np.repeat(np.arange(tree.n_stems), n_rings)
     k = np.arange(stem.size) - np.repeat(np.cumsum(n_rings) - n_rings, n_rings)
     u = k / m[stem]
-    flare = _flare_rings(tree, options)
-    if flare:
-        stem = np.concatenate([stem, *(np.full(len(x), s) for s, x in flare)])
-        u = np.concatenate([u, *(x for _, x in flare)])
+    flared = _flared(tree, options, m)
+    if flared:  # the trunks' rings replaced by theirs with the flare rings
+        rest = ~np.isin(stem, list(flared))
+        stem = np.concatenate([stem[rest], *(np.full(len(x), s) for s, x in flared.items())])
+        u = np.concatenate([u[rest], *flared.values()])
         order = np.lexsort((u, stem))
         stem, u = stem[order], u[order]
-        keep = np.ones(stem.size, dtype=bool)
-        keep[1:] = (stem[1:] != stem[:-1]) | (u[1:] - u[:-1] > 1e-4)
-        stem, u = stem[keep], u[keep]
     return stem, u
 
 
@@ -102,8 +105,8 @@ def ring_counts(tree, options: MeshOptions) -> np.ndarray:
     seg = tree.stem_node_count.astype(np.int64) - 1
     m = per_level(options.rings_per_segment, tree.stem_level.astype(np.int64)).astype(np.int64)
     rings = seg * m + 1
-    for s, x in _flare_rings(tree, options):
-        rings[s] = len(_distinct(np.concatenate([np.arange(rings[s]) / m[s], x])))
+    for s, x in _flared(tree, options, m).items():
+        rings[s] = len(x)
     return rings
 
 
