@@ -7,7 +7,6 @@ share one set of defaults without importing the bake.
 from __future__ import annotations
 
 import math
-
 from dataclasses import dataclass
 
 import numpy as np

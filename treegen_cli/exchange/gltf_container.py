@@ -14,7 +14,6 @@ from urllib.parse import quote, unquote
 import numpy as np
 
 from ..errors import TreegenError
-
 from .gltf_buffer import BYTE, FLOAT, SHORT, UNSIGNED_BYTE, UNSIGNED_INT, UNSIGNED_SHORT, Buffer
 
 
