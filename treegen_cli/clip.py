@@ -104,7 +104,8 @@ def moving_joints(clip: Clip, skeleton: Skeleton) -> np.ndarray:
 def tracked(moving: np.ndarray) -> np.ndarray:
     """The joints whose tracks a writer stores, of the `moving` ones: all of them, or the root
     alone in a still clip (wind speed 0), written as a still loop so that engines playing
-    `wind_loop` by name find it (every writer and count keys this one rule)."""
+    `wind_loop` by name find it (prepare marks them in Clip.animated, which the writers key;
+    the key counts use it too)."""
     return moving if moving.size else np.zeros(1, np.int64)
 
 

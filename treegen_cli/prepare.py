@@ -20,12 +20,13 @@ BOUNDS_MARGIN = 0.02  # of the box size: slerp between keys can bulge slightly p
 
 
 def prepare_clip(clip: Clip, skeleton: Skeleton) -> Clip:
-    """`animated` (bool (J,); an explicit one is kept) and the timeline of the tracked joints
-    (clip.tracked: the root if none moves, so a still clip still has one track)."""
-    moving = moving_joints(clip, skeleton)
+    """`animated` (bool (J,): the joints the writers key; an explicit one is kept) and their
+    timeline: the moving joints, or the root alone in a still clip (clip.tracked), so a
+    still clip is written as a still loop by every writer without a rule of its own."""
+    joints = tracked(moving_joints(clip, skeleton))
     animated = np.zeros(len(skeleton.names), dtype=bool)
-    animated[moving] = True
-    return replace(clip, animated=animated, timeline=union_timeline(clip, tracked(moving)))
+    animated[joints] = True
+    return replace(clip, animated=animated, timeline=union_timeline(clip, joints))
 
 
 def animated_bounds(lod: Lod) -> tuple[np.ndarray, np.ndarray]:

@@ -7,7 +7,6 @@ import numpy as np
 
 from ..asset import Clip, KeyPlan, Skeleton
 from ..axes import quat_to_y_up
-from ..clip import tracked
 from ..quat import continuous
 from .compress import snorm16
 from .gltf_buffer import Buffer
@@ -15,11 +14,11 @@ from .gltf_mesh import unit
 
 
 def tracked_joints(clip: Clip) -> np.ndarray:
-    """Joints that get a channel: the moving ones (prepared in Clip.animated), or the root's
-    alone in a still clip (clip.tracked)."""
+    """Joints that get a channel, as prepare marked them in Clip.animated: the moving ones, or
+    the root's alone in a still clip."""
     if clip.animated is None:
         raise ValueError(f"clip {clip.name!r} is not prepared (prepare.prepare before export)")
-    return tracked(np.flatnonzero(clip.animated))
+    return np.flatnonzero(clip.animated)
 
 
 def rotation_samplers(

@@ -6,7 +6,6 @@ from __future__ import annotations
 import numpy as np
 
 from ..asset import Asset, Clip, Lod, Material, Primitive, Skeleton
-from ..clip import tracked
 from ..errors import TreegenError
 from ..quat import continuous, to_matrix
 from .usd_stage import Axes, gf_vec3f, identifier, snap, unique
@@ -87,7 +86,7 @@ def _define_animation(stage, path, clip: Clip, skel: Skeleton, joint_paths, tcps
 
     if clip.timeline is None or clip.animated is None:
         raise ValueError(f"clip {clip.name!r} is not prepared (prepare.prepare before export)")
-    moving = tracked(np.flatnonzero(clip.animated))  # the timeline's tracks
+    moving = np.flatnonzero(clip.animated)  # the timeline's tracks (the root's, if still)
     frames, rot = clip.timeline
     rot = continuous(axes.quats(rot))  # consecutive samples on one hemisphere: lerping importers are safe
     anim = UsdSkel.Animation.Define(stage, path)
