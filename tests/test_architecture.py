@@ -202,3 +202,16 @@ def test_readme_module_list_names_every_module():
     named = set(re.findall(r"`([a-z_]+\.py)`", section))
     files = {p.name for p in PKG.rglob("*.py")}
     assert named <= files, f"README names modules that do not exist: {sorted(named - files)}"
+
+
+def test_the_cli_starts_without_scipy():
+    """Loading the CLI (every `treegen` call, `--help` included) imports no scipy: its
+    submodules cost 0.2 s on first import, so the stages import them where they are used."""
+    import subprocess
+    import sys
+
+    code = "import sys, treegen_cli.cli; print(sorted({m.split('.')[0] for m in sys.modules} & {'scipy', 'moderngl', 'pxr', 'dask'}))"
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=PKG.parent
+    )
+    assert out.stdout.strip() == "[]", out.stdout

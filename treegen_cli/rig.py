@@ -24,7 +24,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from .asset import Skeleton
 from .errors import TreegenError
@@ -280,6 +279,8 @@ def build_rig(
     parent[0] = -1
     if J > 1 and not np.all(parent[1:] < np.arange(1, J)):
         raise ValueError("tree stems are not ordered parent before child")
+
+    from scipy.spatial.transform import Rotation  # (0.2 s to import: only where used)
 
     if among is not None and frames is not None:  # LOD0's frames at the same nodes
         R = np.asarray(frames, dtype=np.float64)[np.searchsorted(among, tree.lod0_nodes[joint_node])]

@@ -9,7 +9,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
 from .leafshapes import outline
 from .texture_color import check_color, smoothstep, to_srgb8
@@ -259,6 +258,8 @@ def leaf_atlas(
     cell_inside[pad : pad + bh, pad : pad + bw] = inside
     if not cell_inside.any():
         cell_inside[pad + bh // 2, pad + bw // 2] = True
+    from scipy import ndimage  # (0.2 s to import: only where used)
+
     _, (ny, nx) = ndimage.distance_transform_edt(~cell_inside, return_indices=True)
     nearest = ((ny - pad) * bw + (nx - pad)).ravel()
     # Texels from the margin, counted up to the rim width by repeated 4-neighbour erosion.

@@ -53,7 +53,6 @@ import threading
 from dataclasses import replace
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 from threadpoolctl import ThreadpoolController
 
 from .asset import Clip
@@ -205,6 +204,8 @@ def bake_wind(
     rot = np.broadcast_to(rest[None], (n + 1, n_j, 4)).copy()
     moving = np.any(theta != 0.0, axis=(1, 2))
     if np.any(moving):
+        from scipy.spatial.transform import Rotation  # (0.2 s to import: only where used)
+
         idx = np.flatnonzero(moving)
         world_rest = Rotation.from_matrix(np.asarray(skel.bind_world)[idx, :3, :3]).as_matrix()
         local = np.einsum("jba,jkb->jka", world_rest, theta[idx])  # R_wᵀ θ

@@ -21,7 +21,6 @@ its v range on 0. Hence v is continuous and increasing along every stem with no 
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from ..asset import Primitive
 from ..shapes import flare_factor, taper_radius
@@ -139,6 +138,8 @@ def bark_tubes(tree, rig, options: MeshOptions) -> Primitive:
     # does not pinch the incoming tube against the outgoing one.
     bend = np.flatnonzero((t <= 1e-9) & (a_loc > 0))
     if bend.size:
+        from scipy.spatial.transform import Rotation  # (0.2 s to import: only where used)
+
         r_in = Rotation.from_matrix(F[a[bend] - 1])
         half = Rotation.from_rotvec(0.5 * (r_in.inv() * Rotation.from_matrix(F[a[bend]])).as_rotvec())
         frame[bend] = (r_in * half).as_matrix()
