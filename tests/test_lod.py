@@ -182,7 +182,7 @@ def test_parents_keys_move_children_synthetic_chain():
 
 
 def test_lod_meshes_keep_leaf_cover_and_coarsen():
-    """Leaf area changes only as much as keeping the crown's cover needs (lod_budget.cover_factors:
+    """Leaf area changes only as much as keeping the crown's cover needs (lod_factors.cover_factors:
     the kept leaves also make up for the dropped twigs' bark, so the area may grow by a third;
     the cover itself is rendered and compared in test_lod_budget.py)."""
     for name in ("quaking_aspen", "black_tupelo"):

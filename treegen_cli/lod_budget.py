@@ -23,7 +23,7 @@ Each LOD is cut from LOD0's tree (lod_leaves.py), in this order:
      than the one before, which `--lod-triangles` could ask for; each moves to the middle of LOD0's
      leaves it stands for, lod_leaves.gather_leaves, so it sits a little elsewhere in each
      LOD), their blades scaled so the LOD covers on screen,
-     at its switch distance, what LOD0 covers (`cover_factors`, lod_cover.py): each region of a
+     at its switch distance, what LOD0 covers (`cover_factors`, lod_factors.py): each region of a
      few pixels keeps LOD0's area (dropped twigs' bark and leaves included) within REGION_CLIP
      of the crown's growth, one factor then matches the whole. A leafless tree thickens its
      kept branches instead.
@@ -41,7 +41,7 @@ import numpy as np
 
 from .limits import bark_triangles
 from .leafshapes import triangle_share
-from .lod_cover import Blades, Grid, solve_factor, stem_area, tree_area
+from .lod_factors import cover_factors, thicken
 from .lod_nodes import coarsen_nodes, point_tips, stub_stems, twig_keys
 from .lod_leaves import (
     LENGTH_SHARE,
@@ -56,8 +56,6 @@ from .mesh.options import FULL_CARD_CELL
 from .tree import Tree, tree_box
 
 
-REGION_PX = 4.0  # cells (pixels at the switch) over which a LOD keeps LOD0's area
-REGION_CLIP = 2.0  # a region's leaves grow at most this much more (or less) than the crown's
 GAP_PX = 6.0  # a dropped stem whose leaves start this many pixels out is kept as a cone
 STUB_TOL_PX = 4.0  # ... within this many pixels of the stem it stands for
 STUB_SHARE = 0.5  # ... while the cones take at most this share of the triangles the kept bark
@@ -246,35 +244,6 @@ def triangle_blades(tree: Tree) -> Tree:
     return replace(grown, leaf_pos=pos)
 
 
-def cover_factors(
-    full: Tree, thin: Tree, px: float, sides=(None, None), triangle: bool = False, widen=None
-) -> tuple[np.ndarray | float, float]:
-    """(leaf area factors (L,), stem radius factor) so that `thin` (pruned and thinned from
-    `full`) covers on screen what `full` covers, at `px` metres per pixel (lod_cover): each
-    kept leaf grows by what its region (cells of REGION_PX pixels) lost in leaves and stems,
-    times one factor solved so the whole covers as `full` does (`triangle`: `thin`'s blades
-    are drawn as triangle cards; `widen`: `thin`'s mesh.girth). A leafless tree thickens its
-    kept branches instead."""
-    if full.n_leaves and not thin.n_leaves:
-        return 1.0, 1.0  # the budget holds no leaf: nothing to grow, and no branch stands in
-    grid = Grid.around(full, px)
-    target = grid.cover(tree_area(full, grid, sides[0]))
-    if thin.n_leaves and full.n_leaves:
-        drawn = triangle_share(int(thin.params.leaf_shape))[0] if triangle else 1.0
-        local = regional_factors(full, thin, REGION_PX * px, drawn)
-        stems = stem_area(thin, grid, sides=sides[1], girth=widen)
-        blades = Blades(thin, grid.px, LENGTH_SHARE, float(np.median(local)), triangle)
-        f = solve_factor(lambda f: grid.cover(stems + blades.area(grid, f * local)), target, 0.25, 4.0)
-        return f * local, 1.0
-    r = solve_factor(
-        lambda r: grid.cover(stem_area(thicken(thin, r), grid, sides=sides[1], girth=widen)),
-        target,
-        0.5,
-        32.0,
-    )
-    return 1.0, r
-
-
 def capped_growth(tree: Tree, factor, cap: float):
     """`factor` (scalar or (L,)), each blade's area growth, cut where it would draw the blade's
     length or width past `cap` metres (past its own, where that is longer already): a LOD whose
@@ -287,51 +256,6 @@ def capped_growth(tree: Tree, factor, cap: float):
         (np.maximum(cap, size[:, 1]) / size[:, 1]) ** (1.0 / (1.0 - LENGTH_SHARE)),
     )
     return factor if np.all(f <= most) else np.minimum(f, most)
-
-
-def thicken(tree: Tree, factor: float) -> Tree:
-    """`tree` with its branches' radii (not the trunks') × `factor`."""
-    if factor == 1.0:
-        return tree
-    f = np.where(tree.stem_level > 0, factor, 1.0)
-    return replace(tree, stem_radius=tree.stem_radius * f, node_radius=tree.node_radius * f[tree.node_stem])
-
-
-def _seen(tree: Tree, leaves: bool) -> tuple[np.ndarray, np.ndarray]:
-    """(points, area seen from the side, mean over directions): blade middles or stem
-    segment middles."""
-    if leaves:
-        return tree.leaf_middle, tree.leaf_area * (1.0 - 0.5 * np.abs(tree.leaf_frame[:, 2, 2]))
-    seg = tree.segments
-    d = tree.node_pos[seg + 1] - tree.node_pos[seg]
-    length = np.linalg.norm(d, axis=1)
-    width = tree.node_radius[seg] + tree.node_radius[seg + 1]
-    return tree.node_pos[seg] + 0.5 * d, width * length * np.sqrt(
-        1.0 - 0.5 * (d[:, 2] / np.maximum(length, 1e-12)) ** 2
-    )
-
-
-def regional_factors(full: Tree, thin: Tree, cell: float, drawn: float = 1.0) -> np.ndarray:
-    """Per kept leaf (L,), the area factor that gives its cell (of `cell` metres) the area
-    `full` showed there (leaves and stems) less the kept stems', relative to the whole crown's
-    (clipped to [1/REGION_CLIP, REGION_CLIP] of it): where the dropped twigs were, leaves grow
-    more. `drawn`: the share of a kept blade's area its leaf draws (triangle cards draw part)."""
-    mid, seen = _seen(thin, True)
-    pts = [_seen(full, True), _seen(full, False), _seen(thin, False), (mid, drawn * seen)]
-    lo = np.min([p.min(0) for p, _ in pts if len(p)], axis=0)
-    ijk = np.concatenate([np.floor((p - lo) / cell).astype(np.int64) for p, _ in pts])
-    span = ijk.max(axis=0) + 1 if len(ijk) else np.ones(3, dtype=np.int64)
-    keys = (ijk[:, 0] * span[1] + ijk[:, 1]) * span[2] + ijk[:, 2]  # (a 1-D unique: 10× faster)
-    _, flat = np.unique(keys, return_inverse=True)  # occupied cells only
-    flat = flat.reshape(-1)
-    n = int(flat.max()) + 1 if flat.size else 1
-    ends = np.cumsum([len(p) for p, _ in pts])
-    flat = np.split(flat, ends[:-1])
-    sums = [np.bincount(f, weights=a, minlength=n) for f, (_, a) in zip(flat, pts)]
-    want = np.maximum(sums[0] + sums[1] - sums[2], 0.0)
-    ratio = want.sum() / max(sums[3].sum(), 1e-30)
-    g = np.where(sums[3] > 0, want / np.maximum(sums[3], 1e-30), ratio)[flat[3]] / ratio
-    return ratio * np.clip(g, 1.0 / REGION_CLIP, REGION_CLIP)
 
 
 def worth_keeping(tree: Tree, per_stem: np.ndarray, per_leaf: float) -> np.ndarray:

@@ -132,7 +132,7 @@ def point_tips(tree: Tree, stems: np.ndarray | None = None) -> Tree:
     """`tree` with every branch (or those of `stems` (S,)) ending in a point (its last node's
     radius 0): the mesh closes a pointed tip on its apex instead of a last ring and a cap, so a
     one-segment twig costs a third of its triangles (a cone) and a far leafless LOD keeps three
-    times the twigs; the area the cones lose is made up by thickening (lod_budget.cover_factors)."""
+    times the twigs; the area the cones lose is made up by thickening (lod_factors.cover_factors)."""
     tip = tree.stem_node_start.astype(np.int64) + tree.stem_node_count - 1
     tip = tip[(tree.stem_level > 0 if stems is None else stems) & (tree.stem_node_count > 1)]
     if not tip.size:
