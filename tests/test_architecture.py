@@ -204,14 +204,23 @@ def test_readme_module_list_names_every_module():
     assert named <= files, f"README names modules that do not exist: {sorted(named - files)}"
 
 
-def test_the_cli_starts_without_scipy():
-    """Loading the CLI (every `treegen` call, `--help` included) imports no scipy: its
-    submodules cost 0.2 s on first import, so the stages import them where they are used."""
+def test_the_cli_starts_without_scipys_slow_parts_and_limits_every_blas():
+    """Loading the CLI (every `treegen` call, `--help` included) imports no scipy.spatial or
+    ndimage (the stages import them where used), but scipy.linalg it does: wind.one_blas_thread
+    can only limit the BLAS libraries loaded when wind.py scans them, and scipy's own
+    OpenBLAS, loaded later, ran LAPACK on every core (the palm's and sassafras's bytes moved)."""
     import subprocess
     import sys
 
-    code = "import sys, treegen_cli.cli; print(sorted({m.split('.')[0] for m in sys.modules} & {'scipy', 'moderngl', 'pxr', 'dask'}))"
+    code = (
+        "import sys, treegen_cli.cli; from treegen_cli.wind import _BLAS; "
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in {'moderngl', 'pxr', 'dask'} "
+        "or m.startswith(('scipy.spatial', 'scipy.ndimage')))); "
+        "print(sorted({c.filepath.split('site-packages')[-1].split('/')[1] for c in _BLAS.lib_controllers}))"
+    )
     out = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=PKG.parent
     )
-    assert out.stdout.strip() == "[]", out.stdout
+    loaded, blas = out.stdout.strip().splitlines()
+    assert loaded == "[]", loaded
+    assert "scipy.libs" in blas and "numpy.libs" in blas, blas

@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import cholesky, solve_triangular
 
 from .rig import Rig
 from .skeleton import depth_levels
@@ -147,8 +148,6 @@ def _modes(K: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     generalized drivers here); φ mass-normalised (φᵀ M φ = I)."""
     if M.shape[0] == 0:
         return np.zeros(0), np.zeros((0, 0))
-    from scipy.linalg import cholesky, solve_triangular  # (0.2 s to import: only where used)
-
     L = cholesky(M, lower=True)
     a = solve_triangular(L, solve_triangular(L, K, lower=True).T, lower=True)
     w2, v = np.linalg.eigh(0.5 * (a + a.T))
