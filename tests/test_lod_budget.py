@@ -48,7 +48,7 @@ MEASURED = {
     "balsam_fir": (None, None),
     "black_tupelo": (None, None),
     "ca_black_oak": (None, 0.89),
-    "desert_bush": (None, 0.84),
+    "desert_bush": (None, 0.87),
     "eastern_cottonwood": (None, 0.88),
     "european_larch": (None, 0.89),
     "fan_palm": (None, 0.80),
@@ -485,6 +485,19 @@ def test_lod_switches_keep_cover(species):
     for pop in lod_pops(asset, LodOptions(), views=(-90.0,), max_px=RENDER_PX):
         assert abs(pop.coverage - 1.0) <= (cover_off or COVERAGE_TOL), (species, pop)
         assert pop.iou >= (iou or IOU_TARGET), (species, pop)
+
+
+def test_leaves_do_not_stand_in_for_twigs_that_outweigh_them():
+    """The desert bush's far LODs drop twigs showing 8 to 19 times its leaves' area: its kept
+    branches thicken to cover their share and its leaves grow for the leaves only
+    (lod_factors.STEM_STANDIN), so the bush stays bark-coloured. Grown for the twigs too, the
+    leaves drew 6 and 14 times LOD0's leaf area (green cards round a bare bush); LOD1, which
+    drops less than twice the leaves' area in twigs, still grows its leaves for them."""
+    from treegen_cli.pipeline import _leaf_area
+
+    asset = _asset("desert_bush")
+    share = [_leaf_area(lod) / _leaf_area(asset.lods[0]) for lod in asset.lods if lod.impostor is None]
+    assert share[1] > 2.0 and max(share[2:]) < 1.5, share
 
 
 def test_default_options_build_the_planned_tree():

@@ -22,6 +22,9 @@ from .tree import Tree
 
 REGION_PX = 4.0  # cells (pixels at the switch) over which a LOD keeps LOD0's area
 REGION_CLIP = 2.0  # a region's leaves grow at most this much more (or less) than the crown's
+STEM_STANDIN = 2.0  # leaves stand in for the dropped stems while those showed at most this ×
+# the leaves' own area; past it (a grass's awns, a twiggy bush's far LODs) each kind keeps its
+# own cover, or a barley ear's brown awns came back as green grains grown ninefold
 
 
 def cover_factors(
@@ -37,6 +40,12 @@ def cover_factors(
         return 1.0, 1.0  # the budget holds no leaf: nothing to grow, and no branch stands in
     grid = Grid.around(full, px)
     target = grid.cover(tree_area(full, grid, sides[0]))
+    if (
+        thin.n_leaves
+        and full.n_leaves
+        and _lost_stems(full, thin) > STEM_STANDIN * _seen(full, True)[1].sum()
+    ):
+        return _by_kind(full, thin, grid, px, sides, triangle, widen)
     if thin.n_leaves and full.n_leaves:
         drawn = triangle_share(int(thin.params.leaf_shape))[0] if triangle else 1.0
         local = regional_factors(full, thin, REGION_PX * px, drawn)
@@ -51,6 +60,33 @@ def cover_factors(
         32.0,
     )
     return 1.0, r
+
+
+def _lost_stems(full: Tree, thin: Tree) -> float:
+    """Stem area (seen from the side) `thin` dropped from `full`."""
+    return float(_seen(full, False)[1].sum() - _seen(thin, False)[1].sum())
+
+
+def _by_kind(full: Tree, thin: Tree, grid: Grid, px: float, sides, triangle: bool, widen):
+    """cover_factors where the dropped stems outweigh the leaves: kept branches thicken to
+    cover what `full`'s stems covered, then the leaves grow to cover what its leaves covered
+    over them (their regions by the leaves they lost only), so bark stays bark-coloured."""
+    full_stems = stem_area(full, grid, sides=sides[0])
+    r = 1.0
+    if np.any(thin.stem_level > 0):
+        r = solve_factor(
+            lambda r: grid.cover(stem_area(thicken(thin, r), grid, sides=sides[1], girth=widen)),
+            grid.cover(full_stems),
+            1.0,
+            32.0,
+        )
+    stems = stem_area(thicken(thin, r), grid, sides=sides[1], girth=widen)
+    target = grid.cover(stems + tree_area(full, grid, sides[0]) - full_stems)
+    drawn = triangle_share(int(thin.params.leaf_shape))[0] if triangle else 1.0
+    local = regional_factors(full, thin, REGION_PX * px, drawn, stems=False)
+    blades = Blades(thin, grid.px, LENGTH_SHARE, float(np.median(local)), triangle)
+    f = solve_factor(lambda f: grid.cover(stems + blades.area(grid, f * local)), target, 0.25, 4.0)
+    return f * local, r
 
 
 def thicken(tree: Tree, factor: float) -> Tree:
@@ -75,11 +111,14 @@ def _seen(tree: Tree, leaves: bool) -> tuple[np.ndarray, np.ndarray]:
     )
 
 
-def regional_factors(full: Tree, thin: Tree, cell: float, drawn: float = 1.0) -> np.ndarray:
+def regional_factors(
+    full: Tree, thin: Tree, cell: float, drawn: float = 1.0, stems: bool = True
+) -> np.ndarray:
     """Per kept leaf (L,), the area factor that gives its cell (of `cell` metres) the area
     `full` showed there (leaves and stems) less the kept stems', relative to the whole crown's
     (clipped to [1/REGION_CLIP, REGION_CLIP] of it): where the dropped twigs were, leaves grow
-    more. `drawn`: the share of a kept blade's area its leaf draws (triangle cards draw part)."""
+    more (`stems=False`: its leaves' area only). `drawn`: the share of a kept blade's area its
+    leaf draws (triangle cards draw part)."""
     mid, seen = _seen(thin, True)
     pts = [_seen(full, True), _seen(full, False), _seen(thin, False), (mid, drawn * seen)]
     lo = np.min([p.min(0) for p, _ in pts if len(p)], axis=0)
@@ -92,7 +131,7 @@ def regional_factors(full: Tree, thin: Tree, cell: float, drawn: float = 1.0) ->
     ends = np.cumsum([len(p) for p, _ in pts])
     flat = np.split(flat, ends[:-1])
     sums = [np.bincount(f, weights=a, minlength=n) for f, (_, a) in zip(flat, pts)]
-    want = np.maximum(sums[0] + sums[1] - sums[2], 0.0)
+    want = np.maximum(sums[0] + sums[1] - sums[2], 0.0) if stems else sums[0]
     ratio = want.sum() / max(sums[3].sum(), 1e-30)
     g = np.where(sums[3] > 0, want / np.maximum(sums[3], 1e-30), ratio)[flat[3]] / ratio
     return ratio * np.clip(g, 1.0 / REGION_CLIP, REGION_CLIP)
