@@ -17,6 +17,7 @@ of areas (or cells the size of a leaf) misses; stems thinner than a pixel count 
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -301,6 +302,20 @@ def tree_area(tree: Tree, grid: Grid, sides: np.ndarray | None = None) -> np.nda
     if tree.n_leaves:
         area = area + Blades(tree, grid.px, 0.25).area(grid, 1.0)
     return area
+
+
+_COVERS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # Tree → {grid key: cover}
+
+
+def tree_cover(tree: Tree, grid: Grid, sides: np.ndarray | None = None) -> float:
+    """grid.cover(tree_area(tree, grid, sides)), kept per tree (weakly) and grid: a make's LODs
+    measure LOD0 at each switch, and switches whose pixels are under cell_size's floor share
+    one grid (the aspen's LOD1 and LOD2: 40 ms again for the same number)."""
+    key = (grid.px, grid.shape, grid.origin.tobytes(), None if sides is None else sides.tobytes())
+    memo = _COVERS.setdefault(tree, {})
+    if key not in memo:
+        memo[key] = grid.cover(tree_area(tree, grid, sides))
+    return memo[key]
 
 
 def solve_factor(

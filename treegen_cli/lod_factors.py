@@ -16,7 +16,7 @@ from dataclasses import replace
 import numpy as np
 
 from .leafshapes import triangle_share
-from .lod_cover import Blades, Grid, solve_factor, stem_area, tree_area
+from .lod_cover import Blades, Grid, solve_factor, stem_area, tree_area, tree_cover
 from .lod_leaves import LENGTH_SHARE
 from .tree import Tree
 
@@ -39,7 +39,7 @@ def cover_factors(
     if full.n_leaves and not thin.n_leaves:
         return 1.0, 1.0  # the budget holds no leaf: nothing to grow, and no branch stands in
     grid = Grid.around(full, px)
-    target = grid.cover(tree_area(full, grid, sides[0]))
+    target = tree_cover(full, grid, sides[0])
     if (
         thin.n_leaves
         and full.n_leaves
