@@ -41,14 +41,45 @@ def play_keys(rotations: np.ndarray, kept: np.ndarray, interpolation: str = "LIN
     and K−1 all True): LINEAR slerps between a joint's neighbouring kept keys, STEP holds."""
     if interpolation == "LINEAR" and kept.all():  # every key: slerp(q, q, 0) is unit(q), to the bit
         return unit(rotations)
-    K = rotations.shape[0]
+    k = np.arange(rotations.shape[0])[:, None]
+    prev, nxt = _neighbours(kept)
+    qa = np.take_along_axis(rotations, prev[..., None], axis=0)
+    qb = qa if interpolation == "STEP" else np.take_along_axis(rotations, nxt[..., None], axis=0)
+    return _between(qa, qb, k, prev, nxt, interpolation)
+
+
+def play_at(
+    rotations: np.ndarray,
+    kept: np.ndarray,
+    frames: np.ndarray,
+    joints: np.ndarray,
+    interpolation: str = "LINEAR",
+) -> np.ndarray:
+    """play_keys(rotations, kept, interpolation)[frames, joints], (n, 4), slerping only those
+    (frame, joint) pairs: the same arithmetic per pair, so the same bits (the LOD check re-plays
+    the frames a new key changes, not the whole clip)."""
+    if interpolation == "LINEAR" and kept.all():
+        return unit(rotations[frames, joints])
+    prev, nxt = _neighbours(kept)
+    prev, nxt = prev[frames, joints], nxt[frames, joints]
+    qa = rotations[prev, joints]
+    qb = qa if interpolation == "STEP" else rotations[nxt, joints]
+    return _between(qa, qb, frames, prev, nxt, interpolation)
+
+
+def _neighbours(kept: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(K, J) the kept key at or before, and at or after, each frame of each joint."""
+    K = kept.shape[0]
     k = np.arange(K)[:, None]
     prev = np.maximum.accumulate(np.where(kept, k, -1), axis=0)
     nxt = np.minimum.accumulate(np.where(kept, k, K)[::-1], axis=0)[::-1]
-    qa = np.take_along_axis(rotations, prev[..., None], axis=0)
+    return prev, nxt
+
+
+def _between(qa, qb, k, prev, nxt, interpolation: str) -> np.ndarray:
+    """Frame k's rotation between kept keys qa (at prev) and qb (at nxt): held, or slerped."""
     if interpolation == "STEP":
         return qa
-    qb = np.take_along_axis(rotations, nxt[..., None], axis=0)
     span = nxt - prev
     t = np.where(span > 0, (k - prev) / np.where(span > 0, span, 1), 0.0)
     return slerp(qa, qb, t)

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .asset import Skeleton
-from .clip import play_keys
+from .clip import play_at, play_keys
 from .lod_probes import Probes
 from .skeleton import depth_levels, pose_world, trs
 
@@ -78,11 +78,18 @@ class Playback:
         played with the same keys there: its poses are taken, not recomputed (a key at 2i
         between keys at 2p and 2n slerps by (i − p) / (n − p), to the bit)."""
         self.m, self.rot, self.kept, self.interp, self.dense_world = m, rot, kept, interpolation, dense_world
-        self.rec = play_keys(rot, kept, interpolation)
         if half is None:
+            self.rec = play_keys(rot, kept, interpolation)
             self.world = pose_world(m.skeleton, self.rec)
             self.err2 = corner_errors(self.world, dense_world, m.hom)
-        else:
+        else:  # the even frames' rotations too: the odd ones alone are slerped
+            K, J = kept.shape
+            self.rec = np.empty_like(rot)
+            self.rec[::2] = half.rec
+            odd = np.repeat(np.arange(1, K, 2), J)
+            self.rec[1::2] = play_at(rot, kept, odd, np.tile(np.arange(J), K // 2), interpolation).reshape(
+                K // 2, J, 4
+            )
             self.world = np.empty_like(dense_world)
             self.err2 = np.empty(rot.shape[:2])
             self.world[::2], self.err2[::2] = half.world, half.err2
@@ -98,11 +105,14 @@ class Playback:
         m = self.m
         K, J = self.err2.shape
         changed = np.unique(nj)
-        self.rec[:, changed] = play_keys(self.rot[:, changed], self.kept[:, changed], self.interp)
         span = np.zeros((K + 1, J), dtype=np.int32)
         np.add.at(span, (prev + 1, nj), 1)
         np.add.at(span, (nxt, nj), -1)
         mask = np.cumsum(span[:K], axis=0) > 0  # (K, J) pairs to redo
+        kk, col = np.nonzero(mask[:, changed])  # their own playback: only inside (prev, nxt)
+        self.rec[kk, changed[col]] = play_at(
+            self.rot[:, changed], self.kept[:, changed], kk, col, self.interp
+        )
         for level in m.levels[1:]:  # children follow parents
             mask[:, level] |= mask[:, m.parent[level]]
         rest_t = np.asarray(m.skeleton.rest_translation)
