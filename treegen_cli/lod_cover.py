@@ -133,14 +133,29 @@ def _segments(tree: Tree, px: float, radius_factor, sides: np.ndarray | None = N
     nm = n * m
     which = np.repeat(np.arange(seg.size), nm)
     k = np.arange(which.size) - np.repeat(np.cumsum(nm) - nm, nm)
-    along = (k // m[which] + 0.5) / n[which]
-    across = (k % m[which] + 0.5) / m[which] - 0.5
+    mw = m[which]
+    q, r = np.divmod(k, mw)
+    along = (q + 0.5) / n[which]
+    across = (r + 0.5) / mw - 0.5
     (u0, w0), (du, dw) = _project(p0), _project(d)  # per segment, then along it
-    off = across[None, :] * width[:, which]
-    u = u0[:, which] + along * du[:, which] - off * (aw / norm)[:, which]
-    w = w0[:, which] + along * dw[:, which] + off * (au / norm)[:, which]
+
+    def per_sample(x: np.ndarray) -> np.ndarray:  # (V, seg) → (V, P), a new array
+        return np.take(x, which, axis=1)
+
+    # u0 + along·du − off·(aw/norm), summed in place in that order (the same bits, fewer
+    # (V, P) temporaries: the stems' samples are most of the cover estimate's memory traffic)
+    off = per_sample(width)
+    off *= across
+    u, w = per_sample(u0), per_sample(w0)
+    for out, step, turn in ((u, du, -aw / norm), (w, dw, au / norm)):
+        t = per_sample(step)
+        t *= along
+        out += t
+        t = per_sample(turn)  # −aw/norm is −(aw/norm) exactly: u − off·(aw/norm), to the bit
+        t *= off
+        out += t
     seen = sin * width * length[None, :] / nm[None, :]
-    return u, w, seen[:, which], which
+    return u, w, per_sample(seen), which
 
 
 def polygon_widths(frames: np.ndarray, sides: np.ndarray, across: np.ndarray) -> np.ndarray:
@@ -261,12 +276,14 @@ def _opaque_blades(grid: Grid, cells: list[np.ndarray], seen: np.ndarray) -> np.
     for v, cell in enumerate(cells):
         L, S = cell.shape
         cell.sort(axis=1)  # (L, S): runs of one blade's samples in a cell
-        first = np.ones((L, S), dtype=bool)
-        np.not_equal(cell[:, 1:], cell[:, :-1], out=first[:, 1:])
+        flat = cell.reshape(-1)  # compared as one row (short rows cost per row), then each
+        first = np.empty(L * S, dtype=bool)  # blade's first sample starts a run
+        np.not_equal(flat[1:], flat[:-1], out=first[1:])
+        first[::S] = True
         at = np.flatnonzero(first)
         runs = np.diff(at, append=L * S)
         c = runs * seen[v][at // S] / a
-        out[v] = np.bincount(cell.reshape(-1)[at], weights=_effective(c, a), minlength=nu * nw)
+        out[v] = np.bincount(flat[at], weights=_effective(c, a), minlength=nu * nw)
     return out
 
 
