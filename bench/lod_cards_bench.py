@@ -126,6 +126,40 @@ def shelf_pack(w: np.ndarray, h: np.ndarray, side: int) -> tuple[np.ndarray, np.
     return X, Y, int(row_h.sum())
 
 
+def tiles(u, v, labels, C: int, texel: float):
+    """(lo_u, lo_v, columns, rows) of each of C cards' texel tiles: the bounds of its items'
+    corners (N, 4) `u`, `v` in its plane."""
+    lo_u, hi_u = np.full(C, np.inf), np.full(C, -np.inf)
+    lo_v, hi_v = np.full(C, np.inf), np.full(C, -np.inf)
+    np.minimum.at(lo_u, labels, u.min(1)), np.maximum.at(hi_u, labels, u.max(1))
+    np.minimum.at(lo_v, labels, v.min(1)), np.maximum.at(hi_v, labels, v.max(1))
+    tw = np.maximum(1, np.ceil((hi_u - lo_u) / texel)).astype(np.int64)
+    th = np.maximum(1, np.ceil((hi_v - lo_v) / texel)).astype(np.int64)
+    return lo_u, lo_v, tw, th
+
+
+def blade_texels(b, a, l, uu, vv, area, texel):  # noqa: E741
+    """(item, texel column, row, x, y) of every texel centre inside a blade, in card-plane
+    coordinates: each item's blade is b + x a + y l (x in [-1/2, 1/2], y in [0, 1]; each a
+    pair of (N,) arrays u, v), its corners' coordinates (N, 4) `uu`, `vv` bound the texels
+    tried; a blade seen edge-on in the plane (a degenerate map) gives none."""
+    (bu, bv), (au, av), (lu, lv) = b, a, l
+    i0, i1 = np.floor(uu.min(1) / texel).astype(np.int64), np.ceil(uu.max(1) / texel).astype(np.int64)
+    j0, j1 = np.floor(vv.min(1) / texel).astype(np.int64), np.ceil(vv.max(1) / texel).astype(np.int64)
+    det = au * lv - lu * av
+    ok = np.abs(det) > 1e-9 * (area + 1e-30)
+    ni, nj = (i1 - i0) * ok, (j1 - j0) * ok
+    n = ni * nj
+    q = np.repeat(np.arange(len(bu)), n)
+    k = np.arange(q.size) - np.repeat(np.cumsum(n) - n, n)
+    ti, tj = i0[q] + k // np.maximum(nj[q], 1), j0[q] + k % np.maximum(nj[q], 1)
+    pu, pv = (ti + 0.5) * texel - bu[q], (tj + 0.5) * texel - bv[q]
+    x = (lv[q] * pu - lu[q] * pv) / det[q]
+    y = (-av[q] * pu + au[q] * pv) / det[q]
+    inside = (np.abs(x) <= 0.5) & (y >= 0) & (y <= 1)
+    return q[inside], ti[inside], tj[inside], x[inside], y[inside]
+
+
 def cluster_cards(
     items: dict, labels: np.ndarray, leaf_img: np.ndarray, texel: float, seed: int, phi=None, planes: int = 2
 ):
@@ -151,12 +185,7 @@ def cluster_cards(
             - centre[labels][:, None]
         )
         u, v = np.einsum("nkj,nj->nk", rel, eu[labels]), rel[:, :, 2]
-        lo_u, hi_u = np.full(C, np.inf), np.full(C, -np.inf)
-        lo_v, hi_v = np.full(C, np.inf), np.full(C, -np.inf)
-        np.minimum.at(lo_u, labels, u.min(1)), np.maximum.at(hi_u, labels, u.max(1))
-        np.minimum.at(lo_v, labels, v.min(1)), np.maximum.at(hi_v, labels, v.max(1))
-        tw = np.maximum(1, np.ceil((hi_u - lo_u) / texel)).astype(np.int64)
-        th = np.maximum(1, np.ceil((hi_v - lo_v) / texel)).astype(np.int64)
+        lo_u, lo_v, tw, th = tiles(u, v, labels, C, texel)
         cards.append(dict(a=a, nrm=nrm, eu=eu, lo_u=lo_u, lo_v=lo_v, tw=tw, th=th, u=u, v=v))
     tw = np.concatenate([c["tw"] for c in cards]) + 2
     th = np.concatenate([c["th"] for c in cards]) + 2  # one clear texel round each tile
@@ -175,20 +204,7 @@ def cluster_cards(
         bu = np.einsum("ij,ij->i", b - centre[labels], eu) - c["lo_u"][labels]
         bv = b[:, 2] - centre[labels, 2] - c["lo_v"][labels]
         uu, vv = c["u"] - c["lo_u"][labels][:, None], c["v"] - c["lo_v"][labels][:, None]
-        i0, i1 = np.floor(uu.min(1) / texel).astype(np.int64), np.ceil(uu.max(1) / texel).astype(np.int64)
-        j0, j1 = np.floor(vv.min(1) / texel).astype(np.int64), np.ceil(vv.max(1) / texel).astype(np.int64)
-        det = au * lv - lu * av
-        ok = np.abs(det) > 1e-9 * (area + 1e-30)
-        ni, nj = (i1 - i0) * ok, (j1 - j0) * ok
-        n = ni * nj
-        q = np.repeat(np.arange(len(b)), n)
-        k = np.arange(q.size) - np.repeat(np.cumsum(n) - n, n)
-        ti, tj = i0[q] + k // np.maximum(nj[q], 1), j0[q] + k % np.maximum(nj[q], 1)
-        pu, pv = (ti + 0.5) * texel - bu[q], (tj + 0.5) * texel - bv[q]
-        x = (lv[q] * pu - lu[q] * pv) / det[q]
-        y = (-av[q] * pu + au[q] * pv) / det[q]
-        inside = (np.abs(x) <= 0.5) & (y >= 0) & (y <= 1)
-        q, ti, tj, x, y = q[inside], ti[inside], tj[inside], x[inside], y[inside]
+        q, ti, tj, x, y = blade_texels((bu, bv), (au, av), (lu, lv), uu, vv, area, texel)
         r = items["rect"][q]
         px = np.clip(((r[:, 0] + (x + 0.5) * (r[:, 2] - r[:, 0])) * W).astype(np.int64), 0, W - 1)
         py = np.clip(((r[:, 3] - y * (r[:, 3] - r[:, 1])) * H).astype(np.int64), 0, H - 1)

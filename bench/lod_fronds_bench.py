@@ -45,7 +45,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from lod_cards_bench import row, scores, shelf_pack  # noqa: E402
+from lod_cards_bench import blade_texels, row, scores, shelf_pack, tiles  # noqa: E402
 
 from treegen_cli.api import resolve  # noqa: E402
 from treegen_cli.asset import Material, Primitive, Texture  # noqa: E402
@@ -116,12 +116,7 @@ def planar_cards(tree, labels, leaf_img, rects, texel: float):
     eu, ev, nrm = vec[:, :, 2], vec[:, :, 1], vec[:, :, 0]
     u = np.einsum("lki,li->lk", rel, eu[labels])
     v = np.einsum("lki,li->lk", rel, ev[labels])
-    lo_u, hi_u = np.full(C, np.inf), np.full(C, -np.inf)
-    lo_v, hi_v = np.full(C, np.inf), np.full(C, -np.inf)
-    np.minimum.at(lo_u, labels, u.min(1)), np.maximum.at(hi_u, labels, u.max(1))
-    np.minimum.at(lo_v, labels, v.min(1)), np.maximum.at(hi_v, labels, v.max(1))
-    tw = np.maximum(1, np.ceil((hi_u - lo_u) / texel)).astype(np.int64)
-    th = np.maximum(1, np.ceil((hi_v - lo_v) / texel)).astype(np.int64)
+    lo_u, lo_v, tw, th = tiles(u, v, labels, C, texel)
     side = 2 ** math.ceil(math.log2(math.sqrt(1.2 * float(((tw + 2) * (th + 2)).sum()))))
     side = max(side, int(tw.max()) + 2)
     x0, y0, used = shelf_pack(tw + 2, th + 2, side)
@@ -137,20 +132,7 @@ def planar_cards(tree, labels, leaf_img, rects, texel: float):
     au, av = np.einsum("li,li->l", a, E_u), np.einsum("li,li->l", a, E_v)
     lu, lv = np.einsum("li,li->l", l, E_u), np.einsum("li,li->l", l, E_v)
     uu, vv = u - lo_u[labels][:, None], v - lo_v[labels][:, None]
-    i0, i1 = np.floor(uu.min(1) / texel).astype(np.int64), np.ceil(uu.max(1) / texel).astype(np.int64)
-    j0, j1 = np.floor(vv.min(1) / texel).astype(np.int64), np.ceil(vv.max(1) / texel).astype(np.int64)
-    det = au * lv - lu * av
-    ok = np.abs(det) > 1e-9 * (area + 1e-30)
-    ni, nj = (i1 - i0) * ok, (j1 - j0) * ok
-    n = ni * nj
-    q = np.repeat(np.arange(len(b)), n)
-    k = np.arange(q.size) - np.repeat(np.cumsum(n) - n, n)
-    ti, tj = i0[q] + k // np.maximum(nj[q], 1), j0[q] + k % np.maximum(nj[q], 1)
-    pu, pv = (ti + 0.5) * texel - bu[q], (tj + 0.5) * texel - bv[q]
-    x = (lv[q] * pu - lu[q] * pv) / det[q]
-    y = (-av[q] * pu + au[q] * pv) / det[q]
-    inside = (np.abs(x) <= 0.5) & (y >= 0) & (y <= 1)
-    q, ti, tj, x, y = q[inside], ti[inside], tj[inside], x[inside], y[inside]
+    q, ti, tj, x, y = blade_texels((bu, bv), (au, av), (lu, lv), uu, vv, area, texel)
     r = rects[q]
     px = np.clip(((r[:, 0] + (x + 0.5) * (r[:, 2] - r[:, 0])) * W).astype(np.int64), 0, W - 1)
     py = np.clip(((r[:, 3] - y * (r[:, 3] - r[:, 1])) * H).astype(np.int64), 0, H - 1)
