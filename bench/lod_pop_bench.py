@@ -114,6 +114,19 @@ mips sub-pixel blades sample (atlas mean alpha 0.88 × a card's; rendered with t
 forced the oak reads 1.015, the larch 1.048); the larch's needles (4.8 per node, 4.2 × 0.85 cm,
 at 8 cm pixels) overlap more than the estimator's Boolean model counts, even in cells of half
 a pixel (5.5 % → 5.3 %).
+
+Each kind keeps its own cover where dropped twigs outweigh the leaves (27 Nov 2026,
+lod_factors.STEM_STANDIN = 2: kept branches thicken, leaves grow for the leaves only): only the
+desert bush's LOD2 and LOD3 qualify among the bundled species (twigs 7.9 and 19 × the leaves'
+area), worst switch 0.856 → 0.881, cover −3.3 %. Applied to every LOD of every species
+(STEM_STANDIN = 0), the test's view, per switch IoU / cover, 2 → 0: the oak passes (0.899 →
+0.905 at switch 2, 0.902 → 0.913 at 3) but the larch's switch 3 falls 0.892 → 0.880, the
+palm's 0.859 → 0.836 and the rush's switch 1 covers 5.7 % short: kept at 2.
+Switching later does not close the gap either (measured before the rule above): screen
+fractions 0.4 / 0.2 / 0.08 instead of 0.5 / 0.25 / 0.1 (LOD0 drawn 25 % farther, ~1.6× the
+trees at LOD0 in a uniform forest) pass 8 of 15 (oak, larch, poplar join; the tamarack's switch 3 then covers +5.3 %), the palms
+(0.830, 0.836), shave grass (0.756), rush (0.872), desert bush (0.880) and cottonwood (0.890)
+still short.
 """
 
 from __future__ import annotations
