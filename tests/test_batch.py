@@ -321,6 +321,61 @@ def test_a_cluster_whose_worker_lacks_this_treegen_is_refused_before_anything_is
         worker.wait()
 
 
+def test_a_cluster_worker_on_another_openblas_kernel_is_refused(workspace, cluster):
+    """`dask worker` loads numpy before treegen can pin OpenBLAS's kernel (blas_kernel.py): a
+    worker on another kernel writes trees a float32 step apart (a fan palm's trunk key), so it
+    is refused before any job, with the variable that fixes it."""
+    worker = subprocess.Popen(
+        ["dask", "worker", cluster["address"], "--nthreads", "1", "--name", "sandy", "--host", "127.0.0.1"]
+        + ["--no-dashboard"],
+        env={**ENV, "OPENBLAS_CORETYPE": "Sandybridge"},
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    try:
+        from distributed import Client
+
+        with Client(cluster["address"], timeout="30s") as client:
+            client.wait_for_workers(len(client.scheduler_info()["workers"]) + 1, timeout=60)
+        out = workspace / "refused_kernel"
+        proc = treegen("batch", workspace / "catalogue.json", "-o", out, "--scheduler", cluster["address"])
+        assert proc.returncode == 2, proc.stderr
+        assert "runs OpenBLAS's Sandybridge kernel, this process Haswell" in proc.stderr, proc.stderr
+        assert "OPENBLAS_CORETYPE=Haswell dask worker" in proc.stderr
+        assert len(proc.stderr.strip().splitlines()) == 1 and not out.exists()
+    finally:
+        os.killpg(worker.pid, signal.SIGKILL)
+        worker.wait()
+
+
+@pytest.mark.parametrize(
+    "address, said",
+    [
+        ("notaurl", "not a scheduler address; give tcp://HOST:PORT"),
+        ("127.0.0.1", "not a scheduler address; give tcp://HOST:PORT"),
+        ("tcp://127.0.0.1:99999", "not a scheduler address"),
+        ("tcp://127.0.0.1:{free}", "cannot connect to a Dask scheduler"),
+    ],
+)
+def test_a_bad_scheduler_address_is_refused_in_one_line(workspace, tmp_path, address, said):
+    """A mistyped address, or one nothing listens at, is refused at once in one line naming
+    where it came from (Dask retried for 20 s and printed a traceback from Client.__del__)."""
+    import socket
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        free = sock.getsockname()[1]  # closed again: nothing listens there
+    address = address.format(free=free)
+    proc = treegen("batch", workspace / "catalogue.json", "-o", tmp_path / "o", "--scheduler", address)
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
+    assert proc.stderr.startswith(f"treegen: error: --scheduler {address}: {said}"), proc.stderr
+    env = {**ENV, "DASK_SCHEDULER_ADDRESS": address}
+    proc = treegen("batch", workspace / "catalogue.json", "-o", tmp_path / "o", env=env)
+    assert f"DASK_SCHEDULER_ADDRESS={address}: {said}" in proc.stderr and proc.returncode == 2, proc.stderr
+    assert not (tmp_path / "o").exists()
+
+
 # ----------------------------------------------------------------------------- embedded cluster
 
 

@@ -32,9 +32,9 @@ import threading
 import time
 from collections.abc import Callable
 
+from .cluster_check import SCHEDULER_ENV, address_label, check_workers, reachable
 from .errors import TreegenError
 
-SCHEDULER_ENV = "DASK_SCHEDULER_ADDRESS"
 TRIM = "MALLOC_TRIM_THRESHOLD_"
 _tuned = False
 
@@ -127,16 +127,18 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
     from distributed import Client
 
     if address:
+        label = address_label(scheduler, address)
+        reachable(address, label)  # a mistyped address: at once, not after Dask's timeouts
         try:
             client = Client(address, timeout="10s", set_as_default=False)
         except (OSError, TimeoutError, ValueError) as e:
             raise TreegenError(
-                f"--scheduler {address}: cannot connect to a Dask scheduler "
+                f"{label}: cannot connect to a Dask scheduler "
                 f"({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}); "
                 "start one with `dask scheduler`"
             ) from None
         try:
-            n = check_workers(client, address)
+            n = check_workers(client, address, label)
             yield client, f"{n} worker(s) at {address}"
         finally:
             client.close()
@@ -292,47 +294,6 @@ def _died_as_error(workers: int):
 
 def _as_is(x):
     return x
-
-
-def treegen_version() -> str:
-    """Run on each worker by check_workers (by reference: it fails where treegen_cli is
-    not importable, which is the point)."""
-    from .build_id import build_id
-
-    return build_id()
-
-
-def check_workers(client, address: str, wait_s: float = 30.0) -> int:
-    """Refuse a cluster whose workers cannot run our jobs, before any is sent: no worker
-    (after `wait_s`), a worker without treegen_cli, or one with another treegen version
-    (whose bytes could differ from `treegen make` here): same version and same package files
-    (build_id). Returns the number of workers."""
-    from . import __version__
-    from .build_id import build_id
-
-    here = build_id()
-
-    try:
-        client.wait_for_workers(1, timeout=wait_s)
-    except TimeoutError:
-        raise TreegenError(
-            f"--scheduler {address}: no worker joined within {wait_s:g} s; start "
-            f"some with `dask worker {address}`"
-        ) from None
-    found = client.run(treegen_version, on_error="return")
-    for worker, v in sorted(found.items()):
-        if isinstance(v, BaseException):
-            raise TreegenError(
-                f"--scheduler {address}: worker {worker} cannot run treegen "
-                f"({type(v).__name__}: {v}); install treegen {__version__} "
-                "on every worker"
-            ) from None
-        if v != here:
-            raise TreegenError(
-                f"--scheduler {address}: worker {worker} has treegen {v}, this "
-                f"is {here}; install the same version (the same files) on every worker"
-            )
-    return len(found)
 
 
 def worker_name() -> str:
