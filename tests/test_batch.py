@@ -462,16 +462,19 @@ def journaled(out: Path) -> set[str]:
     return paths
 
 
-def test_ctrl_c_keeps_what_landed_and_leaves_no_partial_files_or_empty_folders(workspace):
+@pytest.mark.parametrize("stop", ["ctrl-c", "sigterm"])
+def test_ctrl_c_keeps_what_landed_and_leaves_no_partial_files_or_empty_folders(workspace, stop):
     """Ctrl-C while an aspen's .usdc is being written, its .glb already in place: the task
     never returns, yet the .glb (journaled by its worker as it landed) is recorded as built
     and skipped by the rerun. The rush, last in line, writes into `later/`: that folder
-    exists only if one of its jobs ran. No staging folder, journal or partial file is left."""
+    exists only if one of its jobs ran. No staging folder, journal or partial file is left.
+    A SIGTERM to the batch process alone (a farm stopping the job) ends the same way, exit
+    143 (it was killed at once: staging folders, no manifest, leaked semaphores)."""
     cat = json.loads(json.dumps(CATALOGUE))
     cat["entries"][2]["name"] = "later/{species}_{seed}.{ext}"
     catalogue = workspace / "interrupt.json"
     catalogue.write_text(json.dumps(cat))
-    out = workspace / "interrupted"
+    out = workspace / f"interrupted_{stop}"
     args = [sys.executable, "-m", "treegen_cli", "batch", catalogue, "-o", out, "--workers", "1", "--json"]
     proc = subprocess.Popen(
         args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV, start_new_session=True
@@ -490,14 +493,19 @@ def test_ctrl_c_keeps_what_landed_and_leaves_no_partial_files_or_empty_folders(w
         time.sleep(0.005)
         landed = journaled(out)
     first = half_written(landed)[0]
-    os.killpg(proc.pid, signal.SIGINT)  # the terminal sends Ctrl-C to the whole group
+    if stop == "ctrl-c":
+        os.killpg(proc.pid, signal.SIGINT)  # the terminal sends Ctrl-C to the whole group
+    else:
+        os.kill(proc.pid, signal.SIGTERM)  # `kill PID`: the batch process alone
     stdout, err = proc.communicate(timeout=120)
-    assert proc.returncode == 130, err
-    assert "Traceback" not in err and "treegen: interrupted:" in err and "rerun" in err, err
+    word = "interrupted" if stop == "ctrl-c" else "terminated"
+    assert proc.returncode == (130 if stop == "ctrl-c" else 143), err
+    assert "Traceback" not in err and f"treegen: {word}:" in err and "rerun" in err, err
+    assert "leaked" not in err, err
     manifest = json.loads((out / "manifest.json").read_text())
     built = {r["path"]: r for r in manifest["assets"] if r["status"] == "built"}
     assert first in built and 1 <= len(built) < 12 and manifest["built"] == len(built)
-    assert f"interrupted: {len(built)} built" in err, err
+    assert f"{word}: {len(built)} built" in err, err
     assert sorted(e["path"] for e in events(stdout) if e["event"] == "built") == sorted(built)
     pending = {r["path"] for r in manifest["assets"] if r["status"] == "pending"}
     assert pending == {r["path"] for r in manifest["assets"]} - set(built)

@@ -5,7 +5,9 @@ stderr and exit 2.
 
 from __future__ import annotations
 
+import signal
 import sys
+import threading
 
 import click
 
@@ -17,7 +19,7 @@ from .commands.make import make
 from .commands.preview import preview
 from .commands.species import species
 from .commands.usage import usage_line
-from .errors import TreegenError
+from .errors import Terminated, TreegenError, raise_terminated
 from .progress import add_output_options
 
 
@@ -34,6 +36,8 @@ for command in (info, make, forest, batch, preview, species):
 def main(argv: list[str] | None = None) -> None:
     """Entry point: run the CLI, turning user errors into one line and exit code 2."""
     add_output_options(cli)  # -q/--quiet, -v/--verbose on every registered command
+    if threading.current_thread() is threading.main_thread():  # (tests call main in threads)
+        signal.signal(signal.SIGTERM, raise_terminated)  # SIGTERM cleans up as Ctrl-C does
     try:
         cli.main(args=argv, prog_name="treegen", standalone_mode=False)
     except TreegenError as e:
@@ -47,7 +51,10 @@ def main(argv: list[str] | None = None) -> None:
         command = args[0] if args and args[0] in cli.commands else None
         click.echo(f"treegen: error: {usage_line(e, command)}", err=True)
         sys.exit(2)
-    except click.exceptions.Abort:
+    except click.exceptions.Abort as e:
+        if isinstance(e.__cause__, Terminated):
+            click.echo("treegen: terminated", err=True)
+            sys.exit(143)
         click.echo("treegen: aborted", err=True)
         sys.exit(130)
     except click.ClickException as e:

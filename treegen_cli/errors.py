@@ -49,3 +49,13 @@ class OptionError(TreegenError):
     def worded(self, label: str) -> str:
         value = f"{self.value:g}" if isinstance(self.value, float) else str(self.value)
         return f"{label} {value}: {self.rule}"
+
+
+class Terminated(KeyboardInterrupt):
+    """A SIGTERM (a farm or CI stopping the job), raised where the run is, as a Ctrl-C is, so
+    the same cleanups run: staging folders removed, a batch's manifest written, the cluster
+    closed. The CLI then exits 143 (128 + SIGTERM) where a Ctrl-C exits 130."""
+
+
+def raise_terminated(signum, frame) -> None:
+    raise Terminated()

@@ -27,7 +27,7 @@ from ..batch import (
     schema_text,
     unlisted_files,
 )
-from ..errors import TreegenError
+from ..errors import Terminated, TreegenError
 from ..executor import default_workers, scheduler_address
 from ..progress import current_reporter
 from . import flags
@@ -242,15 +242,16 @@ def _run(cat, plan, out_dir, workers, scheduler, as_json) -> None:
 
         try:
             totals = run_jobs(cat, plan, out_dir, scheduler=scheduler, workers=workers, on_event=on_event)
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as e:  # Ctrl-C, or a SIGTERM (errors.Terminated)
             # run_jobs has closed the cluster, removed staging folders and written the manifest
+            term = isinstance(e, Terminated)
             click.echo(
-                f"treegen: interrupted: {counts['built']} built, {counts['failed']} "
-                f"failed, {len(plan.build) - counts['built'] - counts['failed']} not "
-                f"done; rerun the same command to finish",
+                f"treegen: {'terminated' if term else 'interrupted'}: {counts['built']} built, "
+                f"{counts['failed']} failed, {len(plan.build) - counts['built'] - counts['failed']} "
+                "not done; rerun the same command to finish",
                 err=True,
             )
-            sys.exit(130)
+            sys.exit(143 if term else 130)
     manifest = Path(out_dir) / "manifest.json"
     if as_json:
         click.echo(json.dumps({"event": "done", **totals, "manifest": str(manifest)}))
