@@ -97,19 +97,41 @@ def _frames(options: WindOptions) -> tuple[int, np.ndarray]:
     return len(times) - 1, times
 
 
+def in_axes(basis: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Components (J, a, n) of vectors v (J, n, 3) along each joint's axes basis (J, 3, a):
+    np.einsum("jca,jkc->jak", basis, v) to the bit (see _summed), 10× faster on these shapes."""
+    return _summed(basis[:, c, :, None] * v[:, None, :, c] for c in range(basis.shape[1]))
+
+
+def from_axes(basis: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Vectors (J, n, 3) of components q (J, a, n) along the axes basis (J, 3, a):
+    np.einsum("jca,jak->jkc", basis, q) to the bit (see _summed)."""
+    return _summed(basis[:, None, :, a] * q[:, a, :, None] for a in range(basis.shape[2]))
+
+
+def _summed(terms) -> np.ndarray:
+    """0.0 + t0 + t1 + …, left to right: einsum's sum of products in its own order, from zero
+    as it starts (so −0.0 products sum to +0.0 alike), without its slow strided loop over
+    many small per-joint products (checked bit for bit on five species' makes)."""
+    out = 0.0
+    for t in terms:
+        out = out + t
+    return out  # type: ignore[return-value]
+
+
 def steady_state(dyn: Dynamics, torque: np.ndarray, duration: float) -> np.ndarray:
     """Periodic steady-state angles (J, n, 3) under periodic torques (J, n, 3), exactly: per rFFT
     harmonic ω and mode m, q̂ = φ_mᵀQ̂ / (ω_m² − ω² + 2iζω_mω); θ = Σ φ_m q_m. No spin-up, no
     transient: the result loops with continuous derivatives."""
     n_j, n = torque.shape[:2]
-    Q = np.einsum("jca,jkc->jak", dyn.basis, torque).reshape(2 * n_j, n)  # (2J, n)
+    Q = in_axes(dyn.basis, torque).reshape(2 * n_j, n)  # (2J, n)
     spectrum = np.fft.rfft(Q, axis=1)
     omega = 2.0 * np.pi * np.arange(spectrum.shape[1]) / duration
     wm = dyn.omega[:, None]
     h = 1.0 / (wm * wm - omega[None, :] ** 2 + 2j * dyn.damping[:, None] * wm * omega[None, :])
     q = (dyn.modes.T @ spectrum) * h
     theta = np.fft.irfft(dyn.modes @ q, n=n, axis=1).reshape(n_j, 2, n)
-    return np.einsum("jca,jak->jkc", dyn.basis, theta)
+    return from_axes(dyn.basis, theta)
 
 
 def bound_bends(theta: np.ndarray, parent: np.ndarray, options: WindOptions) -> np.ndarray:
@@ -208,7 +230,8 @@ def bake_wind(
 
         idx = np.flatnonzero(moving)
         world_rest = Rotation.from_matrix(np.asarray(skel.bind_world)[idx, :3, :3]).as_matrix()
-        local = np.einsum("jba,jkb->jka", world_rest, theta[idx])  # R_wᵀ θ
+        th = theta[idx]  # R_wᵀ θ: einsum("jba,jkb->jka", world_rest, th) to the bit
+        local = _summed(world_rest[:, None, b, :] * th[:, :, b, None] for b in range(3))
         half = 0.5 * np.linalg.norm(local, axis=2, keepdims=True)
         sinc = np.sinc(half / np.pi) * 0.5  # sin(h)/(2h)
         delta = np.concatenate([local * sinc, np.cos(half)], axis=2)  # (m, n, 4) xyzw

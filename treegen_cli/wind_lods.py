@@ -26,7 +26,7 @@ import numpy as np
 from .rig import Rig
 from .skeleton import depth_levels, joint_depth
 from .tree import Tree
-from .wind import one_blas_thread
+from .wind import from_axes, in_axes, one_blas_thread
 
 MAX_POINTS = 2000  # leaves (and as many nodes) sampled, at most: the fit needs shape, not all
 NEAR_POINTS = 50_000  # LOD0's leaves searched for a LOD leaf's nearest, at most
@@ -89,10 +89,10 @@ def lod_angles(
     A = (GtW @ G).toarray()
     B = (GtW @ H).toarray()
     lam = REGULARISE * max(float(np.trace(A)) / max(2 * J, 1), 1e-12)
-    own = np.einsum("jka,jnk->jan", E, _node_turns(theta0, rig0, rig, joint_node0))  # (J, 2, n)
+    own = in_axes(E, _node_turns(theta0, rig0, rig, joint_node0))  # (J, 2, n)
     rhs = B @ theta0.transpose(0, 2, 1).reshape(3 * J0, n) + lam * own.reshape(2 * J, n)
     a = cho_solve(cho_factor(A + lam * np.eye(2 * J)), rhs).reshape(J, 2, n)
-    return np.einsum("jka,jan->jnk", E, a)
+    return from_axes(E, a)
 
 
 def _across(E: np.ndarray):
