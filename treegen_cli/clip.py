@@ -36,13 +36,16 @@ def kept_mask(clip: Clip) -> np.ndarray:
     return kept
 
 
-def play_keys(rotations: np.ndarray, kept: np.ndarray, interpolation: str = "LINEAR") -> np.ndarray:
+def play_keys(
+    rotations: np.ndarray, kept: np.ndarray, interpolation: str = "LINEAR", rows: slice = slice(None)
+) -> np.ndarray:
     """Local rotations (K, J, 4) an engine plays from the kept keys `kept` (bool (K, J), rows 0
-    and K−1 all True): LINEAR slerps between a joint's neighbouring kept keys, STEP holds."""
+    and K−1 all True): LINEAR slerps between a joint's neighbouring kept keys, STEP holds.
+    `rows`: those frames only (the same values as the whole clip's rows)."""
     if interpolation == "LINEAR" and kept.all():  # every key: slerp(q, q, 0) is unit(q), to the bit
-        return unit(rotations)
-    k = np.arange(rotations.shape[0])[:, None]
-    prev, nxt = _neighbours(kept)
+        return unit(rotations[rows])
+    k = np.arange(rotations.shape[0])[rows, None]
+    prev, nxt = (x[rows] for x in _neighbours(kept))
     qa = np.take_along_axis(rotations, prev[..., None], axis=0)
     qb = qa if interpolation == "STEP" else np.take_along_axis(rotations, nxt[..., None], axis=0)
     return _between(qa, qb, k, prev, nxt, interpolation)

@@ -83,13 +83,9 @@ class Playback:
             self.world = pose_world(m.skeleton, self.rec)
             self.err2 = corner_errors(self.world, dense_world, m.hom)
         else:  # the even frames' rotations too: the odd ones alone are slerped
-            K, J = kept.shape
             self.rec = np.empty_like(rot)
             self.rec[::2] = half.rec
-            odd = np.repeat(np.arange(1, K, 2), J)
-            self.rec[1::2] = play_at(rot, kept, odd, np.tile(np.arange(J), K // 2), interpolation).reshape(
-                K // 2, J, 4
-            )
+            self.rec[1::2] = play_keys(rot, kept, interpolation, rows=slice(1, None, 2))
             self.world = np.empty_like(dense_world)
             self.err2 = np.empty(rot.shape[:2])
             self.world[::2], self.err2[::2] = half.world, half.err2
@@ -115,18 +111,20 @@ class Playback:
         )
         for level in m.levels[1:]:  # children follow parents
             mask[:, level] |= mask[:, m.parent[level]]
-        rest_t = np.asarray(m.skeleton.rest_translation)
+        kk, jj = np.nonzero(mask)  # every pair's local matrix in one call, composed by level
+        local = trs(np.asarray(m.skeleton.rest_translation)[jj], self.rec[kk, jj])
+        slot = np.empty((K, J), dtype=np.int64)
+        slot[kk, jj] = np.arange(kk.size)
         for level in m.levels:
-            kk, col = np.nonzero(mask[:, level])
-            if not kk.size:
+            lk, col = np.nonzero(mask[:, level])
+            if not lk.size:
                 continue
             j = level[col]
-            local = trs(rest_t[j], self.rec[kk, j])
+            here = local[slot[lk, j]]
             p = m.parent[j]
             root = p < 0
-            self.world[kk[root], j[root]] = local[root]
-            self.world[kk[~root], j[~root]] = self.world[kk[~root], p[~root]] @ local[~root]
-        kk, jj = np.nonzero(mask)
+            self.world[lk[root], j[root]] = here[root]
+            self.world[lk[~root], j[~root]] = self.world[lk[~root], p[~root]] @ here[~root]
         diff = np.matmul((self.world[kk, jj] - self.dense_world[kk, jj])[:, :3, :], m.hom[jj])
         self.err2[kk, jj] = np.einsum("nac,nac->nc", diff, diff).max(axis=1)
         self.work += len(kk)
