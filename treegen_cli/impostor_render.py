@@ -301,12 +301,13 @@ class AtlasRenderer:
         self.ctx.release()
 
     def draw(self, scene: Drawable, cells=None) -> None:
-        """Clear and draw `scene`'s rest pose into every cell, or only `cells` [(col, row)]."""
-        ctx, c, radius = self.ctx, self.centre, self.radius
-        fbo = self.fbo
+        """Clear and draw `scene`'s rest pose into every cell, or only into `cells` [(col, row)],
+        clearing only those (for `covered`: a 2048² clear cost llvmpipe 5 ms, more than 2 cells)."""
+        ctx, c, radius, fbo = self.ctx, self.centre, self.radius, self.fbo
         fbo.use()
         ctx.viewport = (0, 0, self.size, self.size)
-        fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        for rect in [self._rect(col, row) for col, row in cells] if cells else [None]:
+            fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0, viewport=rect)  # None: the whole atlas
         ctx.enable(ctx.DEPTH_TEST)
         ctx.enable_direct(0x8DB9)  # GL_FRAMEBUFFER_SRGB: linear → sRGB
         ctx.disable(ctx.CULL_FACE)
@@ -377,16 +378,14 @@ class AtlasRenderer:
             out.append(np.frombuffer(data, np.uint8).reshape(self.size, self.size, 4)[::-1])
         return out[0], out[1]
 
+    def _rect(self, col: int, row: int) -> tuple[int, int, int, int]:
+        """Cell (col, row)'s GL viewport (x, y, w, h): GL rows count from the bottom."""
+        return (col * self.cell, self.size - (row + 1) * self.cell, self.cell, self.cell)
+
     def covered(self, cells) -> int:
         """Texels the last draw covered in `cells` [(col, row)] (alpha > 0)."""
-        n, cell = 0, self.cell
-        for col, row in cells:
-            y = self.size - (row + 1) * cell  # GL rows count from the bottom
-            data = self.fbo.read(
-                viewport=(col * cell, y, cell, cell), components=4, attachment=0, alignment=1
-            )
-            n += int(np.count_nonzero(np.frombuffer(data, np.uint8)[3::4]))
-        return n
+        reads = (self.fbo.read(viewport=self._rect(*rc), components=4, alignment=1) for rc in cells)
+        return sum(int(np.count_nonzero(np.frombuffer(data, np.uint8)[3::4])) for data in reads)
 
 
 def render_atlas(
