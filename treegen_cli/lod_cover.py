@@ -247,8 +247,10 @@ def _cell_index(grid: Grid, u: np.ndarray, w: np.ndarray) -> np.ndarray:
     """The flat cell index (u · nw + w, clipped to the grid) of samples at (u, w) in cells
     from the view's origin (overwritten)."""
     nu, nw = grid.shape
-    iu = np.clip(np.floor(u, out=u).astype(np.int64), 0, nu - 1)  # (NaN: the border cell)
-    iw = np.clip(np.floor(w, out=w).astype(np.int64), 0, nw - 1)
+    iu = np.floor(u, out=u).astype(np.int64)  # (NaN: the border cell)
+    np.clip(iu, 0, nu - 1, out=iu)  # in place: a sample count of int64s less to allocate
+    iw = np.floor(w, out=w).astype(np.int64)
+    np.clip(iw, 0, nw - 1, out=iw)
     iu *= nw
     iu += iw
     return iu
