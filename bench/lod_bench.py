@@ -22,6 +22,18 @@ cover estimator's faster binning, one BLAS thread in build_asset (idle OpenBLAS 
 the PNG on a second thread and the decimation reusing every other frame's poses. An in-process
 A/B of 18 makes each, alternating checkouts (load 0.5-1.6): 1.13-1.25 → 1.03-1.05 s wall
 (paired 0.85-0.90×), 1.43-1.56 → 1.14-1.17 CPU-s. Still above the issue's 1.0 s.
+
+Measured again 2026-11-27 (the same run, e8c7316 → a47705d alternating, eight runs each, the
+first four at 8d3cf63; a parallel render kept the load at 1.5-4): medians 1.13 → 1.03 s
+wall, 1.17 → 1.07 CPU-s, LOD stage 0.21 → 0.195 s (runs 1.05-1.26 → 0.94-1.18 s). Two warm
+processes alternating make by make (30 makes each): 1.15 → 1.00 s wall (paired median
+0.87×), 1.20 → 1.06 CPU-s (0.89×), LOD stage 0.215 → 0.190 s (0.89×); generate 0.29 →
+0.20 s, wind 0.23 → 0.21 s. From LOD0's cover measured once per grid, the stratified leaf
+order kept across LODs, in-place stem sampling, the playback check re-slerping only what a
+key changes, the wind's per-joint axis sums written out (not np.einsum) and calibration
+draws clearing only their cells. Left as they are, since any change moves output bits: the
+impostor's GL draw (about 0.2 s of llvmpipe) and the 512² eigensolve (about 50 ms with its
+triangular solves).
 """
 
 from __future__ import annotations
