@@ -87,6 +87,33 @@ def for_format(fmt: str, shape):
 # triangle (indices), and the share of that --compress keeps (README: ~60 %, ~a fifth)
 _VERTEX_BYTES, _TRIANGLE_BYTES = 48, 8
 _COMPRESSED = {"none": 1.0, "quantize": 0.6, "meshopt": 0.2}
+# the static formats' own (vertex, triangle) bytes: an OBJ's v/vt/vn lines and an `f a/a/a …`
+# line (a dry run read LOD0's 48 + 8 and was 2.3× low on the aspen, 11× under --profile web);
+# a PLY's float32 position and normal, and a uchar count + three int32 (measured to the byte)
+_STATIC_BYTES = {"obj": (77, 60), "ply": (24, 13)}
+# USD's meshes and keys against the glTF model: crate packs them tighter, text spells them out
+# (the aspen, textures aside: .usdc 7.7 MB, .usda 32.1 MB for the .glb's 12.4 MB)
+_USD_SCALE = {"usdc": 0.62, "usdz": 0.62, "usda": 2.6}
+# PNG bytes per texel: the leaf atlas and bark maps (N² + 2 (N/2)² texels; 0.67-0.95 measured),
+# the impostor's albedo + normal atlases (side² each pair; 0.49 for a sparse small tree to 1.46
+# for the aspen at --profile web: a full crown compresses less)
+_MATERIAL_PNG, _IMPOSTOR_PNG = 0.9, 0.9
+
+
+def _texture_bytes(fmt: str, options, impostor: bool) -> float:
+    """What a file's textures add: its materials' PNGs (none in a PLY, or without textures) and
+    the impostor atlases (the LOD formats only)."""
+    from ..impostor import atlas_side
+
+    if fmt == "ply" or not options.materials.textures:
+        return 0.0
+    n = options.materials.texture_size
+    size = _MATERIAL_PNG * 1.5 * n * n
+    if impostor and f".{fmt}" not in STATIC:
+        size += _IMPOSTOR_PNG * atlas_side(n, options.impostor) ** 2
+    return size
+
+
 # CPU seconds of a build beyond what plan_asset does (fitted on 7 builds, bench/estimate_bench.py):
 # per joint and frame of every LOD's clip (wind), the impostor, per MB written; and, with no
 # plan, per vertex of every LOD (growing, rigging, meshing, planning the LODs)
@@ -125,9 +152,13 @@ def estimate(
         if isinstance(shape, list):
             lods = len(shape)
             joints = sum(row["joints"] for row in shape)
-            size = _COMPRESSED[r.values["compress"]] * sum(
-                row["vertices"] * _VERTEX_BYTES + row["triangles"] * _TRIANGLE_BYTES for row in shape
-            ) + shape[0]["joints"] * frames * 16 * min(lods, 2)
+            per_v, per_t = _STATIC_BYTES.get(job.fmt, (_VERTEX_BYTES, _TRIANGLE_BYTES))
+            # --compress (a profile's too) encodes glTF only
+            packed = _COMPRESSED[r.values["compress"]] if job.fmt in ("glb", "gltf") else 1.0
+            size = _USD_SCALE.get(job.fmt, 1.0) * (
+                packed * sum(row["vertices"] * per_v + row["triangles"] * per_t for row in shape)
+                + shape[0]["joints"] * frames * 16 * min(lods, 2)
+            )
             grow = (seconds or {}).get(job.task, _S_VERTEX * sum(row["vertices"] for row in shape))
             how = "plan"
         else:
@@ -142,6 +173,7 @@ def estimate(
             grow = _S_VERTEX * verts
             how = "model"
         impostor = lods > 1 and r.options.impostor is not None
+        size += _texture_bytes(job.fmt, r.options, impostor)
         secs = grow + _S_JOINT_FRAME * joints * frames + _S_IMPOSTOR * impostor + _S_MB * size / 1e6
         out[job.output] = (size, secs, how)
     return out
