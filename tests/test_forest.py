@@ -1060,8 +1060,14 @@ def test_a_profile_budgets_every_prototype(tmp_path):
     write_layout(tmp_path, data)
     out = tmp_path / "f.glb"
     args = ["forest", str(tmp_path / "layout.json"), "-o", str(out), "--profile", "mobile", "--workers", "1"]
-    proc = CliRunner().invoke(cli, args)
+    from treegen_cli.progress import add_output_options
+
+    add_output_options(cli)  # (main() adds -q/-v to every command)
+    proc = CliRunner().invoke(cli, [*args, "-v"])
     assert proc.exit_code == 0, proc.output
+    # -v: a line per prototype and the forest's stages (it printed nothing more than without)
+    assert proc.output.count("  prototype rush seed 1: ") == 1, proc.output  # one (species, seed)
+    assert "triangles per LOD, 12 joints" in proc.output and "  write " in proc.output, proc.output
     gltf, _ = read_gltf(out)
     lod0 = next(m for m in gltf["meshes"] if m["name"].endswith("_LOD0"))
     tris = sum(gltf["accessors"][p["indices"]]["count"] // 3 for p in lod0["primitives"])

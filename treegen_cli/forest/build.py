@@ -341,4 +341,20 @@ def run_forest(
     t1 = time.perf_counter()
     written = export_forest(scene, output, gltf_options(layout, compress, error_px))
     scene.timings["write_s"] = time.perf_counter() - t1
+    _details(scene)
     return summary(scene, written, time.perf_counter() - t0, layout.camera is not None)
+
+
+def _details(scene: Forest) -> None:
+    """With -v: a line per prototype (triangles per LOD, joints) and the forest's stages."""
+    from ..progress import current_reporter
+
+    rep = current_reporter()
+    for a in scene.prototypes:
+        tris = " / ".join(f"{sum(len(p.indices) // 3 for p in lod.primitives):,}" for lod in a.lods)
+        rep.detail(
+            f"  prototype {a.extras.get('species', a.name)} seed {a.extras.get('seed', 0)}: "
+            f"{tris} triangles per LOD, {len(a.lods[0].skeleton.names)} joints"
+        )
+    for name in ("prototypes", "place", "write"):
+        rep.detail(f"  {name:<10}{scene.timings.get(name + '_s', 0.0):8.3f} s")
