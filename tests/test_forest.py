@@ -910,6 +910,9 @@ def test_gltf_instance_references_every_shared_lod_mesh_skin_and_clip(walk):
                 place.get("translation", [0, 0, 0]), [inst.position[0], inst.position[2], -inst.position[1]]
             )
             assert driven & set(joints) or k == n_lods[inst.prototype] - 1
+            # a tree's switches scale with it: the same size on screen (the palm at 1.5 ×)
+            d = sc.prototypes[inst.prototype].lods[k].distance * inst.scale
+            assert nodes[n]["extras"]["treegen_lod"]["distance_m"] == pytest.approx(d, rel=1e-12)
     # the project's reader follows the first tree's MSFT_lod chain: exactly its prototype's LODs
     first = sc.prototypes[sc.instances[0].prototype]
     for k, lod in enumerate(first.lods):

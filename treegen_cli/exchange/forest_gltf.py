@@ -196,7 +196,7 @@ def _build_forest(scene: Forest, options: GltfOptions = GLTF_DEFAULTS) -> tuple[
                     "name": f"{name}_LOD{k}",
                     "mesh": sh.mesh(inst.prototype, k),
                     "skin": len(skins),
-                    "extras": lod_extras(asset, k),
+                    "extras": lod_extras(asset, k, inst.scale),
                 }
             )
             nodes.append(place_node)

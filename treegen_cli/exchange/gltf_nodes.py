@@ -68,16 +68,17 @@ def set_msft_lod(node: dict, lower: list[int], lods: list) -> None:
     }
 
 
-def lod_extras(asset: Asset, k: int) -> dict:
+def lod_extras(asset: Asset, k: int, scale: float = 1.0) -> dict:
     """What an engine needs to switch LODs itself (Godot 4 visibility ranges, Unity LODGroup):
     this LOD's index, the distance from which it is used and the screen coverage below which
-    the next one takes over."""
+    the next one takes over. `scale`: a forest tree's; a tree 1.2× as tall switches 1.2× as
+    far, at the same size on screen (the screen coverage is a share of its own bounds)."""
     lod = asset.lods[k]
     return {
         "treegen_lod": {
             "index": int(asset.extras.get("lod_index", k)),
             "count": int(asset.extras.get("lod_count", len(asset.lods))),
-            "distance_m": float(lod.distance),
+            "distance_m": float(lod.distance) * float(scale),
             "screen_coverage": float(lod.screen_coverage),
         }
     }
