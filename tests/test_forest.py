@@ -1335,3 +1335,12 @@ def test_layout_impostor_distance_places_every_prototypes_impostor(tmp_path):
         r"used from 60 m.* \(on \S*poplar\S*\)$",
     ):  # the layout's file and key, the tree it failed on (it was the species file's name)
         build_scene(layout, workers=1, progress=False)
+
+
+def test_a_layout_saved_with_a_byte_order_mark_reads_as_without(tmp_path):
+    """Some Windows editors save UTF-8 with a byte-order mark; json refused it ("Unexpected
+    UTF-8 BOM"). Layouts and catalogues (one reader) skip it."""
+    plain = write_layout(tmp_path, layout_dict(), "plain.json")
+    marked = tmp_path / "marked.json"
+    marked.write_bytes(b"\xef\xbb\xbf" + plain.read_bytes())
+    assert load_layout(marked).placements == load_layout(plain).placements

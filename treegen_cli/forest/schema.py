@@ -75,7 +75,7 @@ def read_json_file(path: Path, kind: str):
     the file (and line and column for bad JSON). NaN/Infinity literals decode to NaN, which the
     schema's finite-number check then reports at its JSON path."""
     try:
-        text = path.read_text("utf-8")
+        text = path.read_text("utf-8-sig")  # a byte-order mark (Windows editors) is skipped
     except FileNotFoundError:
         raise TreegenError(f"{path}: no such {kind} file") from None
     except IsADirectoryError:
