@@ -668,6 +668,11 @@ def test_a_file_where_an_output_folder_goes_is_refused_before_anything_runs(work
             },
             ["defaults.lod_files: has no effect on entries[0].formats[0]"],
         ),
+        # as make refuses --duration for x.obj: an entry whose every format is static
+        (
+            {"entries": [{"species": "species/rush.txt", "formats": ["obj", "ply"], "duration": 2}]},
+            ['entries[0].duration: has no effect, entries[0].formats ["obj", "ply"] holds no wind'],
+        ),
     ],
 )
 def test_catalogue_errors_name_the_json_path_exit_2_and_write_nothing(workspace, change, needles):

@@ -69,9 +69,18 @@ def check_formats(options: dict, formats: list, label: Callable[[str], str], whe
     """Refuse, for a catalogue entry written as `formats` (its JSON path `where`), an option
     typed in it that one of those formats cannot take: `compress` on a non-glTF format (a
     profile's is for glTF only, and dropped there), `lod_files` on a static one, which holds
-    LOD0 alone (make refuses both; a batch must not write what make would not)."""
+    LOD0 alone, a wind or LOD option where every format is static (make refuses them all; a
+    batch must not write what make would not)."""
     import json
 
+    if formats and all(static_format(f"x.{f}") for f in formats):  # as make refuses for x.obj
+        typed = [k for k in (*WIND_ONLY, *LOD_ONLY) if options.get(k) not in (None, False)]
+        typed = [k for k in typed if not label(k).startswith("defaults.")]  # (those serve others)
+        if typed:
+            raise TreegenError(
+                f"{label(typed[0])}: has no effect, {where} {json.dumps(formats)} holds no wind or "
+                "LODs (static formats); leave it out"
+            )
     for k, f in enumerate(formats):
         if options.get("compress") not in (None, "none") and f not in ("glb", "gltf"):
             raise TreegenError(
