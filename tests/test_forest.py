@@ -583,6 +583,16 @@ def test_oversized_forest_is_refused_naming_the_flag(tmp_path):
     assert proc.returncode == 2, proc.stderr
     assert "--max-trees" in proc.stderr and "scatter[0]" in proc.stderr
     assert "Traceback" not in proc.stderr and not out.exists()
+    # the limit named is the one typed, the count as given, the instances before counted
+    layout["instances"] = [{"species": str(species), "position": [0, 0]}] * 3
+    layout["scatter"][0]["count"] = 10
+    path.write_text(_json.dumps(layout))
+    proc = subprocess.run(
+        [sys.executable, "-m", "treegen_cli", "forest", str(path), "-o", str(out), "--max-trees", "5"],
+        capture_output=True,
+        text=True,
+    )
+    assert "scatter[0]: 10 trees (count) and 3 placed before, over the limit of 5 trees" in proc.stderr
 
 
 # ----------------------------------------------------------------------------- on Dask

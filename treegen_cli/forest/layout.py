@@ -125,7 +125,7 @@ def parse_layout(data, path: Path, max_trees: int = MAX_TREES) -> Layout:
         )
     for s, sc in enumerate(data.get("scatter", [])):
         placements.extend(
-            _scatter_placements(sc, f"scatter[{s}]", base, defaults, checked, max_trees - len(placements))
+            _scatter_placements(sc, f"scatter[{s}]", base, defaults, checked, max_trees, len(placements))
         )
         if len(placements) > max_trees:
             raise TreegenError(
@@ -151,7 +151,13 @@ def parse_layout(data, path: Path, max_trees: int = MAX_TREES) -> Layout:
 
 
 def _scatter_placements(
-    sc: dict, where: str, base: Path, defaults: Defaults, checked: dict, max_trees: int = MAX_TREES
+    sc: dict,
+    where: str,
+    base: Path,
+    defaults: Defaults,
+    checked: dict,
+    max_trees: int = MAX_TREES,
+    placed: int = 0,
 ) -> list[Placement]:
     if ("rectangle" in sc) == ("polygon" in sc):
         raise TreegenError(f"{where}: give exactly one of 'rectangle' or 'polygon'")
@@ -195,10 +201,11 @@ def _scatter_placements(
             f"{where}.count: {count:,} trees on {area:,.4g} m² is {count / area:,.4g} per m²; "
             f"allowed at most {MAX_DENSITY:g} per m² (as 'density'): scatter them over more ground"
         )
-    if count > max_trees:
+    if count + placed > max_trees:  # (`placed`: the trees the layout places before these)
+        before = f" and {placed:,} placed before" if placed else ""
         raise TreegenError(
-            f"{where}: {count:,.0f} trees (density × area), over the limit of "
-            f"{max(max_trees, 0):,}; raise it with --max-trees N"
+            f"{where}: {count:,.0f} trees ({'count' if 'count' in sc else 'density × area'}){before}, "
+            f"over the limit of {max_trees:,} trees; raise it with --max-trees N"
         )
     count = int(round(count))
     seed = int(sc.get("seed", defaults.seed))
