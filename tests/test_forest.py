@@ -1354,3 +1354,23 @@ def test_a_layout_saved_with_a_byte_order_mark_reads_as_without(tmp_path):
     marked = tmp_path / "marked.json"
     marked.write_bytes(b"\xef\xbb\xbf" + plain.read_bytes())
     assert load_layout(marked).placements == load_layout(plain).placements
+
+
+def test_a_species_refused_while_building_is_named_by_layout_and_json_path(tmp_path):
+    """A species file's own error found only when its prototype is built (an implausible
+    Scale, a budget it cannot come down to) names the layout and the JSON path that names the
+    file, not the species file alone."""
+    import subprocess
+    import sys
+
+    big = tmp_path / "bigpalm.txt"
+    big.write_text((SPECIES / "palm.txt").read_text().replace("\nScale          12.0", "\nScale 900"))
+    layout = write_layout(tmp_path, {"instances": [{"species": "bigpalm.txt", "position": [0, 0]}]})
+    out = tmp_path / "f.glb"
+    main = "import sys; from treegen_cli.cli import main; main(sys.argv[1:])"
+    proc = subprocess.run(
+        [sys.executable, "-c", main, "forest", str(layout), "-o", str(out)], capture_output=True, text=True
+    )
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
+    assert proc.stderr.startswith(f"treegen: error: {layout}: instances[0].species: {big}:"), proc.stderr
+    assert "Scale = 900" in proc.stderr and not out.exists()

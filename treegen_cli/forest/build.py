@@ -226,9 +226,13 @@ def build_scene(
         prototypes = build_prototypes(keys, options, workers, progress, layout.params, scheduler, report)
     except TreegenError as e:  # a layout key refused on one tree: the layout's error, tree named
         species, sep, rest = str(e).partition(": ")
-        if not sep or not rest.startswith(("defaults.", "instances[", "scatter[")):
+        if sep and rest.startswith(("defaults.", "instances[", "scatter[")):
+            raise TreegenError(f"{layout.path}: {rest} (on {species})") from None
+        # a species file's own error: also the layout and the JSON path that names the file
+        path = next((p for p in layout.named if str(e).startswith(str(p))), None)
+        if path is None:
             raise
-        raise TreegenError(f"{layout.path}: {rest} (on {species})") from None
+        raise TreegenError(f"{layout.path}: {layout.named[path]}: {e}") from None
     t1 = time.perf_counter()
     placements = layout.placements
     proto = np.array([index[(p.species, p.seed)] for p in placements], int)

@@ -52,6 +52,7 @@ class Layout:
     defaults: Defaults
     placements: list[Placement]
     params: dict = field(default_factory=dict)  # species file → its Params, parsed once
+    named: dict = field(default_factory=dict)  # species file → the JSON path first naming it
 
 
 def _xyz(v) -> tuple[float, float, float]:
@@ -68,11 +69,12 @@ def load_layout(path: str | os.PathLike, max_trees: int = MAX_TREES) -> Layout:
         raise TreegenError(f"{path}: {e}") from None
 
 
-def _species_file(base: Path, value: str, where: str, checked: dict) -> Path:
+def _species_file(base: Path, value: str, where: str, checked: dict, named: dict) -> Path:
     """The species file `value` names (a path relative to the layout wins, else a bundled
     name); parsed once per layout so a bad file is reported at the JSON path that names it
-    (before anything is built or written)."""
+    (before anything is built or written); `named`: file → the first JSON path naming it."""
     p = resolve_species(value, base, f"{where}: species file '{show_value(value)[1:-1]}'").resolve()
+    named.setdefault(p, where)  # a prototype's build error is reported at this JSON path
     if p not in checked:
         try:
             checked[p] = load_params(p)
@@ -110,12 +112,13 @@ def parse_layout(data, path: Path, max_trees: int = MAX_TREES) -> Layout:
 
     placements: list[Placement] = []
     checked: dict = {}
+    named: dict = {}
     for i, inst in enumerate(data.get("instances", [])):
         where = f"instances[{i}]"
         pos = [float(x) for x in inst["position"]] + [0.0] * (3 - len(inst["position"]))
         placements.append(
             Placement(
-                species=_species_file(base, inst["species"], f"{where}.species", checked),
+                species=_species_file(base, inst["species"], f"{where}.species", checked, named),
                 seed=int(inst.get("seed", defaults.seed)),
                 position=_xyz(pos),
                 rotation_deg=float(inst.get("rotation_deg", defaults.rotation_deg)),
@@ -125,7 +128,9 @@ def parse_layout(data, path: Path, max_trees: int = MAX_TREES) -> Layout:
         )
     for s, sc in enumerate(data.get("scatter", [])):
         placements.extend(
-            _scatter_placements(sc, f"scatter[{s}]", base, defaults, checked, max_trees, len(placements))
+            _scatter_placements(
+                sc, f"scatter[{s}]", base, defaults, checked, max_trees, len(placements), named
+            )
         )
         if len(placements) > max_trees:
             raise TreegenError(
@@ -147,6 +152,7 @@ def parse_layout(data, path: Path, max_trees: int = MAX_TREES) -> Layout:
         defaults=defaults,
         placements=placements,
         params=checked,
+        named=named,
     )
 
 
@@ -158,6 +164,7 @@ def _scatter_placements(
     checked: dict,
     max_trees: int = MAX_TREES,
     placed: int = 0,
+    named: dict | None = None,
 ) -> list[Placement]:
     if ("rectangle" in sc) == ("polygon" in sc):
         raise TreegenError(f"{where}: give exactly one of 'rectangle' or 'polygon'")
@@ -191,7 +198,7 @@ def _scatter_placements(
     if "scale" in sc and sc["scale"][0] <= 0:
         raise TreegenError(f"{where}.scale: scales must be > 0, got {sc['scale']}")
     files = [
-        _species_file(base, s["file"], f"{where}.species[{i}].file", checked)
+        _species_file(base, s["file"], f"{where}.species[{i}].file", checked, {} if named is None else named)
         for i, s in enumerate(sc["species"])
     ]
     weights = np.array([float(s.get("weight", 1.0)) for s in sc["species"]])
