@@ -1374,3 +1374,29 @@ def test_a_species_refused_while_building_is_named_by_layout_and_json_path(tmp_p
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
     assert proc.stderr.startswith(f"treegen: error: {layout}: instances[0].species: {big}:"), proc.stderr
     assert "Scale = 900" in proc.stderr and not out.exists()
+    # a file whose name starts with another's is not mistaken for it (a.txt, a.txt2)
+    (tmp_path / "a.txt").write_text((SPECIES / "palm.txt").read_text())
+    (tmp_path / "a.txt2").write_text(big.read_text())
+    two = [{"species": "a.txt", "position": [0, 0]}, {"species": "a.txt2", "position": [9, 0]}]
+    layout = write_layout(tmp_path, {"instances": two})
+    proc = subprocess.run(
+        [sys.executable, "-c", main, "forest", str(layout), "-o", str(out)], capture_output=True, text=True
+    )
+    assert f"{layout}: instances[1].species: {tmp_path / 'a.txt2'}:" in proc.stderr, proc.stderr
+
+
+def test_forest_workers_die_of_sigterm_not_of_the_clis_handler():
+    """The CLI raises errors.Terminated on SIGTERM; forked forest workers inherit that handler
+    and, terminated by their parent, printed a traceback or ran their next task. Their
+    initializer restores the default."""
+    import subprocess
+    import sys
+
+    code = (
+        "import signal; from treegen_cli.errors import raise_terminated; "
+        "signal.signal(signal.SIGTERM, raise_terminated); "
+        "from treegen_cli.executor import _worker_start; _worker_start(); "
+        "print(signal.getsignal(signal.SIGTERM) is signal.SIG_DFL, signal.getsignal(signal.SIGINT) is signal.SIG_IGN)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["True", "True"], out

@@ -213,8 +213,11 @@ def process_pool(workers: int):
 
 
 def _worker_start() -> None:
-    """In each worker: ignore SIGINT, and exit once the parent is gone (re-parented)."""
+    """In each worker: ignore SIGINT, die of SIGTERM (a fork inherits the CLI's handler, which
+    would raise in the worker: a traceback, or the next task run while the parent waits), and
+    exit once the parent is gone (re-parented)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     parent = os.getppid()
 
     def watch() -> None:

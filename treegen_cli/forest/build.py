@@ -229,7 +229,7 @@ def build_scene(
         if sep and rest.startswith(("defaults.", "instances[", "scatter[")):
             raise TreegenError(f"{layout.path}: {rest} (on {species})") from None
         # a species file's own error: also the layout and the JSON path that names the file
-        path = next((p for p in layout.named if str(e).startswith(str(p))), None)
+        path = next((p for p in layout.named if str(e).startswith(f"{p}:")), None)
         if path is None:
             raise
         raise TreegenError(f"{layout.path}: {layout.named[path]}: {e}") from None
