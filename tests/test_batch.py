@@ -349,6 +349,30 @@ def test_a_cluster_worker_on_another_openblas_kernel_is_refused(workspace, clust
         worker.wait()
 
 
+def test_worker_kernels_must_agree_and_match_this_process_on_x86():
+    """check_kernels: a worker without OpenBLAS, workers that disagree, or (this process on
+    x86-64 running OpenBLAS) a kernel other than this process's is refused with the variable
+    to set; a client without OpenBLAS (another architecture's laptop) needs only agreement."""
+    import platform
+
+    from treegen_cli.cluster_check import check_kernels
+    from treegen_cli.errors import TreegenError
+
+    def refused(kernels, here="Haswell"):
+        with pytest.raises(TreegenError) as e:
+            check_kernels(kernels, here, "tcp://h:8786", "--scheduler tcp://h:8786")
+        return str(e.value)
+
+    assert "worker w1 runs no OpenBLAS" in refused({"w1": "none", "w2": "Haswell"})
+    msg = refused({"w1": "Haswell", "w2": "SkylakeX"})
+    assert "worker w1 runs OpenBLAS's Haswell kernel, worker w2 SkylakeX" in msg
+    assert "OPENBLAS_CORETYPE=Haswell dask worker tcp://h:8786" in msg
+    check_kernels({"w1": "SkylakeX", "w2": "SkylakeX"}, "none", "a", "b")  # agree: accepted
+    if platform.machine().lower() in ("x86_64", "amd64"):
+        assert "this process Haswell" in refused({"w1": "SkylakeX"})
+    check_kernels({"w1": "Haswell", "w2": "Haswell"}, "Haswell", "a", "b")
+
+
 @pytest.mark.parametrize(
     "address, said",
     [
@@ -356,6 +380,7 @@ def test_a_cluster_worker_on_another_openblas_kernel_is_refused(workspace, clust
         ("127.0.0.1", "not a scheduler address; give tcp://HOST:PORT"),
         ("tcp://127.0.0.1:99999", "not a scheduler address"),
         ("tcp://127.0.0.1:{free}", "cannot connect to a Dask scheduler"),
+        ("tcp://127.0.0.1:{free}/", "not a scheduler address"),  # (Dask refuses the slash too)
     ],
 )
 def test_a_bad_scheduler_address_is_refused_in_one_line(workspace, tmp_path, address, said):
@@ -673,6 +698,14 @@ def test_a_file_where_an_output_folder_goes_is_refused_before_anything_runs(work
             {"entries": [{"species": "species/rush.txt", "formats": ["obj", "ply"], "duration": 2}]},
             ['entries[0].duration: has no effect, entries[0].formats ["obj", "ply"] holds no wind'],
         ),
+        (  # 0 is given (make refuses --wind-speed 0 for x.obj), and the rig is void there too
+            {"entries": [{"species": "species/rush.txt", "formats": ["obj"], "wind_speed": 0}]},
+            ["entries[0].wind_speed: has no effect"],
+        ),
+        (
+            {"entries": [{"species": "species/rush.txt", "formats": ["obj"], "joints": 6}]},
+            ['entries[0].joints: has no effect, entries[0].formats ["obj"] holds no wind, LODs or skin'],
+        ),
     ],
 )
 def test_catalogue_errors_name_the_json_path_exit_2_and_write_nothing(workspace, change, needles):
@@ -847,6 +880,21 @@ def test_dry_run_prints_the_table_and_an_estimate_and_writes_nothing(workspace):
     assert len(planned) == 10 and planned[-1].startswith("  planned 10/10: entries[2] seed 8")
 
 
+def test_estimated_textures_follow_the_atlas_the_build_makes():
+    """The dry run's PNG bytes: the material maps at the texture size, the impostor atlas as
+    resolved (an explicit --impostor-size, not twice the texture size), none in a PLY."""
+    from treegen_cli.api import resolve
+    from treegen_cli.batch.plan import _texture_bytes
+
+    small = resolve({"texture_size": 256}).options
+    big = resolve({"texture_size": 256, "impostor_size": 2048}).options
+    assert big.impostor.grid * big.impostor.cell == 2048
+    imp_small = _texture_bytes("glb", small, True) - _texture_bytes("glb", small, False)
+    imp_big = _texture_bytes("glb", big, True) - _texture_bytes("glb", big, False)
+    assert imp_big == pytest.approx(16 * imp_small)  # 2048² against 512²
+    assert _texture_bytes("ply", big, True) == 0 and _texture_bytes("obj", big, True) < imp_big
+
+
 def test_estimate_counts_the_planning_it_measured_and_the_budget_a_job_grows_to(tmp_path):
     """The dry run's seconds are the planning's own (measured, CPU) plus what the build adds
     (clip, impostor, bytes); without a plan (the run's ETA) a triangle budget caps the tree
@@ -917,7 +965,8 @@ def test_dry_run_plans_what_the_run_builds_with_budgets_and_profiles(workspace):
         for key in ("triangles", "joints", "lod_distances_m"):
             assert job[key] == row[key], (path, key)
         # sizes per format: an OBJ is text, USD text or crate, glTF maybe compressed; each with
-        # its textures (an OBJ was estimated 2-11x low, without them)
+        # its textures (an OBJ was estimated 2-11x low, without them); the impostor atlas's PNG
+        # bytes follow its crown's fill, which only rendering tells
         assert 0.7 <= row["bytes"] / job["estimated_bytes"] <= 1.4, (
             path,
             row["bytes"],

@@ -18,7 +18,7 @@ import socket
 from .errors import TreegenError
 
 SCHEDULER_ENV = "DASK_SCHEDULER_ADDRESS"
-_ADDRESS = re.compile(r"^(?:(?P<scheme>[a-z]+)://)?(?P<host>\[[^\]]+\]|[^:/\s]+):(?P<port>\d{1,5})/?$")
+_ADDRESS = re.compile(r"^(?:(?P<scheme>[a-z]+)://)?(?P<host>\[[^\]]+\]|[^:/\s]+):(?P<port>\d{1,5})$")
 
 
 def address_label(scheduler: str | None, address: str) -> str:
@@ -90,12 +90,39 @@ def check_workers(client, address: str, label: str = "", wait_s: float = 30.0) -
                 f"{label}: worker {worker} has treegen {v}, this is {here}; install the same "
                 "version (the same files) on every worker"
             )
-    kernel = blas_kernels()
-    for worker, k in sorted(client.run(blas_kernels, on_error="return").items()):
-        if k != kernel:
-            raise TreegenError(
-                f"{label}: worker {worker} runs OpenBLAS's {k} kernel, this process {kernel}: "
-                f"their trees would differ in the last bits; start the workers with "
-                f"`OPENBLAS_CORETYPE={kernel.split('/')[0]} dask worker {address} ...`"
-            )
+    check_kernels(client.run(blas_kernels, on_error="return"), blas_kernels(), address, label)
     return len(found)
+
+
+def check_kernels(kernels: dict, here: str, address: str, label: str) -> None:
+    """Refuse workers whose OpenBLAS kernels (`kernels`: worker → blas_kernels()) would give
+    other bits: a worker without OpenBLAS, workers that disagree, or (this process running
+    OpenBLAS on x86-64, as the workers do) a kernel other than `here`'s, so a batch's assets
+    are `treegen make`'s here. A client on another architecture (a laptop on ARM) only needs
+    its workers to agree."""
+    import platform
+
+    from .blas_kernel import KERNEL
+
+    pin = here.split("/")[0] if here != "none" else KERNEL
+    start = f"start every worker with `OPENBLAS_CORETYPE={pin} dask worker {address} ...`"
+    for worker, k in sorted(kernels.items()):
+        if isinstance(k, BaseException) or k == "none":
+            raise TreegenError(
+                f"{label}: worker {worker} runs no OpenBLAS (a numpy built on another BLAS): its "
+                "trees would differ in the last bits; install numpy's PyPI wheels there"
+            )
+    seen = sorted(set(kernels.values()))
+    if len(seen) > 1:
+        a, b = (next(w for w, k in sorted(kernels.items()) if k == x) for x in seen[:2])
+        raise TreegenError(
+            f"{label}: worker {a} runs OpenBLAS's {kernels[a]} kernel, worker {b} {kernels[b]}: "
+            f"their trees would differ in the last bits; {start}"
+        )
+    x86 = platform.machine().lower() in ("x86_64", "amd64")
+    if seen and here != "none" and x86 and seen[0] != here:
+        worker = sorted(kernels)[0]
+        raise TreegenError(
+            f"{label}: worker {worker} runs OpenBLAS's {seen[0]} kernel, this process {here}: "
+            f"their trees would differ in the last bits; {start}"
+        )

@@ -74,12 +74,13 @@ def check_formats(options: dict, formats: list, label: Callable[[str], str], whe
     import json
 
     if formats and all(static_format(f"x.{f}") for f in formats):  # as make refuses for x.obj
-        typed = [k for k in (*WIND_ONLY, *LOD_ONLY) if options.get(k) not in (None, False)]
+        typed = [k for k in (*WIND_ONLY, *LOD_ONLY, *SKIN_ONLY) if options.get(k) is not None]
+        typed = [k for k in typed if options[k] is not False]  # (0 counts as given, as in make)
         typed = [k for k in typed if not label(k).startswith("defaults.")]  # (those serve others)
         if typed:
             raise TreegenError(
-                f"{label(typed[0])}: has no effect, {where} {json.dumps(formats)} holds no wind or "
-                "LODs (static formats); leave it out"
+                f"{label(typed[0])}: has no effect, {where} {json.dumps(formats)} holds no wind, "
+                "LODs or skin (static formats); leave it out"
             )
     for k, f in enumerate(formats):
         if options.get("compress") not in (None, "none") and f not in ("glb", "gltf"):

@@ -103,14 +103,12 @@ _MATERIAL_PNG, _IMPOSTOR_PNG = 0.9, 0.9
 def _texture_bytes(fmt: str, options, impostor: bool) -> float:
     """What a file's textures add: its materials' PNGs (none in a PLY, or without textures) and
     the impostor atlases (the LOD formats only)."""
-    from ..impostor import atlas_side
-
     if fmt == "ply" or not options.materials.textures:
         return 0.0
     n = options.materials.texture_size
     size = _MATERIAL_PNG * 1.5 * n * n
-    if impostor and f".{fmt}" not in STATIC:
-        size += _IMPOSTOR_PNG * atlas_side(n, options.impostor) ** 2
+    if impostor and f".{fmt}" not in STATIC:  # the atlas as resolved (--impostor-size, or 2N)
+        size += _IMPOSTOR_PNG * (options.impostor.grid * options.impostor.cell) ** 2
     return size
 
 
