@@ -217,10 +217,13 @@ def test_the_cli_starts_without_scipys_slow_parts_and_limits_every_blas():
         "print(sorted(m for m in sys.modules if m.split('.')[0] in {'moderngl', 'pxr', 'dask'} "
         "or m.startswith(('scipy.spatial', 'scipy.ndimage')))); "
         "print(sorted({c.filepath.split('site-packages')[-1].split('/')[1] for c in _BLAS.lib_controllers}))"
+        "; from treegen_cli.wind import one_blas_thread; "
+        "print(one_blas_thread(lambda: sorted({c.num_threads for c in _BLAS.lib_controllers}))())"
     )
     out = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=PKG.parent
     )
-    loaded, blas = out.stdout.strip().splitlines()
+    loaded, blas, threads = out.stdout.strip().splitlines()
     assert loaded == "[]", loaded
     assert "scipy.libs" in blas and "numpy.libs" in blas, blas
+    assert threads == "[1]", threads  # both limited to one thread inside one_blas_thread

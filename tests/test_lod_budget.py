@@ -487,17 +487,30 @@ def test_lod_switches_keep_cover(species):
         assert pop.iou >= (iou or IOU_TARGET), (species, pop)
 
 
-def test_leaves_do_not_stand_in_for_twigs_that_outweigh_them():
+def test_leaves_do_not_stand_in_for_twigs_that_outweigh_them(monkeypatch):
     """The desert bush's far LODs drop twigs showing 8 to 19 times its leaves' area: its kept
     branches thicken to cover their share and its leaves grow for the leaves only
     (lod_factors.STEM_STANDIN), so the bush stays bark-coloured. Grown for the twigs too, the
     leaves drew 6 and 14 times LOD0's leaf area (green cards round a bare bush); LOD1, which
     drops less than twice the leaves' area in twigs, still grows its leaves for them."""
+    import treegen_cli.lod_budget as lod_budget
     from treegen_cli.pipeline import _leaf_area
 
     asset = _asset("desert_bush")
     share = [_leaf_area(lod) / _leaf_area(asset.lods[0]) for lod in asset.lods if lod.impostor is None]
     assert share[1] > 2.0 and max(share[2:]) < 1.5, share
+    radii = []  # each LOD's branch radius factor, as planned
+    real = lod_budget.cover_factors
+
+    def record(*args, **kwargs):
+        out = real(*args, **kwargs)
+        radii.append(out[1])
+        return out
+
+    monkeypatch.setattr(lod_budget, "cover_factors", record)
+    job = resolve(dict(no_wind=True, texture_size=128, impostor=False))
+    build_asset(load_params(species_path("desert_bush")), 0, job.options, tree=grown("desert_bush"))
+    assert radii[0] == 1.0 and min(radii[1:]) > 1.0, radii  # LOD1: leaves; LOD2, LOD3: branches
 
 
 def test_default_options_build_the_planned_tree():

@@ -105,7 +105,8 @@ def in_axes(basis: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 def from_axes(basis: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Vectors (J, n, 3) of components q (J, a, n) along the axes basis (J, 3, a):
-    np.einsum("jca,jak->jkc", basis, q) to the bit (see _summed)."""
+    np.einsum("jca,jak->jkc", basis, q) to the bit for the two bending axes used here (a = 2;
+    with three einsum may pair the terms otherwise, see _summed)."""
     return _summed(basis[:, None, :, a] * q[:, a, :, None] for a in range(basis.shape[2]))
 
 
