@@ -289,6 +289,33 @@ def test_trunks_under_a_pixel_coarsen_as_branches_do():
     assert tris[3] <= 1.25 * FRACTIONS[3] * tris[0], tris  # near its 5 % (was 17 %)
 
 
+def test_trunks_over_the_bark_budget_coarsen_whatever_their_width(monkeypatch):
+    """Arbaro's barley: 19 stalks a pixel wide or more at LOD1 and LOD2 took the whole budget
+    kept whole (LOD1 11,893 triangles for 7,277, LOD2 11,427 for 2,183), so every ear's awns
+    were dropped and its grains grown. Trunks whose bark alone exceeds the bark's share are
+    coarsened within the chord tolerance: LOD1 meets its budget and keeps branches (the awns)."""
+    from pathlib import Path
+
+    import treegen_cli.pipeline as pipeline
+
+    built = {}
+    real = pipeline.lod_tree
+
+    def record(tree, k, *args):
+        out = real(tree, k, *args)
+        built[k] = out[0]
+        return out
+
+    monkeypatch.setattr(pipeline, "lod_tree", record)
+    params = load_params(Path(__file__).parent / "fixtures" / "arbaro" / "barley.xml")
+    job = resolve(dict(no_wind=True, impostor=False, texture_size=128))
+    asset, tree = build_asset(params, 0, job.options)
+    tris = [sum(len(p.indices) // 3 for p in lod.primitives) for lod in asset.lods]
+    assert tris[1] <= FRACTIONS[1] * tris[0] and tris[2] <= 1.25 * FRACTIONS[2] * tris[0], tris
+    awns = int((tree.stem_level > 0).sum())
+    assert (built[1].stem_level > 0).sum() > 0.5 * awns, (int((built[1].stem_level > 0).sum()), awns)
+
+
 def test_more_distances_than_budgets_step_on_by_the_last_ratio():
     """Five distances and the default 0.5, 0.15, 0.05: LOD4 gets a third of LOD3's budget (the
     last value repeated made it a copy of LOD3, 4,176 triangles each on the aspen)."""

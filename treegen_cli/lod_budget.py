@@ -5,7 +5,9 @@ Each LOD is cut from LOD0's tree (lod_leaves.py), in this order:
   1. sides: the LOD table's sides per level, never more than LOD0's (`--sides 5,3` caps them),
      each stem widened to LOD0's mean width (mesh.girth, which lod_cover counts too);
   2. nodes: branch nodes within NODE_TOL_PX pixels of the chord between their neighbours are
-     dropped (lod_nodes.py): a far twig needs fewer rings, so more twigs fit the budget;
+     dropped (lod_nodes.py): a far twig needs fewer rings, so more twigs fit the budget; a
+     trunk's too where it is under THIN_TRUNK_PX wide, or the trunks alone exceed the bark's
+     share (a grass's stalks, which otherwise left no room for its ears);
   3. bark: stems kept thickest first (their ancestors always) while their bark, counted from the
      mesh's own ring and side formulas, fits the bark share of the budget — LOD0's share of bark
      in its triangles, so bark and leaves shrink together; a leafy tree keeps stems under
@@ -152,11 +154,13 @@ def plan_lod(
     # trunks keep their nodes, but a leafless tree's or one under a pixel wide at its base
     # (barley's 19 stalks, 2 mm: each kept ~99 rings, LOD3 at 78 % of LOD0's triangles)
     thin = 2.0 * tree.stem_radius < THIN_TRUNK_PX * px
+    share = bark0 / total0 if total0 else 1.0
+    if per_stem[tree.stem_level == 0].sum() > budget * share:  # trunks alone over the bark's
+        thin = np.ones_like(thin)  # share: coarsen them all (barley's 19 stalks at LOD1)
     coarse = coarsen_nodes(tree, NODE_TOL_PX * px, trunks=(not leaf0) | thin)
     if not leaf0:  # a leafless crown is its twigs: cones, three for the price of one
         coarse = point_tips(coarse)
     per_stem = bark_triangles(coarse, mesh)
-    share = bark0 / total0 if total0 else 1.0
     L = tree.n_leaves
     triangle = (
         triangle_cards
