@@ -314,10 +314,12 @@ def _opaque(grid: Grid, u: np.ndarray, w: np.ndarray, seen: np.ndarray, piece: n
     return out
 
 
-def tree_area(tree: Tree, grid: Grid, sides: np.ndarray | None = None) -> np.ndarray:
+def tree_area(
+    tree: Tree, grid: Grid, sides: np.ndarray | None = None, stems: np.ndarray | None = None
+) -> np.ndarray:
     """(V, cells) area of all of `tree` (blades as they are, stems drawn with `sides`) per
-    cell of `grid`."""
-    area = stem_area(tree, grid, sides=sides)
+    cell of `grid`; `stems`: its stem_area there, already measured."""
+    area = stem_area(tree, grid, sides=sides) if stems is None else stems
     if tree.n_leaves:
         area = area + Blades(tree, grid.px, 0.25).area(grid, 1.0)
     return area

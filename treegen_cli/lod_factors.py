@@ -39,27 +39,13 @@ def cover_factors(
     if full.n_leaves and not thin.n_leaves:
         return 1.0, 1.0  # the budget holds no leaf: nothing to grow, and no branch stands in
     grid = Grid.around(full, px)
-    target = tree_cover(full, grid, sides[0])
-    if (
-        thin.n_leaves
-        and full.n_leaves
-        and _lost_stems(full, thin) > STEM_STANDIN * _seen(full, True)[1].sum()
-    ):
+    if not (thin.n_leaves and full.n_leaves):  # leafless: the kept branches thicken
+        return 1.0, _thickening(thin, grid, sides, widen, tree_cover(full, grid, sides[0]), 0.5)
+    if _lost_stems(full, thin) > STEM_STANDIN * _seen(full, True)[1].sum():
         return _by_kind(full, thin, grid, px, sides, triangle, widen)
-    if thin.n_leaves and full.n_leaves:
-        drawn = triangle_share(int(thin.params.leaf_shape))[0] if triangle else 1.0
-        local = regional_factors(full, thin, REGION_PX * px, drawn)
-        stems = stem_area(thin, grid, sides=sides[1], girth=widen)
-        blades = Blades(thin, grid.px, LENGTH_SHARE, float(np.median(local)), triangle)
-        f = solve_factor(lambda f: grid.cover(stems + blades.area(grid, f * local)), target, 0.25, 4.0)
-        return f * local, 1.0
-    r = solve_factor(
-        lambda r: grid.cover(stem_area(thicken(thin, r), grid, sides=sides[1], girth=widen)),
-        target,
-        0.5,
-        32.0,
-    )
-    return 1.0, r
+    stems = stem_area(thin, grid, sides=sides[1], girth=widen)
+    target = tree_cover(full, grid, sides[0])
+    return _leaf_growth(full, thin, grid, px, stems, target, triangle, True), 1.0
 
 
 def _lost_stems(full: Tree, thin: Tree) -> float:
@@ -74,19 +60,30 @@ def _by_kind(full: Tree, thin: Tree, grid: Grid, px: float, sides, triangle: boo
     full_stems = stem_area(full, grid, sides=sides[0])
     r = 1.0
     if np.any(thin.stem_level > 0):
-        r = solve_factor(
-            lambda r: grid.cover(stem_area(thicken(thin, r), grid, sides=sides[1], girth=widen)),
-            grid.cover(full_stems),
-            1.0,
-            32.0,
-        )
+        r = _thickening(thin, grid, sides, widen, grid.cover(full_stems), 1.0)
     stems = stem_area(thicken(thin, r), grid, sides=sides[1], girth=widen)
-    target = grid.cover(stems + tree_area(full, grid, sides[0]) - full_stems)
+    target = grid.cover(stems + tree_area(full, grid, sides[0], full_stems) - full_stems)
+    return _leaf_growth(full, thin, grid, px, stems, target, triangle, False), r
+
+
+def _thickening(thin: Tree, grid: Grid, sides, widen, target: float, lo: float) -> float:
+    """The factor (in [lo, 32]) on `thin`'s branch radii at which its stems cover `target`."""
+    return solve_factor(
+        lambda r: grid.cover(stem_area(thicken(thin, r), grid, sides=sides[1], girth=widen)), target, lo, 32.0
+    )
+
+
+def _leaf_growth(
+    full: Tree, thin: Tree, grid: Grid, px: float, stems, target: float, triangle: bool, for_stems: bool
+):
+    """Per kept leaf, the area factor at which `thin`'s blades over `stems` cover `target`: the
+    regions' factors (regional_factors; `for_stems`: standing in for dropped twigs too) times
+    one solved factor."""
     drawn = triangle_share(int(thin.params.leaf_shape))[0] if triangle else 1.0
-    local = regional_factors(full, thin, REGION_PX * px, drawn, stems=False)
+    local = regional_factors(full, thin, REGION_PX * px, drawn, stems=for_stems)
     blades = Blades(thin, grid.px, LENGTH_SHARE, float(np.median(local)), triangle)
     f = solve_factor(lambda f: grid.cover(stems + blades.area(grid, f * local)), target, 0.25, 4.0)
-    return f * local, r
+    return f * local
 
 
 def thicken(tree: Tree, factor: float) -> Tree:
