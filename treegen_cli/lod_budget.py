@@ -151,13 +151,13 @@ def plan_lod(
     per_stem = bark_triangles(tree, mesh)
     if budget >= total0 and per_stem.sum() <= bark0:
         return LodPlan(tree, int(per_stem.sum()), leaf0, 1.0)
-    # trunks keep their nodes, but a leafless tree's or one under a pixel wide at its base
-    # (barley's 19 stalks, 2 mm: each kept ~99 rings, LOD3 at 78 % of LOD0's triangles)
+    # trunks keep their nodes, but a leafless tree's, one under a pixel wide at its base
+    # (barley's 19 stalks, 2 mm: each kept ~99 rings, LOD3 at 78 % of LOD0's triangles), or
+    # all of them when they alone exceed the bark's share (barley's stalks at LOD1 and LOD2)
     thin = 2.0 * tree.stem_radius < THIN_TRUNK_PX * px
     share = bark0 / total0 if total0 else 1.0
-    if per_stem[tree.stem_level == 0].sum() > budget * share:  # trunks alone over the bark's
-        thin = np.ones_like(thin)  # share: coarsen them all (barley's 19 stalks at LOD1)
-    coarse = coarsen_nodes(tree, NODE_TOL_PX * px, trunks=(not leaf0) | thin)
+    over = bool(per_stem[tree.stem_level == 0].sum() > budget * share)
+    coarse = coarsen_nodes(tree, NODE_TOL_PX * px, trunks=(not leaf0) | over | thin)
     if not leaf0:  # a leafless crown is its twigs: cones, three for the price of one
         coarse = point_tips(coarse)
     per_stem = bark_triangles(coarse, mesh)
