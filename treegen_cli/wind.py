@@ -231,8 +231,7 @@ def bake_wind(
 
         idx = np.flatnonzero(moving)
         world_rest = Rotation.from_matrix(np.asarray(skel.bind_world)[idx, :3, :3]).as_matrix()
-        th = theta[idx]  # R_wᵀ θ: einsum("jba,jkb->jka", world_rest, th) to the bit
-        local = _summed(world_rest[:, None, b, :] * th[:, :, b, None] for b in range(3))
+        local = in_axes(world_rest, theta[idx]).transpose(0, 2, 1)  # R_wᵀ θ (m, n, 3)
         half = 0.5 * np.linalg.norm(local, axis=2, keepdims=True)
         sinc = np.sinc(half / np.pi) * 0.5  # sin(h)/(2h)
         delta = np.concatenate([local * sinc, np.cos(half)], axis=2)  # (m, n, 4) xyzw
