@@ -127,16 +127,11 @@ def parse_layout(data, path: Path, max_trees: int = MAX_TREES) -> Layout:
             )
         )
     for s, sc in enumerate(data.get("scatter", [])):
-        placements.extend(
+        placements.extend(  # (a scatter over the limit with the trees before it is refused)
             _scatter_placements(
-                sc, f"scatter[{s}]", base, defaults, checked, max_trees, len(placements), named
+                sc, f"scatter[{s}]", base, defaults, checked, named, max_trees, len(placements)
             )
         )
-        if len(placements) > max_trees:
-            raise TreegenError(
-                f"scatter[{s}]: the layout places {len(placements):,} trees, over "
-                f"the limit of {max_trees:,}; raise it with --max-trees N"
-            )
     if len(placements) > max_trees:
         raise TreegenError(
             f"instances: the layout places {len(placements):,} trees, over the "
@@ -162,9 +157,9 @@ def _scatter_placements(
     base: Path,
     defaults: Defaults,
     checked: dict,
+    named: dict,
     max_trees: int = MAX_TREES,
     placed: int = 0,
-    named: dict | None = None,
 ) -> list[Placement]:
     if ("rectangle" in sc) == ("polygon" in sc):
         raise TreegenError(f"{where}: give exactly one of 'rectangle' or 'polygon'")
@@ -198,7 +193,7 @@ def _scatter_placements(
     if "scale" in sc and sc["scale"][0] <= 0:
         raise TreegenError(f"{where}.scale: scales must be > 0, got {sc['scale']}")
     files = [
-        _species_file(base, s["file"], f"{where}.species[{i}].file", checked, {} if named is None else named)
+        _species_file(base, s["file"], f"{where}.species[{i}].file", checked, named)
         for i, s in enumerate(sc["species"])
     ]
     weights = np.array([float(s.get("weight", 1.0)) for s in sc["species"]])
