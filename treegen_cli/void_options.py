@@ -29,12 +29,16 @@ def static_format(output) -> bool:
     return output is not None and Path(output).suffix.lower() in STATIC
 
 
+def _given(options: dict, keys) -> list[str]:
+    """The `keys` the user gave: a flag when set, a value when given at all (0 included)."""
+    return [k for k in keys if options.get(k) is not None and options.get(k) is not False]
+
+
 def check_no_effect(options: dict, label: Callable[[str], str], output) -> None:
     """Refuse an option the user gave that the rest of the request makes void (called before
-    a profile fills its own: those are defaults, not requests). A flag counts when set, a
-    value when given at all (0 included)."""
+    a profile fills its own: those are defaults, not requests), as _given counts them."""
     static = static_format(output)
-    given = [k for k in (*WIND_ONLY, *LOD_ONLY) if options.get(k) is not None and options.get(k) is not False]
+    given = _given(options, (*WIND_ONLY, *LOD_ONLY))
     for k in given:
         if static:
             why = f"a {Path(output).suffix.lower()} file holds no wind or LODs (static format)"
@@ -74,8 +78,7 @@ def check_formats(options: dict, formats: list, label: Callable[[str], str], whe
     import json
 
     if formats and all(static_format(f"x.{f}") for f in formats):  # as make refuses for x.obj
-        typed = [k for k in (*WIND_ONLY, *LOD_ONLY, *SKIN_ONLY) if options.get(k) is not None]
-        typed = [k for k in typed if options[k] is not False]  # (0 counts as given, as in make)
+        typed = _given(options, (*WIND_ONLY, *LOD_ONLY, *SKIN_ONLY))
         typed = [k for k in typed if not label(k).startswith("defaults.")]  # (those serve others)
         if typed:
             raise TreegenError(
