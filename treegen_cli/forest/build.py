@@ -360,5 +360,4 @@ def _details(scene: Forest) -> None:
             f"  prototype {a.extras.get('species', a.name)} seed {a.extras.get('seed', 0)}: "
             f"{tris} triangles per LOD, {len(a.lods[0].skeleton.names)} joints"
         )
-    for name in ("prototypes", "place", "write"):
-        rep.detail(f"  {name:<10}{scene.timings.get(name + '_s', 0.0):8.3f} s")
+    rep.stage_totals({name: scene.timings.get(name + "_s", 0.0) for name in ("prototypes", "place", "write")})
