@@ -1001,6 +1001,40 @@ def test_walk_forest_is_validator_clean_and_loads_in_godot_and_three(walk):
     assert clip["bones_moved"] > 0 and clip["loop_closes"]
 
 
+def test_godot3_merges_same_seed_impostor_skins_unless_named_skins_are_off(tmp_path):
+    """What the README tells Godot 3 users: a one-trunk species (joint `trunk_0`) and a
+    several-trunk one (`trunk0_0`) from one seed have equal one-joint impostor skins under
+    different joint names; Godot 3.2 merges them (it compares binds, not names) and one
+    impostor's bind names a bone its skeleton lacks. With Use Named Skins off each skin binds
+    its own skeleton's first bone: no error, every track resolved."""
+    import clients
+
+    data = no_camera(
+        instances=[
+            {"species": s, "position": [x, 0], "seed": 0}
+            for s, x in ((POPLAR, 0), (str(SPECIES / "desert_bush.txt"), 8))
+        ],
+        scatter=[],
+    )
+    sc = build_scene(load_layout(write_layout(tmp_path, data)), workers=1, progress=False)
+    path = tmp_path / "pair.glb"
+    write_scene(sc, path)
+    try:
+        named = clients.godot_import(path)
+        by_index = clients.godot_import(path, options={"skins/use_named_skins": False})
+    except clients.ClientMissing as e:
+        pytest.skip(str(e))
+    assert named["imported"] and by_index["imported"]
+    assert [e["message"] for e in named["errors"]] and all(
+        "has no bone" in e["message"] for e in named["errors"]
+    )
+    assert not by_index["errors"], by_index["errors"]
+    impostors = [m for m in by_index["mesh_instances"] if m["skin_binds"] == 1]
+    assert len(impostors) == 2 and all(m["skeleton_found"] for m in impostors)
+    (anim,) = [a for p in by_index["animation_players"] for a in p["animations"]]
+    assert anim["tracks"] == anim["tracks_resolved"] and anim["loop_closes"]
+
+
 def _geometry_bytes(path: Path) -> int:
     """The file's bytes less its embedded PNGs (stored alike by every --compress)."""
     gltf, _ = read_gltf(path)
