@@ -195,7 +195,8 @@ def godot_import(
 ) -> dict:
     """Import glb_path the way the Godot 3.2 editor does, then load and inspect the imported scene.
 
-    Import: a fresh project with project.godot and the file as res://x.glb, then
+    Import: a fresh project with project.godot and the file as res://x.glb (res://x.gltf with
+    the .bin and PNGs it names beside it), then
     `godot3-server --path PROJECT --editor --quit` (the editor's first scan imports every new file
     before it quits). Inspect: `godot3-server --path PROJECT -s res://inspect.gd` loads res://x.glb,
     instances it inside the SceneTree and prints one JSON line (tools/godot/inspect.gd).
@@ -232,8 +233,11 @@ def godot_import(
     }
     with tempfile.TemporaryDirectory(prefix="treegen_godot_") as tmp:
         proj, env = _project(Path(tmp))
-        shutil.copyfile(glb_path, proj / "x.glb")
-        (proj / "x.glb.import").write_text(
+        x = "x" + glb_path.suffix.lower()  # a .gltf comes with the files it names
+        shutil.copyfile(glb_path, proj / x)
+        for name in _sibling_files(glb_path):
+            shutil.copyfile(glb_path.parent / name, proj / name)
+        (proj / f"{x}.import").write_text(
             _IMPORT_PRESET + "".join(f"{k}={_godot_literal(v)}\n" for k, v in (options or {}).items())
         )
 
@@ -241,17 +245,28 @@ def godot_import(
         result["import_seconds"] = round(secs, 2)
         result["import_exit"] = "timeout" if rc is None else rc
         result["errors"] += _godot_messages(err, "import", result["noise"])
-        scn = list((proj / ".import").glob("x.glb-*.scn")) if (proj / ".import").is_dir() else []
+        scn = list((proj / ".import").glob(f"{x}-*.scn")) if (proj / ".import").is_dir() else []
         if not scn:
             result["reason"] = "timeout" if rc is None else f"no imported scene (exit {rc})"
             result["log_tail"] = _tail(err)
         else:
             if rc is None:
                 result["reason"] = "imported, but the editor did not exit before the timeout"
-            _inspect(proj, env, "res://x.glb", result, timeout)
+            _inspect(proj, env, f"res://{x}", result, timeout)
         if keep_project:
             shutil.copytree(proj, keep_project, dirs_exist_ok=True)
     return result
+
+
+def _sibling_files(path: Path) -> list[str]:
+    """The files a .gltf names by relative URI (its buffers, its images); none for a .glb."""
+    if path.suffix.lower() != ".gltf":
+        return []
+    from urllib.parse import unquote
+
+    doc = json.loads(path.read_text(encoding="utf-8"))
+    uris = [b.get("uri", "") for b in doc.get("buffers", [])] + [i.get("uri", "") for i in doc.get("images", [])]
+    return [unquote(u) for u in uris if u and not u.startswith("data:")]
 
 
 def godot_import_many(glb_paths, timeout: float = 600, *, inspect_timeout: float = 120) -> dict:

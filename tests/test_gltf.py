@@ -385,6 +385,48 @@ def test_gltf_buffer_uri_is_percent_encoded(tmp_path):
     assert "#" not in resolved and resolved == (tmp_path / "my tree#1.bin").as_uri()
 
 
+def test_a_gltf_writes_its_textures_as_png_files_beside_it(tmp_path):
+    """A .gltf's images are PNG files beside it (`NAME_gltf_leaf.png`, the USD/OBJ naming),
+    named by percent-encoded URIs, byte for byte the images a .glb of the same tree embeds;
+    the validator resolves them clean, and the file reads back with the same textures."""
+    from urllib.parse import unquote
+
+    from treegen_cli import api
+    from treegen_cli.exchange import read_drawable
+
+    from conftest import species_path
+
+    fast = {"duration": 1.0, "fps": 8, "max_joints": 12}
+    path = tmp_path / "my tree#1.gltf"
+    made = api.make(species_path("rush"), path, **fast)
+    api.make(species_path("rush"), tmp_path / "t.glb", **fast)
+    gltf, _ = read_gltf(path)
+    glb, glb_blob = read_gltf(tmp_path / "t.glb")
+    images = gltf["images"]
+    assert len(images) == len(glb["images"]) and all("bufferView" not in i for i in images)
+    names = [unquote(i["uri"]) for i in images]
+    assert all(n.startswith("my tree#1_gltf_") and "%" not in n for n in names)
+    assert {"my tree#1_gltf_leaf.png", "my tree#1_gltf_bark.png"} <= set(names)
+    assert all(i["uri"].startswith("my%20tree%231_gltf_") for i in images)
+    assert {os.path.basename(f) for f in made["files"]} >= set(names)
+    for name, embedded in zip(names, glb["images"]):
+        view = glb["bufferViews"][embedded["bufferView"]]
+        start = view.get("byteOffset", 0)
+        assert (tmp_path / name).read_bytes() == glb_blob[start : start + view["byteLength"]], name
+    # the buffer holds no PNG: every view is an accessor's
+    used = {a["bufferView"] for a in gltf["accessors"] if "bufferView" in a}
+    assert used == set(range(len(gltf["bufferViews"])))
+    _clean(path)
+    a, b = read_drawable(path), read_drawable(tmp_path / "t.glb")
+    for pa, pb in zip(a.parts, b.parts):
+        for key in ("texture", "normal_map"):
+            x, y = getattr(pa, key), getattr(pb, key)
+            assert (x is None) == (y is None) and (x is None or np.array_equal(x, y)), (pa.name, key)
+    # the impostor's atlas indices name images of the file, now files beside it
+    meta = gltf["asset"]["extras"]["treegen_impostor"]
+    assert all((tmp_path / names[i]).is_file() for i in meta["images"].values())
+
+
 def test_atomic_write_leaves_no_temp_files(tmp_path, monkeypatch):
     export(synthetic_asset(), tmp_path / "t.gltf")
     export(synthetic_asset(), tmp_path / "t.glb")

@@ -7,6 +7,7 @@ sidecars, are tests/test_gltf.py's)."""
 from __future__ import annotations
 
 import json
+from urllib.parse import unquote
 import os
 
 import pytest
@@ -21,9 +22,10 @@ def _pngs(folder) -> set[str]:
     return {n for n in os.listdir(folder) if n.endswith(".png")}
 
 
-@pytest.mark.parametrize("suffix", [".usda", ".obj"])
+@pytest.mark.parametrize("suffix", [".usda", ".obj", ".gltf"])
 def test_a_rerun_without_textures_removes_the_textures_the_old_file_named(tmp_path, suffix):
-    stem = "my t" if suffix == ".obj" else "t"  # (an .mtl's map lines are read whole: spaces)
+    # (an .mtl's map lines are read whole, a .gltf's URIs are percent-encoded: spaces)
+    stem = "t" if suffix == ".usda" else "my t"
     out = tmp_path / f"{stem}{suffix}"
     first = api.make(species_path("rush"), out, **({} if suffix == ".obj" else FAST))
     tag = f"{stem}_{suffix[1:]}_"
@@ -38,15 +40,18 @@ def test_a_rerun_without_textures_removes_the_textures_the_old_file_named(tmp_pa
     assert left - {mine.name} <= {os.path.basename(f) for f in again["files"]}  # the rest: this write's
 
 
-def test_parts_rewritten_without_textures_keep_only_what_they_wrote(tmp_path):
-    out = tmp_path / "p.usdc"
+@pytest.mark.parametrize("suffix", [".usdc", ".gltf"])
+def test_parts_rewritten_without_textures_keep_only_what_they_wrote(tmp_path, suffix):
+    out = tmp_path / f"p{suffix}"
     api.make(species_path("rush"), out, lod_files=True, **FAST)
-    assert {"p_LOD_usdc_leaf.png", "p_LOD_usdc_bark.png"} <= _pngs(tmp_path)
+    tag = suffix[1:]
+    assert {f"p_LOD_{tag}_leaf.png", f"p_LOD_{tag}_bark.png"} <= _pngs(tmp_path)
     again = api.make(species_path("rush"), out, lod_files=True, no_textures=True, **FAST)
     assert _pngs(tmp_path) == {os.path.basename(f) for f in again["files"] if f.endswith(".png")}
 
 
-def test_a_forest_rewritten_with_other_prototypes_drops_their_textures(tmp_path):
+@pytest.mark.parametrize("suffix", [".usda", ".gltf"])
+def test_a_forest_rewritten_with_other_prototypes_drops_their_textures(tmp_path, suffix):
     from click.testing import CliRunner
 
     from treegen_cli.cli import cli
@@ -61,7 +66,7 @@ def test_a_forest_rewritten_with_other_prototypes_drops_their_textures(tmp_path)
             ],
         }
         (tmp_path / "f.json").write_text(json.dumps(layout))
-        args = ["forest", str(tmp_path / "f.json"), "-o", str(tmp_path / "f.usda"), "--workers", "1"]
+        args = ["forest", str(tmp_path / "f.json"), "-o", str(tmp_path / f"f{suffix}"), "--workers", "1"]
         res = CliRunner().invoke(cli, args)
         assert res.exit_code == 0, res.output
         return _pngs(tmp_path)
@@ -70,7 +75,10 @@ def test_a_forest_rewritten_with_other_prototypes_drops_their_textures(tmp_path)
     assert any("rush" in n for n in both) and any("shave_grass" in n for n in both)
     one = forest(["shave_grass"])
     assert one and not any("rush" in n for n in one), one  # the rush's textures went with it
-    from pxr import UsdUtils
+    if suffix == ".gltf":
+        named = [unquote(i["uri"]) for i in json.loads((tmp_path / "f.gltf").read_text())["images"]]
+    else:
+        from pxr import UsdUtils
 
-    _, named, _ = UsdUtils.ExtractExternalReferences(str(tmp_path / "f.usda"))
+        _, named, _ = UsdUtils.ExtractExternalReferences(str(tmp_path / "f.usda"))
     assert one == {a.removeprefix("./") for a in named if a.endswith(".png")}

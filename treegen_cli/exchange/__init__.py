@@ -142,20 +142,26 @@ def check_compress(path: str | os.PathLike, compress: str, flag: str = "--compre
         check_encoder()
 
 
-def _writer(path: Path, options: GltfOptions) -> Callable[[Asset, Path], None]:
-    """The table's writer for `path`; glTF writers get the encoding options."""
+def _writer(path: Path, options: GltfOptions) -> Callable[..., None]:
+    """The table's writer for `path`; glTF writers get the encoding options. Each takes
+    (asset, target) and, where the format writes PNGs beside the file, their names
+    (`textures`, texture_files.TextureFiles)."""
     check_compress(path, options.compress)
     writer = WRITERS[path.suffix.lower()]
     if options == GLTF_DEFAULTS:
         return writer
     if options.quantized:  # LOD0's keys planned within 1 mm before the writer encodes them
 
-        def compressed(asset: Asset, target: Path) -> None:
+        def compressed(asset: Asset, target: Path, textures=None) -> None:
             planned = with_key_plans(asset, options.compress == "meshopt")
-            gltf.write_gltf(planned, target, options=options)
+            gltf.write_gltf(planned, target, options=options, textures=textures)
 
         return compressed
-    return lambda asset, target: gltf.write_gltf(asset, target, options=options)
+
+    def encoded(asset: Asset, target: Path, textures=None) -> None:
+        gltf.write_gltf(asset, target, options=options, textures=textures)
+
+    return encoded
 
 
 def _write(
@@ -196,14 +202,16 @@ def export_parts(
     path = check_suffix(path, WRITERS)
     writer = _writer(path, options)
     targets = lod_file_paths(path, len(parts))
-    if path.suffix.lower() in (".usda", ".usdc"):  # the parts share one set of textures beside
+    if path.suffix.lower() in (".usda", ".usdc", ".gltf"):  # the parts share one set of textures beside
         from .texture_files import TextureFiles
 
         # NAME_LOD_usdc_leaf.png: not the single file's names, which it may overwrite with its own
-        names = TextureFiles(path.with_name(f"{path.stem}{PARTS_TAG}{path.suffix}"))
+        names = TextureFiles(path.with_name(f"{path.stem}{PARTS_TAG}{path.suffix}"), packaged=False)
+
+        base = writer
 
         def writer(part: Asset, target: Path) -> None:
-            _usd(part, target, names.shared())
+            base(part, target, textures=names.shared())
 
     def write_all(tmp: Path) -> None:
         for part, target in zip(parts, targets):  # a handful of LODs

@@ -44,16 +44,23 @@ from .gltf_container import write_document
 from .gltf_material import Textures, material_dict
 from .gltf_mesh import Quantization, gltf_uvs, primitive_dict, y_up32
 from .gltf_nodes import inverse_bind_accessor, is_default, joint_fields, lod_extras, set_msft_lod
+from .texture_files import TextureFiles
 
 
 class _Shared:
     """Lazily written per-(prototype, LOD[, variant]) data, so unused LODs cost nothing."""
 
-    def __init__(self, scene: Forest, buf: Buffer, options: GltfOptions = GLTF_DEFAULTS):
+    def __init__(
+        self,
+        scene: Forest,
+        buf: Buffer,
+        options: GltfOptions = GLTF_DEFAULTS,
+        files: TextureFiles | None = None,
+    ):
         self.scene, self.buf, self.options = scene, buf, options
         self.uv_boxes = _uv_boxes(scene) if options.quantized else {}
         self._quant: dict = {}
-        self.textures = Textures(buf)
+        self.textures = Textures(buf, files)
         self.materials: list[dict] = []
         self._mat: dict = {}
         self.meshes: list[dict] = []
@@ -70,7 +77,7 @@ class _Shared:
         that key materials by name (Blender's .001 copies) would mix them up."""
         if m not in self._mat:
             self._mat[m] = len(self.materials)
-            d = material_dict(m, self.textures, self.uv_boxes.get(m))
+            d = material_dict(m, self.textures, self.uv_boxes.get(m), f"{owner}_")
             self.materials.append({**d, "name": f"{owner}_{d['name']}"})
         return self._mat[m]
 
@@ -158,10 +165,13 @@ def build_forest(scene: Forest, options: GltfOptions = GLTF_DEFAULTS) -> tuple[d
     return gltf, buf.blob()
 
 
-def _build_forest(scene: Forest, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, Buffer]:
-    """Scene → (glTF JSON dict without buffer uri, the unjoined buffer)."""
+def _build_forest(
+    scene: Forest, options: GltfOptions = GLTF_DEFAULTS, files: TextureFiles | None = None
+) -> tuple[dict, Buffer]:
+    """Scene → (glTF JSON dict without buffer uri, the unjoined buffer); `files`: the PNGs
+    go there (a .gltf's: `NAME_gltf_<prototype>_leaf.png`), not into the buffer."""
     buf = Buffer(meshopt=options.compress == "meshopt", pooled=options.quantized)
-    sh = _Shared(scene, buf, options)
+    sh = _Shared(scene, buf, options, files)
     nodes: list[dict] = []
     skins: list[dict] = []
     channels: list[dict] = []
@@ -251,7 +261,10 @@ def _build_forest(scene: Forest, options: GltfOptions = GLTF_DEFAULTS) -> tuple[
 
 
 def write_forest_gltf(scene: Forest, path: str | os.PathLike, options: GltfOptions = GLTF_DEFAULTS) -> None:
-    """Write straight to `path` (.glb, or .gltf + `<stem>.bin`); exchange.export_forest stages it."""
+    """Write straight to `path` (.glb, or .gltf + `<stem>.bin` and its PNGs);
+    exchange.export_forest stages it."""
     path = Path(path)
-    gltf, buf = _build_forest(scene, options)
-    write_document(gltf, buf, path, binary=path.suffix.lower() != ".gltf")
+    binary = path.suffix.lower() != ".gltf"
+    files = None if binary else TextureFiles(path, packaged=False)
+    gltf, buf = _build_forest(scene, options, files)
+    write_document(gltf, buf, path, binary, files.files if files is not None else {})

@@ -1,9 +1,10 @@
-"""glTF 2.0 writer: Asset → .glb (binary, default) or .gltf + sibling .bin.
+"""glTF 2.0 writer: Asset → .glb (binary, default) or .gltf + sibling .bin and PNGs.
 
 A lean writer of our own, in parts: `gltf_buffer.py` packs every array into the binary buffer
 as accessors, `gltf_mesh.py` encodes the primitives, `gltf_nodes.py` the skeletons and skins,
 `gltf_material.py` the materials and their PNGs, `gltf_animation.py` the clips, and
-`gltf_container.py` writes the .glb (or .gltf + .bin). The JSON is built from plain dicts
+`gltf_container.py` writes the .glb (or .gltf + .bin; a .gltf's textures are PNG files beside
+it, `NAME_gltf_leaf.png`, named as texture_files.py names USD's and OBJ's). The JSON is built from plain dicts
 and dumped with sorted keys, so the same Asset always gives the same bytes. All core glTF 2.0
 (MSFT_lod only as an optional extension; `--compress`: compress.py).
 
@@ -45,6 +46,7 @@ from .gltf_material import Textures, material_dict
 from .gltf_mesh import primitive_dict, quantization
 from .gltf_nodes import inverse_bind_accessor, joint_fields, lod_extras, set_msft_lod
 from .impostor_meta import describe, impostor_lod, write_sidecar
+from .texture_files import TextureFiles
 
 
 def build(asset: Asset, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, bytes]:
@@ -53,10 +55,13 @@ def build(asset: Asset, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, byt
     return gltf, buf.blob()
 
 
-def _build(asset: Asset, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, Buffer]:
-    """Asset → (glTF JSON dict without buffer uri, the unjoined buffer)."""
+def _build(
+    asset: Asset, options: GltfOptions = GLTF_DEFAULTS, files: TextureFiles | None = None
+) -> tuple[dict, Buffer]:
+    """Asset → (glTF JSON dict without buffer uri, the unjoined buffer); `files`: the PNGs go
+    there (a .gltf's), not into the buffer."""
     buf = Buffer(meshopt=options.compress == "meshopt", pooled=options.quantized)
-    textures = Textures(buf)
+    textures = Textures(buf, files)
     mat_index = {m.name: i for i, m in enumerate(asset.materials)}
     steps = [
         meshopt_step(options, lod.distance) if options.compress == "meshopt" else 0.0 for lod in asset.lods
@@ -154,15 +159,20 @@ def _build(asset: Asset, options: GltfOptions = GLTF_DEFAULTS) -> tuple[dict, Bu
 
 
 def write_gltf(
-    asset: Asset, path: str | os.PathLike, binary: bool | None = None, options: GltfOptions = GLTF_DEFAULTS
+    asset: Asset,
+    path: str | os.PathLike,
+    binary: bool | None = None,
+    options: GltfOptions = GLTF_DEFAULTS,
+    textures: TextureFiles | None = None,
 ) -> None:
-    """Write straight to `path` (and `<stem>.bin` beside a .gltf); not atomic on its own —
-    `exchange.export` stages it."""
+    """Write straight to `path` (and `<stem>.bin` and the PNGs beside a .gltf; `textures`: their
+    names, shared by `--lod-files` parts); not atomic on its own — `exchange.export` stages it."""
     path = Path(path)
     if binary is None:
         binary = path.suffix.lower() != ".gltf"
-    gltf, buf = _build(asset, options)
-    write_document(gltf, buf, path, binary)
+    files = None if binary else textures or TextureFiles(path, packaged=False)
+    gltf, buf = _build(asset, options, files)
+    write_document(gltf, buf, path, binary, files.files if files is not None else {})
     meta = gltf["asset"].get("extras", {}).get("treegen_impostor")
     if meta is not None:  # for engines' impostor shaders: images are in the file
         write_sidecar(meta | {"file": path.name}, path)

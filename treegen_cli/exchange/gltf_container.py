@@ -50,8 +50,11 @@ def glb_bytes(gltf: dict, blob: bytes) -> bytes:
     return _glb_head(gltf, len(blob)) + blob
 
 
-def write_document(gltf: dict, buf: Buffer, path: Path, binary: bool) -> None:
-    """A built glTF: .glb streamed (the buffer is never joined), or JSON + `<stem>.bin`."""
+def write_document(
+    gltf: dict, buf: Buffer, path: Path, binary: bool, files: dict[str, bytes] | None = None
+) -> None:
+    """A built glTF: .glb streamed (the buffer is never joined), or JSON + `<stem>.bin` and
+    `files` (name relative to `path` → bytes: the PNGs its images name)."""
     blob_len = gltf["buffers"][0]["byteLength"]
     if binary:
         with open(path, "wb") as f:  # streamed: the buffer is never joined
@@ -63,6 +66,8 @@ def write_document(gltf: dict, buf: Buffer, path: Path, binary: bool) -> None:
     gltf["buffers"][0]["uri"] = quote(bin_path.name)  # a URI: "my tree#1.bin" → my%20tree%231.bin
     with open(bin_path, "wb") as f:
         buf.write_to(f)
+    for name, data in sorted((files or {}).items()):
+        (path.parent / name).write_bytes(data)
     path.write_bytes(dumps(gltf))
 
 

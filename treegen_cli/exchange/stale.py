@@ -4,7 +4,7 @@ parts (engines import parts by name, so Unity and Godot took the old ones), and 
 an impostor left the sidecar and atlas PNGs describing an impostor the file no longer has.
 
 Textures are the earlier file's own: the PNGs beside it that the old .usda/.usdc (its asset
-paths) or .obj (its .mtl's maps) named with this output's prefix, read before it is replaced,
+paths), .gltf (its images' URIs) or .obj (its .mtl's maps) named with this output's prefix, read before it is replaced,
 and not written again (a `--no-textures` rerun, a forest whose prototypes changed).
 
 Otherwise only exact names treegen gives this output are touched: NAME.ext's sidecar and impostor PNGs
@@ -18,8 +18,10 @@ single file and the parts are separate outputs and never remove each other's fil
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
+from urllib.parse import unquote
 
 IMPOSTOR_PNGS = ("impostor_albedo", "impostor_normal", "impostor_cards", "impostor_cards_normal")
 # a material library's texture line: the name is the rest of the line after the options
@@ -29,8 +31,8 @@ PARTS_TAG = "_LOD"  # the parts' shared textures: NAME_LOD_usdc_leaf.png (textur
 
 
 def _named_textures(file: Path) -> list[str]:
-    """PNG names (relative) an earlier output file refers to: a USD layer's asset paths, an
-    OBJ's material library maps; none for a file that is not one (or not readable)."""
+    """PNG names (relative) an earlier output file refers to: a USD layer's asset paths, a
+    .gltf's image URIs, an OBJ's material library maps; none for a file that is not one (or not readable)."""
     suffix = file.suffix.lower()
     try:
         if suffix in (".usda", ".usdc"):
@@ -40,6 +42,9 @@ def _named_textures(file: Path) -> list[str]:
         elif suffix == ".obj":
             mtl = file.with_suffix(".mtl").read_text(encoding="utf-8", errors="replace")
             assets = [m[1] for m in map(_MAP.match, mtl.splitlines()) if m]
+        elif suffix == ".gltf":
+            images = json.loads(file.read_text(encoding="utf-8")).get("images", [])
+            assets = [unquote(i["uri"]) for i in images if not i.get("uri", "data:").startswith("data:")]
         else:
             return []
     except Exception:  # (not treegen's, unreadable: nothing it names is ours to remove)
