@@ -265,7 +265,9 @@ def _sibling_files(path: Path) -> list[str]:
     from urllib.parse import unquote
 
     doc = json.loads(path.read_text(encoding="utf-8"))
-    uris = [b.get("uri", "") for b in doc.get("buffers", [])] + [i.get("uri", "") for i in doc.get("images", [])]
+    uris = [b.get("uri", "") for b in doc.get("buffers", [])] + [
+        i.get("uri", "") for i in doc.get("images", [])
+    ]
     return [unquote(u) for u in uris if u and not u.startswith("data:")]
 
 

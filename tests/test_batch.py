@@ -706,6 +706,14 @@ def test_a_file_where_an_output_folder_goes_is_refused_before_anything_runs(work
             {"entries": [{"species": "species/rush.txt", "formats": ["obj"], "joints": 6}]},
             ['entries[0].joints: has no effect, entries[0].formats ["obj"] holds no wind, LODs or skin'],
         ),
+        (  # false is given too: an impostor either way is void without LODs
+            {"entries": [{"species": "species/rush.txt", "formats": ["ply"], "impostor": False}]},
+            ['entries[0].impostor: has no effect, entries[0].formats ["ply"] holds no wind, LODs or skin'],
+        ),
+        (
+            {"entries": [{"species": "species/rush.txt", "no_lod": True, "impostor": True}]},
+            ["entries[0].impostor: has no effect, entries[0].no_lod builds one LOD, never an impostor"],
+        ),
     ],
 )
 def test_catalogue_errors_name_the_json_path_exit_2_and_write_nothing(workspace, change, needles):

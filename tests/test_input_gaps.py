@@ -242,6 +242,12 @@ CASES = [
     (["make", "rush", "-o", "x.ply", "--lod-files"], ["--lod-files: has no effect, a .ply file"]),
     (["make", "rush", "-o", "x.glb", "--no-wind", "--wind-speed", "0"], ["--wind-speed: has no effect"]),
     (["make", "rush", "-o", "x.obj", "--impostor-size", "256"], ["--impostor-size: has no effect, a .obj"]),
+    # --impostor either way: void without LODs (it was silently ignored)
+    (["make", "rush", "-o", "x.obj", "--no-impostor"], ["--no-impostor: has no effect, a .obj file"]),
+    (
+        ["make", "rush", "-o", "x.glb", "--no-lod", "--impostor"],
+        ["--impostor: has no effect, --no-lod builds one LOD, never an impostor"],
+    ),
     (
         ["make", "rush", "-o", "x.glb", "--lod-distances", "0,10", "--lod-screen", "0.5"],
         ["--lod-screen: has no effect, --lod-distances replaces it"],

@@ -1,5 +1,6 @@
 """Options the rest of a `make` request makes void (`--wind-speed` with `--no-wind`, an
-impostor size with `--no-impostor`, LOD options for a static format): refused by name, not
+impostor size with `--no-impostor`, `--impostor` with `--no-lod`, LOD options for a static
+format): refused by name, not
 silently ignored. Called before a profile fills its own values: those are defaults, not
 requests.
 
@@ -52,6 +53,15 @@ def check_no_effect(options: dict, label: Callable[[str], str], output) -> None:
         else:
             continue
         raise TreegenError(f"{label(k)}: has no effect, {why}; leave it out")
+    if options.get("impostor") is not None and (static or options.get("no_lod")):  # either way
+        flag = label("impostor")
+        typed = flag if flag != "--impostor" or options["impostor"] else "--no-impostor"
+        why = (
+            f"a {Path(output).suffix.lower()} file holds no LODs (static format)"
+            if static
+            else f"{label('no_lod')} builds one LOD, never an impostor"
+        )
+        raise TreegenError(f"{typed}: has no effect, {why}; leave it out")
     suffix = Path(output).suffix.lower() if output is not None else ""
     for k in (*SKIN_ONLY, *TEXTURE_ONLY):
         if options.get(k) is None:
@@ -79,6 +89,7 @@ def check_formats(options: dict, formats: list, label: Callable[[str], str], whe
 
     if formats and all(static_format(f"x.{f}") for f in formats):  # as make refuses for x.obj
         typed = _given(options, (*WIND_ONLY, *LOD_ONLY, *SKIN_ONLY))
+        typed += ["impostor"] if options.get("impostor") is not None else []  # either way
         typed = [k for k in typed if not label(k).startswith("defaults.")]  # (those serve others)
         if typed:
             raise TreegenError(
