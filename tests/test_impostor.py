@@ -149,7 +149,8 @@ def test_a_leaf_card_in_the_atlas_shows_its_texel_times_colour_tint_shade_and_oc
     its albedo is the texel × colour × the leaf's tint × LEAF_SHADE × the occlusion at its
     vertices (written out here), its normal faces the viewer on both sides, depth from its plane."""
     from treegen_cli.drawable import Drawable
-    from treegen_cli.impostor_render import LEAF_SHADE, leaf_tint, render_atlas
+    from treegen_cli.impostor_render import render_atlas
+    from treegen_cli.impostor_shading import LEAF_SHADE, leaf_tint
 
     tex = np.zeros((16, 16, 4), np.uint8)
     tex[..., :3] = (200, 120, 60)
@@ -207,7 +208,8 @@ def test_leaf_ids_tint_shrink_and_png_helpers():
     """Cards are leaves 0, 1, … in order (the tint the views give leaf k is hash(k)); the leaf
     atlas shrinks by powers of two to ≥ 256 texels, keeping its coverage; the unfiltered PNG
     decodes to the same pixels."""
-    from treegen_cli.impostor_render import leaf_ids, leaf_tint, shrink
+    from treegen_cli.impostor_render import shrink
+    from treegen_cli.impostor_shading import leaf_ids, leaf_tint
     from treegen_cli.texture_png import png_bytes_unfiltered
 
     cards = (np.array([0, 1, 3, 0, 3, 2])[None] + 4 * np.arange(5)[:, None]).ravel()
