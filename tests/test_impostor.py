@@ -280,7 +280,7 @@ def test_impostor_is_the_last_lod_within_budget_and_shows_the_tree(species):
 
 
 @needs_gl
-@pytest.mark.parametrize("species", ["balsam_fir", "desert_bush"])
+@pytest.mark.parametrize("species", ["balsam_fir", "desert_bush", "rush"])
 def test_the_switch_to_the_impostor_keeps_the_crowns_cover(species):
     """Rendered at the switch (the coarsest LOD at the impostor's distance, the project's
     renderer, the side view a card faces), the cards cover what that LOD covers, within ±6.5 %
@@ -289,7 +289,9 @@ def test_the_switch_to_the_impostor_keeps_the_crowns_cover(species):
     before its LOD's three-sided twigs were drawn as wide as LOD0's four-sided ones,
     mesh.girth, which gives them more of the LOD's cover). The fir's
     clumped needles, thinned for the atlas, covered +47 % when kept at their summed area; the
-    desert bush, its twigs dropped from the atlas, −64 % (impostor_atlas)."""
+    desert bush, its twigs dropped from the atlas, −64 % (impostor_atlas); the rush, every
+    stalk widened to 1.5 texels, +153 % (now −4.5 %: some of its stalks are drawn, each as
+    wide, impostor_atlas._bark_at_least)."""
     from treegen_cli.drawable import from_asset
     from treegen_cli.silhouette import compare, coverage_masks, metres_per_pixel
 
@@ -445,6 +447,23 @@ def _switch_pixels(asset) -> tuple[np.ndarray, np.ndarray]:
             out[i].append(imgs[i][both])
     geo, imp = (np.concatenate(x) for x in out)
     return geo, imp
+
+
+@needs_gl
+@pytest.mark.parametrize("species", ["desert_bush", "shave_grass"])
+def test_a_crown_of_few_leaves_does_not_darken_its_impostor(species):
+    """At the switch (_switch_pixels) the cards' mean luminance over the LOD's is within
+    0.8-1.25× the leafy aspen's: bark inside a crown is shaded by its leaves in proportion to
+    how much of it they are (impostor_render.leafiness). Shaded as the aspen's limbs, the
+    bare desert bush and the leafless shave grass came out 0.61× as bright (dark brown blobs),
+    now 1.07× and 0.87×."""
+    lum = np.array([0.2126, 0.7152, 0.0722])
+
+    def ratio(name: str) -> float:
+        geo, cards = (x @ lum for x in _switch_pixels(_asset(name)))
+        return float(cards.mean() / geo.mean())
+
+    assert 0.8 <= ratio(species) / ratio("quaking_aspen") <= 1.25
 
 
 @needs_gl
@@ -685,6 +704,65 @@ def test_a_small_atlas_keeps_the_trunk_under_the_crown():
     for k in range(alpha.shape[1] // cell):
         rows = np.flatnonzero(alpha[:, k * cell : (k + 1) * cell].any(axis=1))
         assert rows.size and np.array_equal(rows, np.arange(rows[0], rows[-1] + 1)), (k, rows)
+
+
+def _tubes(radii, height: float = 2.0, sides: int = 6):
+    """One bark primitive of vertical open tubes (4 rings each), tube k at x = k, radius radii[k]."""
+    from treegen_cli.asset import Primitive
+
+    a = np.arange(sides) * (2 * np.pi / sides)
+    ring = np.stack([np.cos(a), np.sin(a), np.zeros(sides)], -1)
+    pos, nrm, idx = [], [], []
+    for k, r in enumerate(radii):
+        base = len(pos) * 4 * sides
+        z = np.repeat(np.linspace(0.0, height, 4), sides)
+        pos.append(np.column_stack([k + r * np.tile(ring[:, 0], 4), r * np.tile(ring[:, 1], 4), z]))
+        nrm.append(np.tile(ring, (4, 1)))
+        for i in range(3):
+            for j in range(sides):
+                v00, v01 = base + i * sides + j, base + i * sides + (j + 1) % sides
+                idx += [v00, v01, v00 + sides, v01, v01 + sides, v00 + sides]
+    p = np.concatenate(pos).astype(np.float32)
+    V = len(p)
+    return Primitive(
+        name="bark",
+        material="bark",
+        positions=p,
+        normals=np.concatenate(nrm).astype(np.float32),
+        uvs=np.zeros((V, 2), np.float32),
+        indices=np.asarray(idx, np.uint32),
+        joints=np.zeros((V, 4), np.uint16),
+        weights=np.tile([1.0, 0.0, 0.0, 0.0], (V, 1)).astype(np.float32),
+    )
+
+
+def test_thin_stems_widened_within_a_budget_and_the_rest_drawn_one_in_so_many():
+    """impostor_atlas._bark_at_least: stems under a texel are widened to `width`; the thickest
+    in full while the area that adds stays within the budget, and of the rest one in so many
+    is drawn, each at full width, so together they show what all showed (within a stem)."""
+    from treegen_cli.impostor_atlas import _bark_at_least
+
+    width = 0.1
+    radii = [0.04] + [0.005] * 40  # a trunk 80 % of the width, 40 stalks of 10 %
+    prim = _tubes(radii)
+    moved, keep = _bark_at_least(prim, width, below=10.0, budget=0.3)  # the trunk adds 0.04 m²
+    assert keep is not None
+    drawn = keep.reshape(len(radii), -1)
+    assert np.all(drawn == drawn[:, :1]) and drawn[0, 0] == 1.0  # whole stems; the trunk in full
+    stalks = int(drawn[1:, 0].sum())
+    assert abs(stalks - 40 * 0.005 / (0.5 * width)) <= 1  # 4 of 40 show their area
+    picked = np.flatnonzero(drawn[1:, 0]) + 1
+    assert np.ptp(picked) >= 30  # spread over the stalks, not the first few
+    # every stem widened to the width (a hexagon's apothem at least half of it)
+    p = np.asarray(moved.positions).reshape(len(radii), -1, 3)
+    r = np.linalg.norm(p[..., :2] - np.array([[[k, 0.0]] for k in range(len(radii))]), axis=-1)
+    assert r.min() >= 0.5 * width - 1e-6
+    # no budget for the trunk either: it is drawn as one in so many as well (0.8 → drawn)
+    _, keep = _bark_at_least(prim, width, below=10.0, budget=0.0)
+    assert keep.reshape(len(radii), -1)[0, 0] == 1.0
+    # nothing under the width: nothing moved, all drawn
+    same, keep = _bark_at_least(_tubes([0.2, 0.3]), width, below=10.0, budget=0.0)
+    assert keep is None and np.array_equal(same.positions, _tubes([0.2, 0.3]).positions)
 
 
 @needs_gl

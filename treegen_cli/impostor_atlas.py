@@ -75,18 +75,35 @@ def _widest_bark(prim: Primitive, cap: int) -> Primitive:
 
 
 MIN_BARK_TEXELS = 1.5  # stems are drawn at least this many atlas texels wide
+WIDEN_SHARE = 0.1  # ... stems in full while what that adds is within this share of the
+# view's cover, thickest first; of the thinner stems only some are drawn (_bark_at_least)
 
 
-def _bark_at_least(prim: Primitive, width: float, below: float) -> Primitive:
+def _areas(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    return 0.5 * np.linalg.norm(np.cross(p[tri[:, 1]] - p[tri[:, 0]], p[tri[:, 2]] - p[tri[:, 0]]), axis=1)
+
+
+def _bark_at_least(
+    prim: Primitive, width: float, below: float, budget: float = math.inf
+) -> tuple[Primitive, np.ndarray | None]:
     """Bark whose tubes are at least `width` metres wide below height `below` (the bole under
     the crown; the crown's leaves hide its limbs): each vertex pushed out along its (radial)
-    normal by what its tube lacks. A tube's radius is read from each edge between
-    vertices whose normals differ by more than 20° (around a ring, not along the tube): chord
-    / (2 sin(θ/2)) for normals θ apart, the least over the vertex's edges (a diagonal to the
-    next ring reads longer). A trunk thinner than a texel fell to the alpha test in small
-    atlases: the `mobile` profile's aspen cards showed its crown floating."""
+    normal by what its tube lacks; and (V,) 1 where a vertex is drawn, 0 where not (None: all
+    are). A tube's radius is read from each edge between vertices whose normals differ by
+    more than 20° (around a ring, not along the tube): chord / (2 sin(θ/2)) for normals θ
+    apart, the least over the vertex's edges (a diagonal to the next ring reads longer).
+
+    A trunk thinner than a texel fell to the alpha test in small atlases: the `mobile`
+    profile's aspen cards showed its crown floating. Widening every thin stem turned a rush's
+    fan of stalks into a solid wedge (2.5× its coarsest LOD's cover). So stems (the mesh's
+    connected pieces) are widened in full, the least widened first, while the area that adds
+    (a tube's surface / π) stays within `budget` m²; of the others, each standing for its
+    true width's share of the widened area, one in so many is drawn (error diffusion in mesh
+    order) and the rest are left out: fewer stalks, each a line, covering what all did."""
     if prim.material != "bark" or not len(prim.indices):
-        return prim
+        return prim, None
+    from .impostor_shading import leaf_ids
+
     p = np.array(prim.positions, np.float64)  # a copy: moved below
     n = np.asarray(prim.normals, np.float64)
     tri = np.asarray(prim.indices, np.int64).reshape(-1, 3)
@@ -101,9 +118,28 @@ def _bark_at_least(prim: Primitive, width: float, below: float) -> Primitive:
     push = np.where(np.isfinite(radius) & (p[:, 2] < below), np.clip(0.5 * width - radius, 0.0, None), 0.0)
     moved = push > 0
     if not moved.any():
-        return prim
+        return prim, None
+    before = _areas(p, tri)
     p[moved] += push[moved, None] * n[moved]
-    return replace(prim, positions=p.astype(np.float32))
+    after = _areas(p, tri)
+    stem = leaf_ids(prim.indices, len(p))  # a connected piece of bark: a stem
+    grown = moved[tri].any(axis=1)
+    n_stems = int(stem.max()) + 1
+    was = np.bincount(stem[tri[grown, 0]], before[grown], n_stems)
+    now = np.bincount(stem[tri[grown, 0]], after[grown], n_stems)
+    touched = np.flatnonzero(now > was)
+    share = was[touched] / now[touched]  # of its widened area, what the stem truly shows
+    added = (now[touched] - was[touched]) / math.pi
+    full = np.zeros(len(touched), bool)
+    order = np.argsort(-share, kind="stable")
+    full[order] = np.cumsum(added[order]) <= budget
+    drawn = np.ones(n_stems, bool)
+    rest = touched[~full]
+    if len(rest):  # error diffusion: the k-th is drawn when the running sum passes k - 1/2
+        run = np.cumsum(share[~full])
+        drawn[rest] = np.diff(np.floor(run + 0.5), prepend=0.0) > 0
+    moved_prim = replace(prim, positions=p.astype(np.float32))
+    return moved_prim, (None if drawn.all() else drawn[stem].astype(np.float32))
 
 
 def _dilate(rgba: np.ndarray, grid: int, cell: int) -> np.ndarray:
@@ -120,6 +156,18 @@ def _dilate(rgba: np.ndarray, grid: int, cell: int) -> np.ndarray:
     texels = rgba.view(np.uint32).reshape(grid, cell, grid, cell)
     out = np.where(empty, fill.view(np.uint32).reshape(grid, 1, grid, 1), texels)
     return out.view(np.uint8).reshape(rgba.shape)
+
+
+def _shown(prims: list[Primitive]) -> tuple[float, float]:
+    """(leaves, bark): the area a LOD shows from the side, roughly (m²): its leaves' one side
+    (their cards'), its bark's surface / π (a tube's outline)."""
+    out = [0.0, 0.0]
+    for p in prims:
+        if len(p.indices):
+            area = _areas(np.asarray(p.positions, np.float64), np.asarray(p.indices, np.int64).reshape(-1, 3))
+            bark = p.material == "bark"
+            out[bark] += float(area.sum()) / (math.pi if bark else 1.0)
+    return out[0], out[1]
 
 
 def _atlas_parts(prims: list[Primitive], materials: list[Material], decoded: dict | None = None) -> list:
@@ -178,7 +226,7 @@ def render_views(
     (needles on a shoot, leaflets on a frond) overlap, so keeping their summed area (k×)
     covered up to 47 % more than the tree (the fir) and the impostor popped at its switch."""
     from .drawable import Drawable
-    from .impostor_render import AtlasRenderer
+    from .impostor_render import AtlasRenderer, leafiness
     from .lod_cover import solve_factor
 
     texel = 2.0 * radius / options.cell  # a cell holds the bounding sphere
@@ -186,29 +234,34 @@ def render_views(
         np.asarray(p.positions)[:, 2] for p in lod.primitives if p.material != "bark" and len(p.positions)
     ]
     crown = min((float(z.min()) for z in leaves), default=-math.inf)
-    prims = [
-        _bark_at_least(_widest_bark(p, options.max_bark_triangles), MIN_BARK_TEXELS * texel, crown)
+    leaf_area, bark_area = _shown(lod.primitives)
+    budget = WIDEN_SHARE * (leaf_area + bark_area)
+    leafy = leafiness(leaf_area / max(leaf_area + bark_area, 1e-12))
+    widened = [
+        _bark_at_least(_widest_bark(p, options.max_bark_triangles), MIN_BARK_TEXELS * texel, crown, budget)
         for p in lod.primitives
     ]
+    prims = [w[0] for w in widened]
+    keep = {i: w[1] for i, w in enumerate(widened) if w[1] is not None}
     thin = [_fewer_leaves(p, options.max_leaf_cards) for p in prims]
     decoded: dict[int, np.ndarray] = {}  # the leaf atlas is decoded once for both part lists
     parts = _atlas_parts(thin, materials, decoded)
     thinned = [_corners(p) if t is not p else 0 for t, p in zip(thin, prims)]
-    with AtlasRenderer(centre, radius, options.grid, options.cell) as r:
+    with AtlasRenderer(centre, radius, options.grid, options.cell, leafy) as r:
         if any(thinned):
 
             def cover(area: float) -> int:
                 scaled = [_enlarged(q, area, t) if t else q for q, t in zip(parts, thinned)]
-                r.draw(Drawable(parts=scaled, n_joints=1), cells)
+                r.draw(Drawable(parts=scaled, n_joints=1), cells, keep)
                 return r.covered(cells)
 
-            r.draw(Drawable(parts=_atlas_parts(prims, materials, decoded), n_joints=1), cells)
+            r.draw(Drawable(parts=_atlas_parts(prims, materials, decoded), n_joints=1), cells, keep)
             target = r.covered(cells)
             k = max(len(p.positions) / max(len(t.positions), 1) for p, t in zip(prims, thin))
             # area factor 1 (never more cover) .. 2k, from the summed area k
             tol = max(CALIBRATION_TOL, 1.0 / max(target, 1))  # a small atlas: a texel at least
             area = solve_factor(cover, target, 1.0, 2.0 * k, tol, CALIBRATION_STEPS, start=k)
             parts = [_enlarged(q, area, t) if t else q for q, t in zip(parts, thinned)]
-        r.draw(Drawable(parts=parts, n_joints=1))
+        r.draw(Drawable(parts=parts, n_joints=1), None, keep)
         albedo, normal = r.read()
     return _dilate(albedo, options.grid, options.cell), normal

@@ -27,8 +27,17 @@ from .errors import TreegenError
 from .impostor_shading import leaf_shading
 from .render_gl import GL_SRGB8_ALPHA8, gl_context
 
-# Bark inside the crown is shaded by its leaves (the aspen's white limbs showed as specks).
+# Bark inside the crown is shaded by its leaves (the aspen's white limbs showed as specks);
+# a crown whose leaves show less than LEAFY of its area shades it in proportion (a desert
+# bush's few leaves turned its whole bare bush dark, and a leafless plant's crown is no crown).
 CROWN_SHADE = 0.4
+LEAFY = 0.5
+
+
+def leafiness(leaf_share: float) -> float:
+    """How fully a crown whose leaves are `leaf_share` of what it shows shades its bark, 0..1."""
+    return min(max(leaf_share, 0.0) / LEAFY, 1.0)
+
 
 # Both programs share the view: instance → cell → orthographic projection into the cell.
 _VIEW = """
@@ -69,15 +78,18 @@ _BARK_VS = (
 in vec3 in_pos;
 in vec3 in_normal;
 in vec2 in_uv;
+in float in_keep;
 out vec3 v_normal;
 out vec2 v_uv;
 out vec3 v_rel;
+out float v_keep;
 
 void main() {
     project(in_pos);
     v_normal = in_normal;
     v_uv = in_uv;
     v_rel = (in_pos - centre) / radius;
+    v_keep = in_keep;
 }
 """
 )
@@ -91,16 +103,22 @@ uniform float opacity;
 uniform vec3 base_color;
 uniform vec3 crown_centre;
 uniform vec3 crown_radius;
-uniform float crown_shade;     // CROWN_SHADE
+uniform float crown_shade;     // CROWN_SHADE, less in a crown of few leaves (leafiness)
 in vec3 v_normal;
 in vec2 v_uv;
 in vec3 v_rel;
+in float v_keep;
 layout(location = 0) out vec4 f_albedo;
 layout(location = 1) out vec4 f_normal;
+const float BAYER[16] = float[16](0., 8., 2., 10., 12., 4., 14., 6., 3., 11., 1., 9., 15., 7., 13., 5.);
 
 void main() {
     vec4 texel = has_tex ? texture(base_tex, v_uv) : vec4(1.0);
     if (texel.a * opacity < alpha_cutoff) discard;
+    // a stem widened past its true width to a texel keeps that share of its texels, spread
+    // by an ordered dither (impostor_atlas._bark_at_least)
+    ivec2 q = ivec2(gl_FragCoord.xy) & 3;
+    if (v_keep < 1.0 && (BAYER[q.y * 4 + q.x] + 0.5) / 16.0 > v_keep) discard;
     vec3 n = normalize(v_normal);
     if (!gl_FrontFacing) n = -n;
     // baked, as cards have no crown to shade them: the inner crown gets less sky (render.py's
@@ -213,7 +231,7 @@ class AtlasRenderer:
     (centre, radius, grid × grid cells of `cell` pixels): the atlas, and the quick draws of a
     few cells that calibrate its thinned leaves (impostor.render_views)."""
 
-    def __init__(self, centre: np.ndarray, radius: float, grid: int, cell: int):
+    def __init__(self, centre: np.ndarray, radius: float, grid: int, cell: int, leafy: float = 1.0):
         try:
             self.ctx = ctx = gl_context()
         except TreegenError as e:  # the default make must say what to do without EGL
@@ -221,7 +239,7 @@ class AtlasRenderer:
                 f"impostor: {str(e).removeprefix('preview: ')} (make it with --no-impostor)"
             ) from None
         try:
-            self.grid, self.cell, self.size = grid, cell, grid * cell
+            self.grid, self.cell, self.size, self.leafy = grid, cell, grid * cell, float(leafy)
             self.centre, self.radius = np.asarray(centre, np.float64), float(radius)
             self.bark = ctx.program(vertex_shader=_BARK_VS, fragment_shader=_BARK_FS)
             self.leaf = ctx.program(vertex_shader=_LEAF_VS, fragment_shader=_LEAF_FS)
@@ -247,9 +265,10 @@ class AtlasRenderer:
     def __exit__(self, *exc) -> None:
         self.ctx.release()
 
-    def draw(self, scene: Drawable, cells=None) -> None:
+    def draw(self, scene: Drawable, cells=None, keep: dict | None = None) -> None:
         """Clear and draw `scene`'s rest pose into every cell, or only into `cells` [(col, row)],
-        clearing only those (for `covered`: a 2048² clear cost llvmpipe 5 ms, more than 2 cells)."""
+        clearing only those (for `covered`: a 2048² clear cost llvmpipe 5 ms, more than 2 cells).
+        `keep`: {bark part index: (V,) share of its texels each vertex keeps} (else all)."""
         ctx, c, radius, fbo = self.ctx, self.centre, self.radius, self.fbo
         fbo.use()
         ctx.viewport = (0, 0, self.size, self.size)
@@ -275,8 +294,9 @@ class AtlasRenderer:
         bark, leaf = self.bark, self.leaf
         _set(bark, "crown_centre", tuple(float(x) for x in crown_centre))
         _set(bark, "crown_radius", tuple(float(x) for x in crown_radius))
-        _set(bark, "crown_shade", float(CROWN_SHADE))
-        for p in scene.parts:
+        shade = CROWN_SHADE if self.leafy >= 1.0 else 1.0 - (1.0 - CROWN_SHADE) * self.leafy
+        _set(bark, "crown_shade", float(shade))
+        for i, p in enumerate(scene.parts):
             if not len(p.indices) or (p.double_sided and p.opacity <= 0):
                 continue
             uvs = p.uvs if p.uvs is not None else np.zeros((len(p.positions), 2), np.float32)
@@ -294,6 +314,9 @@ class AtlasRenderer:
                 tex = self._texture(p.texture if p.textured else None, p.wrap, small=True)
             else:
                 prog = bark
+                share = (keep or {}).get(i)
+                share = np.ones(len(p.positions), np.float32) if share is None else share
+                bufs.append((_buffer(ctx, share, "f4"), "1f", "in_keep"))
                 tex = self._texture(p.texture, p.wrap) if p.textured else None
                 _set(prog, "has_tex", tex is not None)
                 _set(prog, "alpha_cutoff", float(cut))
