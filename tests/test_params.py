@@ -670,3 +670,22 @@ def test_a_fragment_is_accepted_only_when_asked():
     with pytest.raises(TreegenError, match=r"^x\.txt: missing Shape, .* and \d+ more; "):
         parse_params_text("Levels 2\n", "x.txt")
     assert fragment("Levels 2\n").levels == 2
+
+
+def test_an_xml_file_that_is_not_xml_says_it_was_read_as_text(tmp_path):
+    """An .xml file is read by its content: one that does not start with '<' is read as
+    Weber–Penn text, and its error says so (a trial saw only 'unknown key hello'); a real
+    Weber–Penn file named .xml still reads, and a text file's message is unchanged."""
+    bad = tmp_path / "garbage.xml"
+    bad.write_text("hello not xml\n")
+    with pytest.raises(TreegenError) as exc:
+        load_params(bad)
+    assert str(exc.value).startswith(f"{bad}:1: unknown key hello") and "not Arbaro XML" in str(exc.value)
+    txt = tmp_path / "garbage.txt"
+    txt.write_text("hello not xml\n")
+    with pytest.raises(TreegenError) as exc:
+        load_params(txt)
+    assert "Arbaro" not in str(exc.value)
+    named = tmp_path / "aspen.xml"
+    named.write_bytes((ROOT / "species" / "quaking_aspen.txt").read_bytes())
+    assert load_params(named) == load_params(ROOT / "species" / "quaking_aspen.txt")

@@ -69,4 +69,12 @@ def load_params(path: str | Path) -> Params:
         raise TreegenError(f"{source}: no such species file") from None
     except OSError as exc:
         raise TreegenError(f"{source}: cannot read species file: {exc.strerror or exc}") from None
-    return parse_params_bytes(data, source)
+    try:
+        return parse_params_bytes(data, source)
+    except TreegenError as exc:  # an .xml that is not XML was read as text: say so
+        if p.suffix.lower() != ".xml" or data.lstrip(b"\xef\xbb\xbf\xff\xfe \t\r\n\x00").startswith(b"<"):
+            raise
+        raise TreegenError(
+            f"{exc} (this .xml file does not start with '<', so it is not Arbaro XML and was read "
+            "as Weber–Penn text)"
+        ) from None
