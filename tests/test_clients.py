@@ -259,9 +259,10 @@ def test_compressed_lod_files_load_and_play(compressed, compressed_web):
 
 def test_godot_imports_a_gltf_with_its_png_files(tmp_path):
     """A .gltf names its textures as PNG files beside it (and its .bin): Godot's import of the
-    folder finds them, every check the GLB passes included. (Godot 3.2 does not decode its
-    URIs, so a name with a space fails there as any spec-correct .gltf's would: README.)"""
-    path = tmp_path / "rush.gltf"
+    folder finds them, every check the GLB passes included. Godot 3.2 does not decode URIs:
+    a name's parentheses stay as they are in them (r%281%29.bin was not found); a name with a
+    space fails there as any spec-correct .gltf's would (README)."""
+    path = tmp_path / "rush(1).gltf"
     proc = run_treegen("make", species_path("rush"), "-o", path, "-q")
     assert proc.returncode == 0, proc.stderr
     assert sorted(p.name for p in tmp_path.glob("*.png")) and not list(tmp_path.glob("*.glb"))

@@ -408,6 +408,10 @@ def test_a_gltf_writes_its_textures_as_png_files_beside_it(tmp_path):
     assert all(n.startswith("my tree#1_gltf_") and "%" not in n for n in names)
     assert {"my tree#1_gltf_leaf.png", "my tree#1_gltf_bark.png"} <= set(names)
     assert all(i["uri"].startswith("my%20tree%231_gltf_") for i in images)
+    # sub-delimiters stay as they are (Godot 3.2 reads URIs undecoded)
+    api.make(species_path("rush"), tmp_path / "r(1)+x.gltf", **fast)
+    doc, _ = read_gltf(tmp_path / "r(1)+x.gltf")
+    assert doc["buffers"][0]["uri"] == "r(1)+x.bin" and doc["images"][0]["uri"].startswith("r(1)+x_gltf_")
     assert {os.path.basename(f) for f in made["files"]} >= set(names)
     for name, embedded in zip(names, glb["images"]):
         view = glb["bufferViews"][embedded["bufferView"]]

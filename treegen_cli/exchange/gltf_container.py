@@ -50,6 +50,16 @@ def glb_bytes(gltf: dict, blob: bytes) -> bytes:
     return _glb_head(gltf, len(blob)) + blob
 
 
+# RFC 3986 sub-delimiters and '@' stay as they are in a relative path: Godot 3.2 reads URIs
+# without decoding them, so "r(1).bin" as r%281%29.bin was a file it could not find
+URI_SAFE = "/!$&'()*+,;=@"
+
+
+def file_uri(name: str) -> str:
+    """A sibling file's relative URI: "my tree#1.bin" → my%20tree%231.bin, "r(1).bin" as is."""
+    return quote(name, safe=URI_SAFE)
+
+
 def write_document(
     gltf: dict, buf: Buffer, path: Path, binary: bool, files: dict[str, bytes] | None = None
 ) -> None:
@@ -63,7 +73,7 @@ def write_document(
                 buf.write_to(f)
         return
     bin_path = path.with_suffix(".bin")
-    gltf["buffers"][0]["uri"] = quote(bin_path.name)  # a URI: "my tree#1.bin" → my%20tree%231.bin
+    gltf["buffers"][0]["uri"] = file_uri(bin_path.name)
     with open(bin_path, "wb") as f:
         buf.write_to(f)
     for name, data in sorted((files or {}).items()):

@@ -4,13 +4,12 @@ texture written once however many materials use it."""
 
 from __future__ import annotations
 
-from urllib.parse import quote
-
 import numpy as np
 
 from ..asset import Material, Texture
 from .compress import UvRange
 from .gltf_buffer import Buffer
+from .gltf_container import file_uri
 from .texture_files import TextureFiles
 
 REPEAT, CLAMP_TO_EDGE, LINEAR, LINEAR_MIPMAP_LINEAR = 10497, 33071, 9729, 9987
@@ -54,7 +53,7 @@ class Textures:
         normal + depth atlas) gets no texture."""
         if t not in self._image:
             where = (
-                {"uri": quote(self.files.name(t, prefix))}
+                {"uri": file_uri(self.files.name(t, prefix))}
                 if self.files is not None
                 else {"bufferView": self.buf.view(np.frombuffer(t.png, dtype=np.uint8), None)}
             )

@@ -1,5 +1,5 @@
 """Where the textures of a written file go, one rule for every format that keeps them as
-separate files (USD, OBJ):
+separate files (USD, OBJ, a .gltf's images):
 
 - inside a package (.usdz): `textures/<name>.png`;
 - beside the main file: flat siblings `<stem>_<ext>_<name>.png` (`a.usdc` → `a_usdc_leaf.png`;
