@@ -686,6 +686,11 @@ def test_an_xml_file_that_is_not_xml_says_it_was_read_as_text(tmp_path):
     with pytest.raises(TreegenError) as exc:
         load_params(txt)
     assert "Arbaro" not in str(exc.value)
+    binary = tmp_path / "bin.xml"  # refused for its bytes, never read as text: no hint
+    binary.write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00")
+    with pytest.raises(TreegenError) as exc:
+        load_params(binary)
+    assert "binary" in str(exc.value) and "Arbaro" not in str(exc.value)
     named = tmp_path / "aspen.xml"
     named.write_bytes((ROOT / "species" / "quaking_aspen.txt").read_bytes())
     assert load_params(named) == load_params(ROOT / "species" / "quaking_aspen.txt")

@@ -57,6 +57,16 @@ def parse_params_bytes(data: bytes, source: str = "<string>", partial: bool = Fa
     return parse_params_text(text, source, partial)
 
 
+def _read_as_text(data: bytes) -> bool:
+    """Whether parse_params_bytes gave `data` to the Weber–Penn text reader (UTF-8 text, no
+    NUL, not starting with '<'), rather than refusing its bytes or reading it as XML."""
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return False
+    return "\x00" not in text and bool(text.strip()) and not _looks_xml(text)
+
+
 def load_params(path: str | Path) -> Params:
     """Read and validate one species file (text or Arbaro XML, decided by content)."""
     p = Path(path)
@@ -72,7 +82,7 @@ def load_params(path: str | Path) -> Params:
     try:
         return parse_params_bytes(data, source)
     except TreegenError as exc:  # an .xml that is not XML was read as text: say so
-        if p.suffix.lower() != ".xml" or data.lstrip(b"\xef\xbb\xbf\xff\xfe \t\r\n\x00").startswith(b"<"):
+        if p.suffix.lower() != ".xml" or not _read_as_text(data):
             raise
         raise TreegenError(
             f"{exc} (this .xml file does not start with '<', so it is not Arbaro XML and was read "
