@@ -205,6 +205,7 @@ CASES = [
         ["--schedule: has no effect without --lod", "add --lod"],
     ),
     (["info", "rush", "--impostor-size", "512"], ["--impostor-size: has no effect without --lod"]),
+    (["info", "rush", "--no-impostor"], ["--no-impostor: has no effect without --lod"]),  # as typed
     (["batch", "catalogue_fov.json", "-o", "out", "--dry-run"], ["entries[0].fov 100: ", "fov < 90"]),
     (
         ["batch", "catalogue_tex.json", "-o", "out", "--dry-run"],

@@ -211,7 +211,8 @@ def info(
 
     for k in options:  # ("profile" also sets the budget the plain report plans)
         if not lod and k != "profile" and (k in GROUPS["lod"] or k in INFO_LOD_BUILD):
-            raise TreegenError(f"{cli_name(k)}: has no effect without --lod (it shapes the LODs); add --lod")
+            flag = "--no-impostor" if k == "impostor" and options[k] is False else cli_name(k)
+            raise TreegenError(f"{flag}: has no effect without --lod (it shapes the LODs); add --lod")
         if not (lod or wind) and k in GROUPS["wind"]:
             raise TreegenError(
                 f"{cli_name(k)}: has no effect without --wind or --lod (it shapes the wind); add --wind"
