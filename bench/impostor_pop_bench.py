@@ -26,6 +26,26 @@ Between the card views (−45°, 30°) the two crossed cards are each seen fores
 cell facing the camera (the atlas and its sidecar are written for that) removes it. The
 impostor stage costs more, as it draws all of the coarsest LOD: aspen 0.21 → 0.34 CPU-s,
 fir 0.41 → 0.82, willow 0.99.
+
+2026-11-27 (load 2-3, same four views), cover and IoU at the card views −90° and 0°, before
+(ca4b97f) → after thin stems are widened within a budget (the rest drawn one in so many) and
+the cards' own views are drawn twice as fine as the atlas's cells (CARD_SCALE: a texel spans
+0.75 px at the switch, not 1.5); the angled views (−45°, 30°) move by −0.04 to +0.05:
+    balsam_fir      +0.5/+2.1 %  → +0.2/+1.7 %   IoU 0.857/0.881 → 0.861/0.877
+    black_tupelo    +3.2/+2.5 %  → +2.0/+2.6 %   IoU 0.836/0.865 → 0.855/0.885
+    ca_black_oak    +6.2/+3.6 %  → +6.0/+4.0 %   IoU 0.729/0.766 → 0.774/0.833
+    desert_bush     −3.8/+8.0 %  → −1.0/+5.6 %   IoU 0.686/0.747 → 0.721/0.828
+    eastern_cottonwood +0.9/+1.9 % → +0.6/+1.4 % IoU 0.830/0.888 → 0.857/0.914
+    european_larch  +5.0/+4.7 %  → −2.3/−5.6 %   IoU 0.614/0.654 → 0.764/0.774
+    fan_palm        −4.6/−7.7 %  → −3.7/+0.0 %   IoU 0.595/0.742 → 0.629/0.882
+    lombardy_poplar +3.9/+3.4 %  → +2.9/+4.1 %   IoU 0.790/0.789 → 0.873/0.887
+    palm            −7.0/−6.7 %  → −3.2/+1.5 %   IoU 0.678/0.725 → 0.796/0.867
+    quaking_aspen   +1.4/+1.0 %  → +0.9/+2.7 %   IoU 0.899/0.896 → 0.922/0.924
+    rush            +153/+142 %  → −4.5/+6.9 %   IoU 0.332/0.372 → 0.413/0.569
+    sassafras       +2.5/+3.4 %  → +1.0/+2.1 %   IoU 0.834/0.867 → 0.845/0.885
+    shave_grass     +5.5/−9.0 %  → +0.2/−2.8 %   IoU 0.654/0.711 → 0.774/0.859
+    tamarack        +5.4/+9.8 %  → +3.3/+6.2 %   IoU 0.694/0.772 → 0.742/0.834
+    weeping_willow  +0.9/+1.3 %  → −0.2/+1.6 %   IoU 0.888/0.908 → 0.915/0.927
 """
 
 from __future__ import annotations

@@ -15,7 +15,15 @@ import pytest
 from conftest import SPECIES, grown, species_path
 from treegen_cli.axes import to_y_up
 from treegen_cli.drawable import Part, decode_image
-from treegen_cli.impostor import IMPOSTOR_DEFAULTS, card_cells, cell_direction, cell_of, encode, view_basis
+from treegen_cli.impostor import (
+    CARD_SCALE,
+    IMPOSTOR_DEFAULTS,
+    card_cells,
+    cell_direction,
+    cell_of,
+    encode,
+    view_basis,
+)
 from treegen_cli.lod import LodOptions, screen_coverage
 from treegen_cli.lod_decimate import measure_error_px
 from treegen_cli.params import load_params
@@ -265,13 +273,22 @@ def test_impostor_is_the_last_lod_within_budget_and_shows_the_tree(species):
         )
     mat = next(m for m in asset.materials if m.name == "impostor")
     assert not mat.double_sided and mat.alpha_cutoff == 0.5
-    # the cards sample a strip of their own cells, cut from the atlas (which stays in the file
-    # for impostor shaders), and its normal map
-    c = imp.impostor.cell
+    # the cards sample a strip of their own views (the atlas stays in the file for impostor
+    # shaders), CARD_SCALE × finer than its cells, and its normal map: the same view, each
+    # card's mask CARD_SCALE² texels a cell's agreeing with the atlas's almost everywhere
+    c, s = imp.impostor.cell, CARD_SCALE
     strip = decode_image(mat.base_texture.png, 4)
-    assert strip.shape == (c, 2 * c, 4) and mat.normal_texture is not None
+    assert strip.shape == (s * c, 2 * s * c, 4) and mat.normal_texture is not None
     for i, (col, row) in enumerate(imp.impostor.cards):
-        assert np.array_equal(strip[:, i * c : (i + 1) * c, 3], _alpha(asset, col, row))
+        fine = (strip[:, i * s * c : (i + 1) * s * c, 3] > 127).reshape(c, s, c, s).mean(axis=(1, 3))
+        coarse = _alpha(asset, col, row) > 127
+        agree = ((fine >= 0.5) == coarse).mean()
+        assert agree > 0.9, (species, agree)  # (measured 0.94-0.99: edges differ)
+        assert abs(fine.mean() - coarse.mean()) <= 0.15 * coarse.mean() + 0.002, (
+            species,
+            fine.mean(),
+            coarse.mean(),
+        )
     # the impostor's clip is decimated within the bound like any LOD's
     (clip,) = imp.clips
     assert clip.name == f"wind_lod{len(geo)}_loop"
@@ -366,7 +383,7 @@ def test_cards_ride_one_joint_that_sways_with_the_crown():
 @needs_gl
 def test_the_cards_normal_map_holds_the_crowns_normals_in_their_tangent_space():
     """Each card's texels carry the atlas's normals turned into the card's frame (x along
-    its right, y up, z towards the viewer), blurred over 3 × 3 texels and leaning on the
+    its right, y up, z towards the viewer), blurred over the atlas's 3 × 3 texels and leaning on the
     crown's rounded mass: covered texels point out of the card and turn across it as the
     atlas's normals do; the crown's top leans up, its sides outwards; background texels are flat.
     The quads' own normals are flat and their tangents run along +u (glTF's TANGENT)."""
@@ -374,7 +391,7 @@ def test_the_cards_normal_map_holds_the_crowns_normals_in_their_tangent_space():
     lod = asset.lods[-1]
     imp = lod.impostor
     mat = next(m for m in asset.materials if m.name == "impostor")
-    c, grid = imp.cell, imp.grid
+    c, grid = imp.cell * CARD_SCALE, imp.grid
     t = decode_image(mat.normal_texture.png, 3).astype(float) / 127.5 - 1.0
     alpha = decode_image(mat.base_texture.png, 4)[..., 3]
     atlas = decode_image(imp.normal_depth.png, 4)[..., :3].astype(float) / 127.5 - 1.0
@@ -385,12 +402,15 @@ def test_the_cards_normal_map_holds_the_crowns_normals_in_their_tangent_space():
         d = cell_direction(col, row, grid)
         right, up = view_basis(d)
         ti, oi = t[:, i * c : (i + 1) * c], on[:, i * c : (i + 1) * c]
-        n = atlas[row * c : (row + 1) * c, col * c : (col + 1) * c]
+        a_c = imp.cell  # the atlas's cell, each texel CARD_SCALE² of the card's
+        n = atlas[row * a_c : (row + 1) * a_c, col * a_c : (col + 1) * a_c]
         # across the card the texels turn as the atlas's normals do (their part along the
-        # view was the leaves facing the camera that drew them, and is left to the mass)
+        # view was the leaves facing the camera that drew them, and is left to the mass),
+        # compared texel by texel of the atlas (the card's CARD_SCALE² texels averaged)
         a = np.stack([n @ right, n @ up], axis=-1)
-        b = ti[..., :2]
-        turned = oi & (np.linalg.norm(a, axis=-1) > 0.3)
+        b = ti[..., :2].reshape(a_c, CARD_SCALE, a_c, CARD_SCALE, 2).mean(axis=(1, 3))
+        whole = oi.reshape(a_c, CARD_SCALE, a_c, CARD_SCALE).all(axis=(1, 3))
+        turned = whole & (np.linalg.norm(a, axis=-1) > 0.3)
         cos = np.sum(a * b, axis=-1) / np.maximum(
             np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1), 1e-9
         )
@@ -689,21 +709,39 @@ def test_impostor_distance_places_the_impostor_beyond_the_last_lod(tmp_path):
 
 
 @needs_gl
-def test_a_small_atlas_keeps_the_trunk_under_the_crown():
+@pytest.mark.parametrize(
+    "species, options",
+    [
+        ("quaking_aspen", {"profile": "mobile"}),
+        ("palm", {"impostor_size": 128}),
+        ("fan_palm", {"impostor_size": 128}),
+    ],
+)
+def test_a_small_atlas_keeps_the_trunk_under_the_crown(species, options):
     """At the `mobile` profile's 32 px views the aspen's trunk (0.4 m) is under a texel (0.66
     m) and fell to the alpha test: the cards' crown floated over a stub. Drawn at least 1.5
-    texels wide under the crown, every row of each card from the crown's top to the ground
-    has an opaque texel."""
+    texels wide under the crown, every row of each card from the crown's top down to the
+    tree's base has an opaque texel. At 8 px views the palms' bole is there, the card's lowest
+    quarter above the base covered in every row (their lone trunks were left out once thin
+    stems were drawn one in so many, impostor_atlas._bark_at_least; between bole and fronds
+    a row may stay empty there, as before)."""
     from treegen_cli.api import resolve
 
-    job = resolve({"profile": "mobile", "no_wind": True})
-    asset, _ = build_asset(load_params(species_path("quaking_aspen")), 0, job.options, tree=None)
+    job = resolve({**options, "no_wind": True})
+    asset, _ = build_asset(load_params(species_path(species)), 0, job.options, tree=None)
+    imp = asset.lods[-1].impostor
     card = [m for m in asset.materials if m.name == "impostor"][0].base_texture
     alpha = decode_image(card.png, 4, "cards")[..., 3] > 0
     cell = alpha.shape[0]
+    # the base's row: the cell holds the bounding sphere, the card's view is level (within
+    # half a cell's elevation), so height z shows at row (0.5 − (z − centre) / (2 radius)) · cell
+    base = int((0.5 + (float(imp.centre[2]) - float(imp.bounds[0][2])) / (2 * imp.radius)) * cell)
     for k in range(alpha.shape[1] // cell):
         rows = np.flatnonzero(alpha[:, k * cell : (k + 1) * cell].any(axis=1))
-        assert rows.size and np.array_equal(rows, np.arange(rows[0], rows[-1] + 1)), (k, rows)
+        assert rows.size and rows[-1] >= base - 1, (species, k, rows, base)
+        assert set(range(base - cell // 4, base)) <= set(rows.tolist()), (species, k, rows, base)
+        if species == "quaking_aspen":
+            assert np.array_equal(rows, np.arange(rows[0], rows[-1] + 1)), (k, rows)
 
 
 def _tubes(radii, height: float = 2.0, sides: int = 6):
@@ -745,8 +783,8 @@ def test_thin_stems_widened_within_a_budget_and_the_rest_drawn_one_in_so_many():
     width = 0.1
     radii = [0.04] + [0.005] * 40  # a trunk 80 % of the width, 40 stalks of 10 %
     prim = _tubes(radii)
-    moved, keep = _bark_at_least(prim, width, below=10.0, budget=0.3)  # the trunk adds 0.04 m²
-    assert keep is not None
+    moved, keep, used = _bark_at_least(prim, width, below=10.0, budget=0.3)  # the trunk adds 0.04 m²
+    assert keep is not None and 0.0 < used <= 0.3
     drawn = keep.reshape(len(radii), -1)
     assert np.all(drawn == drawn[:, :1]) and drawn[0, 0] == 1.0  # whole stems; the trunk in full
     stalks = int(drawn[1:, 0].sum())
@@ -757,12 +795,18 @@ def test_thin_stems_widened_within_a_budget_and_the_rest_drawn_one_in_so_many():
     p = np.asarray(moved.positions).reshape(len(radii), -1, 3)
     r = np.linalg.norm(p[..., :2] - np.array([[[k, 0.0]] for k in range(len(radii))]), axis=-1)
     assert r.min() >= 0.5 * width - 1e-6
-    # no budget for the trunk either: it is drawn as one in so many as well (0.8 → drawn)
-    _, keep = _bark_at_least(prim, width, below=10.0, budget=0.0)
+    # no budget at all: a trunk (a quarter of the bark or more) is still drawn in full,
+    # whatever its share (a palm's lone trunk, 0.4 of a widened one, fell to the diffusion and
+    # vanished); a thick stem of less bark by the diffusion (0.8: drawn)
+    _, keep, _ = _bark_at_least(prim, width, below=10.0, budget=0.0)
     assert keep.reshape(len(radii), -1)[0, 0] == 1.0
+    _, keep, _ = _bark_at_least(_tubes([0.005] * 5 + [0.02]), width, below=10.0, budget=0.0)
+    assert keep is not None and keep.reshape(6, -1)[5, 0] == 1.0  # 44 % of the bark, share 0.4
+    lone, keep, _ = _bark_at_least(_tubes([0.02]), width, below=10.0, budget=0.0)
+    assert keep is None and np.asarray(lone.positions)[:, 0].max() >= 0.5 * width - 1e-6
     # nothing under the width: nothing moved, all drawn
-    same, keep = _bark_at_least(_tubes([0.2, 0.3]), width, below=10.0, budget=0.0)
-    assert keep is None and np.array_equal(same.positions, _tubes([0.2, 0.3]).positions)
+    same, keep, used = _bark_at_least(_tubes([0.2, 0.3]), width, below=10.0, budget=0.0)
+    assert keep is None and used == 0.0 and np.array_equal(same.positions, _tubes([0.2, 0.3]).positions)
 
 
 @needs_gl

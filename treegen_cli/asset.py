@@ -156,7 +156,7 @@ class Lod:
     bounds: tuple[np.ndarray, np.ndarray] | None = None
     # prepared: (min, max) of the skinned geometry at rest
     # and at every key of every clip
-    impostor: Impostor | None = None  # set on an impostor LOD (cards cut from the atlas)
+    impostor: Impostor | None = None  # set on an impostor LOD (cards showing the atlas's views)
 
 
 @dataclass(frozen=True, eq=False)

@@ -39,7 +39,7 @@ class Part:
     opacity: float = 1.0  # base colour alpha factor (multiplies texture alpha)
     wrap: tuple[str, str] = ("REPEAT", "REPEAT")  # texture's (u, v): REPEAT CLAMP MIRROR
     normal_wrap: tuple[str, str] = ("REPEAT", "REPEAT")  # normal map's (u, v)
-    impostor: bool = False  # cards cut from a view atlas (asset.IMPOSTOR_MATERIAL)
+    impostor: bool = False  # cards showing a view atlas's views (asset.IMPOSTOR_MATERIAL)
     # (centre, half-extents) of the crown this part belongs to, where a drawable holds many
     # trees (a forest preview); None: the drawable's one crown (render.Renderer)
     crown: tuple[np.ndarray, np.ndarray] | None = None

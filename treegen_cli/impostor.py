@@ -1,10 +1,10 @@
-"""The impostor: the last LOD, a tree drawn as a few textured cards cut from a view atlas.
+"""The impostor: the last LOD, a tree drawn as a few textured cards showing a view atlas's views.
 
     lod, material = build_impostor(coarse_lod, materials, lod_options, distance, "wind_lod4_loop")
     # Result: a Lod of 2 crossed cards (8 triangles: a face each way) skinned to one joint swaying like the
     # trunk, with `lod.impostor` holding the hemi-octahedral atlas (albedo + alpha, normals +
     # depth) for engines with impostor shaders; `material` ("impostor") samples the cards'
-    # strip cut from it (albedo + alpha, tangent-space normal map).
+    # strip of two of its views, drawn finer (albedo + alpha, tangent-space normal map).
 
 The atlas (impostor_render.render_atlas, one batched GL pass) holds grid × grid orthographic
 views of the bounding sphere (centre, radius), one per cell. Views look at the centre from the
@@ -22,10 +22,10 @@ pixel (x, y) ∈ [−1, 1]² (y towards the top of the cell) shows centre + radi
 Cards: the two cells nearest the horizon along +a and +b (elevation about 90°/grid), each a
 quad through the centre in its view's plane showing that cell, one face each way: seen from
 behind, a card shows the mirror image, the true silhouette from there. The cards sample a
-strip of their own cells (card_textures), its normals in the cards' tangent space, so engines
-light them with the crown's own normals. They ride one joint at the trunk base whose rotation
-is the trunk's world rotation at the crown's height
-(decimated for the impostor's distance like any LOD clip), so the tree keeps swaying.
+strip of their own views, drawn CARD_SCALE× finer than the atlas's (card_textures), normals in
+the cards' tangent space, so engines light them with the crown's own normals. They ride one
+joint at the trunk base turning as the trunk does at the crown's height (decimated for the
+impostor's distance like any LOD clip), so the tree keeps swaying.
 """
 
 from __future__ import annotations
@@ -34,12 +34,15 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .asset import Clip, Impostor, Lod, Material, Primitive, Skeleton, Texture
+from .asset import Impostor, Lod, Material, Primitive, Texture
 from .errors import TreegenError
 from .impostor_atlas import render_views
 from .lod import MAX_DISTANCE, LodOptions, screen_distance
 from .lod_decimate import decimate
-from .quat import mul as quat_mul, unit as unit_quat
+from .impostor_sway import trunk_sway
+
+
+CARD_SCALE = 2  # the cards' views have this many times the atlas cells' pixels a side
 
 
 @dataclass(frozen=True)
@@ -47,7 +50,9 @@ class ImpostorOptions:
     """Atlas size and when the impostor takes over.
 
     switch_px: the tree's height on screen (pixels of the LOD options' view, width / aspect
-    high) below which the impostor is used; at 1.5 × cell an atlas texel spans 1.5 pixels there.
+    high) below which the impostor is used; at 1.5 × cell an atlas texel spans 1.5 pixels
+    there, a card's (card_cell) 0.75 (at 1.5 the aspen's, willow's and oak's cards scored IoU
+    0.90, 0.89, 0.73 against their LOD3 at the switch, at 0.75 0.92, 0.92, 0.77)
     The switch is never nearer than min_factor × the last geometric LOD's distance.
     distance: metres that replace both (--impostor-distance), beyond the last LOD's; `flag`
     names it in messages as the user gave it (a catalogue's or a layout's key)."""
@@ -63,6 +68,10 @@ class ImpostorOptions:
     alpha_cutoff: float = 0.5
     distance: float | None = None
     flag: str = "--impostor-distance"
+
+    @property
+    def card_cell(self) -> int:
+        return min(CARD_SCALE * self.cell, 512)
 
     def __post_init__(self) -> None:
         if self.distance is not None and not self.distance <= MAX_DISTANCE:  # (NaN too)
@@ -230,39 +239,40 @@ FLAT_NORMAL = (128, 128, 255)  # a tangent-space normal map's "no bump" texel
 MIN_FACING = 0.05  # a card texel's normal leans at most this close to the card's plane
 MASS_FACING = 0.6  # the crown's rounded mass: its normal at a card's middle is the view,
 MASS_WEIGHT = 0.45  # at its sides tilted sideways, at its top upwards. Each texel's normal
-# is the mean of its covered 3 × 3 neighbours' (leaf or bark normals, less their part along
+# is the mean of its covered neighbours' (NEIGHBOURS², leaf or bark normals, less their part along
 # the view) plus this much of the mass's: the mass says which way the card faces, the
 # neighbours how the crown's surface turns across it. One leaf's own normal alone lit
 # leaves turned from the sun as black blotches a texel or two wide; with their part along
 # the view (double-sided leaves face the camera that drew them) each card faced its own view
 # and, seen at 45°, the card turned to the sun lit its half of the crown and the other's
-# went dark, the opposite of the geometric LOD's halves. The neighbours' sum (up to nine
+# went dark, the opposite of the geometric LOD's halves. The neighbours' sum (up to 9 or 25
 # times the mass) let clumps of leaves facing one way lean whole patches away from the sun:
 # 6-23 % of the crown's pixels were darker than all but 2 % of the coarsest LOD's, black
 # blotches at the switch size (bench/impostor_colour_bench.py's dark column)
 
 
-def _box3(a: np.ndarray) -> np.ndarray:
-    """Sum over each texel's 3 × 3 neighbourhood (zero outside) of an (H, W, C) array."""
-    p = np.pad(a, ((1, 1), (1, 1), (0, 0)))
-    rows = p[:-2] + p[1:-1] + p[2:]
-    return rows[:, :-2] + rows[:, 1:-1] + rows[:, 2:]
+NEIGHBOURS = 2 * CARD_SCALE + 1  # a card texel's neighbourhood: the atlas's 3 × 3 texels
 
 
-def card_textures(
-    albedo: np.ndarray, normal: np.ndarray, grid: int, cell: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """The cards' own images: their cells cut from the atlases into one strip (cell px high,
-    a cell per card), so an engine samples a strip a few per cent of the atlas's size (the
-    atlas stays in the file for impostor shaders, unsampled). The normals, in the atlas's
+def _box(a: np.ndarray, k: int = NEIGHBOURS) -> np.ndarray:
+    """Sum over each texel's k × k neighbourhood (k odd, zero outside) of an (H, W, C) array."""
+    p = np.pad(a, ((k // 2, k // 2), (k // 2, k // 2), (0, 0)))
+    rows = np.add.reduce([p[i : i + a.shape[0]] for i in range(k)])
+    return np.add.reduce([rows[:, j : j + a.shape[1]] for j in range(k)])
+
+
+def card_textures(albedo: np.ndarray, normal: np.ndarray, grid: int) -> tuple[np.ndarray, np.ndarray]:
+    """The cards' own images from their views side by side (render_views: a square per card),
+    so an engine samples a strip a few per cent of the atlas's size (the atlas stays in the
+    file for impostor shaders, unsampled). The normals, in the atlas's
     (a, b, up) frame, are turned into each card's tangent space, (n·right, n·up', n·d): the
     front face's frame, and also the back face's, since the back shows the mirror image and
     its normals mirror through the card's plane with it. Background texels are flat."""
     a_strip, n_strip = [], []
-    for col, row in card_cells(grid):
-        rows, cols = slice(row * cell, (row + 1) * cell), slice(col * cell, (col + 1) * cell)
-        a_cell = albedo[rows, cols]
-        n = normal[rows, cols, :3].astype(np.float64) / 127.5 - 1.0
+    cell = albedo.shape[0]
+    for i, (col, row) in enumerate(card_cells(grid)):
+        a_cell = albedo[:, i * cell : (i + 1) * cell]
+        n = normal[:, i * cell : (i + 1) * cell, :3].astype(np.float64) / 127.5 - 1.0
         d = cell_direction(col, row, grid)
         right, up = view_basis(d)
         x = (np.arange(cell) + 0.5) / cell * 2.0 - 1.0  # texel centres, [-1, 1] across the cell
@@ -271,7 +281,7 @@ def card_textures(
         mass /= np.linalg.norm(mass, axis=-1, keepdims=True)
         n = n - (n @ d)[..., None] * d  # the leaves faced this view in the atlas: no more
         covered = (a_cell[..., 3:] > 0).astype(np.float64)
-        n = _box3(n * covered) / np.maximum(_box3(covered), 1.0)  # the neighbours' mean
+        n = _box(n * covered) / np.maximum(_box(covered), 1.0)  # the neighbours' mean
         n = n + MASS_WEIGHT * mass  # the crown lit as a rounded mass
         t = np.stack([n @ right, n @ up, n @ d], axis=-1)
         t /= np.maximum(np.linalg.norm(t, axis=-1, keepdims=True), 1e-12)
@@ -282,49 +292,6 @@ def card_textures(
         a_strip.append(a_cell)
         n_strip.append(enc)
     return np.concatenate(a_strip, axis=1), np.concatenate(n_strip, axis=1)
-
-
-# ----------------------------------------------------------------------------------- the sway
-
-
-def trunk_sway(lod: Lod, height: float) -> tuple[Skeleton, Clip | None]:
-    """One joint at the trunk base (LOD `lod`'s root) whose rotation is the world rotation,
-    relative to rest, of the highest trunk joint at or below `height` (the crown's centre)."""
-    sk = lod.skeleton
-    chain = [0]  # the trunk: trunk_* joints from the root
-    names, parent = sk.names, np.asarray(sk.parent)
-    while True:
-        kids = [j for j in np.flatnonzero(parent == chain[-1]) if names[j].startswith("trunk")]
-        if not kids:
-            break
-        chain.append(int(kids[0]))
-    z = np.asarray(sk.bind_world)[chain, 2, 3]
-    top = chain[int(np.flatnonzero(z <= height)[-1])] if (z <= height).any() else 0
-    path = chain[: chain.index(top) + 1]
-    one = Skeleton(
-        names=[names[0]],
-        parent=np.array([-1], np.int32),
-        rest_translation=np.asarray(sk.rest_translation)[:1].copy(),
-        rest_rotation=np.asarray(sk.rest_rotation)[:1].copy(),
-        bind_world=np.asarray(sk.bind_world)[:1].copy(),
-    )
-    if not lod.clips:
-        return one, None
-    clip = lod.clips[0]
-    rot = np.asarray(clip.rotations, np.float64)
-    world, rest = rot[:, path[0]], np.asarray(sk.rest_rotation, np.float64)[path[0]]
-    for j in path[1:]:  # world rotation = product down the chain
-        world = quat_mul(world, rot[:, j])
-        rest = quat_mul(rest, np.asarray(sk.rest_rotation, np.float64)[j])
-    inv_rest = rest * np.array([-1, -1, -1, 1.0])
-    delta = quat_mul(world, inv_rest[None])  # world swing relative to rest
-    local = unit_quat(quat_mul(delta, np.asarray(sk.rest_rotation, np.float64)[0][None]))
-    return one, Clip(
-        name=clip.name,
-        times=np.asarray(clip.times),
-        rotations=local[:, None, :],
-        interpolation=clip.interpolation,
-    )
 
 
 # ----------------------------------------------------------------------------------- the stage
@@ -361,7 +328,9 @@ def build_impostor(
     is drawn into the atlas; its skeleton and clip give the sway), used from `distance`."""
     source = atlas_source(coarse)
     centre, radius, (lo, hi) = sphere(source)
-    albedo, normal = render_views(source, materials, centre, radius, options, card_cells(options.grid))
+    albedo, normal, card_albedo, card_normal = render_views(
+        source, materials, centre, radius, options, card_cells(options.grid)
+    )
     from concurrent.futures import ThreadPoolExecutor
 
     from .texture_png import png_bytes, png_bytes_unfiltered as png
@@ -369,7 +338,7 @@ def build_impostor(
     with ThreadPoolExecutor(1) as pool:  # zlib lets go of the GIL: one atlas on each core
         normal_png = pool.submit(png, normal)
         albedo_tex = Texture("impostor_albedo", png(albedo), wrap="CLAMP")
-        card_albedo, card_normal = card_textures(albedo, normal, options.grid, options.cell)
+        card_albedo, card_normal = card_textures(card_albedo, card_normal, options.grid)
         normal_tex = Texture("impostor_normal", normal_png.result(), wrap="CLAMP", srgb=False)
     cards_tex = Texture("impostor_cards", png_bytes(card_albedo), wrap="CLAMP")
     cards_normal = Texture("impostor_cards_normal", png_bytes(card_normal), wrap="CLAMP", srgb=False)

@@ -76,7 +76,10 @@ def _widest_bark(prim: Primitive, cap: int) -> Primitive:
 
 MIN_BARK_TEXELS = 1.5  # stems are drawn at least this many atlas texels wide
 WIDEN_SHARE = 0.1  # ... stems in full while what that adds is within this share of the
-# view's cover, thickest first; of the thinner stems only some are drawn (_bark_at_least)
+# view's cover, the least widened first; of the others only some are drawn (_bark_at_least)
+
+
+TRUNK_SHARE = 0.25  # a stem holding this share of the bark is a trunk: always widened
 
 
 def _areas(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
@@ -85,23 +88,25 @@ def _areas(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
 
 def _bark_at_least(
     prim: Primitive, width: float, below: float, budget: float = math.inf
-) -> tuple[Primitive, np.ndarray | None]:
+) -> tuple[Primitive, np.ndarray | None, float]:
     """Bark whose tubes are at least `width` metres wide below height `below` (the bole under
-    the crown; the crown's leaves hide its limbs): each vertex pushed out along its (radial)
-    normal by what its tube lacks; and (V,) 1 where a vertex is drawn, 0 where not (None: all
-    are). A tube's radius is read from each edge between vertices whose normals differ by
+    the crown, whose leaves hide its limbs): each vertex
+    pushed out along its (radial) normal by what its tube lacks; (V,) 1 where a vertex is
+    drawn, 0 where not (None: all are); and the budget used (m²). A tube's radius is read from each edge between vertices whose normals differ by
     more than 20° (around a ring, not along the tube): chord / (2 sin(θ/2)) for normals θ
     apart, the least over the vertex's edges (a diagonal to the next ring reads longer).
 
     A trunk thinner than a texel fell to the alpha test in small atlases: the `mobile`
     profile's aspen cards showed its crown floating. Widening every thin stem turned a rush's
     fan of stalks into a solid wedge (2.5× its coarsest LOD's cover). So stems (the mesh's
-    connected pieces) are widened in full, the least widened first, while the area that adds
-    (a tube's surface / π) stays within `budget` m²; of the others, each standing for its
-    true width's share of the widened area, one in so many is drawn (error diffusion in mesh
-    order) and the rest are left out: fewer stalks, each a line, covering what all did."""
+    connected pieces) are widened in full: a trunk, a stem of TRUNK_SHARE of the bark or more,
+    always (a palm lost its own at small atlases, its crown floating), then the least widened first while
+    the area that adds (a tube's surface / π) stays within `budget` m²; of the others, each
+    standing for its true width's share of the widened area, one in so many is drawn (error
+    diffusion in mesh order) and the rest are left out: fewer stalks, each a line, covering
+    what all did."""
     if prim.material != "bark" or not len(prim.indices):
-        return prim, None
+        return prim, None, 0.0
     from .impostor_shading import leaf_ids
 
     p = np.array(prim.positions, np.float64)  # a copy: moved below
@@ -118,7 +123,7 @@ def _bark_at_least(
     push = np.where(np.isfinite(radius) & (p[:, 2] < below), np.clip(0.5 * width - radius, 0.0, None), 0.0)
     moved = push > 0
     if not moved.any():
-        return prim, None
+        return prim, None, 0.0
     before = _areas(p, tri)
     p[moved] += push[moved, None] * n[moved]
     after = _areas(p, tri)
@@ -130,16 +135,20 @@ def _bark_at_least(
     touched = np.flatnonzero(now > was)
     share = was[touched] / now[touched]  # of its widened area, what the stem truly shows
     added = (now[touched] - was[touched]) / math.pi
-    full = np.zeros(len(touched), bool)
+    area = np.bincount(stem[tri[:, 0]], before, n_stems)[touched]
+    trunk = area >= TRUNK_SHARE * before.sum()  # (a rush's stalks: none)
     order = np.argsort(-share, kind="stable")
+    order = np.concatenate([order[trunk[order]], order[~trunk[order]]])
+    full = np.zeros(len(touched), bool)
     full[order] = np.cumsum(added[order]) <= budget
+    full |= trunk
     drawn = np.ones(n_stems, bool)
     rest = touched[~full]
     if len(rest):  # error diffusion: the k-th is drawn when the running sum passes k - 1/2
         run = np.cumsum(share[~full])
         drawn[rest] = np.diff(np.floor(run + 0.5), prepend=0.0) > 0
     moved_prim = replace(prim, positions=p.astype(np.float32))
-    return moved_prim, (None if drawn.all() else drawn[stem].astype(np.float32))
+    return moved_prim, (None if drawn.all() else drawn[stem].astype(np.float32)), float(added[full].sum())
 
 
 def _dilate(rgba: np.ndarray, grid: int, cell: int) -> np.ndarray:
@@ -217,9 +226,11 @@ CALIBRATION_STEPS = 6  # secant steps at most, then the factor last tried
 
 def render_views(
     lod: Lod, materials: list[Material], centre: np.ndarray, radius: float, options, cells
-) -> tuple[np.ndarray, np.ndarray]:
-    """The two atlases (albedo + alpha, normals + depth) of `lod`'s rest pose; `options` an
-    ImpostorOptions, `cells` [(col, row)] the cards' cells.
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The two atlases (albedo + alpha, normals + depth) of `lod`'s rest pose, and the same
+    two of the cards' views side by side at options.card_cell px (finer than the atlas's:
+    they are magnified at the switch); `options` an ImpostorOptions, `cells` [(col, row)] the
+    cards' cells.
 
     Beyond max_leaf_cards, every k-th leaf is drawn, enlarged so that the card views cover
     what all the leaves cover there (a few quick draws of the card cells): clumped leaves
@@ -233,16 +244,20 @@ def render_views(
     leaves = [
         np.asarray(p.positions)[:, 2] for p in lod.primitives if p.material != "bark" and len(p.positions)
     ]
+    # leafless: nothing widened (widened everywhere, shave grass's cards covered +25 to +47 %)
     crown = min((float(z.min()) for z in leaves), default=-math.inf)
     leaf_area, bark_area = _shown(lod.primitives)
-    budget = WIDEN_SHARE * (leaf_area + bark_area)
+    budget = WIDEN_SHARE * (leaf_area + bark_area)  # shared by the bark primitives
     leafy = leafiness(leaf_area / max(leaf_area + bark_area, 1e-12))
-    widened = [
-        _bark_at_least(_widest_bark(p, options.max_bark_triangles), MIN_BARK_TEXELS * texel, crown, budget)
-        for p in lod.primitives
-    ]
-    prims = [w[0] for w in widened]
-    keep = {i: w[1] for i, w in enumerate(widened) if w[1] is not None}
+    prims, keep = [], {}
+    for i, p in enumerate(lod.primitives):
+        wide, drawn, used = _bark_at_least(
+            _widest_bark(p, options.max_bark_triangles), MIN_BARK_TEXELS * texel, crown, budget
+        )
+        prims.append(wide)
+        budget = max(budget - used, 0.0)
+        if drawn is not None:
+            keep[i] = drawn
     thin = [_fewer_leaves(p, options.max_leaf_cards) for p in prims]
     decoded: dict[int, np.ndarray] = {}  # the leaf atlas is decoded once for both part lists
     parts = _atlas_parts(thin, materials, decoded)
@@ -264,4 +279,11 @@ def render_views(
             parts = [_enlarged(q, area, t) if t else q for q, t in zip(parts, thinned)]
         r.draw(Drawable(parts=parts, n_joints=1), None, keep)
         albedo, normal = r.read()
-    return _dilate(albedo, options.grid, options.cell), normal
+        cc = options.card_cell
+        card_albedo, card_normal = r.strip(Drawable(parts=parts, n_joints=1), cells, keep, cc)
+    return (
+        _dilate(albedo, options.grid, options.cell),
+        normal,
+        np.concatenate([_dilate(card_albedo[:, i * cc : (i + 1) * cc], 1, cc) for i in range(len(cells))], 1),
+        card_normal,
+    )

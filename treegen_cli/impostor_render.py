@@ -47,6 +47,8 @@ uniform float radius;
 uniform int grid;
 uniform int n_cells;                              // > 0: instance i draws only cells[i]
 uniform ivec2 cells[4];
+uniform int strip;                                // > 0: instance i draws into slot i of a
+                                                  // strip of that many views (the cards')
 
 vec3 cell_direction(int col, int row) {        // hemi-octahedral decode of the cell centre
     vec2 q = (vec2(col, row) + 0.5) / float(grid) * 2.0 - 1.0;
@@ -65,6 +67,10 @@ vec3 project(vec3 pos) {                          // sets gl_Position; returns t
     vec3 rel = (pos - centre) / radius;
     vec3 l = vec3(dot(rel, right), dot(rel, up), dot(rel, d));
     float n = float(grid);
+    if (strip > 0) {
+        gl_Position = vec4((float(gl_InstanceID) + 0.5 + 0.5 * l.x) / float(strip) * 2.0 - 1.0, l.y, -l.z, 1.0);
+        return l;
+    }
     gl_Position = vec4((float(col) + 0.5 + 0.5 * l.x) / n * 2.0 - 1.0,
                        1.0 - (float(row) + 0.5 - 0.5 * l.y) / n * 2.0, -l.z, 1.0);
     return l;                                     // depth 0.5 + 0.5·l.z = 1 − gl_FragCoord.z
@@ -82,7 +88,7 @@ in float in_keep;
 out vec3 v_normal;
 out vec2 v_uv;
 out vec3 v_rel;
-out float v_keep;
+flat out float v_keep;
 
 void main() {
     project(in_pos);
@@ -107,18 +113,14 @@ uniform float crown_shade;     // CROWN_SHADE, less in a crown of few leaves (le
 in vec3 v_normal;
 in vec2 v_uv;
 in vec3 v_rel;
-in float v_keep;
+flat in float v_keep;
 layout(location = 0) out vec4 f_albedo;
 layout(location = 1) out vec4 f_normal;
-const float BAYER[16] = float[16](0., 8., 2., 10., 12., 4., 14., 6., 3., 11., 1., 9., 15., 7., 13., 5.);
 
 void main() {
     vec4 texel = has_tex ? texture(base_tex, v_uv) : vec4(1.0);
     if (texel.a * opacity < alpha_cutoff) discard;
-    // a stem widened past its true width to a texel keeps that share of its texels, spread
-    // by an ordered dither (impostor_atlas._bark_at_least)
-    ivec2 q = ivec2(gl_FragCoord.xy) & 3;
-    if (v_keep < 1.0 && (BAYER[q.y * 4 + q.x] + 0.5) / 16.0 > v_keep) discard;
+    if (v_keep < 0.5) discard;  // a thin stem left out (impostor_atlas._bark_at_least)
     vec3 n = normalize(v_normal);
     if (!gl_FrontFacing) n = -n;
     // baked, as cards have no crown to shade them: the inner crown gets less sky (render.py's
@@ -265,15 +267,17 @@ class AtlasRenderer:
     def __exit__(self, *exc) -> None:
         self.ctx.release()
 
-    def draw(self, scene: Drawable, cells=None, keep: dict | None = None) -> None:
+    def draw(self, scene: Drawable, cells=None, keep: dict | None = None, target=None) -> None:
         """Clear and draw `scene`'s rest pose into every cell, or only into `cells` [(col, row)],
         clearing only those (for `covered`: a 2048² clear cost llvmpipe 5 ms, more than 2 cells).
-        `keep`: {bark part index: (V,) share of its texels each vertex keeps} (else all)."""
-        ctx, c, radius, fbo = self.ctx, self.centre, self.radius, self.fbo
+        `keep`: {bark part index: (V,) 1 where drawn, 0 where not} (else all); `target`: (fbo,
+        (w, h)) of a strip (`strip`) instead of the atlas."""
+        ctx, c, radius = self.ctx, self.centre, self.radius
+        fbo, (w, h) = target or (self.fbo, (self.size, self.size))
         fbo.use()
-        ctx.viewport = (0, 0, self.size, self.size)
-        for rect in [self._rect(col, row) for col, row in cells] if cells else [None]:
-            fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0, viewport=rect)  # None: the whole atlas
+        ctx.viewport = (0, 0, w, h)
+        for rect in [self._rect(col, row) for col, row in cells] if cells and not target else [None]:
+            fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0, viewport=rect)  # None: all of it
         ctx.enable(ctx.DEPTH_TEST)
         ctx.enable_direct(0x8DB9)  # GL_FRAMEBUFFER_SRGB: linear → sRGB
         ctx.disable(ctx.CULL_FACE)
@@ -339,6 +343,26 @@ class AtlasRenderer:
             img = self._white if image is None else (shrink(image) if small else image)
             self._textures[key] = (_texture(self.ctx, img, wrap), image)  # keeps `image` alive
         return self._textures[key][0]
+
+    def strip(self, scene: Drawable, cells, keep: dict | None, cell: int) -> tuple[np.ndarray, np.ndarray]:
+        """The views of `cells` side by side, `cell` px each (the cards' own images, finer than
+        the atlas's cells), as read() gives the atlas: (albedo, normal + depth) uint8."""
+        ctx, w = self.ctx, cell * len(cells)
+        images = [ctx.texture((w, cell), 4, internal_format=GL_SRGB8_ALPHA8), ctx.texture((w, cell), 4)]
+        depth = ctx.depth_renderbuffer((w, cell))
+        fbo = ctx.framebuffer(color_attachments=images, depth_attachment=depth)
+        try:
+            for prog in (self.bark, self.leaf):
+                _set(prog, "strip", len(cells))
+            self.draw(scene, cells, keep, (fbo, (w, cell)))
+            out = [fbo.read(components=4, attachment=k, alignment=1) for k in range(2)]
+        finally:
+            for prog in (self.bark, self.leaf):
+                _set(prog, "strip", 0)
+            for res in (fbo, depth, *images):
+                res.release()
+        albedo, normal = (np.frombuffer(d, np.uint8).reshape(cell, w, 4)[::-1] for d in out)
+        return albedo, normal
 
     def read(self) -> tuple[np.ndarray, np.ndarray]:
         """(albedo RGBA, normal + depth RGBA) uint8 images of the last draw, top row first."""
