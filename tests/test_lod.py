@@ -301,6 +301,7 @@ def test_cli_info_lod_json():
         assert len(rows) == 3 and "impostor" not in rows[1]
         assert imp["distance_m"] >= 1.5 * 130.0 and imp["triangles"] == 8 and imp["joints"] == 1
         assert imp["impostor"]["grid"] == 16 and imp["impostor"]["atlas_px"] == 1024
+        assert imp["impostor"]["cell_px"] == 64 and imp["impostor"]["card_view_px"] == 128
         assert 15.0 < imp["impostor"]["card_m"] < 25.0 and imp["impostor"]["atlas_bytes"] > 1e5
         assert rows[1]["screen_coverage"] > 0.0 == imp["screen_coverage"]
     res = CliRunner().invoke(

@@ -121,10 +121,13 @@ def lod_table_row(lod: Lod, options: LodOptions = LOD_DEFAULTS) -> dict:
         "screen_coverage": round(float(lod.screen_coverage), 4),
     }
     imp = lod.impostor
-    if imp is not None:  # the last LOD: crossed cards cut from a view atlas
+    if imp is not None:  # the last LOD: crossed cards showing two of a view atlas's views
+        from .impostor import ImpostorOptions
+
         row["impostor"] = {
             "grid": imp.grid,
             "cell_px": imp.cell,
+            "card_view_px": ImpostorOptions(grid=imp.grid, cell=imp.cell).card_cell,
             "atlas_px": imp.grid * imp.cell,
             "card_m": round(2.0 * imp.radius, 3),
             "atlas_bytes": len(imp.albedo.png) + len(imp.normal_depth.png),

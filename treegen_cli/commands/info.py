@@ -113,9 +113,9 @@ def _lod_table(stats: dict, o: dict) -> None:
             i = r["impostor"]
             click.echo(
                 f"    LOD {k} is the impostor: from {r['distance_m']:.1f} m, two crossed "
-                f"cards {i['card_m']:.1f} m square cut from {i['grid']}×{i['grid']} views "
+                f"cards {i['card_m']:.1f} m square showing two of {i['grid']}×{i['grid']} views "
                 f"of {i['cell_px']} px ({i['atlas_px']}² atlas, "
-                f"{i['atlas_bytes'] / 1e3:,.0f} KB of PNG)"
+                f"{i['atlas_bytes'] / 1e3:,.0f} KB of PNG), drawn at {i['card_view_px']} px"
             )
     click.echo(
         "  schedules on the full tree (the paper's Table 3; error: perspective-true, "
