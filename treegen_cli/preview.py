@@ -246,7 +246,7 @@ def _size(text: str) -> tuple[int, int]:
     show_default=True,
     help="Camera bearing, degrees counter-clockwise from +X seen from above "
     "(Z-up tree space); -90 looks along +Y, so the default wind blows left → right. "
-    "A layout with a camera is seen from that camera instead.",
+    "Refused for a layout with a camera, which is seen from that camera.",
 )
 @click.option(
     "--elevation",
