@@ -66,8 +66,8 @@ def describe(asset: Asset, k: int, to_file: np.ndarray, images: dict) -> dict:
         "decoding": DECODING,
         "view": VIEW,
         "images": images,
-        "albedo": "sRGB colour with the crown's self-shading baked in (leaves x about 0.48, "
-        f"less in red, more in blue; inner crown darker); alpha = coverage, cut out below "
+        "albedo": "sRGB colour with the crown's self-shading baked in (leaves x 0.37 / 0.40 / 0.59 in "
+        f"r / g / b; inner crown darker); alpha = coverage, cut out below "
         f"{imp.alpha_cutoff:g}",
         "normal_depth": "rgb = unit normal in (a, b, up) * 0.5 + 0.5 (linear); "
         "alpha = 0.5 + 0.5 * dot(p - centre, d) / radius (1 towards the viewer)",
