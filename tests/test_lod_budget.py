@@ -289,6 +289,28 @@ def test_trunks_under_a_pixel_coarsen_as_branches_do():
     assert tris[3] <= 1.25 * FRACTIONS[3] * tris[0], tris  # near its 5 % (was 17 %)
 
 
+def test_no_lod_keeps_more_leaves_than_the_one_before():
+    """Arbaro's wheat: LOD1 keeps 857 of its 1,715 leaves as cards; LOD2's triangle cards (a
+    triangle a leaf) fitted all 1,715 again in its budget, so the crown thinned at one switch
+    and filled back at the next (IoU 0.845 at switch 2). Capped at LOD1's, LOD2 keeps the
+    same 857 (0.887), and every LOD's leaves are among the ones before (nested)."""
+    from pathlib import Path
+
+    from treegen_cli.lod_budget import _leaf_count
+    from treegen_cli.render_gl import egl_available
+    from treegen_cli.silhouette import lod_pops
+
+    params = load_params(Path(__file__).parent / "fixtures" / "arbaro" / "wheat.xml")
+    job = resolve(dict(no_wind=True, impostor=False, texture_size=128))
+    asset, _ = build_asset(params, 0, job.options)
+    counts = [_leaf_count(lod) for lod in asset.lods]
+    assert counts[1] < counts[0] and counts == sorted(counts, reverse=True), counts
+    if not egl_available():
+        pytest.fail("no headless OpenGL (EGL) context: the renderer cannot run here")
+    pop = lod_pops(asset, LodOptions(), views=(-90.0,), max_px=RENDER_PX)[1]
+    assert pop.iou >= 0.87 and abs(pop.coverage - 1.0) <= COVERAGE_TOL, pop
+
+
 def test_trunks_over_the_bark_budget_coarsen_whatever_their_width(monkeypatch):
     """Arbaro's barley: 19 stalks a pixel wide or more at LOD1 and LOD2 took the whole budget
     kept whole (LOD1 11,893 triangles for 7,277, LOD2 11,427 for 2,183), so every ear's awns

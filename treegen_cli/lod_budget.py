@@ -20,9 +20,9 @@ Each LOD is cut from LOD0's tree (lod_leaves.py), in this order:
      leaves: its leaves would float (the fan palm's fronds);
   4. leaves: as many stratified leaves of LOD0's as the rest of the budget holds — from
      LOD2 on, blades a few pixels long are drawn as triangle cards, one triangle each
-     instead of a card's two, so twice as many stay (`TRIANGLE_CARD_PX`) — (nested: a
-     leaf a LOD keeps, the LODs before it keep too, as long as no LOD keeps more leaves
-     than the one before, which `--lod-triangles` could ask for; each moves to the middle of LOD0's
+     instead of a card's two, so twice as many stay (`TRIANGLE_CARD_PX`), but never more
+     than the LOD before kept — (nested: a leaf a LOD keeps, the LODs before it keep too;
+     each moves to the middle of LOD0's
      leaves it stands for, lod_leaves.gather_leaves, so it sits a little elsewhere in each
      LOD), their blades scaled so the LOD covers on screen,
      at its switch distance, what LOD0 covers (`cover_factors`, lod_factors.py): each region of a
@@ -42,7 +42,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .limits import bark_triangles
-from .leafshapes import triangle_share
+from .leafshapes import card_corners, triangle_share
 from .lod_factors import cover_factors, thicken
 from .lod_nodes import coarsen_nodes, point_tips, stub_stems, twig_keys
 from .lod_leaves import (
@@ -134,6 +134,7 @@ def plan_lod(
     px: float,
     mesh0: MeshOptions | None = None,
     triangle_cards: bool = False,
+    max_leaves: int | None = None,
 ) -> LodPlan:
     """LOD `tree` within `budget` triangles for `mesh` (see the module doc). `bark0`, `leaf0`:
     LOD0's bark and leaf triangles; `px`: metres a pixel spans at the LOD's switch distance;
@@ -184,7 +185,7 @@ def plan_lod(
         # leaf grown to stand for the crown was a card 883 m wide; none, the crown vanished
         # for a LOD and came back at the impostor: the rush's LOD3 under --profile web)
         room = math.floor((1.0 - share) * budget / per_leaf)
-    n_keep = int(min(L, max(0, room)))
+    n_keep = int(min(L, max(0, room), L if max_leaves is None else max_leaves))
     thin = thin_leaves(pruned, n_keep, 1.0)
     if triangle:
         thin = triangle_blades(thin)
@@ -319,5 +320,16 @@ def lod_tree(tree: Tree, k: int, lod0, previous, rig_options, mesh_options, opti
         px,
         mesh_options,
         k >= TRIANGLE_CARDS_FROM,
+        _leaf_count(previous),
     )
     return plan.tree, rig, plan.mesh or mesh
+
+
+def _leaf_count(lod) -> int:
+    """Leaves LOD `lod` draws: a LOD keeps no more (Arbaro's wheat, in triangle cards from
+    LOD2 on, kept all 1,715 leaves after LOD1's 857: thinned, then back)."""
+    return sum(
+        len(p.positions) // card_corners(len(p.positions), len(p.indices))
+        for p in lod.primitives
+        if p.material != "bark" and len(p.positions)
+    )
