@@ -311,6 +311,20 @@ def test_no_lod_keeps_more_leaves_than_the_one_before():
     assert pop.iou >= 0.87 and abs(pop.coverage - 1.0) <= COVERAGE_TOL, pop
 
 
+def test_leaves_drawn_as_their_outline_count_as_leaves_across_lods():
+    """`--leaf-geometry shape` draws each blade as its outline (the aspen's: 8 triangles), not a
+    card: the LOD-to-LOD leaf cap counts them as pieces (counting by card corners divided by
+    zero and `make` died with a traceback)."""
+    from treegen_cli.lod_budget import _leaf_count
+
+    job = resolve(dict(no_wind=True, impostor=False, texture_size=128, leaf_geometry="shape"))
+    asset, _ = build_asset(
+        load_params(species_path("quaking_aspen")), 0, job.options, tree=grown("quaking_aspen")
+    )
+    counts = [_leaf_count(lod) for lod in asset.lods]
+    assert counts[0] == grown("quaking_aspen").n_leaves and counts == sorted(counts, reverse=True), counts
+
+
 def test_trunks_over_the_bark_budget_coarsen_whatever_their_width(monkeypatch):
     """Arbaro's barley: 19 stalks a pixel wide or more at LOD1 and LOD2 took the whole budget
     kept whole (LOD1 11,893 triangles for 7,277, LOD2 11,427 for 2,183), so every ear's awns

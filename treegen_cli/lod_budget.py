@@ -327,9 +327,16 @@ def lod_tree(tree: Tree, k: int, lod0, previous, rig_options, mesh_options, opti
 
 def _leaf_count(lod) -> int:
     """Leaves LOD `lod` draws: a LOD keeps no more (Arbaro's wheat, in triangle cards from
-    LOD2 on, kept all 1,715 leaves after LOD1's 857: thinned, then back)."""
-    return sum(
-        len(p.positions) // card_corners(len(p.positions), len(p.indices))
-        for p in lod.primitives
-        if p.material != "bark" and len(p.positions)
-    )
+    LOD2 on, kept all 1,715 leaves after LOD1's 857: thinned, then back). Cards count by
+    their corners; blades drawn as their outline (`--leaf-geometry shape`) as pieces."""
+    from .impostor_shading import leaf_ids
+
+    count = 0
+    for p in lod.primitives:
+        if p.material == "bark" or not len(p.positions):
+            continue
+        corners = card_corners(len(p.positions), len(p.indices))
+        count += (
+            len(p.positions) // corners if corners else int(leaf_ids(p.indices, len(p.positions)).max()) + 1
+        )
+    return count
