@@ -51,8 +51,9 @@ class ImpostorOptions:
 
     switch_px: the tree's height on screen (pixels of the LOD options' view, width / aspect
     high) below which the impostor is used; at 1.5 × cell an atlas texel spans 1.5 pixels
-    there, a card's (card_cell) 0.75 (at 1.5 the aspen's, willow's and oak's cards scored IoU
-    0.90, 0.89, 0.73 against their LOD3 at the switch, at 0.75 0.92, 0.92, 0.77)
+    there, a card's (card_cell) 0.75 (less where min_factor puts the switch farther: 72 px
+    with the default LODs). At 1.5 the aspen's, willow's and oak's cards scored IoU 0.90, 0.89,
+    0.73 against their LOD3 at the switch, at 0.75 0.92, 0.92, 0.77.
     The switch is never nearer than min_factor × the last geometric LOD's distance.
     distance: metres that replace both (--impostor-distance), beyond the last LOD's; `flag`
     names it in messages as the user gave it (a catalogue's or a layout's key)."""
@@ -71,7 +72,7 @@ class ImpostorOptions:
 
     @property
     def card_cell(self) -> int:
-        return min(CARD_SCALE * self.cell, 512)
+        return CARD_SCALE * self.cell
 
     def __post_init__(self) -> None:
         if self.distance is not None and not self.distance <= MAX_DISTANCE:  # (NaN too)

@@ -1,9 +1,10 @@
 """The impostor's atlas, drawn: which of a LOD's triangles go in, and how thinned leaves keep
 the crown's cover.
 
-    albedo, normal_depth = render_views(coarse_lod, materials, centre, radius, options, cells)
-    # Result: the two (size, size, 4) uint8 atlases; transparent texels carry their cell's
-    # mean colour (_dilate).
+    albedo, normal_depth, card_albedo, card_normal = render_views(
+        coarse_lod, materials, centre, radius, options, cells)
+    # Result: the two (size, size, 4) uint8 atlases, and the cards' views side by side at
+    # options.card_cell px; transparent texels carry their view's mean colour (_dilate).
 
 The views are a few pixels per leaf, so a crown of many leaves is drawn from every k-th leaf,
 enlarged; the enlargement is measured (render_views), not assumed, and bark is drawn from its
@@ -90,11 +91,12 @@ def _bark_at_least(
     prim: Primitive, width: float, below: float, budget: float = math.inf
 ) -> tuple[Primitive, np.ndarray | None, float]:
     """Bark whose tubes are at least `width` metres wide below height `below` (the bole under
-    the crown, whose leaves hide its limbs): each vertex
-    pushed out along its (radial) normal by what its tube lacks; (V,) 1 where a vertex is
-    drawn, 0 where not (None: all are); and the budget used (m²). A tube's radius is read from each edge between vertices whose normals differ by
-    more than 20° (around a ring, not along the tube): chord / (2 sin(θ/2)) for normals θ
-    apart, the least over the vertex's edges (a diagonal to the next ring reads longer).
+    the crown, whose leaves hide its limbs): each vertex pushed out along its (radial) normal
+    by what its tube lacks; (V,) 1 where a vertex is drawn, 0 where not (None: all are); and
+    the budget used (m²). A tube's radius is read from each edge between vertices whose
+    normals differ by more than 20° (around a ring, not along the tube): chord / (2 sin(θ/2))
+    for normals θ apart, the least over the vertex's edges (a diagonal to the next ring reads
+    longer).
 
     A trunk thinner than a texel fell to the alpha test in small atlases: the `mobile`
     profile's aspen cards showed its crown floating. Widening every thin stem turned a rush's

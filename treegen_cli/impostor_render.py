@@ -8,7 +8,8 @@ Each view is an orthographic camera on the bounding sphere (centre, radius) look
 centre from the direction its cell's centre decodes to (impostor.cell_direction: the same
 formula, in GLSL here). One instanced draw call per part: the vertex shader picks the instance's
 cell, projects the rest-pose vertex into the view and places it inside the cell, whose square
-holds the whole sphere, so nothing leaks into a neighbour. Rendered on render_gl.py's context with
+holds the whole sphere, so nothing leaks into a neighbour (`AtlasRenderer.strip` draws a few
+chosen views side by side instead, at their own size: the cards'). Rendered on render_gl.py's context with
 render.py's texture conventions; a plain cut-out test (the views are small: one sample a pixel). Space
 is the generator's (Z up): a, b, up = +X, +Y, +Z.
 
@@ -68,7 +69,8 @@ vec3 project(vec3 pos) {                          // sets gl_Position; returns t
     vec3 l = vec3(dot(rel, right), dot(rel, up), dot(rel, d));
     float n = float(grid);
     if (strip > 0) {
-        gl_Position = vec4((float(gl_InstanceID) + 0.5 + 0.5 * l.x) / float(strip) * 2.0 - 1.0, l.y, -l.z, 1.0);
+        float x = (float(gl_InstanceID) + 0.5 + 0.5 * l.x) / float(strip) * 2.0 - 1.0;
+        gl_Position = vec4(x, l.y, -l.z, 1.0);
         return l;
     }
     gl_Position = vec4((float(col) + 0.5 + 0.5 * l.x) / n * 2.0 - 1.0,
@@ -348,10 +350,12 @@ class AtlasRenderer:
         """The views of `cells` side by side, `cell` px each (the cards' own images, finer than
         the atlas's cells), as read() gives the atlas: (albedo, normal + depth) uint8."""
         ctx, w = self.ctx, cell * len(cells)
-        images = [ctx.texture((w, cell), 4, internal_format=GL_SRGB8_ALPHA8), ctx.texture((w, cell), 4)]
-        depth = ctx.depth_renderbuffer((w, cell))
-        fbo = ctx.framebuffer(color_attachments=images, depth_attachment=depth)
+        made: list = []  # released whatever happens
         try:
+            made += [ctx.texture((w, cell), 4, internal_format=GL_SRGB8_ALPHA8), ctx.texture((w, cell), 4)]
+            made.append(ctx.depth_renderbuffer((w, cell)))
+            fbo = ctx.framebuffer(color_attachments=made[:2], depth_attachment=made[2])
+            made.append(fbo)
             for prog in (self.bark, self.leaf):
                 _set(prog, "strip", len(cells))
             self.draw(scene, cells, keep, (fbo, (w, cell)))
@@ -359,7 +363,7 @@ class AtlasRenderer:
         finally:
             for prog in (self.bark, self.leaf):
                 _set(prog, "strip", 0)
-            for res in (fbo, depth, *images):
+            for res in reversed(made):
                 res.release()
         albedo, normal = (np.frombuffer(d, np.uint8).reshape(cell, w, 4)[::-1] for d in out)
         return albedo, normal

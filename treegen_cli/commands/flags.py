@@ -169,7 +169,7 @@ HELP: dict[str, tuple[str | None, str, str | None]] = {
     ),
     "impostor": (
         "--no-impostor",
-        "End the LODs with an impostor: crossed cards cut from a "
+        "End the LODs with an impostor: crossed cards showing two views of a "
         "16×16-view hemi-octahedral atlas (albedo, normals + depth; described in the "
         "file's extras and NAME.glb.impostor.json), swaying with the trunk.",
         None,

@@ -64,8 +64,8 @@ from . import flags
     "--impostor/--no-impostor",
     default=True,
     show_default=True,
-    help="End each tree's LODs with its impostor (crossed cards cut from a view "
-    "atlas), as `treegen make` does.",
+    help="End each tree's LODs with its impostor (crossed cards showing two views of a "
+    "view atlas), as `treegen make` does.",
 )
 @click.option(
     "--profile",
