@@ -289,6 +289,23 @@ def test_trunks_under_a_pixel_coarsen_as_branches_do():
     assert tris[3] <= 1.25 * FRACTIONS[3] * tris[0], tris  # near its 5 % (was 17 %)
 
 
+def _drawn_leaves(lod) -> int:
+    """Leaves a LOD's mesh draws: cards by their corners, outline blades as connected pieces."""
+    from treegen_cli.impostor_shading import leaf_ids
+    from treegen_cli.leafshapes import card_corners
+
+    count = 0
+    for p in lod.primitives:
+        if p.material != "bark" and len(p.positions):
+            corners = card_corners(len(p.positions), len(p.indices))
+            count += (
+                len(p.positions) // corners
+                if corners
+                else int(leaf_ids(p.indices, len(p.positions)).max()) + 1
+            )
+    return count
+
+
 def test_no_lod_keeps_more_leaves_than_the_one_before():
     """Arbaro's wheat: LOD1 keeps 857 of its 1,715 leaves as cards; LOD2's triangle cards (a
     triangle a leaf) fitted all 1,715 again in its budget, so the crown thinned at one switch
@@ -296,14 +313,13 @@ def test_no_lod_keeps_more_leaves_than_the_one_before():
     same 857 (0.887), and every LOD's leaves are among the ones before (nested)."""
     from pathlib import Path
 
-    from treegen_cli.lod_budget import _leaf_count
     from treegen_cli.render_gl import egl_available
     from treegen_cli.silhouette import lod_pops
 
     params = load_params(Path(__file__).parent / "fixtures" / "arbaro" / "wheat.xml")
     job = resolve(dict(no_wind=True, impostor=False, texture_size=128))
     asset, _ = build_asset(params, 0, job.options)
-    counts = [_leaf_count(lod) for lod in asset.lods]
+    counts = [_drawn_leaves(lod) for lod in asset.lods]
     assert counts[1] < counts[0] and counts == sorted(counts, reverse=True), counts
     if not egl_available():
         pytest.fail("no headless OpenGL (EGL) context: the renderer cannot run here")
@@ -313,15 +329,13 @@ def test_no_lod_keeps_more_leaves_than_the_one_before():
 
 def test_leaves_drawn_as_their_outline_count_as_leaves_across_lods():
     """`--leaf-geometry shape` draws each blade as its outline (the aspen's: 8 triangles), not a
-    card: the LOD-to-LOD leaf cap counts them as pieces (counting by card corners divided by
-    zero and `make` died with a traceback)."""
-    from treegen_cli.lod_budget import _leaf_count
-
+    card: the LOD-to-LOD leaf cap holds for them too (counting the cap by card corners divided
+    by zero and `make` died with a traceback)."""
     job = resolve(dict(no_wind=True, impostor=False, texture_size=128, leaf_geometry="shape"))
     asset, _ = build_asset(
         load_params(species_path("quaking_aspen")), 0, job.options, tree=grown("quaking_aspen")
     )
-    counts = [_leaf_count(lod) for lod in asset.lods]
+    counts = [_drawn_leaves(lod) for lod in asset.lods]
     assert counts[0] == grown("quaking_aspen").n_leaves and counts == sorted(counts, reverse=True), counts
 
 
@@ -337,8 +351,8 @@ def test_trunks_over_the_bark_budget_coarsen_whatever_their_width(monkeypatch):
     built = {}
     real = pipeline.lod_tree
 
-    def record(tree, k, *args):
-        out = real(tree, k, *args)
+    def record(tree, k, *args, **kwargs):
+        out = real(tree, k, *args, **kwargs)
         built[k] = out[0]
         return out
 
@@ -496,8 +510,8 @@ def test_far_lods_keep_the_stems_their_leaves_hang_from(monkeypatch):
     built = []
     real = pipeline.lod_tree
 
-    def record(tree, k, *args):
-        out = real(tree, k, *args)
+    def record(tree, k, *args, **kwargs):
+        out = real(tree, k, *args, **kwargs)
         built.append((k, out[0], args[-1]))
         return out
 

@@ -42,7 +42,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .limits import bark_triangles
-from .leafshapes import card_corners, triangle_share
+from .leafshapes import triangle_share
 from .lod_factors import cover_factors, thicken
 from .lod_nodes import coarsen_nodes, point_tips, stub_stems, twig_keys
 from .lod_leaves import (
@@ -295,9 +295,13 @@ def lod_budget(k: int, lod0, previous, options) -> float:
     return min(frac * _triangles(lod0), _triangles(previous))
 
 
-def lod_tree(tree: Tree, k: int, lod0, previous, rig_options, mesh_options, options):
+def lod_tree(
+    tree: Tree, k: int, lod0, previous, rig_options, mesh_options, options, leaves: int | None = None
+):
     """(Tree, RigOptions, MeshOptions) of LOD `k` > 0, cut from LOD0's `tree` within its
-    triangle budget (`lod0`, `previous`: the LODs built so far, first and last)."""
+    triangle budget (`lod0`, `previous`: the LODs built so far, first and last) and keeping
+    at most `leaves`, the LOD before's (Arbaro's wheat, in triangle cards from LOD2 on, kept
+    all 1,715 leaves after LOD1's 857: thinned, then back)."""
     table = options.sides[min(k, len(options.sides) - 1)]
     mesh = replace(
         mesh_options, sides=capped_sides(table, mesh_options.sides), match_sides=mesh_options.sides
@@ -320,23 +324,6 @@ def lod_tree(tree: Tree, k: int, lod0, previous, rig_options, mesh_options, opti
         px,
         mesh_options,
         k >= TRIANGLE_CARDS_FROM,
-        _leaf_count(previous),
+        leaves,
     )
     return plan.tree, rig, plan.mesh or mesh
-
-
-def _leaf_count(lod) -> int:
-    """Leaves LOD `lod` draws: a LOD keeps no more (Arbaro's wheat, in triangle cards from
-    LOD2 on, kept all 1,715 leaves after LOD1's 857: thinned, then back). Cards count by
-    their corners; blades drawn as their outline (`--leaf-geometry shape`) as pieces."""
-    from .impostor_shading import leaf_ids
-
-    count = 0
-    for p in lod.primitives:
-        if p.material == "bark" or not len(p.positions):
-            continue
-        corners = card_corners(len(p.positions), len(p.indices))
-        count += (
-            len(p.positions) // corners if corners else int(leaf_ids(p.indices, len(p.positions)).max()) + 1
-        )
-    return count

@@ -129,13 +129,14 @@ def build_lods(params: Params, tree: Tree, options: MakeOptions, seed: int, timi
     distances = switch_distances(height, lo)
     at = replace(lo, distances=tuple(distances))  # lod_tree sizes stems by the switch distance
     lods: list[Lod] = []
-    sway, rig0 = None, None
+    sway, rig0, leaves = None, None, tree.n_leaves
     for k, distance in enumerate(distances):
         t, rig, mesh = tree, options.rig, options.mesh
-        if k > 0:
+        if k > 0:  # (no LOD keeps more leaves than the one before)
             t, rig, mesh = timings.run(
-                "generate", lod_tree, tree, k, lods[0], lods[-1], options.rig, options.mesh, at
+                "generate", lod_tree, tree, k, lods[0], lods[-1], options.rig, options.mesh, at, leaves=leaves
             )
+            leaves = t.n_leaves
         lod, sway, built = build_lod(t, replace(options, rig=rig, mesh=mesh), seed, timings, sway, rig0)
         rig0 = built if rig0 is None else rig0
         clips = [
