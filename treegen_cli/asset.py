@@ -217,3 +217,11 @@ def lod_bounds(lod: Lod) -> tuple[np.ndarray, np.ndarray]:
         return np.zeros(3), np.zeros(3)
     allp = np.concatenate(pts)
     return allp.min(0), allp.max(0)
+
+
+def triangle_areas(positions, indices) -> np.ndarray:
+    """(T,) float64 areas of the triangles `indices` (flat or (T, 3)) over `positions`."""
+    p = np.asarray(positions, np.float64)
+    t = np.asarray(indices, np.int64).reshape(-1, 3)
+    a = p[t[:, 0]]
+    return 0.5 * np.linalg.norm(np.cross(p[t[:, 1]] - a, p[t[:, 2]] - a), axis=1)

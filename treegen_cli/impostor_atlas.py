@@ -18,7 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from .asset import Lod, Material, Primitive
+from .asset import Lod, Material, Primitive, triangle_areas
 from .leafshapes import card_corners
 
 
@@ -83,10 +83,6 @@ WIDEN_SHARE = 0.1  # ... stems in full while what that adds is within this share
 TRUNK_SHARE = 0.25  # a stem holding this share of the bark is a trunk: always widened
 
 
-def _areas(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
-    return 0.5 * np.linalg.norm(np.cross(p[tri[:, 1]] - p[tri[:, 0]], p[tri[:, 2]] - p[tri[:, 0]]), axis=1)
-
-
 def _bark_at_least(
     prim: Primitive, width: float, below: float, budget: float = math.inf
 ) -> tuple[Primitive, np.ndarray | None, float]:
@@ -126,9 +122,9 @@ def _bark_at_least(
     moved = push > 0
     if not moved.any():
         return prim, None, 0.0
-    before = _areas(p, tri)
+    before = triangle_areas(p, tri)
     p[moved] += push[moved, None] * n[moved]
-    after = _areas(p, tri)
+    after = triangle_areas(p, tri)
     stem = leaf_ids(prim.indices, len(p))  # a connected piece of bark: a stem
     grown = moved[tri].any(axis=1)
     n_stems = int(stem.max()) + 1
@@ -174,10 +170,8 @@ def _shown(prims: list[Primitive]) -> tuple[float, float]:
     (their cards'), its bark's surface / π (a tube's outline)."""
     out = [0.0, 0.0]
     for p in prims:
-        if len(p.indices):
-            area = _areas(np.asarray(p.positions, np.float64), np.asarray(p.indices, np.int64).reshape(-1, 3))
-            bark = p.material == "bark"
-            out[bark] += float(area.sum()) / (math.pi if bark else 1.0)
+        bark = p.material == "bark"
+        out[bark] += float(triangle_areas(p.positions, p.indices).sum()) / (math.pi if bark else 1.0)
     return out[0], out[1]
 
 

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .asset import triangle_areas
 from .errors import TreegenError
 
 
@@ -83,11 +84,6 @@ def _inscribed(n: int) -> list[tuple[float, float, float]]:
     return rows
 
 
-def _area(p: np.ndarray, t: np.ndarray) -> float:
-    a, b, c = p[t[:, 0]], p[t[:, 1]], p[t[:, 2]]
-    return float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
-
-
 def _outline(
     name: str,
     p2: np.ndarray,
@@ -102,7 +98,7 @@ def _outline(
         pts = z
     if normals is None:
         normals = np.tile([0.0, 0.0, 1.0], (len(p2), 1))
-    return LeafOutline(name, pts, normals, uvs, tris, _area(pts, tris))
+    return LeafOutline(name, pts, normals, uvs, tris, float(triangle_areas(pts, tris).sum()))
 
 
 def _flat(name: str, rows) -> LeafOutline:

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from . import __version__
-from .asset import Asset, Lod
+from .asset import Asset, Lod, triangle_areas
 from .budget import DEFAULTS as BUDGET_DEFAULTS, BudgetOptions, plan_budget
 from .generate import DEFAULTS as GENERATE_DEFAULTS, GenerateOptions, generate
 from .impostor import ImpostorOptions, build_impostor, cards, switch_distance
@@ -157,12 +157,9 @@ CROWN_SHARE = 0.1  # the impostor's source draws at least this share of LOD0's l
 
 def _leaf_area(lod: Lod) -> float:
     """Summed area (m²) of the LOD's leaf triangles."""
-    total = 0.0
-    for p in lod.primitives:
-        if p.name == "leaves" and len(p.indices):
-            t = np.asarray(p.positions, np.float64)[np.asarray(p.indices).reshape(-1, 3)]
-            total += 0.5 * float(np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1).sum())
-    return total
+    return sum(
+        float(triangle_areas(p.positions, p.indices).sum()) for p in lod.primitives if p.name == "leaves"
+    )
 
 
 def add_impostor(
