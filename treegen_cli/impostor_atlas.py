@@ -149,19 +149,21 @@ def _bark_at_least(
     return moved_prim, (None if drawn.all() else drawn[stem].astype(np.float32)), float(added[full].sum())
 
 
-def _dilate(rgba: np.ndarray, grid: int, cell: int) -> np.ndarray:
-    """Transparent texels take their cell's mean visible colour (alpha stays 0), so clients'
-    mipmaps and bilinear filtering do not darken the cut-out's edges. The renderer clears to
-    0, so a cell's colour sum needs no mask; texels are filled as whole uint32 words."""
+def _dilate(rgba: np.ndarray, cell: int) -> np.ndarray:
+    """Transparent texels take their view's mean visible colour (alpha stays 0), so clients'
+    mipmaps and bilinear filtering do not darken the cut-out's edges; `rgba` is rows × columns
+    of `cell`-px views (the atlas, or the cards' strip). The renderer clears to 0, so a view's
+    colour sum needs no mask; texels are filled as whole uint32 words."""
     rgba = np.ascontiguousarray(rgba)
-    rows = rgba.reshape(grid, cell, grid, cell * 4).sum(axis=1, dtype=np.uint32)
-    total = rows.reshape(grid, grid, cell, 4).sum(axis=2)[..., :3]  # (grid, grid, 3)
-    empty = (rgba[..., 3] == 0).reshape(grid, cell, grid, cell)
+    nr, nc = rgba.shape[0] // cell, rgba.shape[1] // cell
+    rows = rgba.reshape(nr, cell, nc, cell * 4).sum(axis=1, dtype=np.uint32)
+    total = rows.reshape(nr, nc, cell, 4).sum(axis=2)[..., :3]  # (nr, nc, 3)
+    empty = (rgba[..., 3] == 0).reshape(nr, cell, nc, cell)
     count = np.maximum(cell * cell - np.count_nonzero(empty, axis=(1, 3)), 1).astype(np.uint32)
-    fill = np.zeros((grid, grid, 4), np.uint8)
+    fill = np.zeros((nr, nc, 4), np.uint8)
     fill[..., :3] = (total + count[..., None] // 2) // count[..., None]
-    texels = rgba.view(np.uint32).reshape(grid, cell, grid, cell)
-    out = np.where(empty, fill.view(np.uint32).reshape(grid, 1, grid, 1), texels)
+    texels = rgba.view(np.uint32).reshape(nr, cell, nc, cell)
+    out = np.where(empty, fill.view(np.uint32).reshape(nr, 1, nc, 1), texels)
     return out.view(np.uint8).reshape(rgba.shape)
 
 
@@ -273,13 +275,8 @@ def render_views(
             tol = max(CALIBRATION_TOL, 1.0 / max(target, 1))  # a small atlas: a texel at least
             area = solve_factor(cover, target, 1.0, 2.0 * k, tol, CALIBRATION_STEPS, start=k)
             parts = [_enlarged(q, area, t) if t else q for q, t in zip(parts, thinned)]
-        r.draw(Drawable(parts=parts, n_joints=1), None, keep)
+        final = Drawable(parts=parts, n_joints=1)
+        r.draw(final, None, keep)
         albedo, normal = r.read()
-        cc = options.card_cell
-        card_albedo, card_normal = r.strip(Drawable(parts=parts, n_joints=1), cells, keep, cc)
-    return (
-        _dilate(albedo, options.grid, options.cell),
-        normal,
-        np.concatenate([_dilate(card_albedo[:, i * cc : (i + 1) * cc], 1, cc) for i in range(len(cells))], 1),
-        card_normal,
-    )
+        card_albedo, card_normal = r.strip(final, cells, keep, options.card_cell)
+    return _dilate(albedo, options.cell), normal, _dilate(card_albedo, options.card_cell), card_normal
