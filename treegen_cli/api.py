@@ -39,6 +39,7 @@ from .mesh import MESH_DEFAULTS
 
 # re-exported: api is the one door (api.DEFAULTS, api.resolve, ...)
 from .options import DEFAULTS, GROUPS, INFO_LOD_BUILD, UNSET_FREE, Resolved, cli_name, resolve  # noqa: F401
+from .void_options import typed_name
 from .params import Params, load_params
 from .pipeline import Timings, build_asset
 from .prepare import split_lods
@@ -211,7 +212,7 @@ def info(
 
     for k in options:  # ("profile" also sets the budget the plain report plans)
         if not lod and k != "profile" and (k in GROUPS["lod"] or k in INFO_LOD_BUILD):
-            flag = "--no-impostor" if k == "impostor" and options[k] is False else cli_name(k)
+            flag = typed_name(k, options[k], cli_name)
             raise TreegenError(f"{flag}: has no effect without --lod (it shapes the LODs); add --lod")
         if not (lod or wind) and k in GROUPS["wind"]:
             raise TreegenError(

@@ -30,6 +30,12 @@ def static_format(output) -> bool:
     return output is not None and Path(output).suffix.lower() in STATIC
 
 
+def typed_name(k: str, value, label: Callable[[str], str]) -> str:
+    """Option `k` as the user typed it: its label, `--no-impostor` for `--impostor` given off."""
+    name = label(k)
+    return "--no-impostor" if name == "--impostor" and value is False else name
+
+
 def _given(options: dict, keys) -> list[str]:
     """The `keys` the user gave: a flag when set, a value when given at all (0 included)."""
     return [k for k in keys if options.get(k) is not None and options.get(k) is not False]
@@ -54,14 +60,14 @@ def check_no_effect(options: dict, label: Callable[[str], str], output) -> None:
             continue
         raise TreegenError(f"{label(k)}: has no effect, {why}; leave it out")
     if options.get("impostor") is not None and (static or options.get("no_lod")):  # either way
-        flag = label("impostor")
-        typed = flag if flag != "--impostor" or options["impostor"] else "--no-impostor"
         why = (
             f"a {Path(output).suffix.lower()} file holds no LODs (static format)"
             if static
             else f"{label('no_lod')} builds one LOD, never an impostor"
         )
-        raise TreegenError(f"{typed}: has no effect, {why}; leave it out")
+        raise TreegenError(
+            f"{typed_name('impostor', options['impostor'], label)}: has no effect, {why}; leave it out"
+        )
     suffix = Path(output).suffix.lower() if output is not None else ""
     for k in (*SKIN_ONLY, *TEXTURE_ONLY):
         if options.get(k) is None:
