@@ -206,7 +206,7 @@ def export_parts(
         from .texture_files import TextureFiles
 
         # NAME_LOD_usdc_leaf.png: not the single file's names, which it may overwrite with its own
-        names = TextureFiles(path.with_name(f"{path.stem}{PARTS_TAG}{path.suffix}"), packaged=False)
+        names = TextureFiles(path.with_name(f"{path.stem}{PARTS_TAG}{path.suffix}"))
 
         base = writer
 

@@ -265,6 +265,6 @@ def write_forest_gltf(scene: Forest, path: str | os.PathLike, options: GltfOptio
     exchange.export_forest stages it."""
     path = Path(path)
     binary = path.suffix.lower() != ".gltf"
-    files = None if binary else TextureFiles(path, packaged=False)
+    files = None if binary else TextureFiles(path)
     gltf, buf = _build_forest(scene, options, files)
     write_document(gltf, buf, path, binary, files.files if files is not None else {})

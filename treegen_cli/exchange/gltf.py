@@ -170,7 +170,7 @@ def write_gltf(
     path = Path(path)
     if binary is None:
         binary = path.suffix.lower() != ".gltf"
-    files = None if binary else textures or TextureFiles(path, packaged=False)
+    files = None if binary else textures or TextureFiles(path)
     gltf, buf = _build(asset, options, files)
     write_document(gltf, buf, path, binary, files.files if files is not None else {})
     meta = gltf["asset"].get("extras", {}).get("treegen_impostor")
