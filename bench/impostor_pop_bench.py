@@ -1,7 +1,8 @@
 """The switch to the impostor per bundled species: covered area and silhouette IoU of the cards
 against the coarsest geometric LOD, and the impostor stage's CPU seconds.
 
-    python bench/impostor_pop_bench.py [--species quaking_aspen,...] [--views -90,-45,0,30]
+    python bench/impostor_pop_bench.py [--species quaking_aspen,tests/fixtures/arbaro/barley.xml,...]
+                                       [--views -90,-45,0,30]
 
 Each species is built as `treegen make` builds it (default options, no wind); the coarsest LOD
 and the impostor are rendered at the tree's size on screen at the impostor's distance (fov 60°,
@@ -80,11 +81,14 @@ def main() -> None:
     print(
         f"{'species':<20}{'dist m':>8}{'px':>5}  {'cover per view':<34}{'IoU per view':<30}impostor s (wall)"
     )
-    for name in names:
-        timings = Timings()
-        asset, _ = build_asset(
-            load_params(ROOT / "treegen_cli" / "species" / f"{name}.txt"), 0, job.options, timings
+    for given in names:
+        path = (
+            Path(given)
+            if given.endswith((".txt", ".xml"))
+            else ROOT / "treegen_cli" / "species" / f"{given}.txt"
         )
+        name, timings = path.stem, Timings()
+        asset, _ = build_asset(load_params(path), 0, job.options, timings)
         k = len(asset.lods) - 1
         d = asset.lods[k].distance
         masks, px = coverage_masks(
