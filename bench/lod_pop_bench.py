@@ -127,6 +127,16 @@ fractions 0.4 / 0.2 / 0.08 instead of 0.5 / 0.25 / 0.1 (LOD0 drawn 25 % farther,
 trees at LOD0 in a uniform forest) pass 8 of 15 (oak, larch, poplar join; the tamarack's switch 3 then covers +5.3 %), the palms
 (0.830, 0.836), shave grass (0.756), rush (0.872), desert bush (0.880) and cottonwood (0.890)
 still short.
+
+Two more routes measured (27 Nov 2026, late), the test's view, worst switch IoU, not taken:
+each kept leaf stretched along the principal axis of the leaves it stands for (length × 1 +
+κ·2σ/length, width divided alike, its frame turned to that axis) moves the oak 0.899 → 0.903
+(κ = 1) but the poplar 0.882 → 0.879 and the palm's switch 1 0.878 → 0.846; and giving bark
+half its share of the budget (the rest to leaves) passes the oak (0.904) and lifts the
+cottonwood's switch 3 to 0.902 but drops the larch to 0.872 (its twigs are most of what it
+shows). Three times the leaves at LOD2 and LOD3, over budget, pass the oak, the poplar, the
+larch and the cottonwood's switches 2 and 3 (bench/lod_trios_bench.py); leaf trios, three
+leaf blobs on one triangle, do not carry that within the budget.
 """
 
 from __future__ import annotations
