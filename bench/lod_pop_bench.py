@@ -1,6 +1,7 @@
 """LOD pops per bundled species: silhouette IoU and covered-area ratio at every LOD switch.
 
-    python bench/lod_pop_bench.py [--species quaking_aspen,...] [--views 4] [--max-px 768]
+    python bench/lod_pop_bench.py [--species quaking_aspen,tests/fixtures/arbaro/wheat.xml,...]
+                                  [--views 4] [--max-px 768]
 
 Each switch LOD k−1 → k is rendered at the size the tree has on screen at LOD k's distance
 (fov 60°, 1920 px wide, the default LOD view), rest pose, alpha-tested coverage masks from the
@@ -167,10 +168,11 @@ def main() -> None:
     opts = LodOptions()
     print(f"{'species':<20}{'switch':>7}{'dist m':>8}{'px':>6}{'IoU':>7}{'cover':>8}   triangles / LOD0")
     worst_iou, worst_cov = 1.0, 0.0
-    for name in names:
-        t0 = time.perf_counter()
+    for given in names:
+        path = Path(given) if given.endswith((".txt", ".xml")) else ROOT / "species" / f"{given}.txt"
+        name, t0 = path.stem, time.perf_counter()
         asset, _ = build_asset(
-            load_params(ROOT / "species" / f"{name}.txt"),
+            load_params(path),
             0,
             MakeOptions(wind=None, lod=opts, materials=MaterialOptions(texture_size=256)),
         )

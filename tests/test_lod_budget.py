@@ -116,6 +116,50 @@ def test_triangle_budgets(species):
             assert int(np.asarray(p.joints).max()) < len(lod.skeleton.names)
 
 
+@pytest.mark.parametrize("name", ["barley", "wheat"])
+def test_stalks_over_the_bark_share_coarsen_until_the_lod_fits(name, monkeypatch):
+    """Arbaro's barley (19 stalks, 2.8 mm) and wheat (49): their stalks alone took more than
+    the bark's share of LOD2's and LOD3's budgets, drawn two rings a segment with nodes 1 px
+    off their chords (barley's LOD3 2,043 triangles for 727). Such trunks now take one ring a
+    segment and drop nodes up to MAX_TRUNK_TOL_PX off: every LOD is within its budget, and
+    every stalk is kept from its base to its tip, where its ear sits."""
+    from pathlib import Path
+
+    import treegen_cli.lod_budget as lod_budget
+
+    plans = []
+    real = lod_budget.plan_lod
+
+    def record(*args, **kwargs):
+        plans.append(real(*args, **kwargs))
+        return plans[-1]
+
+    monkeypatch.setattr(lod_budget, "plan_lod", record)
+    job = resolve(dict(no_wind=True, texture_size=128, impostor=False))
+    path = Path(__file__).parent / "fixtures" / "arbaro" / f"{name}.xml"
+    asset, _ = build_asset(load_params(path), 0, job.options)
+    tris = [_tris(lod) for lod in asset.lods]
+    for k, t in enumerate(tris):
+        assert t <= FRACTIONS[k] * tris[0], (k, tris)
+    assert plans[-1].mesh.rings_per_segment == (1,)  # LOD3's stalks were over the share
+
+    def ends(tree):
+        trunk = np.flatnonzero(tree.stem_level == 0)
+        first = tree.stem_node_start[trunk]
+        return tree.node_pos[first], tree.node_pos[first + tree.stem_node_count[trunk] - 1]
+
+    base0, tip0 = ends(_lod0_tree(path))
+    for plan in plans:
+        base, tip = ends(plan.tree)
+        assert np.allclose(base, base0) and np.allclose(tip, tip0)
+
+
+def _lod0_tree(path):
+    from treegen_cli.generate import generate
+
+    return generate(load_params(path), 0)
+
+
 @pytest.mark.parametrize("species", ["quaking_aspen", "fan_palm"])
 def test_far_lods_draw_triangle_cards_where_blades_are_a_few_pixels(species):
     """A LOD from TRIANGLE_CARDS_FROM on whose switch shows LOD0's median blade at most

@@ -64,6 +64,8 @@ STUB_SHARE = 0.5  # ... while the cones take at most this share of the triangles
 # leaves for leaves
 NODE_TOL_PX = 1.0  # a branch node within this many pixels of its neighbours' chord is dropped
 THIN_TRUNK_PX = 1.0  # a trunk narrower than this at its base is coarsened as a branch is
+MAX_TRUNK_TOL_PX = 4.0  # trunks alone over the bark's share: their nodes dropped within up to
+# this many pixels of the chord (doubling from NODE_TOL_PX), one ring a segment
 STEM_WORTH = 1.0  # a leafy tree keeps stems showing at least this × a leaf's area per triangle
 FILL_PASSES = 3  # keep_stems: passes filling what forks cut with their parent left free
 MIN_RADIUS_PX = 0.5  # stems thinner than this many pixels are kept only if worth_keeping;
@@ -159,6 +161,13 @@ def plan_lod(
     share = bark0 / total0 if total0 else 1.0
     over = bool(per_stem[tree.stem_level == 0].sum() > budget * share)
     coarse = coarsen_nodes(tree, NODE_TOL_PX * px, trunks=(not leaf0) | over | thin)
+    if over:  # still: one ring a segment, and the trunks' nodes coarser, until they fit
+        mesh = replace(mesh, rings_per_segment=(1,))
+        tol = NODE_TOL_PX
+        while (tol := 2.0 * tol) <= MAX_TRUNK_TOL_PX and (
+            bark_triangles(coarse, mesh)[coarse.stem_level == 0].sum() > budget * share
+        ):
+            coarse = coarsen_nodes(coarse, tol * px, trunks=True, stems=coarse.stem_level == 0)
     if not leaf0:  # a leafless crown is its twigs: cones, three for the price of one
         coarse = point_tips(coarse)
     per_stem = bark_triangles(coarse, mesh)
