@@ -86,13 +86,17 @@ def linear(img: np.ndarray) -> np.ndarray:
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
-def crown_means(asset, size: int = 192, views=VIEWS) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+def crown_means(
+    asset, size: int = 192, views=VIEWS, pair: tuple[int, int] | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """(coarsest LOD, impostor) mean linear RGB over the pixels both cover, all views, their
     contrast: the standard deviation of linear luminance over those pixels (2,), and the
     impostor's dark share: its pixels darker than all but DARK_PERCENTILE % of the LOD's
-    (blotches; DARK_PERCENTILE / 100 when it is as dark as the LOD)."""
+    (blotches; DARK_PERCENTILE / 100 when it is as dark as the LOD). `pair`: two other LODs
+    (indices), the first in the coarsest LOD's place."""
     k = len(asset.lods) - 1
-    scenes = [from_asset(asset, k - 1), from_asset(asset, k)]
+    a, b = pair or (k - 1, k)
+    scenes = [from_asset(asset, a), from_asset(asset, b)]
     pts = np.concatenate([p.positions for p in scenes[0].parts])
     pixels: list[list[np.ndarray]] = [[], []]
     for az in views:

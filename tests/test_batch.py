@@ -551,6 +551,46 @@ def test_ctrl_c_keeps_what_landed_and_leaves_no_partial_files_or_empty_folders(w
     assert len(list((out / "later").glob("*.glb"))) == 4
 
 
+@pytest.mark.parametrize("stop", ["ctrl-c", "sigterm"])
+@pytest.mark.parametrize("start", ["starts", "fails"])
+def test_a_stop_while_the_cluster_starts_stops_it_once_started(monkeypatch, stop, start):
+    """A Ctrl-C or SIGTERM while the local Dask cluster starts (a few seconds): SIGINT was
+    ignored there (a batch stopped at 2.5-3.5 s built everything and exited 0), and a
+    SIGTERM left a half-started cluster to Dask's exit hook (a 28-line traceback), or stopped
+    its workers too (a process group's) and "Nanny failed to start" ended the run with exit
+    1. Now the signal is held until the cluster has started, which is then closed, and
+    raised as itself whether or not the start got through."""
+    from treegen_cli import executor
+    from treegen_cli.errors import Terminated, raise_terminated
+
+    closed = []
+
+    class Cluster:
+        def close(self):
+            closed.append(True)
+
+    def starting(n):
+        os.kill(os.getpid(), signal.SIGINT if stop == "ctrl-c" else signal.SIGTERM)
+        time.sleep(0.05)  # delivered here, in the middle of the start
+        if start == "fails":
+            raise RuntimeError("Nanny failed to start.")
+        return Cluster()
+
+    monkeypatch.setattr(executor, "start_fork_server", lambda: None)
+    monkeypatch.setattr(executor, "_local_cluster", starting)
+    before = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    signal.signal(signal.SIGTERM, raise_terminated)  # the CLI's (cli.main installs it)
+    try:
+        with pytest.raises(KeyboardInterrupt) as caught:
+            with executor.dask_client(workers=1):
+                pytest.fail("the client was handed out after a stop")
+        assert isinstance(caught.value, Terminated) == (stop == "sigterm")
+        assert closed == ([True] if start == "starts" else [])
+        assert signal.getsignal(signal.SIGINT) is before[signal.SIGINT]  # handlers restored
+    finally:
+        signal.signal(signal.SIGTERM, before[signal.SIGTERM])
+
+
 def test_a_file_where_an_output_folder_goes_is_refused_before_anything_runs(workspace, tmp_path):
     cat = json.loads(json.dumps(CATALOGUE))
     cat["entries"][2]["name"] = "later/{species}_{seed}.{ext}"
