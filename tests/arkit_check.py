@@ -60,7 +60,7 @@ def check(path) -> dict[str, list[str]]:
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PXR_PLUGINPATH_NAME")}
     env["PYTHONPATH"] = str(TARGET)
     proc = subprocess.run(
-        [sys.executable, "-c", _RUN, str(path)],
+        [sys.executable, "-c", _RUN, str(Path(path).resolve())],  # (it runs from TARGET)
         capture_output=True,
         text=True,
         env=env,
