@@ -58,6 +58,15 @@ The std measure of contrast was mostly the blotches: the card's own flat normal 
 0.6: contrast 0.66, dark 5.1 % / 8.1 %, black specks instead of blotches. Looked at (128 px
 previews of LOD3 and the impostor, aspen, fir, willow): the mean with 0.45 is the one without
 black patches.
+
+2026-11-28, `--size 96`: a card texel's normal the mean over all its 5 × 5 neighbours (an empty
+one leaning nowhere), where it was over the covered ones only, so texels out at the fringe are
+lit as the crown's rounded surface (impostor.card_textures), before → after (RGB ratio,
+contrast, dark %):
+    quaking_aspen   1.227 1.222 1.243 0.55 0.7  →  1.249 1.243 1.261 0.53 0.2
+    balsam_fir      1.016 1.085 1.172 0.66 5.0  →  1.033 1.105 1.191 0.66 3.9
+    ca_black_oak    0.891 0.938 0.893 0.66 0.2  →  0.909 0.958 0.909 0.67 0.0
+    weeping_willow  1.077 1.017 1.096 0.70 2.2  →  1.103 1.041 1.118 0.69 1.0
 """
 
 from __future__ import annotations

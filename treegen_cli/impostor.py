@@ -240,8 +240,8 @@ FLAT_NORMAL = (128, 128, 255)  # a tangent-space normal map's "no bump" texel
 MIN_FACING = 0.05  # a card texel's normal leans at most this close to the card's plane
 MASS_FACING = 0.6  # the crown's rounded mass: its normal at a card's middle is the view,
 MASS_WEIGHT = 0.45  # at its sides tilted sideways, at its top upwards. Each texel's normal
-# is the mean of its covered neighbours' (NEIGHBOURS², leaf or bark normals, less their part along
-# the view) plus this much of the mass's: the mass says which way the card faces, the
+# is the mean over its NEIGHBOURS² neighbours of their leaf or bark normals (less their part
+# along the view; an empty neighbour leans nowhere) plus this much of the mass's: the mass says which way the card faces, the
 # neighbours how the crown's surface turns across it. One leaf's own normal alone lit
 # leaves turned from the sun as black blotches a texel or two wide; with their part along
 # the view (double-sided leaves face the camera that drew them) each card faced its own view
@@ -249,7 +249,9 @@ MASS_WEIGHT = 0.45  # at its sides tilted sideways, at its top upwards. Each tex
 # went dark, the opposite of the geometric LOD's halves. The neighbours' sum (up to 9 or 25
 # times the mass) let clumps of leaves facing one way lean whole patches away from the sun:
 # 6-23 % of the crown's pixels were darker than all but 2 % of the coarsest LOD's, black
-# blotches at the switch size (bench/impostor_colour_bench.py's dark column)
+# blotches at the switch size (bench/impostor_colour_bench.py's dark column). Averaged over
+# the covered neighbours only, a texel or two out at the fringe kept its own leaf's lean: black
+# specks along the crown's edge
 
 
 NEIGHBOURS = 2 * CARD_SCALE + 1  # a card texel's neighbourhood: the atlas's 3 × 3 texels
@@ -282,7 +284,10 @@ def card_textures(albedo: np.ndarray, normal: np.ndarray, grid: int) -> tuple[np
         mass /= np.linalg.norm(mass, axis=-1, keepdims=True)
         n = n - (n @ d)[..., None] * d  # the leaves faced this view in the atlas: no more
         covered = (a_cell[..., 3:] > 0).astype(np.float64)
-        n = _box(n * covered) / np.maximum(_box(covered), 1.0)  # the neighbours' mean
+        # the neighbourhood's mean, empty texels counting as no lean (_box(1): the box's size,
+        # cut at the cell's border): a few texels out at the crown's fringe are lit as its
+        # rounded surface there, not as their one or two leaves (black specks at the edges)
+        n = _box(n * covered) / _box(np.ones_like(covered))
         n = n + MASS_WEIGHT * mass  # the crown lit as a rounded mass
         t = np.stack([n @ right, n @ up, n @ d], axis=-1)
         t /= np.maximum(np.linalg.norm(t, axis=-1, keepdims=True), 1e-12)
