@@ -164,6 +164,17 @@ def test_refusal_names_the_minimum_and_the_minimum_builds(tmp_path):
     assert r.returncode == 2 and r.stderr.strip() == line
 
 
+def test_info_says_its_rows_are_the_tree_as_grown_when_a_budget_regrows_it():
+    """`info --profile mobile` reported the tupelo's 10,411 stems and 241,942 triangles, the
+    tree as grown, where `make` builds 18,996 triangles (the budget line said so, the rows
+    did not): its title says the rows are as grown, and only when a budget regrows the tree
+    (a species under a profile's ceiling is built as it is)."""
+    runs = [("black_tupelo", "--profile", "mobile"), ("black_tupelo",), ("fan_palm", "--profile", "mobile")]
+    titles = [run_treegen("info", species_path(name), *args).stdout.splitlines()[0] for name, *args in runs]
+    grown = [t.endswith("as grown: `make` builds the budget's tree, below)") for t in titles]
+    assert grown == [True, False, False], titles
+
+
 def _make_json(*args) -> dict:
     r = run_treegen("make", *args, "--json", "-q")
     assert r.returncode == 0, r.stderr

@@ -56,7 +56,9 @@ def info(species, as_json, with_lod, with_wind, triangles, **options):
         click.echo(json.dumps(stats, indent=2))
         return
     o = options
-    click.echo(f"{stats['species']}  ({stats['file']}, seed {o['seed']})")
+    budget = stats["triangles"].get("budget")
+    grown = "" if budget is None or budget["as_is"] else "; as grown: `make` builds the budget's tree, below"
+    click.echo(f"{stats['species']}  ({stats['file']}, seed {o['seed']}{grown})")
     rows = [
         (
             "stems",
