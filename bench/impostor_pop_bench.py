@@ -47,6 +47,17 @@ the cards' own views are drawn twice as fine as the atlas's cells (CARD_SCALE: a
     shave_grass     +5.5/−9.0 %  → +0.2/−2.8 %   IoU 0.654/0.711 → 0.774/0.859
     tamarack        +5.4/+9.8 %  → +3.3/+6.2 %   IoU 0.694/0.772 → 0.742/0.834
     weeping_willow  +0.9/+1.3 %  → −0.2/+1.6 %   IoU 0.888/0.908 → 0.915/0.927
+
+Grasses (2026-11-28; Arbaro's barley and wheat from tests/fixtures/arbaro), cover / IoU at the
+card views −90° / 0°: barley −1.0/+1.0 %, 0.354/0.404; wheat +4.5/+6.4 %, 0.472/0.589; rush
+−4.5/+6.9 %, 0.413/0.569. Their stalks, under a texel, are widened only below the lowest leaf
+(stubs under the ears) and drawn one in so many. Tried, not taken: (1) stalks also widened
+above it where no leaf is within two widths: barley 0.190/0.305, rush cover +17.6/+24.8 %
+(the one stalk widened whole reads as a thick arc); (2) every thin stalk drawn, each in its
+share of its texels (a per-pixel dither in the bark shader) instead of one in so many: barley
+0.375/0.473 and wheat 0.527/0.611, but the rush's cards lose half their cover (−50.7/−49.7 %)
+once minified to the switch size (a dotted stalk's texels average under the alpha cut-off,
+as an engine's mipmaps would average them too).
 """
 
 from __future__ import annotations
