@@ -591,6 +591,30 @@ def test_a_stop_while_the_cluster_starts_stops_it_once_started(monkeypatch, stop
         signal.signal(signal.SIGTERM, before[signal.SIGTERM])
 
 
+def test_held_signals_go_to_the_handlers_they_were_meant_for():
+    """errors.signals_held: a Ctrl-C inside is raised once it is left (not inside), and one
+    that was ignored before (a batch started in the background from a script: the shell
+    ignores SIGINT for it) stays ignored, where it aborted the cluster's start."""
+    from treegen_cli.errors import signals_held
+
+    before = signal.getsignal(signal.SIGINT)
+    try:
+        for handler, raises in ((signal.default_int_handler, True), (signal.SIG_IGN, False)):
+            signal.signal(signal.SIGINT, handler)
+            reached = []
+            try:
+                with signals_held():
+                    os.kill(os.getpid(), signal.SIGINT)
+                    time.sleep(0.05)
+                    reached.append(True)  # not interrupted inside
+            except KeyboardInterrupt:
+                reached.append("raised")
+            assert reached == ([True, "raised"] if raises else [True]), handler
+            assert signal.getsignal(signal.SIGINT) is handler
+    finally:
+        signal.signal(signal.SIGINT, before)
+
+
 def test_a_file_where_an_output_folder_goes_is_refused_before_anything_runs(workspace, tmp_path):
     cat = json.loads(json.dumps(CATALOGUE))
     cat["entries"][2]["name"] = "later/{species}_{seed}.{ext}"

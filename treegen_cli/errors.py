@@ -1,8 +1,16 @@
 """The one exception type for mistakes a user can make.
 
 The CLI catches it, prints its message on one line without a traceback and exits 2.
-Anything else escaping is a bug in treegen.
+Anything else escaping is a bug in treegen. Also how a stop (Ctrl-C, SIGTERM) reaches the
+run: raised where the run is, or held while something must not be cut in two.
 """
+
+from __future__ import annotations
+
+import signal
+import threading
+from contextlib import contextmanager
+from typing import Iterator
 
 
 class TreegenError(Exception):
@@ -59,3 +67,34 @@ class Terminated(KeyboardInterrupt):
 
 def raise_terminated(signum, frame) -> None:
     raise Terminated()
+
+
+@contextmanager
+def signals_held() -> Iterator[None]:
+    """SIGINT and SIGTERM that arrive inside are acted on once it is left, by the handlers
+    they were meant for (a Ctrl-C Python ignores stays ignored): what they would cut in two
+    finishes first (one asset's file moves; a Dask cluster's start and the close that undoes
+    it). The handlers are put back with both signals blocked, so one arriving then waits for
+    its own handler rather than leaving the other caught for good. Only the main thread can
+    hold them (Python runs handlers there); SIGKILL cannot be."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    both = {signal.SIGINT, signal.SIGTERM}
+    caught: list[int] = []
+    held = {}
+    for sig in sorted(both):
+        if signal.getsignal(sig) is not None:  # (None: a handler Python did not install)
+            held[sig] = signal.signal(sig, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, both)
+        try:
+            for sig, handler in held.items():
+                signal.signal(sig, handler)
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
+        # to the handlers they were meant for, now; SIGTERM first (SIGINT's raises at once)
+        for signum in sorted(set(caught), key=lambda n: n != signal.SIGTERM):
+            signal.raise_signal(signum)

@@ -33,7 +33,7 @@ import time
 from collections.abc import Callable
 
 from .cluster_check import SCHEDULER_ENV, address_label, check_workers, reachable
-from .errors import Terminated, TreegenError
+from .errors import TreegenError, signals_held
 
 TRIM = "MALLOC_TRIM_THRESHOLD_"
 _tuned = False
@@ -154,50 +154,13 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
         # starts is held until it has (then it can be closed): raised midway, it was lost
         # (SIGINT was ignored here too) or left a half-started cluster to Dask's exit hook,
         # which printed a traceback (a SIGTERM).
-        with held_signals() as held:
-            try:
-                cluster = _local_cluster(n)
-            except Exception:  # workers stopped by the same Ctrl-C or SIGTERM (a process
-                held.raise_any()  # group's): that is what happened, not a failed start
-                raise
-        stack.callback(cluster.close)
-        held.raise_any()
+        with signals_held():  # acted on once the cluster can be closed, or its start failed
+            # (its workers stopped by the same signal, a process group's: that is the news)
+            cluster = _local_cluster(n)
+            stack.callback(cluster.close)
         client = Client(cluster, set_as_default=False)
         stack.callback(client.close)
         yield client, f"{n} local worker(s)"
-
-
-class _Held:
-    """Signals caught by held_signals, raised afterwards as their handlers would have."""
-
-    def __init__(self):
-        self.signals: list[int] = []
-
-    def catch(self, signum, frame) -> None:
-        self.signals.append(signum)
-
-    def raise_any(self) -> None:
-        if signal.SIGTERM in self.signals:
-            raise Terminated()
-        if self.signals:
-            raise KeyboardInterrupt
-
-
-@contextlib.contextmanager
-def held_signals():
-    """Yield a _Held that records SIGINT and SIGTERM instead of acting on them (in the main
-    thread; elsewhere Python delivers none), the previous handlers back on exit; call its
-    raise_any() once what they would have interrupted is safe to undo."""
-    held = _Held()
-    if threading.current_thread() is not threading.main_thread():
-        yield held
-        return
-    previous = {sig: signal.signal(sig, held.catch) for sig in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield held
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
 
 
 def _local_cluster(n: int):

@@ -10,15 +10,13 @@ from __future__ import annotations
 import os
 import re
 import shutil
-import signal
 import socket
 import tempfile
-import threading
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable, Iterator
 
-from ..errors import TreegenError
+from ..errors import TreegenError, signals_held
 
 _STAGING = re.compile(r"^\..+\.(\d+)(?:@([A-Za-z0-9-]+))?\.[^.]+\.tmp$")
 # The writer's host is part of the name: on a shared folder (treegen batch on a Dask cluster of
@@ -64,29 +62,6 @@ def sweep(folder: Path) -> list[Path]:
 
 
 @contextmanager
-def _signals_held() -> Iterator[None]:
-    """SIGINT and SIGTERM that arrive inside are acted on once it is left: the moves of one
-    asset's files (its --lod-files parts, sidecars) land together, all new, then the run
-    stops. Only the main thread can hold them (Python runs handlers there); SIGKILL cannot be."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    caught: list[int] = []
-    held = {}
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        if signal.getsignal(sig) is not None:  # (None: a handler Python did not install)
-            held[sig] = signal.signal(sig, lambda signum, frame: caught.append(signum))
-    try:
-        yield
-    finally:
-        for sig, handler in held.items():
-            signal.signal(sig, handler)
-        # to the handlers they were meant for, now; SIGTERM first (SIGINT's raises at once)
-        for signum in sorted(set(caught), key=lambda n: n != signal.SIGTERM):
-            signal.raise_signal(signum)
-
-
-@contextmanager
 def staged(path: str | os.PathLike, after: Callable[[], object] | None = None) -> Iterator[Path]:
     """Yield a path named like `path` inside a fresh staging folder next to it; on success move
     everything written there into place (main file last), then run `after` (an earlier write's
@@ -118,7 +93,7 @@ def staged(path: str | os.PathLike, after: Callable[[], object] | None = None) -
         for name in produced:  # every target checked before any moves: all or nothing
             if (folder / name).is_dir():
                 raise TreegenError(f"{folder / name}: is a folder, where {path} writes a file; move it away")
-        with _signals_held():  # a Ctrl-C between two moves would leave old and new files mixed
+        with signals_held():  # a Ctrl-C between two moves would leave old and new files mixed
             for name in produced:
                 os.replace(tmpdir / name, folder / name)
             if after is not None:
