@@ -66,6 +66,7 @@ NODE_TOL_PX = 1.0  # a branch node within this many pixels of its neighbours' ch
 THIN_TRUNK_PX = 1.0  # a trunk narrower than this at its base is coarsened as a branch is
 MAX_TRUNK_TOL_PX = 4.0  # trunks alone over the bark's share: their nodes dropped within up to
 # this many pixels of the chord (doubling from NODE_TOL_PX), one ring a segment
+TRUNK_PASSES = 8  # ... in up to this many halving passes (lod_nodes.PASSES: 3)
 STEM_WORTH = 1.0  # a leafy tree keeps stems showing at least this × a leaf's area per triangle
 FILL_PASSES = 3  # keep_stems: passes filling what forks cut with their parent left free
 MIN_RADIUS_PX = 0.5  # stems thinner than this many pixels are kept only if worth_keeping;
@@ -161,13 +162,19 @@ def plan_lod(
     share = bark0 / total0 if total0 else 1.0
     over = bool(per_stem[tree.stem_level == 0].sum() > budget * share)
     coarse = coarsen_nodes(tree, NODE_TOL_PX * px, trunks=(not leaf0) | over | thin)
-    if over:  # still: one ring a segment, and the trunks' nodes coarser, until they fit
+    trunk = tree.stem_level == 0
+
+    def still_over() -> bool:
+        return bool(bark_triangles(coarse, mesh)[trunk].sum() > budget * share)
+
+    if over and still_over():  # one ring a segment, then the trunks' nodes coarser, until they fit
         mesh = replace(mesh, rings_per_segment=(1,))
         tol = NODE_TOL_PX
-        while (tol := 2.0 * tol) <= MAX_TRUNK_TOL_PX and (
-            bark_triangles(coarse, mesh)[coarse.stem_level == 0].sum() > budget * share
-        ):
-            coarse = coarsen_nodes(coarse, tol * px, trunks=True, stems=coarse.stem_level == 0)
+        while still_over() and (tol := 2.0 * tol) <= MAX_TRUNK_TOL_PX:
+            # from LOD0's nodes each time (a coarsened tree's chords would add up the errors),
+            # as many halvings as the tolerance allows (a stalk's 50 nodes kept 7 in PASSES)
+            trunks = coarsen_nodes(tree, tol * px, trunks=True, stems=trunk, passes=TRUNK_PASSES)
+            coarse = coarsen_nodes(trunks, NODE_TOL_PX * px, trunks=False)
     if not leaf0:  # a leafless crown is its twigs: cones, three for the price of one
         coarse = point_tips(coarse)
     per_stem = bark_triangles(coarse, mesh)
