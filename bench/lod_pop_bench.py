@@ -137,9 +137,20 @@ half its share of the budget (the rest to leaves) passes the oak (0.904) and lif
 cottonwood's switch 3 to 0.902 but drops the larch to 0.872 (its twigs are most of what it
 shows); bark's share cut to its share of what LOD0 shows from the side (where that is less)
 moves the cottonwood 0.890 → 0.890, the poplar not at all and the fan palm's switch 3 to
-0.811 at −6.1 % cover. Three times the leaves at LOD2 and LOD3, over budget, pass the oak, the poplar, the
+0.811 at −6.1 % cover; stems under a pixel wide at the switch drawn with three sides (their
+bark to the leaves) moves the oak 0.899 → 0.898 and the poplar 0.882 → 0.878, and shave
+grass's switch 3 to −5.8 % cover. Three times the leaves at LOD2 and LOD3, over budget, pass the oak, the poplar, the
 larch and the cottonwood's switches 2 and 3 (bench/lod_trios_bench.py); leaf trios, three
 leaf blobs on one triangle, do not carry that within the budget.
+
+Arbaro's grasses (tests/fixtures/arbaro, 27 Nov 2026, late), IoU / cover per switch, before →
+after their stalks are coarsened to fit the bark's share (lod_budget.MAX_TRUNK_TOL_PX), which
+brings their far LODs within budget (barley's LOD3 2,043 → 710 of 727 triangles):
+    barley  0.960/+0.3  0.533/−39.5  0.828/+1.2  →  0.960/+0.3  0.614/+6.9  0.558/−34.7
+    wheat   0.919/−0.1  0.887/+0.8   0.792/+1.5  →  0.919/−0.1  0.887/+0.8  0.906/+0.9
+The barley's cover drop moves from switch 2 to switch 3: its ears are 665 awns (stems 14 cm
+long, 0.6 mm thick, twice what its stalks show), dropped at one switch or the other, and the
+19 cones that stand for them cannot cover what they did.
 """
 
 from __future__ import annotations
