@@ -150,7 +150,9 @@ brings their far LODs within budget (barley's LOD3 2,043 → 710 of 727 triangle
     wheat   0.919/−0.1  0.887/+0.8   0.792/+1.5  →  0.919/−0.1  0.887/+0.8  0.906/+0.9
 The barley's cover drop moves from switch 2 to switch 3: its ears are 665 awns (stems 14 cm
 long, 0.6 mm thick, twice what its stalks show), dropped at one switch or the other, and the
-19 cones that stand for them cannot cover what they did.
+19 cones that stand for them cannot cover what they did. With the leaves standing in for what
+the cones cannot (lod_factors.STEMS_REACH) its switch 3 reads 0.748 / −9.0 %; the desert bush,
+whose kept branches can, is unchanged.
 """
 
 from __future__ import annotations
