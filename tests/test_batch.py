@@ -615,6 +615,47 @@ def test_held_signals_go_to_the_handlers_they_were_meant_for():
         signal.signal(signal.SIGINT, before)
 
 
+def test_a_signal_while_the_handlers_are_put_back_reaches_its_own(monkeypatch):
+    """A Ctrl-C arriving just as signals_held puts SIGINT's handler back, with another thread
+    alive (a Dask cluster's IO loop: it takes signals the main thread blocks), is raised, and
+    SIGTERM's handler is put back too (it stayed the hold's, which swallowed every later
+    SIGTERM: a CI cancel, `docker stop`)."""
+    import threading
+
+    from treegen_cli import errors
+
+    real = signal.signal
+    sent = []
+
+    def put_back(sig, handler):
+        out = real(sig, handler)
+        if sig == signal.SIGINT and handler is signal.default_int_handler and not sent:
+            sent.append(sig)
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.05)
+        return out
+
+    before = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait)
+    other.start()
+    try:
+        real(signal.SIGINT, signal.default_int_handler)
+        real(signal.SIGTERM, errors.raise_terminated)
+        monkeypatch.setattr(errors.signal, "signal", put_back)
+        with pytest.raises(KeyboardInterrupt):
+            with errors.signals_held():
+                pass
+        monkeypatch.undo()
+        assert sent and signal.getsignal(signal.SIGTERM) is errors.raise_terminated
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    finally:
+        stop.set()
+        other.join()
+        for sig, handler in before.items():
+            real(sig, handler)
+
+
 def test_a_file_where_an_output_folder_goes_is_refused_before_anything_runs(workspace, tmp_path):
     cat = json.loads(json.dumps(CATALOGUE))
     cat["entries"][2]["name"] = "later/{species}_{seed}.{ext}"

@@ -74,27 +74,57 @@ def signals_held() -> Iterator[None]:
     """SIGINT and SIGTERM that arrive inside are acted on once it is left, by the handlers
     they were meant for (a Ctrl-C Python ignores stays ignored): what they would cut in two
     finishes first (one asset's file moves; a Dask cluster's start and the close that undoes
-    it). The handlers are put back with both signals blocked, so one arriving then waits for
-    its own handler rather than leaving the other caught for good. Only the main thread can
-    hold them (Python runs handlers there); SIGKILL cannot be."""
+    it). The holding handler, once released, passes a signal straight to the handler it
+    replaced, so one arriving while the handlers are put back (or set up) reaches its own and
+    leaves no signal caught for good; blocking the signals could not ensure that, since
+    another thread (Dask's) takes them. Only the main thread can hold them (Python runs
+    handlers there); SIGKILL cannot be."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    both = {signal.SIGINT, signal.SIGTERM}
     caught: list[int] = []
-    held = {}
-    for sig in sorted(both):
-        if signal.getsignal(sig) is not None:  # (None: a handler Python did not install)
-            held[sig] = signal.signal(sig, lambda signum, frame: caught.append(signum))
+    replaced: dict = {}
+    released = False
+
+    def hold(signum, frame):
+        if not released:
+            caught.append(signum)
+        else:
+            _deliver(signum, replaced[signum], frame)
+
     try:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            if signal.getsignal(sig) is not None:  # (None: a handler Python did not install)
+                replaced[sig] = signal.signal(sig, hold)
         yield
     finally:
-        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, both)
-        try:
-            for sig, handler in held.items():
-                signal.signal(sig, handler)
-        finally:
-            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
+        released = True
+        stop = _put_back(replaced)
         # to the handlers they were meant for, now; SIGTERM first (SIGINT's raises at once)
         for signum in sorted(set(caught), key=lambda n: n != signal.SIGTERM):
-            signal.raise_signal(signum)
+            _deliver(signum, replaced[signum], None)
+        if stop is not None:
+            raise stop
+
+
+def _put_back(handlers: dict) -> BaseException | None:
+    """Every handler of `handlers` ({signal: handler}) put back, even where one's arrival
+    raises midway (it is returned, to be raised once all are back)."""
+    left, stop = dict(handlers), None
+    while left:
+        sig, handler = next(iter(left.items()))
+        try:
+            signal.signal(sig, handler)
+            del left[sig]
+        except BaseException as e:  # a stop raised by its (released) handler: the rest go back too
+            stop = stop or e
+    return stop
+
+
+def _deliver(signum: int, handler, frame) -> None:
+    """What `handler` (a signal.signal disposition) does with `signum`."""
+    if callable(handler):
+        handler(signum, frame)
+    elif handler == signal.SIG_DFL:
+        signal.signal(signum, signal.SIG_DFL)
+        signal.raise_signal(signum)
