@@ -241,17 +241,17 @@ MIN_FACING = 0.05  # a card texel's normal leans at most this close to the card'
 MASS_FACING = 0.6  # the crown's rounded mass: its normal at a card's middle is the view,
 MASS_WEIGHT = 0.45  # at its sides tilted sideways, at its top upwards. Each texel's normal
 # is the mean over its NEIGHBOURS² neighbours of their leaf or bark normals (less their part
-# along the view; an empty neighbour leans nowhere) plus this much of the mass's: the mass says which way the card faces, the
-# neighbours how the crown's surface turns across it. One leaf's own normal alone lit
-# leaves turned from the sun as black blotches a texel or two wide; with their part along
-# the view (double-sided leaves face the camera that drew them) each card faced its own view
-# and, seen at 45°, the card turned to the sun lit its half of the crown and the other's
-# went dark, the opposite of the geometric LOD's halves. The neighbours' sum (up to 9 or 25
-# times the mass) let clumps of leaves facing one way lean whole patches away from the sun:
-# 6-23 % of the crown's pixels were darker than all but 2 % of the coarsest LOD's, black
-# blotches at the switch size (bench/impostor_colour_bench.py's dark column). Averaged over
-# the covered neighbours only, a texel or two out at the fringe kept its own leaf's lean: black
-# specks along the crown's edge
+# along the view; an empty neighbour leans nowhere) plus this much of the mass's: the mass
+# says which way the card faces, the neighbours how the crown's surface turns across it. One
+# leaf's own normal alone lit leaves turned from the sun as black blotches a texel or two
+# wide; with their part along the view (double-sided leaves face the camera that drew them)
+# each card faced its own view and, seen at 45°, the card turned to the sun lit its half of
+# the crown and the other's went dark, the opposite of the geometric LOD's halves. The
+# neighbours' sum (up to 9 or 25 times the mass) let clumps of leaves facing one way lean
+# whole patches away from the sun: 6-23 % of the crown's pixels were darker than all but 2 %
+# of the coarsest LOD's, black blotches at the switch size (bench/impostor_colour_bench.py's
+# dark column). Averaged over the covered neighbours only, a texel or two out at the fringe
+# kept its own leaf's lean: black specks along the crown's edge
 
 
 NEIGHBOURS = 2 * CARD_SCALE + 1  # a card texel's neighbourhood: the atlas's 3 × 3 texels

@@ -160,9 +160,9 @@ def plan_lod(
     # all of them when they alone exceed the bark's share (barley's stalks at LOD1 and LOD2)
     thin = 2.0 * tree.stem_radius < THIN_TRUNK_PX * px
     share = bark0 / total0 if total0 else 1.0
-    over = bool(per_stem[tree.stem_level == 0].sum() > budget * share)
-    coarse = coarsen_nodes(tree, NODE_TOL_PX * px, trunks=(not leaf0) | over | thin)
     trunk = tree.stem_level == 0
+    over = bool(per_stem[trunk].sum() > budget * share)
+    coarse = coarsen_nodes(tree, NODE_TOL_PX * px, trunks=(not leaf0) | over | thin)
 
     def still_over() -> bool:
         return bool(bark_triangles(coarse, mesh)[trunk].sum() > budget * share)

@@ -62,11 +62,12 @@ def _by_kind(full: Tree, thin: Tree, grid: Grid, px: float, sides, triangle: boo
     over them (their regions by the leaves they lost only), so bark stays bark-coloured; where
     the branches cannot (STEMS_REACH), the leaves grow to cover what all of `full` covered."""
     full_stems = stem_area(full, grid, sides=sides[0])
+    covered = grid.cover(full_stems)
     r = 1.0
     if np.any(thin.stem_level > 0):
-        r = _thickening(thin, grid, sides, widen, grid.cover(full_stems), 1.0)
+        r = _thickening(thin, grid, sides, widen, covered, 1.0)
     stems = stem_area(thicken(thin, r), grid, sides=sides[1], girth=widen)
-    if grid.cover(stems) >= STEMS_REACH * grid.cover(full_stems):
+    if grid.cover(stems) >= STEMS_REACH * covered:
         target = grid.cover(stems + tree_area(full, grid, sides[0], full_stems) - full_stems)
     else:  # thickened as far as they go, the kept branches fall short: leaves cover the rest
         target = tree_cover(full, grid, sides[0])
