@@ -67,6 +67,7 @@ import time
 from pathlib import Path
 
 from treegen_cli import api
+from treegen_cli.bundled import resolve_species
 from treegen_cli.drawable import from_asset
 from treegen_cli.lod import LodOptions
 from treegen_cli.params import load_params
@@ -93,11 +94,7 @@ def main() -> None:
         f"{'species':<20}{'dist m':>8}{'px':>5}  {'cover per view':<34}{'IoU per view':<30}impostor s (wall)"
     )
     for given in names:
-        path = (
-            Path(given)
-            if given.endswith((".txt", ".xml"))
-            else ROOT / "treegen_cli" / "species" / f"{given}.txt"
-        )
+        path = resolve_species(given)
         name, timings = path.stem, Timings()
         asset, _ = build_asset(load_params(path), 0, job.options, timings)
         k = len(asset.lods) - 1

@@ -25,16 +25,14 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 
 import numpy as np
 
 from impostor_colour_bench import crown_means
 from treegen_cli import api
+from treegen_cli.bundled import resolve_species
 from treegen_cli.params import load_params
 from treegen_cli.pipeline import Timings, build_asset
-
-ROOT = Path(__file__).resolve().parent.parent
 
 
 def main() -> None:
@@ -47,12 +45,8 @@ def main() -> None:
     job = api.resolve(given)
     screen = job.options.lod.screen
     print(f"{'species':<20}{'switch':>7}{'px':>5}  {'LOD k / LOD k-1 R G B':<22}{'hue b/g':>8}")
-    for given_name in args.species.split(","):
-        path = (
-            Path(given_name)
-            if given_name.endswith((".txt", ".xml"))
-            else ROOT / "treegen_cli" / "species" / f"{given_name}.txt"
-        )
+    for given in args.species.split(","):
+        path = resolve_species(given)
         asset, _ = build_asset(load_params(path), 0, job.options, Timings())
         for k in range(1, len(asset.lods)):
             size = min(args.max_px, int(round(screen[k - 1] * 1080)))

@@ -161,6 +161,7 @@ import argparse
 import time
 from pathlib import Path
 
+from treegen_cli.bundled import resolve_species
 from treegen_cli.lod import LodOptions
 from treegen_cli.materials import MaterialOptions
 from treegen_cli.params import load_params
@@ -184,7 +185,7 @@ def main() -> None:
     print(f"{'species':<20}{'switch':>7}{'dist m':>8}{'px':>6}{'IoU':>7}{'cover':>8}   triangles / LOD0")
     worst_iou, worst_cov = 1.0, 0.0
     for given in names:
-        path = Path(given) if given.endswith((".txt", ".xml")) else ROOT / "species" / f"{given}.txt"
+        path = resolve_species(given)
         name, t0 = path.stem, time.perf_counter()
         asset, _ = build_asset(
             load_params(path),
