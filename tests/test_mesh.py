@@ -504,3 +504,57 @@ def test_bark_tangents_follow_u_and_their_bitangent_follows_v(lobes, depth):
     bv = np.cross(nv, tv[:, :3]) * tv[:, 3:4]
     assert np.all(np.einsum("ij,ij->i", tv[ok, :3], dPdu[ok]) > 0)
     assert np.all(np.einsum("ij,ij->i", bv[ok], dPdv[ok]) > 0)
+
+
+@pytest.mark.parametrize("species", ["quaking_aspen", "shave_grass"])
+def test_thin_branches_are_drawn_as_crossed_ribbons(species):
+    """MeshOptions.ribbon_radius (a far LOD's, lod_budget.RIBBON_PX): branches of at most 4
+    sides thinner than it at their base leave the bark's tubes for the "twigs" primitive, two
+    crossed ribbons, as wide as a square tube through the circle: 4 vertices a ring and 2 at a
+    pointed tip, 4 triangles between rings and 2 to the tip, as limits estimates them (the
+    budgets count on it). Fronts agree with their normals (check_prim: a renderer lights the
+    face it sees by its normal; the other way round, every twig of the desert bush's far LOD
+    was drawn unlit). ribbons_as_tubes joins them into square tubes through the same
+    vertices: open only round their base (and a blunt tip's) ring, normals outwards."""
+    from treegen_cli.limits import bark_triangles, estimate_vertices
+    from treegen_cli.mesh import pointed_tips, ribbons_as_tubes
+    from treegen_cli.mesh.bark import ring_counts
+    from treegen_cli.mesh.options import ribbon_stems
+
+    tree = species_tree(species, seed=2)
+    options = MeshOptions(
+        sides=(8, 4, 3), ribbon_radius=float(np.median(tree.stem_radius[tree.stem_level > 0]))
+    )
+    rig = build_rig(tree, RigOptions(max_joints=64))
+    prims = {p.name: p for p in build_mesh(tree, rig, options)}
+    ribbon = ribbon_stems(tree, options)
+    assert 0 < ribbon.sum() < tree.n_stems and not ribbon[tree.stem_level == 0].any()
+    twigs, bark = prims["twigs"], prims["bark"]
+    for prim in (twigs, bark):
+        check_prim(prim, len(rig.joint_node))
+    pointed = pointed_tips(tree, options)[ribbon]
+    rings = ring_counts(tree, options)[ribbon] - pointed
+    assert len(twigs.positions) == int((4 * rings + 2 * pointed).sum())
+    assert len(twigs.indices) // 3 == int((4 * (rings - 1) + 2 * pointed).sum())
+    drawn_v = sum(len(p.positions) for p in (bark, twigs))
+    drawn_t = sum(len(p.indices) // 3 for p in (bark, twigs))
+    assert (drawn_v, drawn_t) == (
+        estimate_vertices(tree, options)[0],
+        int(bark_triangles(tree, options).sum()),
+    )
+    # each ring's ribbons cross at right angles, each as wide as the square through its circle
+    ring = twigs.positions[: 4 * int(rings.sum())].reshape(-1, 4, 3).astype(np.float64)
+    x, y = ring[:, 1] - ring[:, 0], ring[:, 3] - ring[:, 2]
+    assert np.allclose(np.einsum("ij,ij->i", x, y), 0.0, atol=1e-6)
+    assert np.allclose(
+        np.linalg.norm(x, axis=1), np.linalg.norm(y, axis=1), rtol=1e-3, atol=1e-5
+    )  # (float32)
+    tube = ribbons_as_tubes(twigs)
+    tri = tube.indices.reshape(-1, 3).astype(np.int64)
+    edges = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
+    edge, uses = np.unique(edges, axis=0, return_counts=True)
+    assert np.all(uses <= 2)
+    assert np.all(edge[uses == 1] // 4 == edge[uses == 1][:, :1] // 4)  # open only round a ring
+    fn = triangle_normals(tube)
+    big = np.linalg.norm(fn, axis=1) > 1e-10
+    assert np.all(np.einsum("ij,ij->i", fn[big], tube.normals[tri[big]].sum(axis=1)) > 0)

@@ -12,7 +12,7 @@ from typing import Callable
 
 import numpy as np
 
-from .asset import IMPOSTOR_MATERIAL
+from .asset import IMPOSTOR_MATERIAL, TWIGS
 from .axes import Z_UP_TO_Y_UP, to_y_up
 from .clip import sample_track
 from .errors import TreegenError
@@ -68,6 +68,13 @@ class Part:
 
 
 WRAPS = ("REPEAT", "CLAMP", "MIRROR")
+
+
+def lit_through(name: str | None, double_sided: bool) -> bool:
+    """Whether a part is foliage (Part.double_sided: lit from both faces, light passing
+    through): a double-sided material's, but not a far LOD's crossed bark ribbons
+    (mesh.TWIGS), which are bark seen from either side."""
+    return bool(double_sided) and not (name or "").startswith(TWIGS)
 
 
 def crown(parts: list[Part]) -> tuple[np.ndarray, np.ndarray]:
@@ -206,7 +213,7 @@ def from_asset(asset, lod: int = 0, label: str = "") -> Drawable:
                 joints=np.asarray(p.joints),
                 weights=np.asarray(p.weights, np.float32),
                 color=tuple(m.base_color[:3]) if m else (0.6, 0.6, 0.6),
-                double_sided=bool(m and m.double_sided),
+                double_sided=lit_through(p.material, bool(m and m.double_sided)),
                 uvs=np.asarray(uvs, np.float32) if has_uv else None,
                 texture=image(base, 4),
                 normal_map=image(normal, 3),

@@ -18,7 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from .asset import Lod, Material, Primitive, triangle_areas
+from .asset import TWIGS, Lod, Material, Primitive, triangle_areas
 from .leafshapes import card_corners
 
 
@@ -177,12 +177,41 @@ def _shown(prims: list[Primitive]) -> tuple[float, float]:
     return out[0], out[1]
 
 
+def _twigs_as_bark(prims: list[Primitive]) -> list[Primitive]:
+    """`prims` with a far LOD's crossed ribbons (mesh TWIGS) drawn into its bark primitive as
+    the square tubes through their vertices (mesh.ribbons_as_tubes), so they are widened or
+    left out as thin bark is (drawn as they are, the fir's impostor crown showed every twig
+    as a dark speck)."""
+    from .mesh import ribbons_as_tubes
+
+    twigs = [ribbons_as_tubes(p) for p in prims if p.material == TWIGS]
+    if not twigs:
+        return prims
+    out = [p for p in prims if p.material != TWIGS]
+    i = next(k for k, p in enumerate(out) if p.material == "bark")
+    parts = [out[i], *twigs]
+    base = np.cumsum([0] + [len(p.positions) for p in parts[:-1]])
+    out[i] = replace(
+        out[i],
+        positions=np.concatenate([p.positions for p in parts]),
+        normals=np.concatenate([p.normals for p in parts]),
+        uvs=np.concatenate([p.uvs for p in parts]),
+        indices=np.concatenate(
+            [np.asarray(p.indices, np.uint32) + np.uint32(b) for p, b in zip(parts, base)]
+        ),
+        joints=np.concatenate([p.joints for p in parts]),
+        weights=np.concatenate([p.weights for p in parts]),
+        tangents=None,  # (the atlas draws no normal map)
+    )
+    return out
+
+
 def _atlas_parts(prims: list[Primitive], materials: list[Material], decoded: dict | None = None) -> list:
     """What render_atlas draws, in generator space (Z up): each primitive with its material's
     colour, cut-out and base texture (decoded once, into `decoded` when given, so several
     calls share the images). Not drawable.from_asset: that would turn everything Y up and
     back, decode the unused normal maps and build a rig."""
-    from .drawable import Part, decode_image
+    from .drawable import Part, decode_image, lit_through
 
     mats = {m.name: m for m in materials}
     decoded = {} if decoded is None else decoded
@@ -205,7 +234,7 @@ def _atlas_parts(prims: list[Primitive], materials: list[Material], decoded: dic
                 color=(m.base_color[0], m.base_color[1], m.base_color[2])
                 if m is not None
                 else (0.6, 0.6, 0.6),
-                double_sided=bool(m is not None and m.double_sided),
+                double_sided=lit_through(p.material, bool(m is not None and m.double_sided)),
                 uvs=np.asarray(p.uvs, np.float32) if has_uv else None,
                 texture=None if tex is None else decoded[id(tex)],
                 alpha_cutoff=m.alpha_cutoff if m is not None else None,
@@ -239,16 +268,15 @@ def render_views(
     from .lod_cover import solve_factor
 
     texel = 2.0 * radius / options.cell  # a cell holds the bounding sphere
-    leaves = [
-        np.asarray(p.positions)[:, 2] for p in lod.primitives if p.material != "bark" and len(p.positions)
-    ]
+    primitives = _twigs_as_bark(lod.primitives)
+    leaves = [np.asarray(p.positions)[:, 2] for p in primitives if p.material != "bark" and len(p.positions)]
     # leafless: nothing widened (widened everywhere, shave grass's cards covered +25 to +47 %)
     crown = min((float(z.min()) for z in leaves), default=-math.inf)
-    leaf_area, bark_area = _shown(lod.primitives)
+    leaf_area, bark_area = _shown(primitives)
     budget = WIDEN_SHARE * (leaf_area + bark_area)  # shared by the bark primitives
     leafy = leafiness(leaf_area / max(leaf_area + bark_area, 1e-12))
     prims, keep = [], {}
-    for i, p in enumerate(lod.primitives):
+    for i, p in enumerate(primitives):
         wide, drawn, used = _bark_at_least(
             _widest_bark(p, options.max_bark_triangles), MIN_BARK_TEXELS * texel, crown, budget
         )

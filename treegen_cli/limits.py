@@ -32,14 +32,15 @@ class Limits:
 LIMITS_DEFAULTS = Limits()
 
 
-def _rings_sides(tree, options) -> tuple[np.ndarray, np.ndarray]:
-    """Rings each stem's bark tube emits and its sides (S,), as mesh.bark makes them."""
+def _rings_sides(tree, options) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Rings each stem's bark emits, its sides, whether it ends in a point, and whether it is
+    drawn as crossed ribbons (S,), as mesh.bark makes them."""
     from .mesh.bark import ring_counts
-    from .mesh.options import pointed_tips, stem_sides
+    from .mesh.options import pointed_tips, ribbon_stems, stem_sides
 
-    rings = ring_counts(tree, options)  # flare rings included, less those on a node's ring
-    rings = rings - pointed_tips(tree, options)  # a pointed tip closes on its apex, no ring
-    return rings, stem_sides(tree, options)
+    pointed = pointed_tips(tree, options)
+    rings = ring_counts(tree, options) - pointed  # a pointed tip closes on its apex, no ring
+    return rings, stem_sides(tree, options), pointed, ribbon_stems(tree, options)
 
 
 def leaf_outline(tree, options):
@@ -54,9 +55,10 @@ def leaf_outline(tree, options):
 def estimate_vertices(tree, options) -> tuple[int, int]:
     """(bark, leaf) vertex counts mesh.build_mesh will emit for `tree` with MeshOptions
     `options`: exact (flare rings that land on a node's ring merged, as mesh.bark merges them).
-    Bark: rings × (sides + 1) per stem plus one apex; leaves: outline points each."""
-    rings, sides = _rings_sides(tree, options)
-    bark = int(np.sum(rings * (sides + 1)) + tree.n_stems)
+    Bark: rings × (sides + 1) per tube plus one apex, 4 a ring per crossed ribbons and 2 at
+    their apex where they end in a point; leaves: outline points each."""
+    rings, sides, pointed, ribbon = _rings_sides(tree, options)
+    bark = int(np.sum(np.where(ribbon, 4 * rings + 2 * pointed, rings * (sides + 1) + 1)))
     leaves = 0
     if options.leaves and tree.n_leaves:
         leaves = tree.n_leaves * len(leaf_outline(tree, options).points)
@@ -65,9 +67,10 @@ def estimate_vertices(tree, options) -> tuple[int, int]:
 
 def bark_triangles(tree, options) -> np.ndarray:
     """Per stem (S,), the bark triangles mesh.build_mesh emits: two per side between
-    consecutive rings plus a fan of `sides` to the apex."""
-    rings, sides = _rings_sides(tree, options)
-    return (2 * (rings - 1) + 1) * sides
+    consecutive rings plus a fan of `sides` to the apex; crossed ribbons four between rings,
+    plus two to a pointed tip (its twigs primitive counts as bark)."""
+    rings, sides, pointed, ribbon = _rings_sides(tree, options)
+    return np.where(ribbon, 4 * (rings - 1) + 2 * pointed, (2 * (rings - 1) + 1) * sides)
 
 
 def estimate_triangles(tree, options) -> tuple[int, int]:

@@ -3,7 +3,10 @@ triangles (`--lod-triangles`, default 1, 0.5, 0.15, 0.05), and never more than L
 
 Each LOD is cut from LOD0's tree (lod_leaves.py), in this order:
   1. sides: the LOD table's sides per level, never more than LOD0's (`--sides 5,3` caps them),
-     each stem widened to LOD0's mean width (mesh.girth, which lod_cover counts too);
+     each stem widened to LOD0's mean width (mesh.girth, which lod_cover counts too); a
+     branch of at most 4 sides under RIBBON_PX wide at the switch is drawn as two crossed
+     ribbons instead (mesh "twigs", double-sided bark: a square tube's outline, 4 triangles
+     a segment);
   2. nodes: branch nodes within NODE_TOL_PX pixels of the chord between their neighbours are
      dropped (lod_nodes.py): a far twig needs fewer rings, so more twigs fit the budget; a
      trunk's too where it is under THIN_TRUNK_PX wide, or the trunks alone exceed the bark's
@@ -71,6 +74,10 @@ STEM_WORTH = 1.0  # a leafy tree keeps stems showing at least this × a leaf's a
 FILL_PASSES = 3  # keep_stems: passes filling what forks cut with their parent left free
 MIN_RADIUS_PX = 0.5  # stems thinner than this many pixels are kept only if worth_keeping;
 # a lobed trunk whose lobes are shallower than this is drawn round
+RIBBON_PX = float(
+    __import__("os").environ.get("RIBBON_PX", "2.0")
+)  # a branch of a few sides under this many pixels wide at the switch is drawn
+# as two crossed ribbons (MeshOptions.ribbon_radius: 4 triangles a segment, a 3-sided tube's 6)
 TRIANGLE_CARD_PX = 3.0  # a LOD from TRIANGLE_CARDS_FROM on whose switch shows LOD0's median
 # blade at most this many pixels long draws its leaf cards as triangle cards
 # (leafshapes.TRIANGLE_CARD, one triangle a leaf): the outline is not legible, the cover is,
@@ -210,9 +217,11 @@ def plan_lod(
     if thin.n_leaves:
         leaf = capped_growth(thin, leaf, MAX_BLADE_SHARE * float(np.ptp(full.leaf_pos, axis=0).max()))
     mesh_thin = mesh
-    if radius != 1.0:  # thicker stems draw the same rings; sides cut to the bark table's
+    if radius != 1.0:  # thicker stems draw the same rings, sides and ribbons
         thin = thicken(thin, radius)
-        mesh_thin = replace(mesh, thin_radius=mesh.thin_radius * radius)
+        mesh_thin = replace(
+            mesh, thin_radius=mesh.thin_radius * radius, ribbon_radius=mesh.ribbon_radius * radius
+        )
     bark = int(bark_triangles(thin, mesh_thin).sum())
     grown = fit_blades(grow_leaves(thin, leaf), *tree_box(full))
     return LodPlan(grown, bark, int(round(n_keep * per_leaf)), float(np.mean(leaf)), mesh_thin)
@@ -331,6 +340,7 @@ def lod_tree(
     from .lod import pixel_size
 
     px = pixel_size(options.distances[k], options)
+    mesh = replace(mesh, ribbon_radius=0.5 * RIBBON_PX * px)
     plan = plan_lod(
         tree,
         _triangles(lod0, "bark"),

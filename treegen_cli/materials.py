@@ -33,13 +33,13 @@ import re
 import zlib
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from pathlib import Path
 
 from .asset import Material, Texture
 from .errors import TreegenError
-from .mesh import FULL_CARD_CELL
+from .mesh import FULL_CARD_CELL, TWIGS
 from .params import Params
 from .texture_leaf import atlas_rects
 from .textures import species_colors, species_textures
@@ -193,6 +193,13 @@ def leaf_cells(params: Params, options: MaterialOptions = MATERIAL_DEFAULTS) -> 
         (float(u0), float(v0), float(u1), float(v1))
         for u0, v0, u1, v1 in atlas_rects(LEAF_VARIANTS, options.texture_size)
     )
+
+
+def twig_material(bark: Material) -> Material:
+    """The crossed ribbons' material (mesh.TWIGS): the bark's colour and texture on both faces
+    (a ribbon is seen from either side), without its normal map (the ribbons are flat and
+    under a pixel or two wide where they are drawn)."""
+    return replace(bark, name=TWIGS, double_sided=True, normal_texture=None)
 
 
 def build_materials(params: Params, options: MaterialOptions = MATERIAL_DEFAULTS) -> Materials:

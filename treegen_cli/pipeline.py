@@ -21,8 +21,8 @@ from .limits import LIMITS_DEFAULTS, Limits, check_keys, check_mesh
 from .lod import LOD_DEFAULTS, LodOptions, screen_coverage, switch_distances
 from .lod_budget import lod_tree
 from .lod_decimate import decimate
-from .materials import MATERIAL_DEFAULTS, MaterialOptions, build_materials, leaf_cells
-from .mesh import MESH_DEFAULTS, MeshOptions, build_mesh
+from .materials import MATERIAL_DEFAULTS, MaterialOptions, build_materials, leaf_cells, twig_material
+from .mesh import MESH_DEFAULTS, TWIGS, MeshOptions, build_mesh
 from .params import Params
 from .prepare import prepare
 from .rig import RIG_DEFAULTS, Rig, RigOptions, build_rig, check_joint_levels
@@ -209,6 +209,8 @@ def build_asset(
         else build_lods(params, tree, options, seed, timings)
     )
     materials = timings.run("textures", lambda: mats.materials)  # waits only if not done
+    if any(p.material == TWIGS for lod in lods for p in lod.primitives):  # a far LOD's ribbons
+        materials = [*materials, twig_material(next(m for m in materials if m.name == "bark"))]
     if options.lod is not None and options.impostor is not None:
         lods, materials = timings.run("impostor", add_impostor, lods, materials, tree, options)
     asset = Asset(

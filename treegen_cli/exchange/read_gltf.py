@@ -25,6 +25,7 @@ from urllib.parse import unquote
 import numpy as np
 
 from ..drawable import (
+    lit_through,
     Channel,
     Drawable,
     Part,
@@ -188,7 +189,7 @@ def _gltf_scene(gltf, blob, read_accessor, lod, path) -> Drawable:
                 joints=jnt,
                 weights=wgt,
                 color=tuple(color[:3]),
-                double_sided=bool(mat.get("doubleSided", False)),
+                double_sided=lit_through(mat.get("name"), bool(mat.get("doubleSided", False))),
                 opacity=float(color[3]) if len(color) > 3 else 1.0,
                 impostor=is_impostor(mat.get("name")),
                 **looks,

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..drawable import (
+    lit_through,
     Drawable,
     Part,
     check_lod,
@@ -125,7 +126,7 @@ def read_drawable(path: Path, lod: int = 0) -> Drawable:
                 joints=ji,
                 weights=jw,
                 color=color,
-                double_sided=double,
+                double_sided=lit_through(prim.GetName(), double),
                 uvs=uvs,
                 impostor=impostor,
                 **looks,

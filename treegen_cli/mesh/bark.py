@@ -2,7 +2,8 @@
 
 Vertex layout: a ring of `sides + 1` vertices (seam column duplicated for UVs) per ring, the
 rings stem by stem (base to tip), then one apex vertex per stem in stem order, so no stem,
-however thin, is ever dropped. Between nodes the radius follows the species' taper × flare
+however thin, is ever dropped (a far LOD's thin branches are drawn as crossed ribbons
+instead, the same rings in ribbons.py's "twigs" primitive). Between nodes the radius follows the species' taper × flare
 profile, through the generator's node radii; a lobed trunk (Lobes, LobeDepth) gets normals of
 the lobed surface.
 
@@ -22,33 +23,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..asset import Primitive
 from ..shapes import flare_factor, taper_radius
-from .options import MeshOptions, girth, per_level, pointed_tips, stem_sides
+from ..asset import Primitive
+from .options import MeshOptions, girth, per_level, pointed_tips, ribbon_stems, stem_sides
+from .influences import merge_influences
+from .ribbons import ribbons
 
 BARK_MAX_TILES = 64.0  # most texture tiles along one stem (see UVs above)
-
-
-def merge_influences(joints: np.ndarray, weights: np.ndarray):
-    """(K, n ≤ 4) joint/weight slots → (K, 4): duplicates merged, sorted by weight, normalised,
-    unused slots (0, 0.0).   Result: ([3, 5, 3, 0], [.2, .3, .5, 0]) → ([3, 5, 0, 0], [.7, .3, 0, 0])"""
-    K, n = joints.shape
-    J = np.zeros((K, 4), dtype=np.int64)
-    W = np.zeros((K, 4), dtype=np.float64)
-    J[:, :n] = joints
-    W[:, :n] = weights
-    for j in range(1, 4):
-        for i in range(j):
-            dup = (J[:, j] == J[:, i]) & (W[:, i] > 0)
-            W[dup, i] += W[dup, j]
-            W[dup, j] = 0.0
-    order = np.argsort(-W, axis=1, kind="stable")
-    W = np.take_along_axis(W, order, axis=1)
-    J = np.take_along_axis(J, order, axis=1)
-    J[W <= 0] = 0
-    W[W < 0] = 0.0
-    W /= W.sum(axis=1, keepdims=True)
-    return J.astype(np.uint16), W.astype(np.float32)
 
 
 def _flare_rings(tree, options: MeshOptions) -> list[tuple[int, np.ndarray]]:
@@ -117,8 +98,10 @@ def bark_offsets(tree) -> np.ndarray:
     return rng.random((tree.n_stems, 2))
 
 
-def bark_tubes(tree, rig, options: MeshOptions) -> Primitive:
-    """The "bark" primitive: every stem's tube and tip (layout and UVs: the module docstring)."""
+def bark_primitives(tree, rig, options: MeshOptions) -> list[Primitive]:
+    """The "bark" primitive: every stem's tube and tip (layout and UVs: the module docstring);
+    and where a far LOD draws its thin branches as crossed ribbons (MeshOptions.ribbon_radius),
+    the "twigs" primitive holding those."""
     S = tree.n_stems
     level = tree.stem_level.astype(np.int64)
     cnt = tree.stem_node_count.astype(np.int64)
@@ -177,8 +160,6 @@ def bark_tubes(tree, rig, options: MeshOptions) -> Primitive:
     rs, centre, frame, z, radius, slope, a, b, t = (
         x[emit] for x in (rs, centre, frame, z, radius, slope, a, b, t)
     )
-    trunk = level[rs] == 0
-    R = rs.size
 
     # --- bark UVs per stem: tile height, seeded offsets, centring shift (module docstring) ---
     cap = np.where(pointed, 0.0, options.cap_height * tree.node_radius[tip])
@@ -189,10 +170,35 @@ def bark_tubes(tree, rig, options: MeshOptions) -> Primitive:
     v_shift = off_v - np.round(0.5 * (span / tile + off_v))
     v_ring = (z - z_base[rs]) / tile[rs] + v_shift[rs]
 
-    lobed = p.lobes > 0 and p.lobe_depth != 0
     sides = stem_sides(tree, options)
-    sd = sides[rs]
     radius = radius * girth(tree, options, sides)[rs]  # a LOD's few sides as wide as LOD0's many
+    ribbon = ribbon_stems(tree, options)
+    rib = ribbon[rs]
+    twigs = None
+    if rib.any():
+        twigs = ribbons(
+            tree,
+            rig,
+            pointed & ribbon,
+            rs[rib],
+            centre[rib],
+            frame[rib],
+            radius[rib],
+            v_ring[rib],
+            a[rib],
+            b[rib],
+            t[rib],
+            off_u,
+            span / tile + v_shift,
+        )
+        rs, centre, frame, z, radius, slope, a, b, t, v_ring = (
+            x[~rib] for x in (rs, centre, frame, z, radius, slope, a, b, t, v_ring)
+        )
+    trunk = level[rs] == 0
+    R = rs.size
+
+    lobed = p.lobes > 0 and p.lobe_depth != 0
+    sd = sides[rs]
     nv = sd + 1  # seam column duplicated for UVs
     v0 = np.cumsum(nv) - nv
     Vr = int(nv.sum())
@@ -240,11 +246,13 @@ def bark_tubes(tree, rig, options: MeshOptions) -> Primitive:
     )
     ring_J, ring_W = merge_influences(ring_J, ring_W)
 
-    # --- apex per stem (tip point, or a low cone over a blunt tip) ---
-    axis = F[tip][:, :, 2]
-    pos_a = tree.node_pos[tip] + cap[:, None] * axis
-    uv_a = np.column_stack([0.5 + off_u, span / tile + v_shift])
-    apex_J, apex_W = merge_influences(rig.node_joints[tip], rig.node_weights[tip])
+    # --- apex per tube (tip point, or a low cone over a blunt tip) ---
+    tubes = np.flatnonzero(~ribbon)
+    tip_t = tip[tubes]
+    axis = F[tip_t][:, :, 2]
+    pos_a = tree.node_pos[tip_t] + cap[tubes, None] * axis
+    uv_a = np.column_stack([0.5 + off_u[tubes], span[tubes] / tile[tubes] + v_shift[tubes]])
+    apex_J, apex_W = merge_influences(rig.node_joints[tip_t], rig.node_weights[tip_t])
 
     # --- triangles: quads between consecutive rings of a stem, then a fan to the apex ---
     pair = np.flatnonzero(rs[1:] == rs[:-1])
@@ -256,17 +264,18 @@ def bark_tubes(tree, rig, options: MeshOptions) -> Primitive:
     quads = np.stack([q0, q0 + 1, q3 + 1, q0, q3 + 1, q3], axis=1).reshape(-1, 3)
     n_emit = np.bincount(rs, minlength=S)
     last_ring = np.cumsum(n_emit) - 1
-    fs = np.repeat(np.arange(S), sides)
-    fj = np.arange(fs.size) - np.repeat(np.cumsum(sides) - sides, sides)
-    l0 = v0[last_ring[fs]] + fj
-    fans = np.stack([l0, l0 + 1, Vr + fs], axis=1)
+    fn = sides[tubes]
+    fe = np.repeat(np.arange(tubes.size), fn)  # the fan's apex: its tube's rank
+    fj = np.arange(fe.size) - np.repeat(np.cumsum(fn) - fn, fn)
+    l0 = v0[last_ring[tubes[fe]]] + fj
+    fans = np.stack([l0, l0 + 1, Vr + fe], axis=1)
 
     # Tangents: w = +1, as cross(normal, +u around the stem) points up the stem (+v); the
     # apex takes its frame's x axis (its normal is the stem axis).
-    tangents = np.ones((Vr + S, 4), dtype=np.float32)
+    tangents = np.ones((Vr + tubes.size, 4), dtype=np.float32)
     tangents[:Vr, :3] = tan_r
-    tangents[Vr:, :3] = F[tip][:, :, 0]
-    return Primitive(
+    tangents[Vr:, :3] = F[tip_t][:, :, 0]
+    bark = Primitive(
         name="bark",
         material="bark",
         positions=np.concatenate([pos_r, pos_a]).astype(np.float32),
@@ -277,3 +286,4 @@ def bark_tubes(tree, rig, options: MeshOptions) -> Primitive:
         joints=np.concatenate([ring_J[rv], apex_J]),
         weights=np.concatenate([ring_W[rv], apex_W]),
     )
+    return [bark] if twigs is None else [bark, twigs]

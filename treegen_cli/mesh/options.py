@@ -1,4 +1,4 @@
-"""MeshOptions, and the per-stem choices they make: sides, girth and pointed tips.
+"""MeshOptions, and the per-stem choices they make: sides, girth, pointed tips and ribbons.
 
 Kept apart from the builders because the size estimate (limits.py) must count exactly what
 bark.py will emit, from the same rules, before any vertex exists.
@@ -28,6 +28,9 @@ class MeshOptions:
     cap_height: float = 0.5  # tip cap cone height / tip radius
     point_radius: float = 1e-4  # metres: tips thinner than this end in a point, not a cap,
     point_ratio: float = 0.02  # ... and so do tips thinner than this × the stem's base radius
+    ribbon_radius: float = 0.0  # metres: branches of at most RIBBON_SIDES sides thinner than
+    # this at their base are drawn as two crossed ribbons ("twigs", double-sided), not tubes:
+    # 4 triangles a segment where a tube of 3 sides takes 6 (a far LOD's, lod_budget.py)
     leaves: bool = True  # emit the "leaves" primitive
     leaf_geometry: str = "card"  # "card": a textured quad per leaf; "shape": the LeafShape
     # outline as geometry (see leafshapes.py); "triangle": a triangle card (far LODs)
@@ -44,6 +47,9 @@ LEAF_GEOMETRIES = ("card", "shape")  # what a user may ask for (--leaf-geometry)
 LOD_LEAF_GEOMETRIES = (*LEAF_GEOMETRIES, "triangle")  # and what a far LOD may draw (lod_budget.py)
 
 
+RIBBON_SIDES = 4  # a branch drawn with more sides than this stays a tube
+
+
 def per_level(values: tuple, level: np.ndarray) -> np.ndarray:
     """`values[level]` per stem, the last entry repeating for deeper levels."""
     v = np.asarray(values)
@@ -52,13 +58,30 @@ def per_level(values: tuple, level: np.ndarray) -> np.ndarray:
 
 def stem_sides(tree, options: MeshOptions) -> np.ndarray:
     """Cross-section sides per stem (S,): per level, raised on a lobed trunk so the lobes show,
-    cut to thin_sides on stems thinner than thin_radius."""
+    cut to thin_sides on stems thinner than thin_radius; 4 for a ribbon stem (crossed
+    ribbons of half-width r show the outline of a square tube through r)."""
+    sides = _tube_sides(tree, options)
+    return np.where(_ribbons(tree, options, sides), RIBBON_SIDES, sides)
+
+
+def _tube_sides(tree, options: MeshOptions) -> np.ndarray:
     level = tree.stem_level.astype(np.int64)
     p = tree.params
     sides = per_level(options.sides, level).astype(np.int64)
     if p.lobes > 0 and p.lobe_depth != 0:
         sides = np.where(level == 0, np.maximum(sides, 4 * p.lobes), sides)
     return np.where(tree.stem_radius < options.thin_radius, np.minimum(sides, options.thin_sides), sides)
+
+
+def ribbon_stems(tree, options: MeshOptions) -> np.ndarray:
+    """Bool (S,): branches drawn as two crossed ribbons instead of a tube (ribbon_radius)."""
+    return _ribbons(tree, options, _tube_sides(tree, options))
+
+
+def _ribbons(tree, options: MeshOptions, sides: np.ndarray) -> np.ndarray:
+    if options.ribbon_radius <= 0.0:
+        return np.zeros(tree.n_stems, dtype=bool)
+    return (tree.stem_level > 0) & (sides <= RIBBON_SIDES) & (tree.stem_radius < options.ribbon_radius)
 
 
 def girth(tree, options: MeshOptions, sides: np.ndarray | None = None) -> np.ndarray:
