@@ -237,10 +237,15 @@ def test_skinning_agrees_across_asset_gltf_and_usd(written):
     asset, _ = build_asset(load_params(SMALL), 0)
     t = np.array([0.0, 0.37, 1.5, 2.0, 4.0])
     for lod in range(len(asset.lods)):
-        ref = scene_from_asset(asset, lod).pose(t)
+        ref_scene = scene_from_asset(asset, lod)
+        ref = ref_scene.pose(t)
         for scene in (scene_from_gltf(written / "palm.glb", lod), scene_from_usd(written / "palm.usdc", lod)):
             assert scene.n_joints == ref.shape[1]
             assert np.allclose(scene.pose(t), ref, atol=1e-4)
+            # leaves lit as leaves; far LODs' crossed twig ribbons, double-sided too, as bark
+            assert [p.double_sided for p in scene.parts] == [p.double_sided for p in ref_scene.parts]
+    twigs = [p for p in scene_from_gltf(written / "palm.glb", 3).parts if p.name == "twigs"]
+    assert twigs and not twigs[0].double_sided
     # the clip loops: end pose == start pose
     s = scene_from_gltf(written / "palm.glb")
     assert np.array_equal(s.pose([0.0]), s.pose([s.duration]))

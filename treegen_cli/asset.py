@@ -128,7 +128,7 @@ class KeyPlan:
 # would darken each other in a sharp wedge, as the preview showed before.
 IMPOSTOR_MATERIAL = "impostor"
 # The primitive and material of a far LOD's thin branches drawn as two crossed ribbons
-# (mesh/bark.py): the bark's texture on both faces, lit as bark (drawable.lit_through).
+# (mesh/ribbons.py): the bark's texture on both faces, lit as bark (drawable.lit_through).
 TWIGS = "twigs"
 
 

@@ -74,7 +74,7 @@ def lit_through(name: str | None, double_sided: bool) -> bool:
     """Whether a part is foliage (Part.double_sided: lit from both faces, light passing
     through): a double-sided material's, but not a far LOD's crossed bark ribbons
     (mesh.TWIGS), which are bark seen from either side."""
-    return bool(double_sided) and not (name or "").startswith(TWIGS)
+    return bool(double_sided) and name != TWIGS
 
 
 def crown(parts: list[Part]) -> tuple[np.ndarray, np.ndarray]:

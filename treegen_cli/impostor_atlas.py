@@ -211,7 +211,7 @@ def _atlas_parts(prims: list[Primitive], materials: list[Material], decoded: dic
     colour, cut-out and base texture (decoded once, into `decoded` when given, so several
     calls share the images). Not drawable.from_asset: that would turn everything Y up and
     back, decode the unused normal maps and build a rig."""
-    from .drawable import Part, decode_image, lit_through
+    from .drawable import Part, decode_image
 
     mats = {m.name: m for m in materials}
     decoded = {} if decoded is None else decoded
@@ -234,7 +234,7 @@ def _atlas_parts(prims: list[Primitive], materials: list[Material], decoded: dic
                 color=(m.base_color[0], m.base_color[1], m.base_color[2])
                 if m is not None
                 else (0.6, 0.6, 0.6),
-                double_sided=lit_through(p.material, bool(m is not None and m.double_sided)),
+                double_sided=bool(m is not None and m.double_sided),  # (twigs: bark by now)
                 uvs=np.asarray(p.uvs, np.float32) if has_uv else None,
                 texture=None if tex is None else decoded[id(tex)],
                 alpha_cutoff=m.alpha_cutoff if m is not None else None,

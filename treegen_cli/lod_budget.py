@@ -74,10 +74,10 @@ STEM_WORTH = 1.0  # a leafy tree keeps stems showing at least this × a leaf's a
 FILL_PASSES = 3  # keep_stems: passes filling what forks cut with their parent left free
 MIN_RADIUS_PX = 0.5  # stems thinner than this many pixels are kept only if worth_keeping;
 # a lobed trunk whose lobes are shallower than this is drawn round
-RIBBON_PX = float(
-    __import__("os").environ.get("RIBBON_PX", "2.0")
-)  # a branch of a few sides under this many pixels wide at the switch is drawn
-# as two crossed ribbons (MeshOptions.ribbon_radius: 4 triangles a segment, a 3-sided tube's 6)
+RIBBON_PX = 2.0  # a branch of a few sides under this many pixels wide at the switch is drawn
+# as two crossed ribbons (MeshOptions.ribbon_radius: 4 triangles a segment where a 3-sided
+# tube takes 6, so more twigs and leaves fit; every branch of 4 sides or fewer, whatever its
+# width, and the fan palm's far cover fell 6 %)
 TRIANGLE_CARD_PX = 3.0  # a LOD from TRIANGLE_CARDS_FROM on whose switch shows LOD0's median
 # blade at most this many pixels long draws its leaf cards as triangle cards
 # (leafshapes.TRIANGLE_CARD, one triangle a leaf): the outline is not legible, the cover is,

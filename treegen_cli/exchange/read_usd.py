@@ -94,7 +94,8 @@ def read_drawable(path: Path, lod: int = 0) -> Drawable:
         color, double = (0.6, 0.6, 0.6), bool(mesh.GetDoubleSidedAttr().Get())
         looks: dict = {}
         material = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()[0]
-        impostor = is_impostor(material.GetPrim().GetName() if material else None)
+        material_name = material.GetPrim().GetName() if material else None
+        impostor = is_impostor(material_name)
         if material:
             shader = material.ComputeSurfaceSource()[0]
             inp = shader.GetInput("diffuseColor") if shader else None
@@ -126,7 +127,7 @@ def read_drawable(path: Path, lod: int = 0) -> Drawable:
                 joints=ji,
                 weights=jw,
                 color=color,
-                double_sided=lit_through(prim.GetName(), double),
+                double_sided=lit_through(material_name, double),
                 uvs=uvs,
                 impostor=impostor,
                 **looks,

@@ -13,12 +13,11 @@ over stems, rings, leaves or vertices (only over the few trunk stems for their f
 
 from __future__ import annotations
 
-from ..asset import Primitive
+from ..asset import TWIGS, Primitive
 from .bark import BARK_MAX_TILES, bark_offsets, bark_primitives
 from .influences import merge_influences
-from .ribbons import ribbons_as_tubes
 from .leaves import CARD, leaf_variants, stamp_leaves
-from ..asset import TWIGS
+from .ribbons import ribbons_as_tubes
 from .options import (
     FULL_CARD_CELL,
     LEAF_GEOMETRIES,

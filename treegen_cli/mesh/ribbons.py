@@ -63,7 +63,10 @@ def ribbons(tree, rig, pointed, rs, centre, frame, radius, v_ring, a, b, t, off_
     tri = np.concatenate([quads.reshape(-1, 3), fans.reshape(-1, 3)])
     aJ, aW = merge_influences(rig.node_joints[tip], rig.node_weights[tip])
     fx, fy = tree.node_frame[tip][:, :, 0], tree.node_frame[tip][:, :, 1]
-    uv_apex = np.repeat(np.column_stack([off_u[rs[ends]] + 0.25, v_tip[rs[ends]]]), 2, axis=0)
+    # each apex at the middle of its ribbon's u span (x: 0 to 0.5, y: 0.25 to 0.75)
+    uv_apex = np.stack(
+        [np.column_stack([off_u[rs[ends]] + m, v_tip[rs[ends]]]) for m in (0.25, 0.5)], axis=1
+    ).reshape(-1, 2)
     return Primitive(
         name=TWIGS,
         material=TWIGS,
@@ -86,7 +89,7 @@ TUBE_CORNERS = np.array([1, 3, 0, 2])  # a ribbon ring's vertices (xâˆ’, x+, yâˆ
 def ribbons_as_tubes(prim: Primitive) -> Primitive:
     """A "twigs" primitive's crossed ribbons as the closed square tubes through the same
     vertices (material "bark", normals radial), for a renderer that widens and thins bark by
-    its tubes (the impostor's atlas: impostor_atlas._bark_at_least). Read as _ribbons writes
+    its tubes (the impostor's atlas: impostor_atlas._bark_at_least). Read as `ribbons` writes
     it: rings of 4 vertices, then a pointed stem's 2 apex vertices; 4 triangles per pair of
     rings (each starting at its lower ring's first vertex), then 2 per pointed tip."""
     tri = np.asarray(prim.indices, np.int64).reshape(-1, 3)
