@@ -25,7 +25,6 @@ from urllib.parse import unquote
 import numpy as np
 
 from ..drawable import (
-    lit_through,
     Channel,
     Drawable,
     Part,
@@ -34,6 +33,7 @@ from ..drawable import (
     decode_image,
     forest_error,
     is_impostor,
+    lit_through,
     vertex_normals,
 )
 from ..errors import TreegenError

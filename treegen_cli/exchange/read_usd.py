@@ -18,13 +18,13 @@ from pathlib import Path
 import numpy as np
 
 from ..drawable import (
-    lit_through,
     Drawable,
     Part,
     check_lod,
     decode_image,
     forest_error,
     is_impostor,
+    lit_through,
     vertex_normals,
     z_up_to_y_up,
 )

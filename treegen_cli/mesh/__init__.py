@@ -17,7 +17,6 @@ from ..asset import TWIGS, Primitive
 from .bark import BARK_MAX_TILES, bark_offsets, bark_primitives
 from .influences import merge_influences
 from .leaves import CARD, leaf_variants, stamp_leaves
-from .ribbons import ribbons_as_tubes
 from .options import (
     FULL_CARD_CELL,
     LEAF_GEOMETRIES,
@@ -28,6 +27,7 @@ from .options import (
     pointed_tips,
     stem_sides,
 )
+from .ribbons import ribbons_as_tubes
 
 __all__ = [
     "BARK_MAX_TILES",

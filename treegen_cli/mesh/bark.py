@@ -3,9 +3,9 @@
 Vertex layout: a ring of `sides + 1` vertices (seam column duplicated for UVs) per ring, the
 rings stem by stem (base to tip), then one apex vertex per stem in stem order, so no stem,
 however thin, is ever dropped (a far LOD's thin branches are drawn as crossed ribbons
-instead, the same rings in ribbons.py's "twigs" primitive). Between nodes the radius follows the species' taper × flare
-profile, through the generator's node radii; a lobed trunk (Lobes, LobeDepth) gets normals of
-the lobed surface.
+instead, the same rings in ribbons.py's "twigs" primitive). Between nodes the radius follows
+the species' taper × flare profile, through the generator's node radii; a lobed trunk (Lobes,
+LobeDepth) gets normals of the lobed surface.
 
 UVs (origin bottom-left): u runs once around every stem (0 → 1 over the sides, seam column
 duplicated); v runs along it in metres of bark divided by the tile height, the stem's own base
@@ -23,10 +23,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..shapes import flare_factor, taper_radius
 from ..asset import Primitive
-from .options import MeshOptions, girth, per_level, pointed_tips, ribbon_stems, stem_sides
+from ..shapes import flare_factor, taper_radius
 from .influences import merge_influences
+from .options import MeshOptions, girth, per_level, pointed_tips, ribbon_stems, stem_sides
 from .ribbons import ribbons
 
 BARK_MAX_TILES = 64.0  # most texture tiles along one stem (see UVs above)
@@ -179,7 +179,7 @@ def bark_primitives(tree, rig, options: MeshOptions) -> list[Primitive]:
         twigs = ribbons(
             tree,
             rig,
-            pointed & ribbon,
+            pointed,
             rs[rib],
             centre[rib],
             frame[rib],

@@ -23,8 +23,8 @@ from .influences import merge_influences
 def ribbons(tree, rig, pointed, rs, centre, frame, radius, v_ring, a, b, t, off_u, v_tip) -> Primitive:
     """The "twigs" primitive: per ribbon stem (its rings `rs`, centres, frames, drawn radii,
     v, and node binding a, b, t), two ribbons crossed along the ring frame's x and y axes, 4
-    vertices a ring and 4 triangles between rings; a pointed stem (`pointed` (S,)) closes
-    each ribbon on one apex. u spans half the bark tile across a ribbon (what a tube shows
+    vertices a ring and 4 triangles between rings; a pointed stem (`pointed` (S,), read at
+    `rs`) closes each ribbon on one apex. u spans half the bark tile across a ribbon (what a tube shows
     of it), v runs as on a tube."""
     R = rs.size
     x, y = frame[:, :, 0], frame[:, :, 1]
